@@ -1,0 +1,3 @@
+from gyrolab.cli import main
+
+raise SystemExit(main())

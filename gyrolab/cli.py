@@ -1,0 +1,140 @@
+"""The ``gyrolab`` command line (DESIGN.md "Command line" contract).
+
+Thin: it parses arguments and hands the namespace to the layer that does the work. Each
+subcommand's handler is ``module:function(args) -> int``, imported only when that
+subcommand runs, so ``gyrolab --help`` stays fast and a broken layer cannot break the rest.
+
+Errors: a :class:`~gyrolab.errors.GyrolabError` becomes one line on stderr and exit 2;
+SIGINT exits 130. Anything else is a bug and shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from gyrolab import __version__
+from gyrolab.errors import GyrolabError, NotYetAvailable
+
+HANDLERS: dict[str, str] = {
+    "simulate": "gyrolab.sim.commands:simulate",
+    "acquire": "gyrolab.acquisition.commands:acquire",
+    "compensate": "gyrolab.compensation.commands:compensate",
+    "apply": "gyrolab.compensation.commands:apply",
+    "report": "gyrolab.report.commands:report",
+    "discrepancy": "gyrolab.sim.discrepancy.commands:discrepancy",
+    "recover": "gyrolab.acquisition.commands:recover",
+    "demo": "gyrolab.report.demo:demo",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse whose errors are one line and exit 2 (argparse prints usage too)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise GyrolabError(f"{self.prog}: {message}")
+
+
+def _effect_spec(text: str) -> str:
+    if not text or text.startswith(":"):
+        raise argparse.ArgumentTypeError(f"bad --effect {text!r} (NAME[:k=v,...])")
+    return text
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="gyrolab", description=__doc__.splitlines()[0])
+    p.add_argument("--version", action="version", version=f"gyrolab {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    def cmd(name: str, help_: str) -> argparse.ArgumentParser:
+        sp = sub.add_parser(name, help=help_, description=help_)
+        return sp
+
+    s = cmd("simulate", "simulate an oven run of the gyro and record it to MCAP")
+    s.add_argument("--out", required=True, help="output RUN.mcap")
+    s.add_argument("--profile", default="paper", help="paper | short | FILE.toml (default paper)")
+    s.add_argument("--model", help="SIM_MODEL.toml (default: the nominal model)")
+    s.add_argument("--rate", type=float, default=100.0, help="ADC sample rate, Hz (default 100)")
+    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    s.add_argument("--effect", action="append", default=[], type=_effect_spec,
+                   metavar="NAME[:k=v,...]", help="add an effect to the model (repeatable)")
+    s.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    a = cmd("acquire", "run an oven profile on a bench (real or simulated) and record it")
+    a.add_argument("--bench", required=True, help="sim | BENCH.toml")
+    a.add_argument("--out", required=True, help="output RUN.mcap")
+    a.add_argument("--profile", default=None, help="paper | short | FILE.toml (default: bench's)")
+    a.add_argument("--speed", type=float, default=None,
+                   help="simulated-bench speed-up over real time (default: as fast as it goes)")
+    a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
+    a.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    c = cmd("compensate", "fit the temperature-compensation model on a calibration run")
+    c.add_argument("run", metavar="RUN.mcap")
+    c.add_argument("--out", required=True, help="output MODEL_DIR")
+    c.add_argument("--validate", metavar="OTHER.mcap", help="held-out run for metrics")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    ap = cmd("apply", "apply a fitted model to a run and write the compensated recording")
+    ap.add_argument("model", metavar="MODEL_DIR")
+    ap.add_argument("run", metavar="RUN.mcap")
+    ap.add_argument("--out", required=True, help="output COMPENSATED.mcap")
+    ap.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    r = cmd("report", "write the temperature-test report of a run")
+    r.add_argument("run", metavar="RUN.mcap")
+    r.add_argument("--model", metavar="MODEL_DIR", help="fitted model to show and apply")
+    r.add_argument("--out", required=True, help="output REPORT_DIR")
+    r.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    d = cmd("discrepancy", "find where the simulator and a recording disagree, and fix the model")
+    d.add_argument("run", metavar="RUN.mcap")
+    d.add_argument("--model", metavar="SIM_MODEL.toml", help="starting model (default nominal)")
+    d.add_argument("--out", required=True, help="output DIR")
+    d.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    rc = cmd("recover", "salvage every complete record of a truncated recording")
+    rc.add_argument("broken", metavar="BROKEN.mcap")
+    rc.add_argument("--out", required=True, help="output FIXED.mcap")
+    rc.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
+    dm.add_argument("--out", required=True, help="output DIR")
+    dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
+    dm.add_argument("--seed", type=int, default=1)
+    dm.add_argument("--force", action="store_true", help="overwrite an existing output")
+    return p
+
+
+def _handler(command: str):  # type: ignore[no-untyped-def]
+    module, func = HANDLERS[command].split(":")
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        if e.name and module.startswith(e.name):
+            raise NotYetAvailable(f"gyrolab {command}: not yet available in this version") from None
+        raise
+    return getattr(mod, func)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if not args.command:
+            parser.print_help()
+            return 2
+        return int(_handler(args.command)(args) or 0)
+    except GyrolabError as e:
+        print(f"gyrolab: error: {e}", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("gyrolab: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

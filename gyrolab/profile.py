@@ -1,0 +1,178 @@
+"""Temperature profiles: the setpoint schedule of an oven test and its soak rules.
+
+A profile is a list of steps. Each step commands one oven setpoint and lasts at least
+``duration_s`` from the moment it starts (the paper's rule: "drop by 10 °C every 1 h").
+A step may add a stability rule: after its minimum duration it is held until the PT100
+slope stays below ``stable_slope_c_per_min`` for ``stable_window_s`` (at most
+``max_extra_s`` more). The simulator and the acquisition runner read the same profile.
+
+The built-in ``paper`` profile (DESIGN.md; paper §4.1): 1 h power-on at room temperature
+(25 °C), heat to 60 °C and hold 1 h, then −10 °C per hour down to −40 °C, which is held
+one more hour — 13 h in all.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrolab.errors import InputError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+@dataclass(frozen=True)
+class Step:
+    """One oven setpoint held for at least ``duration_s`` seconds."""
+
+    setpoint_c: float
+    duration_s: float
+    label: str = ""
+    stable_slope_c_per_min: float | None = None
+    stable_window_s: float = 600.0
+    max_extra_s: float = 3600.0
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.setpoint_c):
+            raise ValueError("setpoint_c must be finite")
+        if not (self.duration_s > 0 and math.isfinite(self.duration_s)):
+            raise ValueError("duration_s must be a positive number of seconds")
+        if self.stable_slope_c_per_min is not None and not self.stable_slope_c_per_min > 0:
+            raise ValueError("stable_slope_c_per_min must be positive")
+        if not self.stable_window_s > 0 or not self.max_extra_s >= 0:
+            raise ValueError("stable_window_s must be > 0 and max_extra_s >= 0")
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A named sequence of steps; ``ambient_c`` is the room the oven starts in."""
+
+    name: str
+    steps: tuple[Step, ...]
+    ambient_c: float = 25.0
+    safe_setpoint_c: float = 25.0
+    description: str = ""
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        if not self.steps:
+            raise ValueError("a profile needs at least one step")
+
+    @property
+    def duration_s(self) -> float:
+        """Nominal duration: the sum of the steps' minimum durations."""
+        return float(sum(s.duration_s for s in self.steps))
+
+    def step_starts(self) -> np.ndarray:
+        """Nominal start time of every step (s since power-on), time rule only."""
+        return np.concatenate([[0.0], np.cumsum([s.duration_s for s in self.steps])[:-1]])
+
+    def setpoint_at(self, t_s: np.ndarray | float) -> np.ndarray:
+        """Setpoint (°C) of the nominal, time-only schedule at times ``t_s``."""
+        t = np.asarray(t_s, dtype=float)
+        idx = np.searchsorted(self.step_starts(), t, side="right") - 1
+        idx = np.clip(idx, 0, len(self.steps) - 1)
+        return np.array([s.setpoint_c for s in self.steps])[idx]
+
+    def reversed(self, name: str | None = None) -> Profile:
+        """The same steps in reverse order (a heating profile from a cooling one)."""
+        return Profile(
+            name=name or f"{self.name}-reversed",
+            steps=tuple(reversed(self.steps)),
+            ambient_c=self.ambient_c,
+            safe_setpoint_c=self.safe_setpoint_c,
+            description=f"{self.description} (reversed)".strip(),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "name": self.name,
+            "description": self.description,
+            "ambient_c": self.ambient_c,
+            "safe_setpoint_c": self.safe_setpoint_c,
+            "step": [],
+        }
+        for s in self.steps:
+            sd = {k: v for k, v in asdict(s).items() if v is not None}
+            d["step"].append(sd)
+        return d
+
+
+def _paper() -> Profile:
+    steps = [Step(25.0, 3600.0, "power-on"), Step(60.0, 3600.0, "heat")]
+    for sp in range(50, -40, -10):
+        steps.append(Step(float(sp), 3600.0, f"{sp} C"))
+    steps.append(Step(-40.0, 7200.0, "-40 C + final hold"))
+    return Profile(
+        name="paper",
+        steps=tuple(steps),
+        ambient_c=25.0,
+        safe_setpoint_c=25.0,
+        description="Wei et al. 2021 §4.1: 1 h at 25 °C, 60 °C for 1 h, -10 °C/h to -40 °C, "
+        "-40 °C held 1 h more",
+    )
+
+
+def _short() -> Profile:
+    """A 40-minute smoke-test profile for tests and quick looks (same shape, 4 min steps)."""
+    steps = [Step(25.0, 240.0, "power-on"), Step(60.0, 240.0, "heat")]
+    for sp in range(50, -50, -10):
+        steps.append(Step(float(sp), 240.0, f"{sp} C"))
+    return Profile(name="short", steps=tuple(steps), description="paper shape, 4 min steps")
+
+
+BUILTIN: dict[str, Profile] = {"paper": _paper(), "short": _short()}
+
+
+def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
+    """Build a profile from the TOML layout (see docs/profiles.md)."""
+    try:
+        raw_steps = d["step"]
+        if not isinstance(raw_steps, list) or not raw_steps:
+            raise InputError(source, "profile needs a non-empty [[step]] list")
+        known = {f for f in Step.__dataclass_fields__}
+        steps = []
+        for i, sd in enumerate(raw_steps):
+            unknown = set(sd) - known
+            if unknown:
+                raise InputError(source, f"step {i + 1}: unknown key(s) {sorted(unknown)}")
+            steps.append(Step(**{k: (float(v) if k != "label" else str(v)) for k, v in sd.items()}))
+        return Profile(
+            name=str(d.get("name", Path(source).stem)),
+            steps=tuple(steps),
+            ambient_c=float(d.get("ambient_c", 25.0)),
+            safe_setpoint_c=float(d.get("safe_setpoint_c", 25.0)),
+            description=str(d.get("description", "")),
+        )
+    except InputError:
+        raise
+    except KeyError as e:
+        raise InputError(source, f"profile is missing {e.args[0]!r}") from None
+    except (TypeError, ValueError) as e:
+        raise InputError(source, f"bad profile: {e}") from None
+
+
+def load_profile(spec: str | os.PathLike[str]) -> Profile:
+    """``paper`` / ``short`` (built in) or a path to a profile TOML file."""
+    s = str(spec)
+    if s in BUILTIN:
+        return BUILTIN[s]
+    p = Path(s)
+    if p.suffix.lower() != ".toml":
+        raise InputError(s, f"unknown profile (built in: {', '.join(BUILTIN)}; or a .toml file)")
+    if not p.is_file():
+        raise InputError(s, "profile file not found")
+    try:
+        d = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise InputError(s, f"not valid TOML: {e}") from None
+    return profile_from_dict(d, s)
