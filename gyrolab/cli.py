@@ -58,16 +58,26 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--model", help="SIM_MODEL.toml (default: the nominal model)")
     s.add_argument("--rate", type=float, default=100.0, help="ADC sample rate, Hz (default 100)")
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    s.add_argument("--effect", action="append", default=[], type=_effect_spec,
-                   metavar="NAME[:k=v,...]", help="add an effect to the model (repeatable)")
+    s.add_argument(
+        "--effect",
+        action="append",
+        default=[],
+        type=_effect_spec,
+        metavar="NAME[:k=v,...]",
+        help="add an effect to the model (repeatable)",
+    )
     s.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     a = cmd("acquire", "run an oven profile on a bench (real or simulated) and record it")
     a.add_argument("--bench", required=True, help="sim | BENCH.toml")
     a.add_argument("--out", required=True, help="output RUN.mcap")
     a.add_argument("--profile", default=None, help="paper | short | FILE.toml (default: bench's)")
-    a.add_argument("--speed", type=float, default=None,
-                   help="simulated-bench speed-up over real time (default: as fast as it goes)")
+    a.add_argument(
+        "--speed",
+        type=float,
+        default=None,
+        help="simulated-bench speed-up over real time (default: as fast as it goes)",
+    )
     a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
     a.add_argument("--force", action="store_true", help="overwrite an existing output")
 

@@ -168,7 +168,9 @@ def _varint(n: int) -> bytes:
             return bytes(out)
 
 
-def encode_block(t0: float, period: float, first_index: int, values: np.ndarray, kind: str) -> bytes:
+def encode_block(
+    t0: float, period: float, first_index: int, values: np.ndarray, kind: str
+) -> bytes:
     """Protobuf wire bytes of a block; ``kind`` is ``"adc"`` (int32) or ``"rate"`` (float32)."""
     dtype = "<i4" if kind == "adc" else "<f4"
     payload = np.ascontiguousarray(values, dtype=dtype).tobytes()
@@ -273,7 +275,11 @@ class RecordingWriter:
 
         self._own = not hasattr(stream, "write")
         self._fh: IO[bytes] = open(stream, "wb") if self._own else stream  # type: ignore[arg-type]
-        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+        comp = {
+            "zstd": CompressionType.ZSTD,
+            "lz4": CompressionType.LZ4,
+            "none": CompressionType.NONE,
+        }
         self._w = Writer(self._fh, chunk_size=chunk_size, compression=comp[compression])
         self._w.start(profile=PROFILE, library=f"gyrolab {_version()}")
         self.start_time_ns = int(start_time_ns)
@@ -305,7 +311,9 @@ class RecordingWriter:
         seq = self._seq.get(topic, 0)
         self._seq[topic] = seq + 1
         ts = self.start_time_ns + int(round(t * 1e9))
-        self._w.add_message(self._chan[topic], log_time=ts, data=data, publish_time=ts, sequence=seq)
+        self._w.add_message(
+            self._chan[topic], log_time=ts, data=data, publish_time=ts, sequence=seq
+        )
         if self.flush_every_s is not None and t - self._last_flush_t >= self.flush_every_s:
             self.flush()
             self._last_flush_t = t
@@ -323,19 +331,29 @@ class RecordingWriter:
     # -- records
     def write_metadata(self, name: str, values: Mapping[str, Any]) -> None:
         """A metadata record; non-string values are stored as JSON text."""
-        flat = {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in values.items()}
+        flat = {
+            k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in values.items()
+        }
         self._w.add_metadata(name, flat)
 
-    def write_adc_block(self, t0: float, period: float, first_index: int, counts: np.ndarray) -> None:
+    def write_adc_block(
+        self, t0: float, period: float, first_index: int, counts: np.ndarray
+    ) -> None:
         self._put(TOPIC_ADC, t0, encode_block(t0, period, first_index, counts, "adc"))
 
-    def write_rate_block(self, t0: float, period: float, first_index: int, rate_dps: np.ndarray) -> None:
+    def write_rate_block(
+        self, t0: float, period: float, first_index: int, rate_dps: np.ndarray
+    ) -> None:
         self._put(TOPIC_RATE, t0, encode_block(t0, period, first_index, rate_dps, "rate"))
 
     def write_pt100(self, t: float, resistance_ohm: float, temperature_c: float) -> None:
         self._json(
             TOPIC_PT100,
-            {"t": t, "resistance_ohm": float(resistance_ohm), "temperature_c": float(temperature_c)},
+            {
+                "t": t,
+                "resistance_ohm": float(resistance_ohm),
+                "temperature_c": float(temperature_c),
+            },
         )
 
     def write_oven(self, t: float, setpoint_c: float, process_value_c: float, mode: str) -> None:
@@ -349,15 +367,28 @@ class RecordingWriter:
             },
         )
 
-    def write_event(self, t: float, event: str, step: int = -1, setpoint_c: float | None = None,
-                    detail: str = "") -> None:
+    def write_event(
+        self,
+        t: float,
+        event: str,
+        step: int = -1,
+        setpoint_c: float | None = None,
+        detail: str = "",
+    ) -> None:
         msg: dict[str, Any] = {"t": t, "event": event, "step": int(step), "detail": detail}
         if setpoint_c is not None:
             msg["setpoint_c"] = float(setpoint_c)
         self._json(TOPIC_EVENT, msg)
 
-    def write_log(self, t: float, level: str, source: str, message: str, kind: str = "",
-                  data: Mapping[str, Any] | None = None) -> None:
+    def write_log(
+        self,
+        t: float,
+        level: str,
+        source: str,
+        message: str,
+        kind: str = "",
+        data: Mapping[str, Any] | None = None,
+    ) -> None:
         msg: dict[str, Any] = {"t": t, "level": level, "source": source, "message": message}
         if kind:
             msg["kind"] = kind
@@ -484,8 +515,9 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
         fh.close()
 
 
-def iter_messages(path: str | os.PathLike[str], topics: list[str] | None = None
-                  ) -> Iterator[tuple[str, int, bytes]]:
+def iter_messages(
+    path: str | os.PathLike[str], topics: list[str] | None = None
+) -> Iterator[tuple[str, int, bytes]]:
     """``(topic, log_time_ns, data)`` in log-time order, streaming."""
     fh, reader = _open_reader(path)
     try:
@@ -499,9 +531,10 @@ def iter_messages(path: str | os.PathLike[str], topics: list[str] | None = None
         fh.close()
 
 
-def iter_blocks(path: str | os.PathLike[str], topic: str = TOPIC_RATE
-                ) -> Iterator[tuple[float, float, int, np.ndarray]]:
-    """Stream the blocks of ``/gyro/rate`` or ``/gyro/adc`` as ``(t0, period, first_index, values)``."""
+def iter_blocks(
+    path: str | os.PathLike[str], topic: str = TOPIC_RATE
+) -> Iterator[tuple[float, float, int, np.ndarray]]:
+    """Stream ``/gyro/rate`` or ``/gyro/adc`` blocks as ``(t0, period, first_index, values)``."""
     kind = "adc" if topic == TOPIC_ADC else "rate"
     for _topic, _ts, data in iter_messages(path, [topic]):
         yield decode_block(data, kind)
