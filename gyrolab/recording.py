@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import struct
+import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -257,6 +258,14 @@ class RecordingWriter:
     written as the MCAP metadata records of those names (nested values as JSON text).
     ``flush_every_s`` (simulated/run seconds) bounds what a crash can lose: the open
     chunk is closed and the file flushed (and fsynced when ``fsync``) at least that often.
+
+    Crash-loss policy (docs/reliability.md): a flush closes the open chunk (a complete,
+    CRC-checked MCAP chunk record) and hands it to the OS with ``write``; from then on a
+    ``kill -9`` of the process cannot lose it, and ``gyrolab recover`` salvages it from a
+    file that never got its footer. ``fsync_every_s`` (wall seconds) additionally bounds
+    what a power cut can lose: a flush fsyncs when that much wall time has passed since the
+    last fsync (``fsync=True`` fsyncs on every flush). :meth:`maybe_flush` lets a caller
+    whose streams went quiet apply the same rule on its own clock.
     """
 
     def __init__(
@@ -270,6 +279,7 @@ class RecordingWriter:
         compression: str = "zstd",
         flush_every_s: float | None = None,
         fsync: bool = False,
+        fsync_every_s: float | None = None,
     ) -> None:
         from mcap.writer import CompressionType, Writer
 
@@ -285,7 +295,11 @@ class RecordingWriter:
         self.start_time_ns = int(start_time_ns)
         self.flush_every_s = flush_every_s
         self.fsync = fsync
+        self.fsync_every_s = fsync_every_s
         self._last_flush_t = 0.0
+        self._last_fsync_wall = time.monotonic()
+        self.flush_count = 0
+        self.fsync_count = 0
         self._seq: dict[str, int] = {}
         self._chan: dict[str, int] = {}
         self._closed = False
@@ -318,6 +332,16 @@ class RecordingWriter:
             self.flush()
             self._last_flush_t = t
 
+    def maybe_flush(self, t: float) -> bool:
+        """Flush if ``flush_every_s`` of run time passed since the last flush; True if done."""
+        if self._closed or self.flush_every_s is None:
+            return False
+        if t - self._last_flush_t >= self.flush_every_s:
+            self.flush()
+            self._last_flush_t = t
+            return True
+        return False
+
     def _json(self, topic: str, msg: Mapping[str, Any]) -> None:
         self._put(topic, float(msg["t"]), json.dumps(msg, separators=(",", ":")).encode())
 
@@ -325,8 +349,14 @@ class RecordingWriter:
         """Close the open chunk and push it to the OS (and to disk when ``fsync``)."""
         self._w.flush()
         self._fh.flush()
-        if self.fsync:
+        self.flush_count += 1
+        now = time.monotonic()
+        if self.fsync or (
+            self.fsync_every_s is not None and now - self._last_fsync_wall >= self.fsync_every_s
+        ):
             os.fsync(self._fh.fileno())
+            self._last_fsync_wall = now
+            self.fsync_count += 1
 
     # -- records
     def write_metadata(self, name: str, values: Mapping[str, Any]) -> None:
@@ -402,7 +432,7 @@ class RecordingWriter:
         self._closed = True
         self._w.finish()
         self._fh.flush()
-        if self.fsync:
+        if self.fsync or self.fsync_every_s is not None:
             os.fsync(self._fh.fileno())
         if self._own:
             self._fh.close()
