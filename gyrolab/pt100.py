@@ -1,0 +1,55 @@
+"""PT100 platinum resistance thermometer, IEC 60751 Callendar–Van Dusen (CVD) equation.
+
+Pure functions shared by the multimeter driver (resistance → temperature) and the
+simulator (temperature → resistance). They live at package level so that neither
+``acquisition`` nor ``sim`` has to import the other.
+
+    R(t) = R0 · (1 + A·t + B·t²)                      for t ≥ 0 °C
+    R(t) = R0 · (1 + A·t + B·t² + C·(t − 100)·t³)     for t < 0 °C
+
+with A = 3.9083e-3 /°C, B = −5.775e-7 /°C², C = −4.183e-12 /°C⁴ (IEC 60751:2008),
+valid from −200 °C to 850 °C. The inverse is exact (quadratic) above 0 °C and a few
+Newton steps below (the C term is small), accurate to well under 1 µ°C.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+R0_OHM = 100.0
+A = 3.9083e-3
+B = -5.775e-7
+C = -4.183e-12
+
+
+def cvd_resistance(t_c: float | np.ndarray, r0_ohm: float = R0_OHM) -> float | np.ndarray:
+    """Resistance (Ω) of a platinum RTD at ``t_c`` (°C); ``r0_ohm`` is R at 0 °C."""
+    t = np.asarray(t_c, dtype=float)
+    r = 1.0 + A * t + B * t * t
+    r = np.where(t < 0.0, r + C * (t - 100.0) * t**3, r)
+    out = r0_ohm * r
+    return float(out) if out.ndim == 0 else out
+
+
+def cvd_temperature(r_ohm: float | np.ndarray, r0_ohm: float = R0_OHM) -> float | np.ndarray:
+    """Temperature (°C) of a platinum RTD reading ``r_ohm`` (Ω): the inverse of
+    :func:`cvd_resistance`. Resistances at or below zero give NaN."""
+    r = np.asarray(r_ohm, dtype=float) / r0_ohm
+    with np.errstate(invalid="ignore"):
+        # Quadratic branch: exact for t >= 0, the starting point below 0 °C.
+        t = (-A + np.sqrt(A * A - 4.0 * B * (1.0 - r))) / (2.0 * B)
+        neg = r < 1.0
+        if np.any(neg):
+            tn = t[neg] if t.ndim else t
+            rn = r[neg] if r.ndim else r
+            for _ in range(4):  # Newton on the full CVD; converges in 2-3 steps
+                f = 1.0 + A * tn + B * tn * tn + C * (tn - 100.0) * tn**3 - rn
+                df = A + 2.0 * B * tn + C * (4.0 * tn**3 - 300.0 * tn * tn)
+                tn = tn - f / df
+            if t.ndim:
+                t = t.copy()
+                t[neg] = tn
+            else:
+                t = tn
+        t = np.where(r > 0.0, t, np.nan)
+    return float(t) if t.ndim == 0 else t
