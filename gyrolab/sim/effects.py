@@ -1,0 +1,378 @@
+"""The gyro error model: named, parametric effects (DESIGN.md "Effects vocabulary").
+
+Each effect is a class with a ``name`` from the vocabulary, a parameter table ``PARAMS``
+(default, unit, meaning, constraint) and a ``target``:
+
+- ``rate``: adds a term (°/s) to the gyro output — :meth:`Effect.rate`;
+- ``post``: transforms the summed output (``quantization``) — :meth:`Effect.post`;
+- ``thermal``/``air``/``pt100``: changes the thermal model or the PT100 reading
+  (``thermal_lag``, ``oven_overshoot``, ``rtd_self_heating``), read by
+  :class:`gyrolab.sim.physics.Physics`.
+
+``T`` is the bias-setting temperature: the gyro case, or the die when ``thermal_lag`` is in
+the model; ``t`` is seconds since power-on. Deterministic effects are functions of the
+temperature history and time; stochastic ones draw from the private generator they are
+given (see :func:`gyrolab.sim.noise.effect_rng`). All effects keep their state between
+blocks, so the output never depends on how a run is cut into blocks. Equations and units:
+docs/sim-model.md, and each class's docstring.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numba
+import numpy as np
+
+from gyrolab.sim.noise import FlickerStream
+
+
+@dataclass
+class BlockContext:
+    """What a block of ``n`` ADC samples looks like to the effects."""
+
+    first_index: int
+    dt: float
+    t: np.ndarray  # s since power-on, per sample
+    temp_c: np.ndarray  # bias-setting temperature T, °C
+    dtemp_c_per_s: np.ndarray  # dT/dt, °C/s
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class Param:
+    """One effect parameter: default value, unit, meaning, constraint."""
+
+    default: float
+    unit: str
+    doc: str
+    check: str = "any"  # any | pos | nonneg | frac (0 < x < 1)
+
+    def validate(self, effect: str, name: str, value: object) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{effect}.{name} must be a number, got {value!r}")
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"{effect}.{name} must be finite")
+        bad = {
+            "pos": not v > 0,
+            "nonneg": not v >= 0,
+            "frac": not 0 < v < 1,
+        }.get(self.check, False)
+        if bad:
+            rule = {"pos": "> 0", "nonneg": ">= 0", "frac": "strictly between 0 and 1"}
+            raise ValueError(f"{effect}.{name} must be {rule[self.check]}, got {v}")
+        return v
+
+
+class Effect:
+    """Base class: an effect instance with validated parameters."""
+
+    name: ClassVar[str] = ""
+    target: ClassVar[str] = "rate"
+    stochastic: ClassVar[bool] = False
+    PARAMS: ClassVar[dict[str, Param]] = {}
+
+    def __init__(
+        self, params: dict[str, float], rng: np.random.Generator | None, rate_hz: float
+    ) -> None:
+        self.p = dict(params)
+        self.rng = rng
+        self.rate_hz = float(rate_hz)
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        """Additive output term (°/s) for the block."""
+        return np.zeros(ctx.n)
+
+    def post(self, out: np.ndarray, ctx: BlockContext) -> np.ndarray:
+        """Transform of the summed output (only ``target == "post"`` effects)."""
+        return out
+
+
+def _tpow(ctx: BlockContext, t_ref: float) -> np.ndarray:
+    return ctx.temp_c - t_ref
+
+
+class BiasPoly(Effect):
+    """``bias = Σ_i c_i (T − T_ref)^i`` (°/s), order 2 by default (c3, c4 default 0)."""
+
+    name = "bias_poly"
+    PARAMS = {
+        "c0": Param(0.02, "deg/s", "bias at T_ref"),
+        "c1": Param(3.0e-4, "deg/s/degC", "linear coefficient"),
+        "c2": Param(1.0e-6, "deg/s/degC^2", "quadratic coefficient"),
+        "c3": Param(0.0, "deg/s/degC^3", "cubic coefficient"),
+        "c4": Param(0.0, "deg/s/degC^4", "quartic coefficient"),
+        "t_ref_c": Param(25.0, "degC", "reference temperature T_ref"),
+    }
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        x = _tpow(ctx, self.p["t_ref_c"])
+        coeffs = [self.p[f"c{i}"] for i in range(4, -1, -1)]
+        return np.polyval(coeffs, x) + np.zeros(ctx.n)
+
+
+class CubicTemp(Effect):
+    """``bias += c3 (T − T_ref)³`` (°/s)."""
+
+    name = "cubic_temp"
+    PARAMS = {
+        "c3": Param(2.0e-8, "deg/s/degC^3", "cubic coefficient"),
+        "t_ref_c": Param(25.0, "degC", "reference temperature T_ref"),
+    }
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        return self.p["c3"] * _tpow(ctx, self.p["t_ref_c"]) ** 3
+
+
+class ThermalRate(Effect):
+    """``bias += k · dT/dt`` (°/s; dT/dt in °C/min): the thermal-gradient sensitivity."""
+
+    name = "thermal_rate"
+    PARAMS = {"k": Param(2.0e-3, "deg/s per degC/min", "temperature-rate sensitivity")}
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        return self.p["k"] * 60.0 * ctx.dtemp_c_per_s
+
+
+class ThermalLag(Effect):
+    """The die that sets the bias lags the case sensor: ``τ dTd/dt = Tc − Td``.
+
+    With this effect every temperature-driven effect sees ``Td`` instead of ``Tc``.
+    """
+
+    name = "thermal_lag"
+    target = "thermal"
+    PARAMS = {"tau_s": Param(900.0, "s", "die time constant behind the case", "pos")}
+
+
+@numba.njit(cache=True, nogil=True)
+def _play(temp: np.ndarray, p0: float, half: float, out: np.ndarray) -> float:  # pragma: no cover
+    """Play (backlash) operator of half-width ``half``: out_i = (T_i − p_i)/half ∈ [−1, 1]."""
+    p = p0
+    for i in range(temp.size):
+        x = temp[i]
+        if p < x - half:
+            p = x - half
+        elif p > x + half:
+            p = x + half
+        out[i] = (x - p) / half
+    return p
+
+
+class Hysteresis(Effect):
+    """``bias += (h/2) · s``, ``s = (T − p)/(w/2)`` with ``p`` the play operator of width w.
+
+    ``p`` follows T with a backlash of ±w/2, so after any monotone excursion longer than
+    ``w`` the bias sits at +h/2 while T rises and −h/2 while it falls (°/s).
+    """
+
+    name = "hysteresis"
+    PARAMS = {
+        "h": Param(2.0e-3, "deg/s", "full bias difference heating vs cooling"),
+        "width_c": Param(1.0, "degC", "temperature reversal that flips the branch", "pos"),
+    }
+
+    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(*a, **k)
+        self._p: float | None = None
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        if self._p is None:
+            self._p = float(ctx.temp_c[0]) if ctx.n else 0.0
+        s = np.empty(ctx.n)
+        self._p = _play(ctx.temp_c, self._p, 0.5 * self.p["width_c"], s)
+        return 0.5 * self.p["h"] * s
+
+
+class Warmup(Effect):
+    """``bias += A · exp(−t/τw)`` (°/s) after power-on."""
+
+    name = "warmup"
+    PARAMS = {
+        "A": Param(5.0e-3, "deg/s", "warm-up amplitude at power-on"),
+        "tau_s": Param(600.0, "s", "warm-up time constant", "pos"),
+    }
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        return self.p["A"] * np.exp(-ctx.t / self.p["tau_s"])
+
+
+class AgingRamp(Effect):
+    """``bias += r · t`` with r in °/s per hour (t in h): a rate ramp."""
+
+    name = "aging_ramp"
+    PARAMS = {"r": Param(5.0e-4, "deg/s/h", "bias ramp")}
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        return self.p["r"] * (ctx.t / 3600.0)
+
+
+class Periodic(Effect):
+    """``bias += A · sin(2π t / P + φ)`` (°/s), e.g. chamber compressor cycling."""
+
+    name = "periodic"
+    PARAMS = {
+        "A": Param(1.0e-3, "deg/s", "amplitude"),
+        "period_s": Param(900.0, "s", "period P", "pos"),
+        "phase_rad": Param(0.0, "rad", "phase at power-on"),
+    }
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        return self.p["A"] * np.sin(2.0 * np.pi * ctx.t / self.p["period_s"] + self.p["phase_rad"])
+
+
+class Arw(Effect):
+    """White rate noise of density N (°/√h): per-sample σ = (N/60) · √f_s (°/s).
+
+    Allan deviation ``σ(τ) = (N/60)/√τ`` °/s (IEEE 952 angle random walk, −½ line).
+    """
+
+    name = "arw"
+    stochastic = True
+    PARAMS = {"N": Param(0.0523, "deg/sqrt(h)", "angle random walk coefficient", "nonneg")}
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        sigma = self.p["N"] / 60.0 * math.sqrt(self.rate_hz)
+        return sigma * self.rng.standard_normal(ctx.n)  # type: ignore[union-attr]
+
+
+class BiasInstability(Effect):
+    """Flicker (1/f) rate noise whose Allan deviation floor is B (°/h).
+
+    One-sided PSD ``S(f) = B² / (2 ln 2 · f)`` (°/s)²/Hz with B in °/s, so that
+    ``σ_Allan = B`` on the flat part. (IEEE 952's coefficient is B/0.664.) Generated by
+    Kasdin's fractional-difference filter at 10 Hz and interpolated: see
+    :class:`gyrolab.sim.noise.FlickerStream`.
+    """
+
+    name = "bias_instability"
+    stochastic = True
+    PARAMS = {"B": Param(0.25, "deg/h", "Allan deviation floor", "nonneg")}
+
+    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(*a, **k)
+        self._fl = FlickerStream(self.p["B"] / 3600.0, self.rng)  # type: ignore[arg-type]
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        return self._fl.value_at(ctx.first_index, ctx.n, self.rate_hz)
+
+
+class RateRandomWalk(Effect):
+    """Integrated white noise, K in °/h/√h: ``b_i = b_{i−1} + K_s √Δt · w_i`` (°/s),
+    ``K_s = K / (3600 · 60)`` °/s/√s; Allan ``σ(τ) = K_s √(τ/3)`` (+½ line)."""
+
+    name = "rate_random_walk"
+    stochastic = True
+    PARAMS = {"K": Param(1.0, "deg/h/sqrt(h)", "rate random walk coefficient", "nonneg")}
+
+    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(*a, **k)
+        self._b = 0.0
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        step = self.p["K"] / (3600.0 * 60.0) * math.sqrt(ctx.dt)
+        b = self._b + np.cumsum(step * self.rng.standard_normal(ctx.n))  # type: ignore[union-attr]
+        if ctx.n:
+            self._b = float(b[-1])
+        return b
+
+
+class Quantization(Effect):
+    """Output quantized to a step q (°/s) with the angle carried over (IEEE 952 angle
+    quantization): ``k_i = round(Σ_{j≤i} Ω_j / q)``, ``Ω_q,i = q (k_i − k_{i−1})``.
+
+    Each output is a multiple of q; the error is a difference of a bounded angle error, so
+    the Allan deviation falls as ``σ(τ) = √3 · Q / τ`` with ``Q = q Δt / √12`` (slope −1).
+    """
+
+    name = "quantization"
+    target = "post"
+    PARAMS = {"q": Param(1.0e-3, "deg/s", "output step (LSB)", "pos")}
+
+    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(*a, **k)
+        self._resid = 0.0  # carried angle, in units of q·Δt, relative to the last output
+
+    def post(self, out: np.ndarray, ctx: BlockContext) -> np.ndarray:
+        if not ctx.n:
+            return out
+        c = self._resid + np.cumsum(out / self.p["q"])
+        k = np.rint(c)
+        q = np.diff(k, prepend=0.0) * self.p["q"]
+        self._resid = float(c[-1] - k[-1])
+        return q
+
+
+class Outliers(Effect):
+    """Sparse spikes: each sample is, with probability ``p = rate_per_h / 3600 / f_s``,
+    offset by ±amplitude (°/s), sign equally likely."""
+
+    name = "outliers"
+    stochastic = True
+    PARAMS = {
+        "rate_per_h": Param(20.0, "1/h", "expected spikes per hour", "nonneg"),
+        "amplitude": Param(0.05, "deg/s", "spike height"),
+    }
+
+    def rate(self, ctx: BlockContext) -> np.ndarray:
+        u = self.rng.random(ctx.n)  # type: ignore[union-attr]
+        p = self.p["rate_per_h"] / 3600.0 / self.rate_hz
+        return np.where(u < p, np.where(u < 0.5 * p, -1.0, 1.0) * self.p["amplitude"], 0.0)
+
+
+class OvenOvershoot(Effect):
+    """Chamber air answers a setpoint step as a second-order system (still rate limited).
+
+    ``overshoot`` is the fractional overshoot of a small step, ``exp(−πζ/√(1−ζ²))``;
+    ``period_s`` the damped period ``2π / (ω_n √(1−ζ²))``.
+    """
+
+    name = "oven_overshoot"
+    target = "air"
+    PARAMS = {
+        "overshoot": Param(0.15, "fraction", "overshoot of a small step", "frac"),
+        "period_s": Param(1200.0, "s", "damped oscillation period", "pos"),
+    }
+
+    def omega_zeta(self) -> tuple[float, float]:
+        """(ω_n in rad/s, ζ)."""
+        lo = math.log(self.p["overshoot"])
+        zeta = -lo / math.sqrt(math.pi**2 + lo * lo)
+        wd = 2.0 * math.pi / self.p["period_s"]
+        return wd / math.sqrt(1.0 - zeta * zeta), zeta
+
+
+class RtdSelfHeating(Effect):
+    """The PT100 reads high by a constant ``offset_c`` (°C): the measuring current's heat."""
+
+    name = "rtd_self_heating"
+    target = "pt100"
+    PARAMS = {"offset_c": Param(0.3, "degC", "reading minus true case temperature")}
+
+
+EFFECTS: dict[str, type[Effect]] = {
+    cls.name: cls
+    for cls in (
+        BiasPoly,
+        CubicTemp,
+        ThermalRate,
+        ThermalLag,
+        Hysteresis,
+        Warmup,
+        AgingRamp,
+        Periodic,
+        Arw,
+        BiasInstability,
+        RateRandomWalk,
+        Quantization,
+        Outliers,
+        OvenOvershoot,
+        RtdSelfHeating,
+    )
+}
