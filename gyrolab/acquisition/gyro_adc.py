@@ -1,0 +1,245 @@
+"""Gyro ADC stream reader: framed 24-bit samples over a serial port (pyserial).
+
+The frame format and the decoder are in :mod:`gyrolab.framing` (shared with the
+simulated source); docs/instruments.md documents both. This class adds the port:
+reading, resynchronising (in the decoder), gap reporting, and reconnecting with
+exponential backoff when the port disappears (USB adapter unplugged, pty closed).
+
+Guarantees, in the order they are checked: a sample is passed on only inside a frame
+whose sync word, length, CRC-16, sequence number and timestamp all check out; frames are
+passed on in sequence order and at most once (a frame not newer than the last one passed
+on is dropped, also across reconnects); every missing frame is reported as a
+:class:`~gyrolab.framing.Gap` with its first sequence number and count.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import serial
+
+from gyrolab.framing import FrameBatch, FrameDecoder, Gap
+
+NAME = "gyro ADC"
+
+
+@dataclass(frozen=True)
+class AdcBlock:
+    """Consecutive samples with no gap inside (the recorder's ``/gyro/adc`` block).
+
+    ``t0`` (s) is the ADC clock at the first sample, ``period`` (s) the nominal sample
+    period, ``first_index`` the first sample's index since the stream's frame 0
+    (``first_seq · samples_per_frame``), ``counts`` int32.
+    """
+
+    first_seq: int
+    first_index: int
+    t0: float
+    period: float
+    counts: np.ndarray
+
+
+@dataclass
+class AdcEvent:
+    """A port event worth logging: ``kind`` is disconnect | reconnect | open_failed | gap."""
+
+    wall_time: float
+    kind: str
+    message: str
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class AdcRead:
+    """What one :meth:`GyroAdcReader.read` returned: blocks in order, the gaps between
+    them (and before the first), and port events."""
+
+    blocks: list[AdcBlock] = field(default_factory=list)
+    gaps: list[Gap] = field(default_factory=list)
+    events: list[AdcEvent] = field(default_factory=list)
+
+    @property
+    def samples(self) -> int:
+        return sum(b.counts.size for b in self.blocks)
+
+
+@dataclass
+class ReaderStats:
+    """Port-level counts; decoding counts are in ``decoder`` (a DecoderStats)."""
+
+    disconnects: int = 0
+    reconnects: int = 0
+    open_failures: int = 0
+    bytes_read: int = 0
+
+
+class GyroAdcReader:
+    """Reads and decodes the ADC stream from ``port``.
+
+    ``samples_per_frame`` and ``rate_hz`` (samples/s) must match the ADC's configuration.
+    ``read()`` returns whatever arrived since the last call (waiting up to ``timeout_s``
+    for the first bytes). When the port fails, ``read()`` closes it, reports a
+    ``disconnect`` event and from then on retries opening it every ``backoff`` seconds,
+    doubling from ``backoff_initial_s`` to ``backoff_max_s``; frames lost meanwhile are
+    reported as a gap with cause ``disconnect`` once data flows again.
+    """
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        samples_per_frame: int = 10,
+        rate_hz: float = 1000.0,
+        baudrate: int = 921600,
+        backoff_initial_s: float = 0.05,
+        backoff_max_s: float = 2.0,
+        serial_factory: Callable[..., Any] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.port_name = port
+        self.samples_per_frame = samples_per_frame
+        self.rate_hz = float(rate_hz)
+        self.period = 1.0 / self.rate_hz
+        self.baudrate = baudrate
+        self.backoff_initial_s = backoff_initial_s
+        self.backoff_max_s = backoff_max_s
+        self._factory = serial_factory or serial.Serial
+        self._clock = clock
+        self.decoder = FrameDecoder(samples_per_frame, rate_hz)
+        self.stats = ReaderStats()
+        self._ser: Any = None
+        self._backoff = backoff_initial_s
+        self._next_attempt = 0.0
+        self._pending_events: list[AdcEvent] = []
+        self.last_data_time: float | None = None  # clock() when bytes last arrived
+
+    # ----------------------------------------------------------------- port
+    @property
+    def connected(self) -> bool:
+        return self._ser is not None
+
+    def open(self) -> None:
+        """Open the port now; raises ``serial.SerialException`` if it cannot."""
+        self._ser = self._factory(self.port_name, baudrate=self.baudrate, timeout=0.05)
+        self._backoff = self.backoff_initial_s
+
+    def close(self) -> None:
+        if self._ser is not None:
+            try:
+                self._ser.close()
+            except Exception:
+                pass
+            self._ser = None
+
+    def __enter__(self) -> GyroAdcReader:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _event(self, kind: str, message: str, **data: Any) -> None:
+        self._pending_events.append(AdcEvent(self._clock(), kind, message, data))
+
+    def _lost_port(self, err: Exception) -> None:
+        self.close()
+        dropped = self.decoder.reset_stream("disconnect")
+        self.stats.disconnects += 1
+        self._backoff = self.backoff_initial_s
+        self._next_attempt = self._clock() + self._backoff
+        self._event(
+            "disconnect",
+            f"{self.port_name}: {err}",
+            partial_bytes_dropped=dropped,
+            last_seq=self.decoder.last_seq,
+        )
+
+    def _try_reopen(self) -> bool:
+        now = self._clock()
+        if now < self._next_attempt:
+            return False
+        try:
+            self.open()
+        except (serial.SerialException, OSError) as e:
+            self.stats.open_failures += 1
+            self._backoff = min(self._backoff * 2.0, self.backoff_max_s)
+            self._next_attempt = now + self._backoff
+            if self.stats.open_failures == 1 or self.stats.open_failures % 10 == 0:
+                self._event("open_failed", f"{self.port_name}: {e}", retry_in_s=self._backoff)
+            return False
+        self.stats.reconnects += 1
+        self._event("reconnect", f"{self.port_name} reopened", last_seq=self.decoder.last_seq)
+        return True
+
+    # ----------------------------------------------------------------- reading
+    def read_bytes(self, timeout_s: float) -> bytes:
+        """Bytes available now, waiting up to ``timeout_s`` for the first; b"" while
+        disconnected (after at most ``timeout_s``, or the next reconnect attempt)."""
+        if self._ser is None:
+            deadline = self._clock() + timeout_s
+            if not self._try_reopen():
+                wait = min(self._next_attempt, deadline) - self._clock()
+                if wait > 0:
+                    time.sleep(wait)
+                if not self._try_reopen():
+                    return b""
+        ser = self._ser
+        try:
+            ser.timeout = timeout_s
+            data = ser.read(max(1, ser.in_waiting))
+            if data:
+                more = ser.in_waiting  # take the rest without waiting again
+                if more:
+                    data += ser.read(more)
+        except (serial.SerialException, OSError) as e:
+            self._lost_port(e)
+            return b""
+        if data:
+            self.stats.bytes_read += len(data)
+            self.last_data_time = self._clock()
+        return data
+
+    def read(self, timeout_s: float = 0.1) -> AdcRead:
+        """Decode whatever has arrived; see the class docstring."""
+        data = self.read_bytes(timeout_s)
+        out = AdcRead(events=self._pending_events)
+        self._pending_events = []
+        if data:
+            self._split(self.decoder.feed(data), out)
+        for g in out.gaps:
+            out.events.append(
+                AdcEvent(
+                    self._clock(),
+                    "gap",
+                    f"{g.frames} frame(s) missing from seq {g.first_seq} ({g.cause})",
+                    {"first_seq": g.first_seq, "frames": g.frames, "cause": g.cause},
+                )
+            )
+        return out
+
+    def _split(self, batch: FrameBatch, out: AdcRead) -> None:
+        """Cut a batch into gap-free blocks."""
+        if not len(batch):
+            return
+        spf = self.samples_per_frame
+        cuts = sorted(batch.gaps_before)
+        bounds = [0, *[c for c in cuts if c > 0], len(batch)]
+        for c in cuts:
+            out.gaps.append(batch.gaps_before[c])
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if b <= a:
+                continue
+            seq0 = int(batch.seq[a])
+            out.blocks.append(
+                AdcBlock(
+                    first_seq=seq0,
+                    first_index=seq0 * spf,
+                    t0=float(batch.timestamp_us[a]) * 1e-6,
+                    period=self.period,
+                    counts=batch.counts[a:b].reshape(-1),
+                )
+            )

@@ -1,0 +1,234 @@
+"""HP / Agilent / Keysight 34401A 6½-digit multimeter: 4-wire resistance of the PT100.
+
+Talks SCPI over pyvisa (the pure-Python ``@py`` backend by default; NI-VISA works too).
+Resources:
+
+- RS-232: ``ASRL/dev/ttyUSB0::INSTR`` (or ``ASRL1::INSTR``): 9600 baud, 8 data bits, no
+  parity, 2 stop bits, DTR/DSR handshake; ``SYST:REM`` is sent first because over RS-232
+  the meter otherwise stays under front-panel control.
+- LAN through a GPIB/serial-to-LAN gateway or a SCPI socket: ``TCPIP::host::5025::SOCKET``.
+- GPIB: ``GPIB0::22::INSTR``.
+
+Measurement: ``CONF:FRES 1000`` (the 100 Ω range overloads at 120 Ω, below a PT100 at
+60 °C = 123.24 Ω; the 1 kΩ range covers −200…+850 °C), ``FRES:NPLC 10`` (integration over
+10 power-line cycles rejects mains pickup), then ``READ?`` per reading. ``SYST:ERR?`` is
+drained after configuration and any error raises. Readings come back in ohms and in °C
+through the IEC 60751 inverse (:func:`gyrolab.pt100.cvd_temperature`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.pt100 import R0_OHM, cvd_temperature
+
+NAME = "34401A"
+
+
+@dataclass(frozen=True)
+class Pt100Reading:
+    """One 4-wire reading: ``resistance_ohm`` (Ω) and ``temperature_c`` (°C, CVD inverse)."""
+
+    resistance_ohm: float
+    temperature_c: float
+
+
+class Agilent34401A:
+    """34401A driver (PyMeasure style: settings and readings below, one SCPI line each).
+
+    Settings
+        ``range_ohm``   ``CONF:FRES <range>``  — 100, 1e3, 10e3, 100e3, 1e6, 10e6, 100e6 Ω
+        ``nplc``        ``FRES:NPLC <n>``      — 0.02, 0.2, 1, 10, 100 power-line cycles
+    Readings
+        ``identity``    ``*IDN?``              — "HEWLETT-PACKARD,34401A,0,11-5-2"
+        ``resistance``  ``READ?``              — Ω (overload, 9.9E+37, raises)
+        ``errors``      ``SYST:ERR?`` repeated — [(code, message)] until ``+0,"No error"``
+
+    ``resource`` is a VISA resource string or an already open pyvisa resource (tests);
+    ``visa_library`` a pyvisa ResourceManager argument (``"@py"``, ``"file.yaml@sim"``)
+    or a ResourceManager. ``timeout_s`` bounds every I/O; it must exceed the integration
+    time (NPLC 10 at 50 Hz = 0.2 s, ×2 for 4-wire autozero).
+    """
+
+    RANGES_OHM = (100.0, 1e3, 10e3, 100e3, 1e6, 10e6, 100e6)
+    NPLC_VALUES = (0.02, 0.2, 1.0, 10.0, 100.0)
+    OVERLOAD = 9.0e37  # the meter returns +9.90000000E+37 on overload
+    _ERR = re.compile(r"^\s*([+-]?\d+)\s*,\s*\"?(.*?)\"?\s*$")
+
+    def __init__(
+        self,
+        resource: str | Any,
+        *,
+        visa_library: str | Any = "@py",
+        timeout_s: float = 5.0,
+        range_ohm: float = 1000.0,
+        nplc: float = 10.0,
+        r0_ohm: float = R0_OHM,
+        baud_rate: int = 9600,
+    ) -> None:
+        if range_ohm not in self.RANGES_OHM:
+            raise LimitError(NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
+        if nplc not in self.NPLC_VALUES:
+            raise LimitError(NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
+        self.range_ohm = float(range_ohm)
+        self.nplc = float(nplc)
+        self.r0_ohm = r0_ohm
+        self.timeout_s = timeout_s
+        self._rm = None
+        if isinstance(resource, str):
+            import pyvisa
+
+            self.resource_name = resource
+            if isinstance(visa_library, pyvisa.ResourceManager):
+                rm = visa_library
+            else:
+                rm = self._rm = pyvisa.ResourceManager(visa_library)
+            try:
+                self.inst = rm.open_resource(resource)
+            except Exception as e:  # pyvisa raises VisaIOError, OSError, ValueError …
+                raise InstrumentError(NAME, f"cannot open {resource}: {e}") from e
+        else:
+            self.resource_name = str(getattr(resource, "resource_name", "<resource>"))
+            self.inst = resource
+        self.is_serial = self.resource_name.upper().startswith("ASRL")
+        self.inst.timeout = int(timeout_s * 1000)  # pyvisa timeouts are in ms
+        self.inst.write_termination = "\n"
+        self.inst.read_termination = "\n"  # RS-232 replies end in CR LF; CR is stripped
+        if self.is_serial:
+            self._setup_serial(baud_rate)
+
+    def _setup_serial(self, baud_rate: int) -> None:
+        try:
+            from pyvisa import constants
+
+            self.inst.baud_rate = baud_rate
+            self.inst.data_bits = 8
+            self.inst.parity = constants.Parity.none
+            self.inst.stop_bits = constants.StopBits.two
+            # The 34401A holds off on DSR; pyvisa-py maps this to pyserial's dsrdtr.
+            self.inst.flow_control = constants.ControlFlow.dtr_dsr
+        except (AttributeError, ImportError):  # a protocol-test stand-in has no such attributes
+            pass
+
+    # ------------------------------------------------------------------ low level
+    def write(self, command: str) -> None:
+        """Send one SCPI command line."""
+        try:
+            self.inst.write(command)
+        except Exception as e:
+            raise self._wrap(e, command) from e
+
+    def query(self, command: str) -> str:
+        """Send ``command`` and return the reply line, stripped."""
+        try:
+            return str(self.inst.query(command)).strip()
+        except Exception as e:
+            raise self._wrap(e, command) from e
+
+    def _wrap(self, e: Exception, command: str) -> InstrumentError:
+        text = f"{type(e).__name__}: {e}"
+        if "TMO" in text or "imeout" in text:
+            return InstrumentTimeout(NAME, f"no reply to {command!r} within {self.timeout_s} s")
+        return InstrumentError(NAME, f"{command!r} failed: {text}")
+
+    # ------------------------------------------------------------------ readings
+    @property
+    def identity(self) -> str:
+        """``*IDN?``: manufacturer, model, serial, firmware."""
+        return self.query("*IDN?")
+
+    @property
+    def errors(self) -> list[tuple[int, str]]:
+        """Drain the error queue (``SYST:ERR?`` until code 0); at most 20 entries."""
+        out: list[tuple[int, str]] = []
+        for _ in range(20):  # the 34401A queue holds 20 errors
+            reply = self.query("SYST:ERR?")
+            m = self._ERR.match(reply)
+            if not m:
+                raise InstrumentError(NAME, f"unparsable SYST:ERR? reply {reply!r}")
+            code = int(m.group(1))
+            if code == 0:
+                break
+            out.append((code, m.group(2)))
+        return out
+
+    def check_errors(self) -> None:
+        """Raise :class:`InstrumentError` listing the error queue if it is not empty."""
+        errs = self.errors
+        if errs:
+            raise InstrumentError(NAME, "error queue: " + "; ".join(f"{c},{m}" for c, m in errs))
+
+    @property
+    def resistance(self) -> float:
+        """``READ?``: one triggered 4-wire resistance reading, Ω."""
+        reply = self.query("READ?")
+        try:
+            value = float(reply)
+        except ValueError:
+            raise InstrumentError(NAME, f"READ? returned {reply!r}") from None
+        if not math.isfinite(value) or abs(value) >= self.OVERLOAD:
+            raise InstrumentError(
+                NAME, f"overload on the {self.range_ohm:g} Ω range (reading {reply})"
+            )
+        return value
+
+    def read(self) -> Pt100Reading:
+        """One reading in Ω and °C."""
+        r = self.resistance
+        return Pt100Reading(r, float(cvd_temperature(r, self.r0_ohm)))
+
+    # ------------------------------------------------------------------ settings
+    def reset(self) -> None:
+        """``*RST`` then ``*CLS`` (clears the error queue)."""
+        self.write("*RST")
+        self.write("*CLS")
+
+    def configure(self, range_ohm: float | None = None, nplc: float | None = None) -> None:
+        """``CONF:FRES <range>`` and ``FRES:NPLC <n>``, then check the error queue."""
+        if range_ohm is not None:
+            if range_ohm not in self.RANGES_OHM:
+                raise LimitError(NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
+            self.range_ohm = float(range_ohm)
+        if nplc is not None:
+            if nplc not in self.NPLC_VALUES:
+                raise LimitError(NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
+            self.nplc = float(nplc)
+        self.write(f"CONF:FRES {self.range_ohm:g}")
+        self.write(f"FRES:NPLC {self.nplc:g}")
+        self.check_errors()
+
+    def connect(self) -> str:
+        """Bring the meter to a known state: remote (RS-232), reset, identify, configure.
+        Returns the ``*IDN?`` string."""
+        if self.is_serial:
+            self.write("SYST:REM")
+        self.reset()
+        idn = self.identity
+        if "34401" not in idn:
+            raise InstrumentError(NAME, f"unexpected instrument {idn!r}")
+        self.configure()
+        return idn
+
+    def close(self) -> None:
+        """Return the meter to local (RS-232) and close the resource."""
+        try:
+            if self.is_serial:
+                self.write("SYST:LOC")
+        except InstrumentError:
+            pass
+        try:
+            self.inst.close()
+        finally:
+            if self._rm is not None:
+                self._rm.close()
+                self._rm = None
+
+    def __enter__(self) -> Agilent34401A:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,279 @@
+"""Watlow F4-style temperature chamber controller over Modbus RTU.
+
+minimalmodbus (on pyserial) is used rather than pymodbus: the oven is one slave on one
+RS-232/RS-485 line polled a few times a second, and minimalmodbus is small, synchronous
+and blocking, which is exactly that; pymodbus's asyncio client/server machinery buys
+nothing here and is more to audit (docs/instruments.md).
+
+Register map (holding registers, function 03 to read, 06 to write; 16-bit signed values
+with implied decimals: raw = round(value · 10**decimals)):
+
+    100  process value (chamber air)         read        °C or °F per 901
+    200  status (bit field, see OvenStatus)  read
+    300  static setpoint                     read/write  °C or °F per 901
+    606  decimal places (0, 1 or 2)          read
+    901  temperature units (0 = °F, 1 = °C)  read
+
+Safety: a setpoint outside ``setpoint_limits_c`` (or not finite, or beyond int16 after
+scaling) raises :class:`LimitError` before a single byte is written. Every setpoint write
+is read back and compared. Transport errors (no reply, CRC error, exception response)
+are retried ``retries`` times, then raised as :class:`InstrumentError` /
+:class:`InstrumentTimeout`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import minimalmodbus
+import serial
+
+from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
+
+NAME = "WatlowF4"
+
+REG_PROCESS_VALUE = 100
+REG_STATUS = 200
+REG_SETPOINT = 300
+REG_DECIMALS = 606
+REG_UNITS = 901
+UNITS_F, UNITS_C = 0, 1
+
+
+@dataclass(frozen=True)
+class OvenStatus:
+    """Register 200, bit by bit."""
+
+    raw: int
+
+    @property
+    def heating(self) -> bool:  # bit 0: heat output on
+        return bool(self.raw & 0x01)
+
+    @property
+    def cooling(self) -> bool:  # bit 1: cool output (compressor/LN2 valve) on
+        return bool(self.raw & 0x02)
+
+    @property
+    def alarm(self) -> bool:  # bit 2: process alarm (deviation/over-temperature)
+        return bool(self.raw & 0x04)
+
+    @property
+    def sensor_fault(self) -> bool:  # bit 3: chamber sensor open/shorted
+        return bool(self.raw & 0x08)
+
+    @property
+    def mode(self) -> str:
+        """``fault`` | ``heat`` | ``cool`` | ``hold`` (the recorder's /oven/state mode)."""
+        if self.alarm or self.sensor_fault:
+            return "fault"
+        if self.heating:
+            return "heat"
+        if self.cooling:
+            return "cool"
+        return "hold"
+
+
+@dataclass
+class ModbusStats:
+    """Transport errors seen (and retried) since the driver was created."""
+
+    transactions: int = 0
+    no_reply: int = 0
+    bad_reply: int = 0  # CRC error or malformed
+    exceptions: int = 0  # slave exception responses
+    retries: int = 0
+    last_error: str = ""
+    by_kind: dict[str, int] = field(default_factory=dict)
+
+
+class WatlowF4:
+    """Watlow F4 over Modbus RTU.
+
+    Settings
+        ``setpoint_c``        reg 300, write + read-back; limits checked first
+    Readings
+        ``process_value_c``   reg 100, chamber air temperature, °C
+        ``setpoint_c``        reg 300, °C
+        ``status``            reg 200, :class:`OvenStatus`
+        ``decimals``          reg 606, implied decimal places
+        ``units``             reg 901, 0 = °F, 1 = °C
+
+    ``port`` is a device path (``/dev/ttyUSB0``, a pty) or an open pyserial-like object
+    (tests). Line: 19200 baud 8N1 by default (the F4 supports 9600/19200/38400).
+    """
+
+    def __init__(
+        self,
+        port: str | Any,
+        *,
+        address: int = 1,
+        baudrate: int = 19200,
+        timeout_s: float = 0.3,
+        setpoint_limits_c: tuple[float, float] = (-45.0, 70.0),
+        retries: int = 2,
+    ) -> None:
+        lo, hi = setpoint_limits_c
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"bad setpoint limits {setpoint_limits_c}")
+        self.setpoint_limits_c = (float(lo), float(hi))
+        self.retries = retries
+        self.stats = ModbusStats()
+        if isinstance(port, str):
+            self.port_name = port
+            try:
+                ser = serial.Serial(
+                    port, baudrate=baudrate, bytesize=8, parity="N", stopbits=1, timeout=timeout_s
+                )
+            except (serial.SerialException, OSError) as e:
+                raise InstrumentError(NAME, f"cannot open {port}: {e}") from e
+        else:
+            self.port_name = str(getattr(port, "port", "<port>"))
+            ser = port
+        self.serial = ser
+        self._mb = minimalmodbus.Instrument(ser, address, mode=minimalmodbus.MODE_RTU)
+        self._mb.clear_buffers_before_each_transaction = True  # drop late/garbled replies
+        self._decimals: int | None = None
+        self._units: int | None = None
+
+    # ----------------------------------------------------------------- transport
+    def _call(self, what: str, fn: Any, *args: Any, **kw: Any) -> Any:
+        last: Exception | None = None
+        for attempt in range(self.retries + 1):
+            self.stats.transactions += 1
+            if attempt:
+                self.stats.retries += 1
+            try:
+                return fn(*args, **kw)
+            except minimalmodbus.NoResponseError as e:
+                self.stats.no_reply += 1
+                last = e
+            except minimalmodbus.SlaveReportedException as e:
+                self.stats.exceptions += 1
+                last = e
+            except (minimalmodbus.InvalidResponseError, minimalmodbus.ModbusException) as e:
+                self.stats.bad_reply += 1
+                last = e
+            except (serial.SerialException, OSError) as e:
+                raise InstrumentError(NAME, f"{what}: port error {e}") from e
+            kind = type(last).__name__
+            self.stats.by_kind[kind] = self.stats.by_kind.get(kind, 0) + 1
+            self.stats.last_error = f"{kind}: {last}"
+        msg = f"{what} failed after {self.retries + 1} tries ({self.stats.last_error})"
+        if isinstance(last, minimalmodbus.NoResponseError):
+            raise InstrumentTimeout(NAME, msg)
+        raise InstrumentError(NAME, msg)
+
+    def read_register(self, register: int) -> int:
+        """Raw signed 16-bit value of one holding register (function 03)."""
+        return int(
+            self._call(f"read {register}", self._mb.read_register, register, 0, 3, signed=True)
+        )
+
+    def write_register(self, register: int, raw: int) -> None:
+        """Write one signed 16-bit raw value (function 06)."""
+        self._call(
+            f"write {register}",
+            self._mb.write_register,
+            register,
+            raw,
+            0,
+            6,
+            signed=True,
+        )
+
+    # ------------------------------------------------------------------ readings
+    @property
+    def decimals(self) -> int:
+        """Implied decimal places (reg 606), read once and cached."""
+        if self._decimals is None:
+            d = self.read_register(REG_DECIMALS)
+            if d not in (0, 1, 2):
+                raise InstrumentError(NAME, f"decimal places register reads {d}")
+            self._decimals = d
+        return self._decimals
+
+    @property
+    def units(self) -> int:
+        """Temperature units (reg 901): 0 = °F, 1 = °C; read once and cached."""
+        if self._units is None:
+            u = self.read_register(REG_UNITS)
+            if u not in (UNITS_F, UNITS_C):
+                raise InstrumentError(NAME, f"units register reads {u}")
+            self._units = u
+        return self._units
+
+    def _to_c(self, raw: int) -> float:
+        v = raw / 10**self.decimals
+        return v if self.units == UNITS_C else (v - 32.0) * 5.0 / 9.0
+
+    def _to_raw(self, value_c: float) -> int:
+        v = value_c if self.units == UNITS_C else value_c * 9.0 / 5.0 + 32.0
+        return round(v * 10**self.decimals)
+
+    @property
+    def process_value_c(self) -> float:
+        """Chamber air temperature, °C (reg 100)."""
+        return self._to_c(self.read_register(REG_PROCESS_VALUE))
+
+    @property
+    def setpoint_c(self) -> float:
+        """Current setpoint, °C (reg 300)."""
+        return self._to_c(self.read_register(REG_SETPOINT))
+
+    @setpoint_c.setter
+    def setpoint_c(self, value_c: float) -> None:
+        self.set_setpoint(value_c)
+
+    @property
+    def status(self) -> OvenStatus:
+        """Status bits (reg 200)."""
+        return OvenStatus(self.read_register(REG_STATUS) & 0xFFFF)
+
+    # ------------------------------------------------------------------ settings
+    def check_setpoint(self, value_c: float) -> None:
+        """Raise :class:`LimitError` if ``value_c`` may not be sent; no I/O at all."""
+        lo, hi = self.setpoint_limits_c
+        if not isinstance(value_c, (int, float)) or not math.isfinite(value_c):
+            raise LimitError(NAME, f"setpoint {value_c!r} is not a finite number")
+        if not lo <= value_c <= hi:
+            raise LimitError(NAME, f"setpoint {value_c} °C outside the limits [{lo}, {hi}] °C")
+
+    def set_setpoint(self, value_c: float) -> float:
+        """Command a new setpoint (°C) and verify it by reading it back.
+
+        Limits are checked before anything is sent (:class:`LimitError`). Returns the
+        setpoint the controller now holds, °C (quantized to its decimal places)."""
+        self.check_setpoint(value_c)
+        raw = self._to_raw(value_c)  # may read 606/901 (reads only, never a write)
+        if not -32768 <= raw <= 32767:
+            raise LimitError(NAME, f"setpoint {value_c} °C does not fit a 16-bit register")
+        self.write_register(REG_SETPOINT, raw)
+        back = self.read_register(REG_SETPOINT)
+        if back != raw:
+            raise InstrumentError(NAME, f"setpoint read-back {back} != written {raw}")
+        return self._to_c(back)
+
+    def connect(self) -> dict[str, Any]:
+        """Read the configuration registers; returns them (for the ``bench`` metadata)."""
+        self._decimals = self._units = None
+        return {
+            "decimals": self.decimals,
+            "units": "C" if self.units == UNITS_C else "F",
+            "setpoint_c": self.setpoint_c,
+            "process_value_c": self.process_value_c,
+        }
+
+    def close(self) -> None:
+        try:
+            self.serial.close()
+        except Exception:
+            pass
+
+    def __enter__(self) -> WatlowF4:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
