@@ -104,8 +104,8 @@ class BiasPoly(Effect):
     name = "bias_poly"
     PARAMS = {
         "c0": Param(0.02, "deg/s", "bias at T_ref"),
-        "c1": Param(3.0e-4, "deg/s/degC", "linear coefficient"),
-        "c2": Param(1.0e-6, "deg/s/degC^2", "quadratic coefficient"),
+        "c1": Param(3.84e-4, "deg/s/degC", "linear coefficient"),
+        "c2": Param(3.4e-6, "deg/s/degC^2", "quadratic coefficient"),
         "c3": Param(0.0, "deg/s/degC^3", "cubic coefficient"),
         "c4": Param(0.0, "deg/s/degC^4", "quartic coefficient"),
         "t_ref_c": Param(25.0, "degC", "reference temperature T_ref"),

@@ -1,0 +1,211 @@
+"""``gyrolab simulate``: run a profile through :class:`~gyrolab.sim.physics.Physics` to MCAP.
+
+A loop over :meth:`Physics.advance` in 1 s blocks (aligned to whole seconds since power-on),
+split where the profile changes the setpoint. Per block it writes ``/gyro/adc`` (the codes)
+and ``/gyro/rate`` (the codes converted back exactly as a bench converts them), and at 1 Hz
+``/temperature/pt100`` (DMM reading and its IEC 60751 inverse) and ``/oven/state``. Memory
+is one block plus the flicker generator's chunk, whatever the run's length.
+
+Recordings are reproducible: the run start defaults to 2021-04-20T00:00:00Z and nothing
+else in the file depends on the wall clock, so the same seed gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+from collections import deque
+from dataclasses import dataclass
+from typing import IO, Any
+
+import numpy as np
+
+from gyrolab import __version__
+from gyrolab.profile import Profile
+from gyrolab.progress import progress
+from gyrolab.recording import RecordingWriter
+from gyrolab.sim.model import SimModel
+from gyrolab.sim.physics import Physics
+from gyrolab.sim.sensors import cvd_temperature
+
+DEFAULT_START = "2021-04-20T00:00:00Z"
+
+# Identities of the simulated instruments (the bench helper's responders answer the same).
+INSTRUMENTS: dict[str, dict[str, str]] = {
+    "dmm": {
+        "identity": "HEWLETT-PACKARD,34401A,SIM00001,11-5-2",
+        "role": "PT100 4-wire resistance",
+        "simulated": "true",
+    },
+    "oven": {
+        "identity": "Watlow F4 (simulated), Modbus RTU address 1",
+        "role": "temperature chamber controller",
+        "simulated": "true",
+    },
+    "gyro_adc": {
+        "identity": "gyrolab simulated 24-bit ADC, serial SIM-ADC-0001",
+        "role": "gyro rate output",
+        "simulated": "true",
+    },
+    "gyro": {
+        "identity": "dual-mass tuning-fork MEMS gyroscope (simulated), serial SIM-GYRO-0001",
+        "role": "device under test",
+        "simulated": "true",
+    },
+}
+
+
+@dataclass
+class SimSummary:
+    """What a simulation wrote."""
+
+    duration_s: float
+    samples: int
+    blocks: int
+    steps: int
+
+
+def _start_ns(start_time: str) -> int:
+    ts = dt.datetime.fromisoformat(start_time.replace("Z", "+00:00"))
+    if ts.tzinfo is None:
+        ts = ts.replace(tzinfo=dt.timezone.utc)
+    return int(round(ts.timestamp())) * 1_000_000_000 + ts.microsecond * 1000
+
+
+def run_metadata(profile: Profile, rate_hz: float, seed: int, start_time: str) -> dict[str, Any]:
+    return {
+        "operator": "gyrolab simulate",
+        "source": "simulation",
+        "start_time": start_time,
+        "profile": profile.name,
+        "profile_definition": profile.to_dict(),
+        "seed": int(seed),
+        "rate_hz": float(rate_hz),
+        "software_version": __version__,
+    }
+
+
+def bench_metadata(model: SimModel, rate_hz: float) -> dict[str, Any]:
+    adc = model.sensors.adc.to_dict()
+    adc["rate_hz"] = float(rate_hz)
+    return {
+        "bench": "sim",
+        "instruments": INSTRUMENTS,
+        "adc": adc,
+        "pt100": {"standard": "IEC 60751", "r0_ohm": 100.0, "wiring": "4-wire", "on": "case"},
+    }
+
+
+def provenance(model: SimModel, seed: int) -> dict[str, Any]:
+    """The ``sim_provenance`` record: the generating model. Never read by discrepancy."""
+    return {
+        "seed": int(seed),
+        "effects": [e.name for e in model.effects],
+        "model_toml": model.to_toml(),
+    }
+
+
+def simulate_run(
+    out: str | os.PathLike[str] | IO[bytes],
+    profile: Profile,
+    model: SimModel,
+    *,
+    rate_hz: float = 100.0,
+    seed: int = 0,
+    start_time: str = DEFAULT_START,
+    show_progress: bool = True,
+) -> SimSummary:
+    """Simulate ``profile`` with ``model`` and write the recording to ``out``.
+
+    Steps with a stability rule are held past their minimum duration until the PT100 slope
+    over ``stable_window_s`` is below ``stable_slope_c_per_min`` (checked once a second),
+    or ``max_extra_s`` has passed.
+    """
+    phys = Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
+    bn = phys.block_n
+    rate = phys.rate_hz
+    w = RecordingWriter(
+        out,
+        start_time_ns=_start_ns(start_time),
+        run=run_metadata(profile, rate, seed, start_time),
+        bench=bench_metadata(model, rate),
+    )
+    n_blocks = 0
+    try:
+        w.write_metadata("sim_provenance", provenance(model, seed))
+        w.write_event(0.0, "run_started", -1, detail=f"profile {profile.name}")
+        w.write_log(
+            0.0,
+            "info",
+            "simulator",
+            f"simulating profile {profile.name} at {rate:g} Hz, seed {seed}",
+        )
+        steps = profile.steps
+        step = 0
+        step_start = 0
+        phys.set_setpoint(steps[0].setpoint_c)
+        w.write_event(0.0, "step_started", 0, steps[0].setpoint_c, steps[0].label)
+        pt_hist: deque[tuple[float, float]] = deque()
+        bar = progress(total=round(profile.duration_s), desc="simulate", unit="s")
+        done = False
+        while not done:
+            idx = phys.index
+            t_now = phys.t
+            r_ohm = phys.pt100_ohm()
+            t_c = float(cvd_temperature(r_ohm))
+            w.write_pt100(t_now, r_ohm, t_c)
+            w.write_oven(t_now, phys.setpoint_c, phys.chamber_c(), "run")
+            s = steps[step]
+            if s.stable_slope_c_per_min is not None:
+                pt_hist.append((t_now, t_c))
+                while pt_hist and pt_hist[0][0] < t_now - s.stable_window_s:
+                    pt_hist.popleft()
+            # samples in this block, cut where the step's minimum duration ends
+            end_block = (idx // bn + 1) * bn
+            parts_counts: list[np.ndarray] = []
+            pos = idx
+            while pos < end_block:
+                # at least one sample per step, so every step is seen by the recording
+                min_end = step_start + max(1, int(round(s.duration_s * rate)))
+                cut = min(end_block, min_end) if pos < min_end else end_block
+                blk = phys.advance(cut - pos)
+                parts_counts.append(blk.counts)
+                pos = cut
+                ended = pos == min_end and s.stable_slope_c_per_min is None
+                if s.stable_slope_c_per_min is not None and pos >= min_end and pos == end_block:
+                    ended = _stable(pt_hist, s) or (pos - min_end) >= s.max_extra_s * rate
+                    if ended and _stable(pt_hist, s):
+                        w.write_event(pos / rate, "soaked", step, s.setpoint_c)
+                if ended:
+                    w.write_event(pos / rate, "step_ended", step, s.setpoint_c)
+                    step += 1
+                    step_start = pos
+                    pt_hist.clear()
+                    if step == len(steps):
+                        done = True
+                        break
+                    s = steps[step]
+                    phys.set_setpoint(s.setpoint_c)
+                    w.write_event(pos / rate, "step_started", step, s.setpoint_c, s.label)
+            counts = parts_counts[0] if len(parts_counts) == 1 else np.concatenate(parts_counts)
+            w.write_adc_block(idx / rate, phys.period, idx, counts)
+            w.write_rate_block(idx / rate, phys.period, idx, phys.adc.counts_to_dps(counts))
+            n_blocks += 1
+            bar.update(1)
+        bar.close()
+        t_end = phys.t
+        w.write_oven(t_end, phys.setpoint_c, phys.chamber_c(), "standby")
+        w.write_event(t_end, "run_ended", -1, detail="profile complete")
+        w.write_log(t_end, "info", "simulator", f"done: {phys.index} samples, {t_end:.0f} s")
+    finally:
+        w.close()
+    return SimSummary(t_end, phys.index, n_blocks, len(steps))
+
+
+def _stable(hist: deque[tuple[float, float]], s: Any) -> bool:
+    """PT100 slope over the window below the step's threshold (°C/min)."""
+    if len(hist) < 3 or hist[-1][0] - hist[0][0] < 0.99 * s.stable_window_s:
+        return False
+    a = np.asarray(hist)
+    slope = np.polyfit(a[:, 0], a[:, 1], 1)[0] * 60.0
+    return abs(slope) < s.stable_slope_c_per_min
