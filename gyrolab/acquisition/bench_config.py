@@ -1,0 +1,255 @@
+"""Bench configuration: the ``BENCH.toml`` that ``gyrolab acquire --bench`` reads.
+
+One file says everything about a bench that is not the profile: where each instrument is
+(VISA resource, serial port), how to talk to it, the safety limits and safe state, the
+ADC's conversion from counts to °/s, the recorder's crash-loss policy, and who runs which
+unit. ``docs/bench-config.md`` documents every key; ``examples/lab.toml`` is a complete
+example. Unknown keys are errors (a typo in a safety limit must not pass silently).
+
+The ``run`` table goes into the recording's ``run`` metadata, the instrument tables (with
+the identities the drivers read at connect time) into ``bench``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from gyrolab.errors import InputError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """Who runs what: into the ``run`` metadata record."""
+
+    operator: str = ""
+    unit_serial: str = ""
+    unit_model: str = ""
+    profile: str = "paper"  # built-in name or a profile TOML (relative to the bench file)
+    notes: str = ""
+
+
+@dataclass(frozen=True)
+class MultimeterConfig:
+    """Agilent/HP 34401A reading the PT100 (4-wire)."""
+
+    resource: str = ""  # "ASRL/dev/ttyUSB0::INSTR" or "TCPIP::host::5025::SOCKET"
+    timeout_s: float = 5.0
+    nplc: float = 10.0
+    range_ohm: float = 1000.0  # 100 Ω range overflows above ~0 °C for a PT100 at 60 °C
+    baud_rate: int = 9600  # RS-232 only
+    period_s: float = 1.0  # one reading per period
+    r0_ohm: float = 100.0  # the PT100's R at 0 °C (calibration)
+    serial: str = ""  # asset serial, if *IDN? does not give it
+    calibration_due: str = ""
+
+
+@dataclass(frozen=True)
+class OvenConfig:
+    """Watlow F4-style controller, Modbus RTU."""
+
+    port: str = ""  # "/dev/ttyUSB1"
+    slave_address: int = 1
+    baud_rate: int = 19200
+    timeout_s: float = 0.3
+    period_s: float = 2.0  # /oven/state poll period
+    serial: str = ""
+
+
+@dataclass(frozen=True)
+class AdcConfig:
+    """The gyro's ADC stream and its conversion to °/s (``Ω = (V − offset)/gain``)."""
+
+    port: str = ""  # "/dev/ttyUSB2"
+    baud_rate: int = 921600
+    sample_rate_hz: float = 100.0
+    samples_per_frame: int = 10  # the ADC's frame length (docs/instruments.md)
+    bits: int = 24
+    vref_v: float = 2.5
+    gain_v_per_dps: float = 0.01  # gyro scale factor seen at the ADC input
+    offset_v: float = 0.0
+    block_s: float = 0.5  # samples per recorded block = block_s · rate (bounds crash loss)
+    serial: str = ""
+
+    def dps_per_count(self) -> float:
+        return self.vref_v / 2 ** (self.bits - 1) / self.gain_v_per_dps
+
+    def to_dps(self, counts: Any) -> Any:
+        """Counts → °/s with this calibration (works on numpy arrays)."""
+        return (counts * (self.vref_v / 2 ** (self.bits - 1)) - self.offset_v) / self.gain_v_per_dps
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Safety limits. Any breach drives the oven to the safe state and ends the run."""
+
+    setpoint_min_c: float = -45.0
+    setpoint_max_c: float = 70.0
+    pt100_min_c: float = -50.0  # under-temperature watchdog on the PT100
+    pt100_max_c: float = 75.0  # over-temperature watchdog on the PT100
+    comm_timeout_s: float = 60.0  # an instrument silent longer than this is lost
+    watchdog_samples: int = 3  # consecutive out-of-limit readings before acting (noise)
+
+
+@dataclass(frozen=True)
+class SafeState:
+    """What the oven is told when a run ends early (fault, limit, SIGINT)."""
+
+    # "setpoint": command and verify setpoint_c. (The F4 register map used here has no
+    # output-off register, so there is no "standby" mode.)
+    mode: str = "setpoint"
+    setpoint_c: float = 25.0
+
+
+@dataclass(frozen=True)
+class RecorderConfig:
+    """Crash-loss policy of the MCAP recorder (docs/reliability.md)."""
+
+    flush_every_s: float = 1.0  # run seconds between chunk flushes (kill -9 window)
+    fsync_every_s: float = 2.0  # wall seconds between fsyncs (power-cut window)
+    chunk_size: int = 1 << 20
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """A whole bench. ``source`` is the file it came from (for messages)."""
+
+    name: str = "bench"
+    run: RunInfo = field(default_factory=RunInfo)
+    multimeter: MultimeterConfig = field(default_factory=MultimeterConfig)
+    oven: OvenConfig = field(default_factory=OvenConfig)
+    adc: AdcConfig = field(default_factory=AdcConfig)
+    limits: Limits = field(default_factory=Limits)
+    safe_state: SafeState = field(default_factory=SafeState)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
+    source: str = "<defaults>"
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("source")
+        return d
+
+    def profile_path(self) -> str:
+        """The profile spec, with a relative TOML path resolved against the bench file."""
+        spec = self.run.profile
+        if spec.lower().endswith(".toml") and not os.path.isabs(spec) and self.source:
+            base = Path(self.source).parent if Path(self.source).is_file() else Path(".")
+            return str(base / spec)
+        return spec
+
+
+_SECTIONS: dict[str, type] = {
+    "run": RunInfo,
+    "multimeter": MultimeterConfig,
+    "oven": OvenConfig,
+    "adc": AdcConfig,
+    "limits": Limits,
+    "safe_state": SafeState,
+    "recorder": RecorderConfig,
+}
+
+
+def _section(cls: type, raw: Any, where: str, source: str) -> Any:
+    if not isinstance(raw, dict):
+        raise InputError(source, f"[{where}] must be a table")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise InputError(source, f"[{where}]: unknown key(s) {unknown}")
+    kw: dict[str, Any] = {}
+    for k, v in raw.items():
+        typ = known[k].type
+        try:
+            if typ in ("float", float):
+                if isinstance(v, bool):
+                    raise TypeError
+                v = float(v)
+                if not math.isfinite(v):
+                    raise ValueError
+            elif typ in ("int", int):
+                if isinstance(v, bool) or float(v) != int(v):
+                    raise TypeError
+                v = int(v)
+            elif typ in ("str", str):
+                if not isinstance(v, str):
+                    raise TypeError
+        except (TypeError, ValueError):
+            raise InputError(source, f"[{where}] {k} = {v!r}: expected {typ}") from None
+        kw[k] = v
+    return cls(**kw)
+
+
+def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
+    """Build and check a :class:`BenchConfig` from the TOML layout."""
+    unknown = sorted(set(d) - set(_SECTIONS) - {"name"})
+    if unknown:
+        raise InputError(source, f"unknown table(s) or key(s) {unknown}")
+    kw: dict[str, Any] = {
+        name: _section(cls, d.get(name, {}), name, source) for name, cls in _SECTIONS.items()
+    }
+    cfg = BenchConfig(name=str(d.get("name", Path(source).stem)), source=source, **kw)
+    validate(cfg)
+    return cfg
+
+
+def validate(cfg: BenchConfig) -> None:
+    """Consistency checks; raises InputError naming the file and the key."""
+    s = cfg.source
+    lim = cfg.limits
+    if not lim.setpoint_min_c < lim.setpoint_max_c:
+        raise InputError(s, "[limits] setpoint_min_c must be below setpoint_max_c")
+    if not lim.pt100_min_c < lim.pt100_max_c:
+        raise InputError(s, "[limits] pt100_min_c must be below pt100_max_c")
+    if lim.comm_timeout_s <= 0 or lim.watchdog_samples < 1:
+        raise InputError(s, "[limits] comm_timeout_s must be > 0 and watchdog_samples >= 1")
+    ss = cfg.safe_state
+    if ss.mode != "setpoint":
+        raise InputError(s, f"[safe_state] mode = {ss.mode!r}: only 'setpoint' is supported")
+    if not lim.setpoint_min_c <= ss.setpoint_c <= lim.setpoint_max_c:
+        raise InputError(s, "[safe_state] setpoint_c is outside the setpoint limits")
+    a = cfg.adc
+    if not (2 <= a.bits <= 32 and a.vref_v > 0 and a.gain_v_per_dps != 0):
+        raise InputError(s, "[adc] needs 2 <= bits <= 32, vref_v > 0, gain_v_per_dps != 0")
+    if not (a.sample_rate_hz > 0 and a.block_s > 0 and 1 <= a.samples_per_frame <= 4096):
+        raise InputError(s, "[adc] sample_rate_hz, block_s must be > 0; samples_per_frame 1..4096")
+    for name, period in (("multimeter", cfg.multimeter.period_s), ("oven", cfg.oven.period_s)):
+        if not period > 0:
+            raise InputError(s, f"[{name}] period_s must be > 0")
+    r = cfg.recorder
+    if not (0 < r.flush_every_s <= 1.5):
+        # The 2 s crash-loss promise needs flush period + one ADC block below 2 s.
+        raise InputError(s, "[recorder] flush_every_s must be in (0, 1.5] s")
+    if r.flush_every_s + a.block_s > 2.0:
+        raise InputError(s, "[recorder] flush_every_s + [adc] block_s must not exceed 2 s")
+    if not r.fsync_every_s > 0 or r.chunk_size < 1024:
+        raise InputError(s, "[recorder] fsync_every_s must be > 0 and chunk_size >= 1024")
+
+
+def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
+    """Read and check a bench TOML file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "bench file not found")
+    try:
+        d = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise InputError(p, f"not valid TOML: {e}") from None
+    cfg = bench_from_dict(d, str(p))
+    for name, val in (
+        ("multimeter", cfg.multimeter.resource),
+        ("oven", cfg.oven.port),
+        ("adc", cfg.adc.port),
+    ):
+        if not val:
+            key = "resource" if name == "multimeter" else "port"
+            raise InputError(p, f"[{name}] {key} is required for a real bench")
+    return cfg

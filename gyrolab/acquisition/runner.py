@@ -1,0 +1,929 @@
+"""The profile runner: a state machine that walks the oven through a profile, safely.
+
+Three parts, Bluesky/ophyd style — the plan never touches a port:
+
+* :class:`ProfilePlan` is the plan: a pure state machine over the profile. Fed the time
+  and PT100 readings, it says what to do (command a setpoint, emit an event, log). Each
+  step starts by commanding its setpoint, is held at least ``duration_s`` and then, when
+  the step has a stability rule, until the PT100 slope over ``stable_window_s`` stays
+  below ``stable_slope_c_per_min`` (at most ``max_extra_s`` more, then it moves on with a
+  warning). The first step is the power-on soak.
+* Devices (:class:`Thermometer`, :class:`Oven`, :class:`GyroStream`) are the hardware
+  abstraction: small protocols that the lab drivers and the simulated bench's drivers
+  both satisfy through thin adapters (``gyrolab.acquisition.commands``).
+* :class:`Acquisition` is the run engine: one polling thread per instrument feeding a
+  queue, and the main thread that owns the recorder, runs the plan, watches the safety
+  limits, and ends the run cleanly on completion, fault or SIGINT.
+
+Safety: every profile setpoint is checked against the bench limits before anything
+starts; the PT100 over/under-temperature watchdog, an instrument that raises a fatal
+fault, and an instrument silent for longer than ``comm_timeout_s`` all end the run the
+same way as SIGINT does: the oven is commanded to the configured safe state (and read
+back), the queued data is written, the file is finalized. Every transition and fault goes
+to ``/profile/event`` and ``/log``.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import signal
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.errors import InputError
+from gyrolab.profile import Profile, Step
+from gyrolab.recording import RecordingWriter
+
+# ------------------------------------------------------------------------ protocols
+
+
+class Clock(Protocol):
+    """The run's time base: seconds on a monotonic timeline shared with the instruments."""
+
+    def now(self) -> float: ...
+
+    def sleep(self, dt: float) -> None: ...
+
+
+class WallClock:
+    """Real time (the lab)."""
+
+    speed = 1.0
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, dt: float) -> None:
+        if dt > 0:
+            time.sleep(dt)
+
+
+class InstrumentFault(Exception):
+    """An instrument reports a condition that must end the run (not a transient error)."""
+
+
+class Thermometer(Protocol):
+    """The PT100 reader (a multimeter)."""
+
+    name: str
+
+    def read(self) -> tuple[float, float]:
+        """``(resistance_ohm, temperature_c)``; raises on a failed reading."""
+        ...
+
+
+class Oven(Protocol):
+    """The temperature chamber's controller."""
+
+    name: str
+
+    def set_setpoint(self, setpoint_c: float) -> None:
+        """Command and verify a setpoint; raises on failure."""
+        ...
+
+    def read(self) -> tuple[float, float]:
+        """``(setpoint_c, process_value_c)``; raises on failure."""
+        ...
+
+
+class AdcBlockLike(Protocol):
+    """Gap-free run of samples: device index of the first, its time on the ADC clock (s)."""
+
+    first_index: int
+    t0: float
+    counts: np.ndarray
+
+
+class AdcReadLike(Protocol):
+    """What one read of the stream gave: blocks in order, gaps, and port events."""
+
+    blocks: list[Any]  # AdcBlockLike
+    gaps: list[Any]  # with first_seq, frames, cause
+    events: list[Any]  # with kind, message, data
+
+
+class GyroStream(Protocol):
+    """The gyro's ADC stream (gyrolab.acquisition.gyro_adc.GyroAdcReader's shape)."""
+
+    name: str
+
+    def read(self, timeout_s: float) -> AdcReadLike:
+        """Intact samples received so far (waits at most ``timeout_s`` wall seconds)."""
+        ...
+
+    def counters(self) -> dict[str, int]:
+        """Running totals: at least ``frames_ok``, ``frames_bad`` and ``frames_lost``."""
+        ...
+
+
+# ------------------------------------------------------------------------------ plan
+
+
+@dataclass(frozen=True)
+class SetSetpoint:
+    setpoint_c: float
+
+
+@dataclass(frozen=True)
+class Event:
+    event: str
+    step: int = -1
+    setpoint_c: float | None = None
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class Log:
+    level: str
+    message: str
+    kind: str = ""
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+Action = SetSetpoint | Event | Log
+
+
+def check_profile_limits(profile: Profile, limits: Limits, source: str = "profile") -> None:
+    """Refuse a profile whose setpoints are outside the bench's limits (before any I/O)."""
+    for i, s in enumerate(profile.steps):
+        if not limits.setpoint_min_c <= s.setpoint_c <= limits.setpoint_max_c:
+            raise InputError(
+                source,
+                f"step {i + 1} setpoint {s.setpoint_c:g} °C is outside the bench limits "
+                f"[{limits.setpoint_min_c:g}, {limits.setpoint_max_c:g}] °C",
+            )
+
+
+def slope_c_per_min(t: np.ndarray, c: np.ndarray) -> float:
+    """Least-squares slope of ``c`` (°C) against ``t`` (s), in °C/min."""
+    if t.size < 3 or t[-1] - t[0] <= 0:
+        return math.inf
+    tt = t - t.mean()
+    return float(60.0 * np.dot(tt, c - c.mean()) / np.dot(tt, tt))
+
+
+class ProfilePlan:
+    """The profile as a state machine: ``idle`` → ``step`` (each) → ``done``.
+
+    Pure: no I/O and no clock of its own; :meth:`start` and :meth:`update` return the
+    actions for the engine to carry out. Times are run seconds.
+    """
+
+    def __init__(self, profile: Profile) -> None:
+        self.profile = profile
+        self.state = "idle"
+        self.step_index = -1
+        self.step_started_at = math.nan
+        self.soaked = False
+        self._hist: deque[tuple[float, float]] = deque()
+
+    @property
+    def step(self) -> Step | None:
+        if 0 <= self.step_index < len(self.profile.steps):
+            return self.profile.steps[self.step_index]
+        return None
+
+    def start(self, t: float) -> list[Action]:
+        if self.state != "idle":
+            raise RuntimeError("plan already started")
+        acts: list[Action] = [Event("run_started", detail=f"profile {self.profile.name}")]
+        acts += self._begin(0, t)
+        return acts
+
+    def _begin(self, i: int, t: float) -> list[Action]:
+        self.state = "step"
+        self.step_index = i
+        self.step_started_at = t
+        self.soaked = False
+        self._hist.clear()
+        s = self.profile.steps[i]
+        label = s.label or ("power-on" if i == 0 else f"{s.setpoint_c:g} C")
+        return [
+            SetSetpoint(s.setpoint_c),
+            Event("step_started", i, s.setpoint_c, label),
+            Log(
+                "info",
+                f"step {i + 1}/{len(self.profile.steps)} ({label}): setpoint {s.setpoint_c:g} °C",
+                "transition",
+            ),
+        ]
+
+    def update(self, t: float, pt100_c: float | None = None) -> list[Action]:
+        """Advance to time ``t``, optionally with a new PT100 reading (°C)."""
+        if self.state != "step":
+            return []
+        s = self.profile.steps[self.step_index]
+        if pt100_c is not None and math.isfinite(pt100_c):
+            self._hist.append((t, pt100_c))
+            keep = s.stable_window_s if s.stable_slope_c_per_min is not None else 0.0
+            while self._hist and self._hist[0][0] < t - keep:
+                self._hist.popleft()
+        elapsed = t - self.step_started_at
+        if elapsed < s.duration_s:
+            return []
+        acts: list[Action] = []
+        if s.stable_slope_c_per_min is not None:
+            stable, slope = self._stable(t, s)
+            if not stable and elapsed < s.duration_s + s.max_extra_s:
+                return []
+            if stable:
+                detail = f"held {elapsed:.0f} s; PT100 slope {slope:+.4f} °C/min"
+            else:
+                detail = f"held {elapsed:.0f} s; NOT stable (slope {slope:+.4f} °C/min)"
+                acts.append(
+                    Log(
+                        "warning",
+                        f"step {self.step_index + 1}: stability rule not met "
+                        f"after max_extra_s={s.max_extra_s:g} s; moving on",
+                        "stability",
+                        {"slope_c_per_min": slope},
+                    )
+                )
+        else:
+            detail = f"held {elapsed:.0f} s"
+        acts.append(Event("soaked", self.step_index, s.setpoint_c, detail))
+        acts.append(Event("step_ended", self.step_index, s.setpoint_c))
+        if self.step_index + 1 < len(self.profile.steps):
+            acts += self._begin(self.step_index + 1, t)
+        else:
+            self.state = "done"
+            acts.append(Event("run_ended", detail="profile complete"))
+            acts.append(Log("info", "profile complete", "transition"))
+        return acts
+
+    def _stable(self, t: float, s: Step) -> tuple[bool, float]:
+        if not self._hist:
+            return False, math.inf
+        a = np.asarray(self._hist, dtype=float)
+        # Only judge a window that is (nearly) full of readings.
+        if a[-1, 0] - a[0, 0] < 0.9 * s.stable_window_s:
+            return False, math.inf
+        slope = slope_c_per_min(a[:, 0], a[:, 1])
+        assert s.stable_slope_c_per_min is not None
+        return abs(slope) < s.stable_slope_c_per_min, slope
+
+    def abort(self) -> None:
+        self.state = "aborted"
+
+    def remaining_s(self, t: float) -> float:
+        """Nominal run seconds left (time rule only)."""
+        if self.state == "idle":
+            return self.profile.duration_s
+        if self.state != "step":
+            return 0.0
+        steps = self.profile.steps
+        cur = max(0.0, steps[self.step_index].duration_s - (t - self.step_started_at))
+        return cur + sum(s.duration_s for s in steps[self.step_index + 1 :])
+
+
+# ------------------------------------------------------------------------- engine
+
+
+@dataclass
+class Status:
+    """A snapshot for the progress display."""
+
+    t: float = 0.0
+    step: int = -1
+    n_steps: int = 0
+    setpoint_c: float = math.nan
+    chamber_c: float = math.nan
+    pt100_c: float = math.nan
+    remaining_s: float = math.nan
+    frames_lost: int = 0
+    frames_bad: int = 0
+    samples: int = 0
+
+
+@dataclass
+class RunResult:
+    """How a run ended."""
+
+    outcome: str  # "completed" | "interrupted" | "fault"
+    reason: str
+    t_end: float
+    samples: int
+    gaps: int
+    samples_missing: int
+    duplicates_dropped: int
+    faults: int
+    safe_state_ok: bool
+
+    @property
+    def exit_code(self) -> int:
+        return {"completed": 0, "interrupted": 130}.get(self.outcome, 1)
+
+
+class _Poller(threading.Thread):
+    """Calls ``op`` every ``period`` run seconds and posts results or failures."""
+
+    def __init__(
+        self,
+        name: str,
+        op: Callable[[], Any],
+        period: float,
+        clock: Clock,
+        post: Callable[[tuple[Any, ...]], None],
+        stop: threading.Event,
+        commands: queue.Queue[Callable[[], Any]] | None = None,
+    ) -> None:
+        super().__init__(name=f"poll-{name}", daemon=True)
+        self.source = name
+        self.op = op
+        self.period = period
+        self.clock = clock
+        self.post = post
+        self.stop_ev = stop
+        self.commands = commands
+
+    def run(self) -> None:
+        nxt = self.clock.now()
+        pending: Callable[[], Any] | None = None
+        while not self.stop_ev.is_set():
+            # Commands (setpoints) go first: they share the port with the polls. A newer
+            # setpoint supersedes an older one; a failed one is retried every period.
+            while self.commands is not None:
+                try:
+                    pending = self.commands.get_nowait()
+                except queue.Empty:
+                    break
+            if pending is not None and self._call(pending, "command"):
+                pending = None
+            self._call(self.op, "reading")
+            nxt += self.period
+            now = self.clock.now()
+            if nxt < now:  # fell behind (slow instrument): skip, don't burst
+                nxt = now
+            self._wait(nxt)
+
+    def _call(self, fn: Callable[[], Any], what: str) -> bool:
+        t = self.clock.now()
+        try:
+            res = fn()
+        except InstrumentFault as e:
+            self.post(("fatal", self.source, t, f"{type(e).__name__}: {e}"))
+            return False
+        except Exception as e:  # a driver's I/O error of any kind is a (transient) fault
+            self.post(("error", self.source, t, f"{what} failed: {type(e).__name__}: {e}"))
+            return False
+        self.post((what, self.source, self.clock.now(), res))
+        return True
+
+    def _wait(self, until: float) -> None:
+        # Sleep in slices so that a stop request is honoured promptly.
+        while not self.stop_ev.is_set():
+            dt = until - self.clock.now()
+            if dt <= 0:
+                return
+            self.clock.sleep(min(dt, 0.5))
+
+
+class _AdcThread(threading.Thread):
+    """Reads the ADC stream continuously and posts what arrives."""
+
+    def __init__(
+        self,
+        dev: GyroStream,
+        post: Callable[[tuple[Any, ...]], None],
+        stop: threading.Event,
+        clock: Clock,
+    ) -> None:
+        super().__init__(name="adc", daemon=True)
+        self.dev, self.post, self.stop_ev, self.clock = dev, post, stop, clock
+
+    def run(self) -> None:
+        while not self.stop_ev.is_set():
+            try:
+                got = self.dev.read(0.05)
+            except InstrumentFault as e:
+                self.post(("fatal", self.dev.name, self.clock.now(), str(e)))
+                return
+            except Exception as e:
+                self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
+                time.sleep(0.05)
+                continue
+            if got.blocks or got.events or got.gaps:
+                self.post(("adc", self.dev.name, self.clock.now(), got))
+
+
+class Acquisition:
+    """The run engine: devices + plan + watchdogs + recorder.
+
+    ``run()`` blocks until the profile is complete, a fault ends it, or SIGINT/SIGTERM
+    (or :meth:`request_stop`) interrupts it; the oven is then left in the safe state and
+    the recording closed. ``on_status`` is called (from the main thread) with a
+    :class:`Status` at most every ``status_every_s`` wall seconds.
+    """
+
+    def __init__(
+        self,
+        *,
+        profile: Profile,
+        writer: RecordingWriter,
+        clock: Clock,
+        thermometer: Thermometer,
+        oven: Oven,
+        gyro: GyroStream,
+        adc: AdcConfig,
+        limits: Limits,
+        safe_state: SafeState,
+        pt100_period_s: float = 1.0,
+        oven_period_s: float = 2.0,
+        on_status: Callable[[Status], None] | None = None,
+        status_every_s: float = 0.5,
+        on_block: Callable[[float], None] | None = None,
+    ) -> None:
+        check_profile_limits(profile, limits)
+        self.profile = profile
+        self.plan = ProfilePlan(profile)
+        self.w = writer
+        self.clock = clock
+        self.thermo, self.oven, self.gyro = thermometer, oven, gyro
+        self.adc = adc
+        self.limits = limits
+        self.safe = safe_state
+        self.pt100_period_s = pt100_period_s
+        self.oven_period_s = oven_period_s
+        self.on_status = on_status
+        self.status_every_s = status_every_s
+        self.on_block = on_block
+        self.q: queue.Queue[tuple[Any, ...]] = queue.Queue()
+        self.stop_ev = threading.Event()
+        self.oven_cmds: queue.Queue[Callable[[], Any]] = queue.Queue()
+        self.status = Status(n_steps=len(profile.steps))
+        self._t0 = 0.0
+        self._interrupt: str | None = None
+        self._fault: str | None = None
+        self._last_ok: dict[str, float] = {}
+        self._down_since: dict[str, float] = {}
+        self._down_errors: dict[str, int] = {}
+        self._pt_bad = 0
+        self._faults = 0
+        self._setpoint_pending: float | None = None
+        # ADC bookkeeping: device index of run sample 0, next expected index, block buffer.
+        self._idx0: int | None = None
+        self._adc_offset = 0.0  # ADC clock minus run time
+        self._blk_t0 = 0.0
+        self._next_idx: int | None = None
+        self._blk: list[np.ndarray] = []
+        self._blk_first = 0
+        self._blk_n = 0
+        self._block_len = max(1, int(round(adc.block_s * adc.sample_rate_hz)))
+        self._period = 1.0 / adc.sample_rate_hz
+        self._samples = 0
+        self._gaps = 0
+        self._missing = 0
+        self._dups = 0
+        self._counters_seen: dict[str, int] = {}
+
+    # -- helpers
+    def t(self) -> float:
+        return self.clock.now() - self._t0
+
+    def _rt(self, t_clock: float) -> float:
+        return t_clock - self._t0
+
+    def log(
+        self,
+        level: str,
+        source: str,
+        message: str,
+        kind: str = "",
+        data: dict[str, Any] | None = None,
+        t: float | None = None,
+    ) -> None:
+        self.w.write_log(self.t() if t is None else t, level, source, message, kind, data)
+
+    def request_stop(self, reason: str = "stop requested") -> None:
+        """Ask the run to end cleanly (thread-safe; what SIGINT does)."""
+        self._interrupt = reason
+
+    # -- the run
+    def run(self) -> RunResult:
+        old_int = old_term = None
+        in_main = threading.current_thread() is threading.main_thread()
+        if in_main:
+            old_int = signal.signal(signal.SIGINT, self._on_signal)
+            old_term = signal.signal(signal.SIGTERM, self._on_signal)
+        try:
+            return self._run()
+        finally:
+            if in_main:
+                signal.signal(signal.SIGINT, old_int)
+                signal.signal(signal.SIGTERM, old_term)
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        self._interrupt = f"interrupted by {signal.Signals(signum).name}"
+
+    def _run(self) -> RunResult:
+        self._t0 = self.clock.now()
+        now = self._t0
+        for name in (self.thermo.name, self.oven.name, self.gyro.name):
+            self._last_ok[name] = now
+        self._do(self.plan.start(0.0))
+        threads = [
+            _Poller(
+                self.thermo.name,
+                self.thermo.read,
+                self.pt100_period_s,
+                self.clock,
+                self.q.put,
+                self.stop_ev,
+            ),
+            _Poller(
+                self.oven.name,
+                self.oven.read,
+                self.oven_period_s,
+                self.clock,
+                self.q.put,
+                self.stop_ev,
+                self.oven_cmds,
+            ),
+            _AdcThread(self.gyro, self.q.put, self.stop_ev, self.clock),
+        ]
+        for th in threads:
+            th.start()
+        last_status = 0.0
+        outcome, reason = "completed", "profile complete"
+        try:
+            while True:
+                try:
+                    item = self.q.get(timeout=0.02)
+                except queue.Empty:
+                    item = None
+                if item is not None:
+                    self._handle(item)
+                    # Drain what is already queued before the slower checks below.
+                    for _ in range(200):
+                        try:
+                            self._handle(self.q.get_nowait())
+                        except queue.Empty:
+                            break
+                t = self.t()
+                self._do(self.plan.update(t))
+                self._watchdog(t)
+                self.w.maybe_flush(t)
+                if self._interrupt:
+                    outcome, reason = "interrupted", self._interrupt
+                    break
+                if self._fault:
+                    outcome, reason = "fault", self._fault
+                    break
+                if self.plan.state == "done":
+                    break
+                if self.on_status and time.monotonic() - last_status >= self.status_every_s:
+                    last_status = time.monotonic()
+                    self._update_status(t)
+                    self.on_status(self.status)
+        finally:
+            safe_ok = self._shutdown(outcome, reason, threads)
+        if self.on_status:
+            self._update_status(self.t())
+            self.on_status(self.status)
+        return RunResult(
+            outcome=outcome,
+            reason=reason,
+            t_end=self.t(),
+            samples=self._samples,
+            gaps=self._gaps,
+            samples_missing=self._missing,
+            duplicates_dropped=self._dups,
+            faults=self._faults,
+            safe_state_ok=safe_ok,
+        )
+
+    def _update_status(self, t: float) -> None:
+        st = self.status
+        st.t = t
+        st.step = self.plan.step_index
+        st.setpoint_c = self.plan.step.setpoint_c if self.plan.step else math.nan
+        st.remaining_s = self.plan.remaining_s(t)
+        c = self.gyro.counters()
+        st.frames_lost = int(c.get("frames_lost", 0))
+        st.frames_bad = int(c.get("frames_bad", 0))
+        st.samples = self._samples
+
+    # -- actions from the plan
+    def _do(self, actions: list[Action]) -> None:
+        t = self.t()
+        for a in actions:
+            if isinstance(a, SetSetpoint):
+                self._command_setpoint(a.setpoint_c)
+            elif isinstance(a, Event):
+                self.w.write_event(t, a.event, a.step, a.setpoint_c, a.detail)
+            elif isinstance(a, Log):
+                self.log(a.level, "runner", a.message, a.kind, a.data, t)
+
+    def _command_setpoint(self, sp: float) -> None:
+        if not self.limits.setpoint_min_c <= sp <= self.limits.setpoint_max_c:
+            # Unreachable after check_profile_limits; kept as the last line of defence.
+            self._fail("runner", f"setpoint {sp:g} °C outside limits; not sent")
+            return
+        self._setpoint_pending = sp
+
+        def cmd() -> tuple[str, float]:
+            self.oven.set_setpoint(sp)
+            return ("setpoint", sp)
+
+        self.oven_cmds.put(cmd)
+
+    # -- items from the device threads
+    def _handle(self, item: tuple[Any, ...]) -> None:
+        kind, source, t_clock, payload = item
+        t = self._rt(t_clock)
+        if kind in ("error", "fatal"):
+            self._on_error(source, t, payload, fatal=kind == "fatal")
+            return
+        if kind == "adc":
+            self._on_adc_read(payload, t, t_clock)
+            return
+        self._on_ok(source, t, t_clock)
+        if kind == "command":
+            what, value = payload
+            if what == "setpoint":
+                if self._setpoint_pending == value:
+                    self._setpoint_pending = None
+                self.log(
+                    "info",
+                    source,
+                    f"setpoint {value:g} °C written and verified",
+                    "command",
+                    {"setpoint_c": value},
+                    t,
+                )
+        elif source == self.thermo.name:
+            ohm, c = payload
+            self.w.write_pt100(t, ohm, c)
+            self.status.pt100_c = c
+            self._pt100_watch(t, c)
+            self._do(self.plan.update(t, c))
+        elif source == self.oven.name:
+            sp, pv = payload
+            self.status.chamber_c = pv
+            mode = "run" if self.plan.state == "step" else "hold"
+            self.w.write_oven(t, sp, pv, mode)
+
+    def _on_ok(self, source: str, t: float, t_clock: float) -> None:
+        self._last_ok[source] = t_clock
+        if source in self._down_since:
+            since = self._down_since.pop(source)
+            n = self._down_errors.pop(source, 0)
+            self.log(
+                "info",
+                source,
+                f"{source} recovered after {t - since:.1f} s ({n} failed attempts)",
+                "recovery",
+                {"outage_s": round(t - since, 3), "failed_attempts": n},
+                t,
+            )
+
+    def _on_error(self, source: str, t: float, message: str, fatal: bool) -> None:
+        if fatal:
+            self._fail(source, message, t)
+            return
+        if source not in self._down_since:
+            self._down_since[source] = t
+            self._down_errors[source] = 1
+            self._faults += 1
+            self.log("warning", source, f"{source}: {message}", "fault", None, t)
+        else:
+            self._down_errors[source] += 1
+
+    def _fail(self, source: str, message: str, t: float | None = None) -> None:
+        if self._fault is None:
+            self._faults += 1
+            self._fault = f"{source}: {message}"
+            self.log("fault", source, message, "fault", None, t)
+
+    def _pt100_watch(self, t: float, c: float) -> None:
+        lim = self.limits
+        if lim.pt100_min_c <= c <= lim.pt100_max_c:
+            self._pt_bad = 0
+            return
+        self._pt_bad += 1
+        if self._pt_bad >= lim.watchdog_samples:
+            which = "over" if c > lim.pt100_max_c else "under"
+            self._fail(
+                "watchdog",
+                f"PT100 {which}-temperature: {c:.2f} °C outside "
+                f"[{lim.pt100_min_c:g}, {lim.pt100_max_c:g}] °C "
+                f"for {self._pt_bad} readings",
+                t,
+            )
+
+    def _watchdog(self, t: float) -> None:
+        now = self.clock.now()
+        for source, last in self._last_ok.items():
+            if now - last > self.limits.comm_timeout_s:
+                self._fail(
+                    "watchdog",
+                    f"lost communication with {source}: nothing for "
+                    f"{now - last:.1f} s (> comm_timeout_s "
+                    f"{self.limits.comm_timeout_s:g} s)",
+                    t,
+                )
+                return
+
+    # -- ADC blocks
+    def _on_adc_read(self, got: AdcReadLike, t: float, t_clock: float) -> None:
+        for ev in got.events:
+            kind = getattr(ev, "kind", "event")
+            if kind == "gap":
+                continue  # logged below from the sample indices, with the cause
+            level, tag = {
+                "disconnect": ("warning", "fault"),
+                "open_failed": ("warning", "fault"),
+                "reconnect": ("info", "recovery"),
+            }.get(kind, ("info", kind))
+            if tag == "fault":
+                self._faults += 1
+            self.log(
+                level,
+                self.gyro.name,
+                f"ADC port {kind}: {ev.message}",
+                tag,
+                dict(getattr(ev, "data", {}) or {}),
+                t,
+            )
+        if got.blocks:
+            self._on_ok(self.gyro.name, t, t_clock)
+            causes = sorted({str(getattr(g, "cause", "lost")) for g in got.gaps})
+            for blk in got.blocks:
+                self._on_adc_block(blk, t, causes)
+        self._log_counter_changes(t)
+
+    def _on_adc_block(self, blk: AdcBlockLike, t_arrival: float, causes: list[str]) -> None:
+        counts = np.asarray(blk.counts, dtype=np.int32)
+        idx = int(blk.first_index)
+        n = int(counts.size)
+        if n == 0:
+            return
+        if self._idx0 is None:
+            self._idx0 = idx
+            self._next_idx = idx
+            self._blk_first = 0
+            # Run time of sample 0: its block's arrival less the block's length; from then
+            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
+            self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self._period)
+        assert self._next_idx is not None
+        if idx < self._next_idx:
+            # Some or all of these samples were written already: never write one twice.
+            dup = min(n, self._next_idx - idx)
+            self._dups += 1
+            self.log(
+                "warning",
+                self.gyro.name,
+                f"dropped {dup} repeated ADC sample(s) at index {idx - self._idx0}",
+                "duplicate",
+                {"index": idx - self._idx0, "samples": dup},
+                t_arrival,
+            )
+            if dup == n:
+                return
+            counts = counts[dup:]
+            idx += dup
+            n -= dup
+            t0_dev = float(blk.t0) + dup * self._period
+        else:
+            t0_dev = float(blk.t0)
+        if idx > self._next_idx:
+            missing = idx - self._next_idx
+            self._emit_block()
+            self._gaps += 1
+            self._missing += missing
+            first = self._next_idx - self._idx0
+            self.log(
+                "warning",
+                self.gyro.name,
+                f"ADC gap: {missing} sample(s) missing from index {first}",
+                "gap",
+                {
+                    "first_missing_index": first,
+                    "n_missing": missing,
+                    "t_first_missing": round(t0_dev - self._adc_offset - missing * self._period, 6),
+                    "cause": ",".join(causes) or "lost",
+                },
+                t_arrival,
+            )
+            self._blk_first = idx - self._idx0
+        if not self._blk_n:
+            self._blk_t0 = t0_dev - self._adc_offset
+        self._blk.append(counts)
+        self._blk_n += n
+        self._next_idx = idx + n
+        if self._blk_n >= self._block_len:
+            self._emit_block()
+
+    def _emit_block(self) -> None:
+        if not self._blk_n:
+            return
+        counts = np.concatenate(self._blk) if len(self._blk) > 1 else self._blk[0]
+        t0 = self._blk_t0
+        self.w.write_adc_block(t0, self._period, self._blk_first, counts)
+        self.w.write_rate_block(t0, self._period, self._blk_first, self.adc.to_dps(counts))
+        self._samples += counts.size
+        self._blk_first += counts.size
+        self._blk = []
+        self._blk_n = 0
+        if self.on_block is not None:
+            self.on_block(t0 + counts.size * self._period)
+
+    def _log_counter_changes(self, t: float) -> None:
+        c = self.gyro.counters()
+        bad = int(c.get("frames_bad", 0)) - self._counters_seen.get("frames_bad", 0)
+        if bad > 0:
+            # Damaged frames are dropped by the reader (CRC); say so, with the totals.
+            self.log(
+                "warning",
+                self.gyro.name,
+                f"{bad} damaged ADC frame(s) rejected "
+                "(CRC/framing); their samples are reported as gaps",
+                "corruption",
+                {k: int(v) for k, v in c.items()},
+                t,
+            )
+        self._counters_seen = {k: int(v) for k, v in c.items()}
+
+    # -- ending
+    def _shutdown(self, outcome: str, reason: str, threads: list[threading.Thread]) -> bool:
+        t = self.t()
+        if outcome != "completed":
+            self.plan.abort()
+            self.w.write_event(
+                t,
+                "aborted",
+                self.plan.step_index,
+                self.plan.step.setpoint_c if self.plan.step else None,
+                reason,
+            )
+            level = "fault" if outcome == "fault" else "warning"
+            self.log(level, "runner", f"run aborted: {reason}", "abort", None, t)
+        self.stop_ev.set()
+        for th in threads:
+            th.join(timeout=5.0)
+        # Write what the device threads had already delivered (no sample is dropped here).
+        while True:
+            try:
+                self._handle(self.q.get_nowait())
+            except queue.Empty:
+                break
+        self._emit_block()
+        ok = self._go_safe()
+        self.w.flush()
+        return ok
+
+    def _go_safe(self) -> bool:
+        """Command the oven to the safe state and verify it; log every attempt."""
+        ss = self.safe
+        err = ""
+        for attempt in range(1, 4):
+            t = self.t()
+            try:
+                self.oven.set_setpoint(ss.setpoint_c)
+                sp, pv = self.oven.read()
+                if abs(sp - ss.setpoint_c) > 0.05:
+                    raise RuntimeError(f"setpoint read back {sp:g} °C")
+                detail = f"setpoint {ss.setpoint_c:g} °C verified"
+            except Exception as e:
+                err = f"{type(e).__name__}: {e}"
+                self.log(
+                    "error",
+                    self.oven.name,
+                    f"safe-state attempt {attempt} failed: {err}",
+                    "fault",
+                    None,
+                    t,
+                )
+                self.clock.sleep(0.2)
+                continue
+            t = self.t()
+            self.w.write_oven(t, sp, pv, "safe")
+            self.w.write_event(t, "safe_state", -1, sp, detail)
+            self.log(
+                "info",
+                self.oven.name,
+                f"oven in safe state: {detail}",
+                "safe_state",
+                {"setpoint_c": sp, "process_value_c": pv},
+                t,
+            )
+            return True
+        t = self.t()
+        self.w.write_event(t, "safe_state", -1, None, f"FAILED: {err}")
+        self.log(
+            "fault",
+            self.oven.name,
+            f"could not put the oven in the safe state: {err}",
+            "fault",
+            None,
+            t,
+        )
+        return False
