@@ -484,6 +484,7 @@ def allan_deviation(
         overlapping=overlapping,
         confidence=ONE_SIGMA if confidence is None else float(confidence),
         data_type="rate" if data_type in ("rate", "freq") else "angle",
+        extra={"record_s": (n_phase - 1) * tau0},
     )
 
 
@@ -536,14 +537,17 @@ def noise_terms(
     method: Literal["slope", "fit"] = "slope",
     slope_tol: float | None = 0.25,
     terms: tuple[str, ...] = ("Q", "N", "B", "K", "R"),
+    b_max_tau_fraction: float = 0.1,
 ) -> NoiseTerms:
     """IEEE 952 noise terms from an Allan deviation curve.
 
     ``method="slope"`` (IEEE 952 C.2 single-point rules): for each term, take the adjacent
     pair of taus whose local log-log slope is closest to the term's slope, draw the line of
     exactly that slope through them and read it at the term's tau (N at 1 s, K at 3 s, R at
-    sqrt(2) s, Q at sqrt(3) s); B = sigma_min / 0.664. A term whose closest local slope is
-    further than ``slope_tol`` from its own is NaN (``slope_tol=None``: always read).
+    sqrt(2) s, Q at sqrt(3) s); B = sigma_min / 0.664, the minimum taken over
+    tau <= ``b_max_tau_fraction`` x record length (default 1/10: the last few points rest on
+    a handful of averages and scatter low, which would bias B low). A term whose closest
+    local slope is further than ``slope_tol`` from its own is NaN (``slope_tol=None``: always read).
 
     ``method="fit"``: non-negative least squares of avar(tau) = sum c_p tau^p over the terms
     asked for, each point weighted by its relative uncertainty sqrt(edf / 2) / avar (unit
@@ -556,7 +560,11 @@ def noise_terms(
     edf = np.asarray(result.edf, dtype=float)[ok]
     if taus.size == 0:
         raise InputError(None, "Allan deviation curve is empty or zero")
-    imin = int(np.argmin(adev))
+    record_s = float(result.extra.get("record_s", np.inf))
+    usable = taus <= b_max_tau_fraction * record_s
+    if not usable.any():
+        usable[:] = True
+    imin = int(np.flatnonzero(usable)[np.argmin(adev[usable])])
     tau_b = float(taus[imin])
     out = dict.fromkeys("QNBKR", float("nan"))
     slopes: dict[str, float] = {}

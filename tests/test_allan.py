@@ -1,0 +1,196 @@
+"""Allan deviation: Stable32 and allantools agreement, EDF, confidence coverage, noise terms."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import allantools
+import numpy as np
+import pytest
+
+from gyrolab.compensation.allan import (
+    allan_deviation,
+    edf_greenhall,
+    noise_terms,
+    tau_grid,
+)
+from gyrolab.errors import InputError
+
+
+def _ocxo(shared_dir: Path) -> np.ndarray:
+    f = np.loadtxt(shared_dir / "ref" / "allan" / "ocxo_frequency.txt", comments="#")
+    return f / 1e7 - 1.0
+
+
+def _stable32(shared_dir: Path, name: str) -> np.ndarray:
+    # columns: AF, Tau, #, Alpha, Min Sigma, Sigma, Max Sigma
+    return np.loadtxt(shared_dir / "ref" / "allan" / name, comments="#")
+
+
+def flicker_noise(n: int, fs: float, b: float, rng: np.random.Generator) -> np.ndarray:
+    """Flicker rate noise whose IEEE 952 (two-sided) PSD is B^2 / (2 pi f): one-sided
+    B^2 / (pi f), synthesised by shaping white Gaussian spectra."""
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    s = np.zeros_like(f)
+    s[1:] = b**2 / (np.pi * f[1:])
+    c = np.sqrt(s * fs * n / 4.0) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
+    return np.fft.irfft(c, n)
+
+
+@pytest.mark.parametrize(
+    ("name", "overlapping"),
+    [("stable32_oadev_alltau.txt", True), ("stable32_adev_alltau.txt", False)],
+)
+def test_matches_stable32(shared_dir: Path, name: str, overlapping: bool) -> None:
+    y = _ocxo(shared_dir)
+    ref = _stable32(shared_dir, name)
+    r = allan_deviation(y, 1.0, taus=ref[:, 1], overlapping=overlapping)
+    np.testing.assert_array_equal(r.m, ref[:, 0].astype(int))
+    np.testing.assert_array_equal(r.n, ref[:, 2].astype(int))
+    # Stable32 prints 5 significant digits: 1e-4 relative is the resolution of the file
+    np.testing.assert_allclose(r.adev, ref[:, 5], rtol=1e-4, atol=0)
+
+
+def test_noise_id_agrees_with_stable32(shared_dir: Path) -> None:
+    """Stable32 identifies alpha by lag-1 ACF where >= 30 averages exist (B1 ratio beyond)."""
+    y = _ocxo(shared_dir)
+    ref = _stable32(shared_dir, "stable32_oadev_alltau.txt")
+    r = allan_deviation(y, 1.0, taus=ref[:, 1])
+    enough = (y.size // ref[:, 0]) >= 30
+    agree = np.mean(r.alpha[enough] == ref[enough, 3])
+    assert enough.sum() > 100
+    assert agree >= 0.95, agree
+
+
+@pytest.mark.parametrize("taus", ["octave", "decade"])
+@pytest.mark.parametrize("overlapping", [True, False])
+def test_matches_allantools_random(taus: str, overlapping: bool) -> None:
+    rng = np.random.default_rng(7)
+    y = 0.02 * rng.standard_normal(50_000) + 1e-4 * np.cumsum(rng.standard_normal(50_000)) + 5.0
+    r = allan_deviation(y, 200.0, taus=taus, overlapping=overlapping)
+    fn = allantools.oadev if overlapping else allantools.adev
+    t, d, _, n = fn(y, rate=200.0, data_type="freq", taus=taus)
+    k = min(len(t), len(r.taus))
+    assert k >= 5
+    np.testing.assert_allclose(r.taus[:k], t[:k], rtol=1e-12)
+    np.testing.assert_allclose(r.adev[:k], d[:k], rtol=1e-9)
+    np.testing.assert_array_equal(r.n[:k], n[:k])
+
+
+def test_angle_input_equals_rate_input() -> None:
+    rng = np.random.default_rng(2)
+    rate = 50.0
+    y = rng.standard_normal(20_000) + 0.5
+    angle = np.concatenate([[0.0], np.cumsum(y)]) / rate
+    a = allan_deviation(y, rate, taus="all", confidence=None)
+    b = allan_deviation(angle, rate, taus="all", data_type="angle", confidence=None)
+    np.testing.assert_allclose(a.adev, b.adev, rtol=1e-8)
+    t, d, _, _ = allantools.oadev(angle, rate=rate, data_type="phase", taus="octave")
+    c = allan_deviation(angle, rate, data_type="angle")
+    np.testing.assert_allclose(c.adev, d[: c.adev.size], rtol=1e-9)
+
+
+def test_large_offset_keeps_float64_accuracy() -> None:
+    """A 1e4 bias on unit noise over 2 M samples: the compensated phase keeps 1e-9."""
+    rng = np.random.default_rng(4)
+    y = rng.standard_normal(2_000_000)
+    a = allan_deviation(y, 1.0, confidence=None)
+    b = allan_deviation(y + 1e4, 1.0, confidence=None)
+    np.testing.assert_allclose(b.adev, a.adev, rtol=1e-9)
+
+
+def test_tau_grids() -> None:
+    assert tau_grid(1001, 10.0, "octave").tolist() == [1, 2, 4, 8, 16, 32, 64, 128, 256]
+    assert tau_grid(1001, 10.0, "decade").tolist() == [1, 2, 4, 10, 20, 40, 100, 200, 400]
+    assert tau_grid(101, 1.0, "all").tolist() == list(range(1, 51))
+    assert tau_grid(101, 10.0, [0.1, 0.1, 0.25, 99.0]).tolist() == [1, 2]  # rounded, deduped
+
+
+@pytest.mark.parametrize("alpha", [-2, -1, 0, 1, 2])
+@pytest.mark.parametrize("overlapping", [True, False])
+def test_edf_matches_allantools(alpha: int, overlapping: bool) -> None:
+    for n in (1000, 20_000, 1_000_000):
+        for m in (1, 2, 5, 30, 200, 499):
+            ours = edf_greenhall(alpha, m, n, overlapping=overlapping)
+            try:
+                ref = allantools.edf_greenhall(alpha, 2, m, n, overlapping=overlapping)
+            except NotImplementedError:  # alpha = 2 with < 3 terms: ours sums eq. 13 exactly
+                assert alpha == 2 and 0 < ours < 10
+                continue
+            assert ours == pytest.approx(ref, rel=1e-12), (n, m)
+
+
+def test_confidence_interval_coverage_white_noise() -> None:
+    """With correct EDF, the 68.3 % interval covers the true deviation ~68 % of the time."""
+    rng = np.random.default_rng(11)
+    true_tau = 16.0  # white rate noise, unit density: sigma(tau) = 1 / sqrt(tau)
+    hits = 0
+    trials = 300
+    for _ in range(trials):
+        y = rng.standard_normal(2048)
+        r = allan_deviation(y, 1.0, taus=[true_tau], alpha=0)
+        hits += int(r.adev_lo[0] <= 1 / np.sqrt(true_tau) <= r.adev_hi[0])
+    assert 0.60 <= hits / trials <= 0.76, hits / trials
+
+
+def test_bounds_bracket_and_alpha_identified() -> None:
+    rng = np.random.default_rng(5)
+    r = allan_deviation(rng.standard_normal(100_000), 10.0)
+    ok = np.isfinite(r.edf)
+    assert ok.all()
+    assert np.all(r.adev_lo < r.adev) and np.all(r.adev < r.adev_hi)
+    assert np.all(r.alpha[r.m <= 1000] == 0)  # white rate noise: alpha = 0
+    lo, hi = allantools.confidence_interval(r.adev[3], r.edf[3])
+    assert r.adev_lo[3] == pytest.approx(lo, rel=1e-10)
+    assert r.adev_hi[3] == pytest.approx(hi, rel=1e-10)
+
+
+def test_noise_terms_white_and_rate_random_walk() -> None:
+    rng = np.random.default_rng(3)
+    fs, n = 100.0, 1 << 20
+    big_n, big_k = 1e-3, 1e-5  # deg/sqrt(s), deg/s/sqrt(s)
+    white = big_n * np.sqrt(fs) * rng.standard_normal(n)
+    r = allan_deviation(white, fs)
+    t = noise_terms(r)
+    assert t.N == pytest.approx(big_n, rel=0.03)
+    assert t.deg_h()["arw_deg_per_sqrt_h"] == pytest.approx(60 * big_n, rel=0.03)
+    rrw = np.cumsum(big_k / np.sqrt(fs) * rng.standard_normal(n))
+    r = allan_deviation(white + rrw, fs)
+    for method in ("slope", "fit"):
+        t = noise_terms(r, method=method, terms=("N", "B", "K"))
+        assert t.N == pytest.approx(big_n, rel=0.05), method
+        assert t.K == pytest.approx(big_k, rel=0.25), method
+
+
+def test_noise_terms_flicker_floor() -> None:
+    rng = np.random.default_rng(8)
+    fs, n, b = 100.0, 1 << 20, 2e-4
+    y = flicker_noise(n, fs, b, rng) + 1e-4 * np.sqrt(fs) * rng.standard_normal(n)
+    r = allan_deviation(y, fs)
+    t = noise_terms(r)
+    assert t.B == pytest.approx(b, rel=0.2)
+    assert t.deg_h()["bias_instability_deg_per_h"] == pytest.approx(3600 * t.B)
+    tf = noise_terms(r, method="fit", terms=("N", "B", "K"))
+    assert tf.B == pytest.approx(b, rel=0.3)
+    assert tf.N == pytest.approx(1e-4, rel=0.1)
+
+
+def test_slope_rule_reports_nan_without_region() -> None:
+    rng = np.random.default_rng(9)
+    r = allan_deviation(rng.standard_normal(10_000), 1.0)  # pure white: no +1/2, +1 region
+    t = noise_terms(r)
+    assert np.isnan(t.K) and np.isnan(t.R)
+    assert np.isfinite(t.N)
+
+
+def test_bad_input() -> None:
+    with pytest.raises(InputError, match="NaN"):
+        allan_deviation(np.array([1.0, np.nan, 2.0, 3.0]), 1.0)
+    with pytest.raises(InputError, match="too short"):
+        allan_deviation(np.array([1.0, 2.0]), 1.0)
+    with pytest.raises(InputError, match="too short"):
+        allan_deviation(np.arange(100.0), 1.0, taus=[1000.0])
+    with pytest.raises(InputError, match="constant"):
+        allan_deviation(np.full(1000, 3.0), 1.0)
+    with pytest.raises(InputError, match="rate"):
+        allan_deviation(np.ones(100), 0.0)
