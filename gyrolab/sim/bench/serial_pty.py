@@ -1,0 +1,129 @@
+"""Pseudo-terminals that look like the bench's serial ports.
+
+:class:`PtyPort` opens a pty pair (``os.openpty``): the simulated instrument holds the
+master, the driver opens the slave path with pyserial exactly as it would open
+``/dev/ttyUSB0``. A stable symlink (like udev's ``/dev/serial/by-id/…``) points at the
+current slave, so a simulated unplug/replug (:meth:`PtyPort.disconnect` /
+:meth:`PtyPort.connect`) makes the driver see EIO, then a missing device, then the same
+path again — what a real USB-serial adapter does.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import select
+import threading
+import tty
+from pathlib import Path
+
+
+class PortClosed(Exception):
+    """The simulated port is unplugged."""
+
+
+class PtyPort:
+    """One simulated serial port. ``link`` is the stable path drivers open (optional)."""
+
+    def __init__(self, link: str | os.PathLike[str] | None = None) -> None:
+        self.link = None if link is None else Path(link)
+        self._master: int | None = None
+        self._slave: int | None = None
+        self.slave_name = ""
+        self._lock = threading.Lock()
+        self.generation = 0  # +1 per (re)connect
+
+    @property
+    def path(self) -> str:
+        """The path a driver opens."""
+        return str(self.link) if self.link is not None else self.slave_name
+
+    @property
+    def connected(self) -> bool:
+        return self._master is not None
+
+    def connect(self) -> None:
+        """Plug the port in: a fresh pty, the link pointed at it."""
+        with self._lock:
+            if self._master is not None:
+                return
+            master, slave = os.openpty()
+            # Raw mode on our copy of the slave: no echo, no CR/LF translation, no
+            # signals, before any driver opens it (pyserial sets raw mode again).
+            tty.setraw(slave)
+            os.set_blocking(master, False)
+            self._master, self._slave = master, slave
+            self.slave_name = os.ttyname(slave)
+            if self.link is not None:
+                tmp = self.link.with_name(self.link.name + ".tmp")
+                with contextlib.suppress(FileNotFoundError):
+                    tmp.unlink()
+                tmp.symlink_to(self.slave_name)
+                os.replace(tmp, self.link)  # atomic: never a half-made link
+            self.generation += 1
+
+    def disconnect(self) -> None:
+        """Unplug: the driver's next read fails (EIO) and the path disappears."""
+        with self._lock:
+            if self.link is not None:
+                with contextlib.suppress(FileNotFoundError):
+                    self.link.unlink()
+            for fd in (self._master, self._slave):
+                if fd is not None:
+                    with contextlib.suppress(OSError):
+                        os.close(fd)
+            self._master = self._slave = None
+
+    close = disconnect
+
+    def write(self, data: bytes, timeout_s: float = 0.5) -> int:
+        """Write ``data``; waits up to ``timeout_s`` while the pty buffer is full
+        (back-pressure from a slow reader), then gives up on the rest (a UART would
+        overrun). Returns bytes written; raises :class:`PortClosed` when unplugged."""
+        mv = memoryview(data)
+        done = 0
+        while done < len(mv):
+            fd = self._master
+            if fd is None:
+                raise PortClosed(self.path)
+            try:
+                done += os.write(fd, mv[done:])
+                continue
+            except BlockingIOError:
+                pass
+            except OSError as e:
+                if e.errno in (errno.EIO, errno.EBADF):
+                    raise PortClosed(self.path) from e
+                raise
+            try:
+                _, w, _ = select.select([], [fd], [], timeout_s)
+            except (OSError, ValueError) as e:
+                raise PortClosed(self.path) from e
+            if not w:
+                break
+        return done
+
+    def read(self, timeout_s: float = 0.05, max_bytes: int = 65536) -> bytes:
+        """Bytes the driver sent, waiting up to ``timeout_s``; b"" if none."""
+        fd = self._master
+        if fd is None:
+            raise PortClosed(self.path)
+        try:
+            r, _, _ = select.select([fd], [], [], timeout_s)
+        except (OSError, ValueError) as e:
+            raise PortClosed(self.path) from e
+        if not r:
+            return b""
+        try:
+            return os.read(fd, max_bytes)
+        except BlockingIOError:
+            return b""
+        except OSError as e:
+            if e.errno == errno.EIO:
+                # No process has the slave open besides us: nothing to read. (Linux
+                # reports EIO on the master only when every slave fd is closed.)
+                return b""
+            if e.errno == errno.EBADF:
+                raise PortClosed(self.path) from e
+            raise

@@ -1,0 +1,250 @@
+"""The simulated bench: the three instruments on real wires, driven by one Physics and
+one simulated clock.
+
+``SimBench.start()`` opens three pseudo-terminals (the ADC stream, the oven's Modbus
+line, the multimeter's RS-232) and a TCP socket (the multimeter's LAN port) and starts a
+tick thread that advances the clock and the physics by a whole number of ADC frames per
+tick, streams the frames, and fires scheduled faults. Drivers connect to
+``bench.adc_port``, ``bench.oven_port``, ``bench.dmm_serial_resource`` /
+``bench.dmm_tcp_resource`` exactly as they would to hardware. The runner uses
+``bench.clock`` (``now()``, ``sleep()``) as its time base so that it runs at the bench's
+speed.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import shutil
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+from gyrolab.sim.bench.adc_source import AdcSource, AdcTruth
+from gyrolab.sim.bench.clock import SimClock
+from gyrolab.sim.bench.dmm_scpi import Scpi34401A, ScpiSerialServer, ScpiTcpServer
+from gyrolab.sim.bench.faults import FaultEvent, FaultPlan
+from gyrolab.sim.bench.oven_modbus import ModbusRtuServer, OvenHooks, WatlowF4Slave
+from gyrolab.sim.bench.serial_pty import PtyPort
+
+
+class SimBench:
+    """Simulated multimeter, oven and gyro ADC (see module doc).
+
+    ``physics`` is a :class:`gyrolab.sim.physics.Physics` (built from ``model``/``seed``/
+    ``adc_rate_hz`` when omitted). ``speed``: simulated seconds per wall second (None: as
+    fast as the ADC reader drains its port). ``tick_s``: simulated time per tick (rounded
+    to whole frames). ``keep_truth`` keeps every ADC frame produced, for tests.
+    """
+
+    def __init__(
+        self,
+        physics: Any | None = None,
+        *,
+        model: Any | None = None,
+        seed: int = 0,
+        adc_rate_hz: float = 100.0,
+        samples_per_frame: int = 10,
+        speed: float | None = 1.0,
+        faults: FaultPlan | None = None,
+        workdir: str | Path | None = None,
+        tcp: bool = True,
+        keep_truth: bool = False,
+        tick_s: float = 0.1,
+        ambient_c: float = 25.0,
+        oven_decimals: int = 1,
+        oven_units_c: bool = True,
+    ) -> None:
+        if physics is None:
+            from gyrolab.sim.model import nominal_model
+            from gyrolab.sim.physics import Physics
+
+            physics = Physics(
+                model or nominal_model(), rate_hz=adc_rate_hz, seed=seed, ambient_c=ambient_c
+            )
+        self.physics = physics
+        self.rate_hz = float(physics.rate_hz)
+        self.samples_per_frame = int(samples_per_frame)
+        if physics.index % self.samples_per_frame:
+            raise ValueError("physics must start on a frame boundary")
+        self.frames_per_tick = max(1, round(tick_s * self.rate_hz / self.samples_per_frame))
+        self.clock = SimClock(speed, start_s=physics.t)
+        self.faults = faults or FaultPlan()
+        self.lock = threading.RLock()  # guards the physics (tick thread vs. responders)
+        self._own_dir = workdir is None
+        self.workdir = Path(workdir or tempfile.mkdtemp(prefix="gyrolab-bench-"))
+        self.workdir.mkdir(parents=True, exist_ok=True)
+
+        self.adc_pty = PtyPort(self.workdir / "adc")
+        self.oven_pty = PtyPort(self.workdir / "oven")
+        self.dmm_pty = PtyPort(self.workdir / "dmm")
+        self.adc = AdcSource(
+            self.adc_pty,
+            samples_per_frame=self.samples_per_frame,
+            rate_hz=self.rate_hz,
+            faults=self.faults.adc,
+            keep_truth=keep_truth,
+        )
+        self.oven = WatlowF4Slave(
+            OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint),
+            decimals=oven_decimals,
+            units_c=oven_units_c,
+            faults=self.faults.oven,
+        )
+        self.dmm = Scpi34401A(self._read_ohm, self.clock)
+        self._servers: list[Any] = [
+            ModbusRtuServer(self.oven, self.oven_pty),
+            ScpiSerialServer(self.dmm, self.dmm_pty),
+        ]
+        self.dmm_tcp: ScpiTcpServer | None = ScpiTcpServer(self.dmm) if tcp else None
+        if self.dmm_tcp is not None:
+            self._servers.append(self.dmm_tcp)
+        self._events: list[tuple[float, int, str, FaultEvent]] = []
+        self._tie = itertools.count()
+        for ev in self.faults.events:
+            self.inject(ev)
+        self.log: list[tuple[float, str, str]] = []  # (t_sim, kind, detail) of faults fired
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.error: BaseException | None = None
+
+    # ---------------------------------------------------------------- physics hooks
+    def _chamber_c(self) -> float:
+        with self.lock:
+            return float(self.physics.chamber_c())
+
+    def _setpoint_c(self) -> float:
+        with self.lock:
+            return float(self.physics.setpoint_c)
+
+    def _set_setpoint(self, value_c: float) -> None:
+        with self.lock:
+            self.physics.set_setpoint(value_c)
+
+    def _read_ohm(self) -> float:
+        with self.lock:
+            return float(self.physics.pt100_ohm())
+
+    # ---------------------------------------------------------------- addresses
+    @property
+    def adc_port(self) -> str:
+        """Serial device path of the ADC stream."""
+        return self.adc_pty.path
+
+    @property
+    def oven_port(self) -> str:
+        """Serial device path of the oven's Modbus RTU line."""
+        return self.oven_pty.path
+
+    @property
+    def dmm_serial_resource(self) -> str:
+        """VISA resource of the multimeter's RS-232 port."""
+        return f"ASRL{self.dmm_pty.path}::INSTR"
+
+    @property
+    def dmm_tcp_resource(self) -> str | None:
+        """VISA resource of the multimeter's LAN socket (None without ``tcp``)."""
+        return None if self.dmm_tcp is None else self.dmm_tcp.resource
+
+    def resources(self) -> dict[str, Any]:
+        """Everything a bench configuration needs to reach the simulated instruments."""
+        return {
+            "dmm_resource": self.dmm_tcp_resource or self.dmm_serial_resource,
+            "dmm_serial_resource": self.dmm_serial_resource,
+            "dmm_tcp_resource": self.dmm_tcp_resource,
+            "oven_port": self.oven_port,
+            "adc_port": self.adc_port,
+            "adc_rate_hz": self.rate_hz,
+            "samples_per_frame": self.samples_per_frame,
+        }
+
+    @property
+    def truth(self) -> AdcTruth:
+        return self.adc.truth
+
+    # ---------------------------------------------------------------- faults
+    def inject(self, event: FaultEvent) -> None:
+        """Schedule ``event`` at its ``t_s`` (simulated), or at the next tick if None."""
+        t = self.clock.now() if event.t_s is None else float(event.t_s)
+        with self.lock:
+            heapq.heappush(self._events, (t, next(self._tie), "start", event))
+
+    def _fire_due(self) -> None:
+        now = self.clock.now()
+        while True:
+            with self.lock:
+                if not self._events or self._events[0][0] > now:
+                    return
+                t, _, phase, ev = heapq.heappop(self._events)
+            self._fire(now, phase, ev)
+
+    def _fire(self, now: float, phase: str, ev: FaultEvent) -> None:
+        self.log.append((now, f"{ev.kind}:{phase}", ev.detail))
+        end = now + ev.duration_s
+        if ev.kind == "disconnect":
+            if phase == "start":
+                self.adc.unplug()
+                with self.lock:
+                    heapq.heappush(self._events, (end, next(self._tie), "end", ev))
+            else:
+                self.adc.replug()
+        elif ev.kind == "stall":
+            if phase == "start":
+                self.adc.start_stall()
+                with self.lock:
+                    heapq.heappush(self._events, (end, next(self._tie), "end", ev))
+            else:
+                self.adc.end_stall()
+        elif ev.kind == "outage":
+            self.dmm.start_outage(end)
+        elif ev.kind == "scpi_error":
+            self.dmm.push_error(ev.detail or '-310,"System error"')
+        else:  # modbus_exception | modbus_crc | modbus_no_reply
+            self.faults.oven.burst(ev.kind, ev.count)
+
+    # ---------------------------------------------------------------- running
+    def start(self) -> SimBench:
+        """Plug in the ports, start the servers and the tick thread."""
+        for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
+            p.connect()
+        for s in self._servers:
+            s.start()
+        self.clock.speed = self.clock.speed  # re-anchor pacing: construction time is not run time
+        self._thread = threading.Thread(target=self._run, name="sim-bench-tick", daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        n = self.frames_per_tick * self.samples_per_frame
+        try:
+            while not self._stop.is_set():
+                t_next = (self.physics.index + n) / self.rate_hz
+                if not self.clock.advance_to(t_next):
+                    break
+                with self.lock:
+                    block = self.physics.advance(n)
+                self.adc.emit(block.first_index, block.counts)
+                self._fire_due()
+        except BaseException as e:  # surfaced by stop() / tests; never silent
+            self.error = e
+            raise
+
+    def stop(self) -> None:
+        """Stop the tick thread and servers, unplug every port, remove the links."""
+        self._stop.set()
+        self.clock.stop()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        for s in self._servers:
+            s.stop()
+        for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
+            p.disconnect()
+        if self._own_dir:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def __enter__(self) -> SimBench:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
