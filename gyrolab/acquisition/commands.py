@@ -1,0 +1,565 @@
+"""``gyrolab acquire`` and ``gyrolab recover``: the lab acquisition entry points.
+
+``acquire --bench BENCH.toml`` opens the three real instruments named in the bench file;
+``acquire --bench sim`` first starts the simulated bench (``gyrolab.sim.bench``: the
+same wire protocols over pseudo-terminals, one simulated clock) and then does exactly the
+same: the drivers, the runner and the recorder cannot tell the difference. The two meet
+only on the wire, which is why this module (and the tests) are the only places that
+import both ``acquisition`` and ``sim``.
+
+The recording is written directly to ``--out`` (never over an existing file unless
+``--force``), so that a crash leaves a recoverable file at the named path
+(docs/reliability.md); ``gyrolab recover`` repairs it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as _dt
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from gyrolab.acquisition.bench_config import BenchConfig, RunInfo, load_bench
+from gyrolab.acquisition.runner import (
+    Acquisition,
+    InstrumentFault,
+    RunResult,
+    Status,
+    WallClock,
+    check_profile_limits,
+)
+from gyrolab.errors import GyrolabError, InputError
+from gyrolab.outputs import check_output
+from gyrolab.profile import Profile, load_profile
+from gyrolab.recording import RecordingWriter
+
+# ---------------------------------------------------------------- device adapters
+
+
+class MultimeterDevice:
+    """The runner's :class:`~gyrolab.acquisition.runner.Thermometer` on a 34401A."""
+
+    name = "multimeter"
+
+    def __init__(self, drv: Any) -> None:
+        self.drv = drv
+
+    def read(self) -> tuple[float, float]:
+        r = self.drv.read()
+        return float(r.resistance_ohm), float(r.temperature_c)
+
+
+class OvenDevice:
+    """The runner's :class:`~gyrolab.acquisition.runner.Oven` on a Watlow F4."""
+
+    name = "oven"
+
+    def __init__(self, drv: Any) -> None:
+        self.drv = drv
+
+    def set_setpoint(self, setpoint_c: float) -> None:
+        self.drv.set_setpoint(setpoint_c)
+
+    def read(self) -> tuple[float, float]:
+        sp = self.drv.setpoint_c
+        pv = self.drv.process_value_c
+        st = self.drv.status
+        if st.sensor_fault:
+            # The controller cannot see the chamber: nothing it does can be trusted.
+            raise InstrumentFault(f"oven controller reports a sensor fault (status {st.raw:#x})")
+        return float(sp), float(pv)
+
+
+class GyroDevice:
+    """The runner's :class:`~gyrolab.acquisition.runner.GyroStream` on a GyroAdcReader."""
+
+    name = "adc"
+
+    def __init__(self, reader: Any) -> None:
+        self.reader = reader
+
+    def read(self, timeout_s: float) -> Any:
+        return self.reader.read(timeout_s)
+
+    def counters(self) -> dict[str, int]:
+        d = self.reader.decoder.stats
+        s = self.reader.stats
+        return {
+            "frames_ok": d.frames_ok,
+            # Damaged frames: CRC failures, and CRC-passing frames whose timestamp
+            # disagrees with their sequence number. (Length errors are mostly sync-word
+            # look-alikes inside payloads, not frames.)
+            "frames_bad": d.crc_errors + d.inconsistent_frames,
+            "frames_lost": d.frames_lost,
+            "frames_stale": d.stale_frames,
+            "gaps": d.gaps,
+            "disconnects": s.disconnects,
+        }
+
+
+# --------------------------------------------------------------------- instruments
+
+
+class Instruments:
+    """The three connected drivers, their runner adapters and identities."""
+
+    def __init__(self) -> None:
+        self.closers: list[Callable[[], None]] = []
+        self.identity: dict[str, Any] = {}
+        self.thermometer: MultimeterDevice | None = None
+        self.oven: OvenDevice | None = None
+        self.gyro: GyroDevice | None = None
+
+    def close(self) -> None:
+        for c in reversed(self.closers):
+            with contextlib.suppress(Exception):
+                c()
+        self.closers.clear()
+
+
+def connect_instruments(
+    cfg: BenchConfig,
+    *,
+    dmm_resource: str,
+    oven_port: str,
+    adc_port: str,
+    time_scale: float = 1.0,
+    visa_library: str = "@py",
+    clock: Callable[[], float] = time.monotonic,
+) -> Instruments:
+    """Open and identify the three instruments; raises InputError naming what failed.
+
+    ``time_scale`` divides the drivers' wall-clock timeouts (a simulated bench running
+    X× faster than real time answers X× sooner, and a silent one must be noticed X×
+    sooner too); it never takes them below a floor that protects against scheduling
+    jitter on a loaded machine.
+    """
+    from gyrolab.acquisition.gyro_adc import GyroAdcReader
+    from gyrolab.acquisition.multimeter import Agilent34401A
+    from gyrolab.acquisition.oven import WatlowF4
+
+    inst = Instruments()
+    src = cfg.source
+
+    def scaled(t: float, floor: float) -> float:
+        return max(floor, t / time_scale)
+
+    try:
+        try:
+            dmm = Agilent34401A(
+                dmm_resource,
+                visa_library=visa_library,
+                timeout_s=scaled(cfg.multimeter.timeout_s, 0.25),
+                range_ohm=cfg.multimeter.range_ohm,
+                nplc=cfg.multimeter.nplc,
+                r0_ohm=cfg.multimeter.r0_ohm,
+                baud_rate=cfg.multimeter.baud_rate,
+            )
+            inst.closers.append(dmm.close)
+            idn = dmm.connect()
+        except Exception as e:
+            raise InputError(src, f"[multimeter] {dmm_resource}: {e}") from None
+        inst.thermometer = MultimeterDevice(dmm)
+        inst.identity["multimeter"] = {
+            "model": "34401A",
+            "idn": idn,
+            "resource": dmm_resource,
+            "serial": cfg.multimeter.serial or _idn_field(idn, 2),
+            "calibration_due": cfg.multimeter.calibration_due,
+            "range_ohm": cfg.multimeter.range_ohm,
+            "nplc": cfg.multimeter.nplc,
+            "r0_ohm": cfg.multimeter.r0_ohm,
+        }
+        try:
+            oven = WatlowF4(
+                oven_port,
+                address=cfg.oven.slave_address,
+                baudrate=cfg.oven.baud_rate,
+                timeout_s=scaled(cfg.oven.timeout_s, 0.1),
+                setpoint_limits_c=(cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c),
+            )
+            inst.closers.append(oven.close)
+            regs = oven.connect()
+        except Exception as e:
+            raise InputError(src, f"[oven] {oven_port}: {e}") from None
+        inst.oven = OvenDevice(oven)
+        inst.identity["oven"] = {
+            "model": "Watlow F4 (Modbus RTU)",
+            "port": oven_port,
+            "slave_address": cfg.oven.slave_address,
+            "serial": cfg.oven.serial,
+            "registers": regs,
+        }
+        try:
+            reader = GyroAdcReader(
+                adc_port,
+                samples_per_frame=cfg.adc.samples_per_frame,
+                rate_hz=cfg.adc.sample_rate_hz,
+                baudrate=cfg.adc.baud_rate,
+                clock=clock,
+            )
+            reader.open()
+            inst.closers.append(reader.close)
+        except Exception as e:
+            raise InputError(src, f"[adc] {adc_port}: {e}") from None
+        inst.gyro = GyroDevice(reader)
+        a = cfg.adc
+        inst.identity["adc"] = {
+            "port": adc_port,
+            "serial": a.serial,
+            "sample_rate_hz": a.sample_rate_hz,
+            "samples_per_frame": a.samples_per_frame,
+            "bits": a.bits,
+            "vref_v": a.vref_v,
+            "gain_v_per_dps": a.gain_v_per_dps,
+            "offset_v": a.offset_v,
+            "dps_per_count": a.dps_per_count(),
+        }
+    except BaseException:
+        inst.close()
+        raise
+    return inst
+
+
+def _idn_field(idn: str, k: int) -> str:
+    parts = [p.strip() for p in idn.split(",")]
+    return parts[k] if len(parts) > k else ""
+
+
+# ------------------------------------------------------------------ simulated bench
+
+
+class SimHandle:
+    """A running simulated bench: its ports, clock and stop function."""
+
+    def __init__(
+        self,
+        *,
+        dmm_resource: str,
+        oven_port: str,
+        adc_port: str,
+        clock: Any,
+        stop: Callable[[], None],
+        time_scale: float,
+        bench: Any = None,
+        provenance: dict[str, Any] | None = None,
+    ) -> None:
+        self.dmm_resource = dmm_resource
+        self.oven_port = oven_port
+        self.adc_port = adc_port
+        self.clock = clock
+        self.stop = stop
+        self.time_scale = time_scale
+        self.bench = bench
+        self.provenance = provenance or {}
+
+
+def sim_bench_config(seed: int) -> BenchConfig:
+    """The bench file ``--bench sim`` stands for: defaults, a simulated operator and unit."""
+    return BenchConfig(
+        name="sim",
+        run=RunInfo(
+            operator="simulated",
+            unit_serial=f"SIM-{seed}",
+            unit_model="simulated MEMS gyro",
+            profile="paper",
+            notes="gyrolab acquire --bench sim",
+        ),
+        source="sim",
+    )
+
+
+def start_sim_bench(
+    cfg: BenchConfig,
+    profile: Profile,
+    *,
+    seed: int,
+    speed: float | None,
+    workdir: Path,
+    faults: Any = None,
+    keep_truth: bool = False,
+) -> SimHandle:
+    """Start the wire-level simulated bench (``gyrolab.sim.bench.SimBench``)."""
+    try:
+        from gyrolab.sim.bench import SimBench  # type: ignore[attr-defined]
+    except ImportError:
+        from gyrolab.errors import NotYetAvailable
+
+        raise NotYetAvailable(
+            "gyrolab acquire --bench sim: the simulated bench is not available"
+        ) from None
+    bench = SimBench(
+        seed=seed,
+        rate_hz=cfg.adc.sample_rate_hz,
+        samples_per_frame=cfg.adc.samples_per_frame,
+        ambient_c=profile.ambient_c,
+        speed=speed,
+        workdir=workdir,
+        faults=faults,
+        keep_truth=keep_truth,
+    )
+    bench.start()
+    clock = bench.clock
+    scale = speed if speed is not None else _SIM_FAST_SCALE
+    return SimHandle(
+        dmm_resource=bench.dmm_resource,
+        oven_port=bench.oven_port,
+        adc_port=bench.adc_port,
+        clock=clock,
+        stop=bench.stop,
+        time_scale=scale,
+        bench=bench,
+        provenance=getattr(bench, "provenance", lambda: {})(),
+    )
+
+
+# Timeouts of a free-running simulated bench are scaled as if it ran this much faster
+# than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
+_SIM_FAST_SCALE = 200.0
+
+
+class _SimClockAdapter:
+    """The simulated bench's clock as the runner's Clock (sleep in simulated seconds)."""
+
+    def __init__(self, clock: Any) -> None:
+        self.c = clock
+
+    def now(self) -> float:
+        return float(self.c.now())
+
+    def sleep(self, dt: float) -> None:
+        if dt > 0:
+            # Bounded wall wait so that a stopped clock cannot hang a thread.
+            self.c.sleep(dt, 1.0)
+
+
+# --------------------------------------------------------------------------- acquire
+
+
+def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], None], Any]:
+    from gyrolab.progress import progress
+
+    bar = progress(total=round(profile.duration_s), desc="acquire", unit="s")
+    state = {"t": 0}
+
+    def show(st: Status) -> None:
+        t = int(min(st.t, profile.duration_s))
+        if t > state["t"]:
+            bar.update(t - state["t"])
+            state["t"] = t
+        bar.set_postfix_str(
+            f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
+            f"oven {st.chamber_c:.2f} PT100 {st.pt100_c:.2f} °C "
+            f"ETA(run) {_hms(st.remaining_s)} lost {st.frames_lost} bad {st.frames_bad}"
+            f"{speed_note}",
+            refresh=False,
+        )
+
+    return show, bar
+
+
+def _hms(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    s = int(s)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
+def _trace_writer() -> Callable[[float], None] | None:
+    """``GYROLAB_TRACE_FD``: write each recorded block's end time there (kill tests)."""
+    fd = os.environ.get("GYROLAB_TRACE_FD")
+    if not fd:
+        return None
+    n = int(fd)
+
+    def trace(t_end: float) -> None:
+        # Unbuffered write: what reached the pipe survives the writer's kill -9.
+        os.write(n, f"{t_end:.6f}\n".encode())
+
+    return trace
+
+
+@contextlib.contextmanager
+def _open_output(path: Path, force: bool) -> Iterator[Any]:
+    """The recording file, created in place: exclusive unless ``force``."""
+    check_output(path, force)
+    mode = "wb" if force else "xb"
+    try:
+        fh = open(path, mode)  # noqa: SIM115 - closed below, after the writer
+    except FileExistsError:
+        raise InputError(path, "already exists (use --force to overwrite)") from None
+    try:
+        yield fh
+    finally:
+        fh.close()
+
+
+def run_acquisition(
+    *,
+    cfg: BenchConfig,
+    profile: Profile,
+    out: Path,
+    force: bool,
+    sim: SimHandle | None,
+    seed: int | None = None,
+    speed: float | None = None,
+    on_status: Callable[[Status], None] | None = None,
+    on_block: Callable[[float], None] | None = None,
+    acquisition_hook: Callable[[Acquisition], None] | None = None,
+) -> RunResult:
+    """Connect, record one run to ``out`` and end cleanly; returns how it ended."""
+    check_profile_limits(profile, cfg.limits, str(cfg.run.profile))
+    check_output(out, force)
+    if sim is not None:
+        clock: Any = _SimClockAdapter(sim.clock)
+        inst = connect_instruments(
+            cfg,
+            dmm_resource=sim.dmm_resource,
+            oven_port=sim.oven_port,
+            adc_port=sim.adc_port,
+            time_scale=sim.time_scale,
+        )
+    else:
+        clock = WallClock()
+        inst = connect_instruments(
+            cfg,
+            dmm_resource=cfg.multimeter.resource,
+            oven_port=cfg.oven.port,
+            adc_port=cfg.adc.port,
+        )
+    try:
+        run_meta: dict[str, Any] = {
+            "operator": cfg.run.operator,
+            "unit_serial": cfg.run.unit_serial,
+            "unit_model": cfg.run.unit_model,
+            "notes": cfg.run.notes,
+            "start_time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "profile": profile.to_dict(),
+            "source": "acquire",
+            "bench_name": cfg.name,
+        }
+        if sim is not None:
+            run_meta.update(seed=seed, speed=speed if speed is not None else "max")
+        bench_meta: dict[str, Any] = {
+            "name": cfg.name,
+            "simulated": sim is not None,
+            **inst.identity,
+            "limits": cfg.to_dict()["limits"],
+            "safe_state": cfg.to_dict()["safe_state"],
+            "recorder": cfg.to_dict()["recorder"],
+        }
+        r = cfg.recorder
+        with _open_output(out, force) as fh:
+            writer = RecordingWriter(
+                fh,
+                start_time_ns=time.time_ns(),
+                run=run_meta,
+                bench=bench_meta,
+                chunk_size=r.chunk_size,
+                flush_every_s=r.flush_every_s,
+                fsync_every_s=r.fsync_every_s,
+            )
+            if sim is not None and sim.provenance:
+                writer.write_metadata("sim_provenance", sim.provenance)
+            fh.flush()  # header + metadata on disk before the first reading
+            assert inst.thermometer and inst.oven and inst.gyro
+            acq = Acquisition(
+                profile=profile,
+                writer=writer,
+                clock=clock,
+                thermometer=inst.thermometer,
+                oven=inst.oven,
+                gyro=inst.gyro,
+                adc=cfg.adc,
+                limits=cfg.limits,
+                safe_state=cfg.safe_state,
+                pt100_period_s=cfg.multimeter.period_s,
+                oven_period_s=cfg.oven.period_s,
+                on_status=on_status,
+                on_block=on_block,
+            )
+            if acquisition_hook is not None:
+                acquisition_hook(acq)
+            try:
+                result = acq.run()
+            finally:
+                writer.close()
+        return result
+    finally:
+        inst.close()
+
+
+def acquire(args: argparse.Namespace) -> int:
+    """``gyrolab acquire --bench sim|BENCH.toml --out RUN.mcap [--profile] [--speed]``."""
+    out = Path(args.out)
+    if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
+        raise GyrolabError(f"--speed must be a positive number, not {args.speed}")
+    if args.bench == "sim":
+        cfg = sim_bench_config(args.seed)
+    else:
+        cfg = load_bench(args.bench)
+        if args.speed is not None:
+            raise GyrolabError(
+                "--speed applies to --bench sim only (real hardware runs in real time)"
+            )
+    profile = load_profile(args.profile or cfg.profile_path())
+    if args.profile:
+        cfg = replace(cfg, run=replace(cfg.run, profile=str(args.profile)))
+    check_profile_limits(profile, cfg.limits, str(args.profile or cfg.run.profile))
+    check_output(out, args.force)
+
+    sim: SimHandle | None = None
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="gyrolab-sim-") as work:
+        if args.bench == "sim":
+            sim = start_sim_bench(
+                cfg, profile, seed=args.seed, speed=args.speed, workdir=Path(work)
+            )
+        speed_note = "" if sim is None else f" ×{args.speed or 'max'}"
+        show, bar = _progress(profile, speed_note)
+        t0 = time.monotonic()
+        try:
+            result = run_acquisition(
+                cfg=cfg,
+                profile=profile,
+                out=out,
+                force=args.force,
+                sim=sim,
+                seed=args.seed,
+                speed=args.speed,
+                on_status=show,
+                on_block=_trace_writer(),
+            )
+        finally:
+            bar.close()
+            if sim is not None:
+                sim.stop()
+    wall = time.monotonic() - t0
+    msg = (
+        f"gyrolab acquire: {result.outcome} ({result.reason}); {result.t_end:.0f} s recorded in "
+        f"{wall:.1f} s wall, {result.samples} samples, {result.gaps} gap(s) "
+        f"({result.samples_missing} samples missing), {result.faults} fault(s); "
+        f"oven safe state {'verified' if result.safe_state_ok else 'NOT verified'}; {out}"
+    )
+    print(msg, file=sys.stderr)
+    return result.exit_code
+
+
+# --------------------------------------------------------------------------- recover
+
+
+def recover(args: argparse.Namespace) -> int:
+    """``gyrolab recover BROKEN.mcap --out FIXED.mcap``: salvage and report what was lost."""
+    from gyrolab.acquisition.recover import recover_recording
+
+    rep = recover_recording(args.broken, args.out, force=args.force)
+    print(rep.summary())
+    return 0
