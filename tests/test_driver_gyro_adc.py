@@ -1,0 +1,260 @@
+"""Gyro ADC frames and the stream reader: format, resync, gaps, reconnect, over real ptys."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gyrolab.acquisition.gyro_adc import AdcRead, GyroAdcReader
+from gyrolab.framing import (
+    SYNC,
+    FrameDecoder,
+    crc16_ccitt,
+    decode_int24,
+    encode_frame,
+    encode_frames,
+    frame_size,
+)
+from gyrolab.sim.bench import ByteFaults, FaultEvent, FaultPlan, SimBench
+
+N = 10
+
+
+def _frames(count: int, seed: int = 0, seq0: int = 0) -> tuple[np.ndarray, list[bytes]]:
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(-(1 << 23), 1 << 23, size=(count, N))
+    ts = (np.arange(seq0, seq0 + count) * N * 1000).astype(np.int64)  # 1 kHz, µs
+    return counts, encode_frames(seq0, ts, counts)
+
+
+# ---------------------------------------------------------------- the frame, byte by byte
+
+
+def test_crc16_ccitt_check_value() -> None:
+    # The CRC catalogue's check value of CRC-16/CCITT-FALSE.
+    assert crc16_ccitt(b"123456789") == 0x29B1
+
+
+def test_frame_layout_is_the_documented_one() -> None:
+    f = encode_frame(0x01020304, 0x1122334455, np.array([1, -1, 0x7FFFFF, -0x800000]))
+    assert len(f) == frame_size(4) == 18 + 12
+    assert f[:2] == SYNC
+    assert int.from_bytes(f[2:4], "little") == 12 + 3 * 4
+    assert int.from_bytes(f[4:8], "little") == 0x01020304
+    assert int.from_bytes(f[8:16], "little") == 0x1122334455
+    assert f[16:19] == b"\x01\x00\x00"  # +1
+    assert f[19:22] == b"\xff\xff\xff"  # -1
+    assert f[22:25] == b"\xff\xff\x7f"  # +8388607
+    assert f[25:28] == b"\x00\x00\x80"  # -8388608
+    assert int.from_bytes(f[-2:], "big") == crc16_ccitt(f[2:-2])
+
+
+def test_encode_rejects_out_of_range_samples() -> None:
+    with pytest.raises(ValueError):
+        encode_frame(0, 0, np.array([1 << 23]))
+
+
+def test_int24_roundtrip_extremes() -> None:
+    v = np.array([0, 1, -1, 8388607, -8388608, 12345, -54321])
+    raw = encode_frame(0, 0, v)[16:-2]
+    assert np.array_equal(decode_int24(raw), v)
+
+
+@settings(max_examples=40, deadline=None)
+@given(cuts=st.lists(st.integers(1, 200), min_size=1, max_size=60))
+def test_any_chunking_gives_the_same_frames(cuts: list[int]) -> None:
+    counts, frames = _frames(40, seed=3)
+    data = b"".join(frames)
+    dec = FrameDecoder(N, 1000.0)
+    got, pos = [], 0
+    for c in cuts + [len(data)]:
+        got.append(dec.feed(data[pos : pos + c]))
+        pos += c
+    assert np.array_equal(np.concatenate([b.counts for b in got]), counts)
+    assert np.array_equal(np.concatenate([b.seq for b in got]), np.arange(40))
+    assert dec.stats.gaps == 0 and dec.stats.crc_errors == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    corrupt=st.floats(0.0, 0.05),
+    drop=st.floats(0.0, 0.01),
+)
+def test_damaged_frames_never_pass_and_intact_ones_always_do(
+    seed: int, corrupt: float, drop: float
+) -> None:
+    counts, frames = _frames(200, seed=seed)
+    faults = ByteFaults(corrupt_prob=corrupt, drop_prob=drop, seed=seed)
+    wire, damaged = [], []
+    for f in frames:
+        w, d = faults.apply(f)
+        wire.append(w)
+        damaged.append(d)
+    dec = FrameDecoder(N, 1000.0)
+    b = dec.feed(b"".join(wire))
+    intact = np.flatnonzero(~np.asarray(damaged))
+    # Every delivered frame is one of the intact ones, with its exact samples.
+    assert np.array_equal(b.seq, intact)
+    assert np.array_equal(b.counts, counts[intact])
+    # Every missing frame after the first delivered one is reported as a gap.
+    if b.seq.size:
+        gaps = b.gaps_before.values()
+        reported = {s for g in gaps for s in range(g.first_seq, g.first_seq + g.frames)}
+        expected = set(range(int(b.seq[0]), int(b.seq[-1]))) - set(b.seq.tolist())
+        assert reported == expected
+
+
+def test_duplicates_and_replays_are_dropped() -> None:
+    counts, frames = _frames(6)
+    dec = FrameDecoder(N, 1000.0)
+    b = dec.feed(b"".join(frames[:4] + frames[2:4] + frames[4:]))
+    assert b.seq.tolist() == [0, 1, 2, 3, 4, 5]
+    assert dec.stats.stale_frames == 2
+    assert np.array_equal(b.counts, counts)
+
+
+def test_gap_reported_with_first_missing_seq() -> None:
+    _, frames = _frames(10)
+    dec = FrameDecoder(N, 1000.0)
+    b = dec.feed(b"".join(frames[:3] + frames[7:]))
+    assert b.seq.tolist() == [0, 1, 2, 7, 8, 9]
+    gap = b.gaps_before[3]
+    assert (gap.first_seq, gap.frames, gap.cause) == (3, 4, "lost")
+    assert dec.stats.frames_lost == 4
+
+
+def test_sequence_wraps_at_32_bits() -> None:
+    seq0 = (1 << 32) - 3
+    counts, frames = _frames(6, seq0=seq0)
+    dec = FrameDecoder(N, None)
+    b = dec.feed(b"".join(frames))
+    assert b.seq.tolist() == list(range(seq0, seq0 + 6))  # unwrapped, still increasing
+    assert dec.stats.gaps == 0
+
+
+def test_frame_with_wrong_timestamp_is_not_passed() -> None:
+    counts, frames = _frames(5)
+    liar = encode_frame(2, 10_000_000, counts[2])  # valid CRC, timestamp 10 s off
+    dec = FrameDecoder(N, 1000.0)
+    b = dec.feed(b"".join([frames[0], frames[1], liar, frames[3], frames[4]]))
+    assert b.seq.tolist() == [0, 1, 3, 4]
+    assert dec.stats.inconsistent_frames == 1
+
+
+def test_source_restart_is_reanchored_and_reported() -> None:
+    _, first = _frames(5)
+    counts2, second = _frames(8, seed=1)  # the ADC rebooted: seq and time restart at 0
+    dec = FrameDecoder(N, 1000.0, restart_after=4)
+    b = dec.feed(b"".join(first + second))
+    assert b.seq[:5].tolist() == [0, 1, 2, 3, 4]
+    assert dec.stats.restarts == 1
+    assert any(g.cause == "restart" for g in b.gaps_before.values())
+    # After re-anchoring, frames flow again, increasing, with their true samples.
+    assert np.all(np.diff(b.seq) > 0)
+    assert np.array_equal(b.counts[5:], counts2[3:])
+
+
+# ---------------------------------------------------------------- over a real pty
+
+
+def _drain(reader: GyroAdcReader, bench: SimBench, until_s: float) -> AdcRead:
+    out = AdcRead()
+    deadline = time.monotonic() + 60.0
+    while bench.clock.now() < until_s and time.monotonic() < deadline:
+        r = reader.read(0.05)
+        out.blocks += r.blocks
+        out.gaps += r.gaps
+        out.events += r.events
+    return out
+
+
+def _delivered(out: AdcRead) -> tuple[np.ndarray, np.ndarray]:
+    seq = np.concatenate(
+        [np.arange(b.first_seq, b.first_seq + b.counts.size // N) for b in out.blocks]
+    )
+    return seq, np.concatenate([b.counts for b in out.blocks]).reshape(-1, N)
+
+
+def test_acceptance_1khz_60s_with_corruption_and_drops() -> None:
+    """1 kHz for 60 s simulated, 1 % of bytes corrupted and 0.1 % dropped, over a pty."""
+    plan = FaultPlan(adc=ByteFaults(corrupt_prob=0.01, drop_prob=0.001, seed=7))
+    bench = SimBench(
+        adc_rate_hz=1000.0, samples_per_frame=N, speed=30.0, faults=plan, keep_truth=True, tcp=False
+    )
+    reader = GyroAdcReader(bench.adc_port, samples_per_frame=N, rate_hz=1000.0)
+    with bench:
+        reader.open()
+        out = _drain(reader, bench, 60.0)
+    for _ in range(3):  # what is still in the pipe
+        r = reader.read(0.05)
+        out.blocks += r.blocks
+        out.gaps += r.gaps
+    reader.close()
+
+    seq, counts, status = bench.truth.arrays()
+    got_seq, got = _delivered(out)
+    assert seq.size >= 6000
+    window = (seq >= got_seq[0]) & (seq <= got_seq[-1])
+    intact = seq[window & (status == "sent")]
+    damaged = set(seq[window & (status != "sent")].tolist())
+    # Every intact frame delivered exactly once, in order.
+    assert np.array_equal(got_seq, intact)
+    # Zero corrupted samples: each delivered frame equals what the source sent.
+    assert np.array_equal(got, counts[np.searchsorted(seq, got_seq)])
+    # Every damaged frame detected: reported missing, and nothing else is.
+    missing = {s for g in out.gaps for s in range(g.first_seq, g.first_seq + g.frames)}
+    assert missing == damaged
+    assert len(damaged) > 1000  # the faults really happened (≈ 41 % of 48-byte frames)
+    st_ = reader.decoder.stats
+    assert st_.frames_lost == len(damaged)
+    assert st_.crc_errors + st_.length_errors > 0.8 * len(damaged)
+    # Blocks carry the time base: t0 = first_index / rate.
+    for b in out.blocks[:50]:
+        assert b.t0 == pytest.approx(b.first_index / 1000.0)
+
+
+def test_disconnect_reconnect_with_backoff_gap_reported_no_duplicates() -> None:
+    plan = FaultPlan(events=[FaultEvent("disconnect", t_s=3.0, duration_s=2.0)])
+    bench = SimBench(
+        adc_rate_hz=1000.0, samples_per_frame=N, speed=10.0, faults=plan, keep_truth=True, tcp=False
+    )
+    reader = GyroAdcReader(
+        bench.adc_port, samples_per_frame=N, rate_hz=1000.0, backoff_initial_s=0.02
+    )
+    with bench:
+        reader.open()
+        out = _drain(reader, bench, 8.0)
+    reader.close()
+
+    kinds = [e.kind for e in out.events]
+    assert "disconnect" in kinds and "reconnect" in kinds
+    assert kinds.index("disconnect") < kinds.index("reconnect")
+    assert reader.stats.disconnects == 1 and reader.stats.reconnects == 1
+    assert reader.stats.open_failures >= 1  # the path was gone for a while: backoff ran
+    seq, counts, status = bench.truth.arrays()
+    got_seq, got = _delivered(out)
+    assert np.all(np.diff(got_seq) > 0)  # nothing duplicated, in order
+    assert np.array_equal(got, counts[np.searchsorted(seq, got_seq)])
+    assert got_seq[-1] > 700  # it continued after the replug (t = 5 s = frame 500)
+    gaps = [g for g in out.gaps if g.cause == "disconnect"]
+    assert len(gaps) == 1
+    unplugged = seq[status == "unplugged"]
+    g = gaps[0]
+    lost = set(range(g.first_seq, g.first_seq + g.frames))
+    assert set(unplugged.tolist()) <= lost  # every frame produced while unplugged is in it
+    assert lost.isdisjoint(got_seq.tolist())
+
+
+def test_reader_reports_open_failure_then_recovers(tmp_path: os.PathLike[str]) -> None:
+    reader = GyroAdcReader(str(tmp_path) + "/nope", samples_per_frame=N, backoff_initial_s=0.01)
+    reader._lost_port(OSError("unplugged"))  # start in the disconnected state
+    r = reader.read(0.05)
+    assert not reader.connected
+    assert any(e.kind == "open_failed" for e in r.events)
+    assert reader._backoff > 0.01  # backoff grew
