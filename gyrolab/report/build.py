@@ -1,0 +1,625 @@
+"""Assemble the report of one run: read the recording (and the model), compute, lay out.
+
+:func:`build_report` returns the :class:`~gyrolab.report.document.Document` and the
+``metrics.json`` content; :mod:`gyrolab.report.commands` writes them. Everything numeric
+comes from the layers below (``gyrolab.compensation``): the report never re-implements a
+metric, so its numbers are the ones ``gyrolab compensate`` prints.
+
+Without a model the report is the raw record of the run (temperature profile, raw output,
+raw Allan deviation and metrics, run log, bench identity); with ``--model`` the model is
+applied to the run and its figures (GPSO, VMD/MPE, drift fit, compensated output,
+compensated Allan deviation, baseline comparison) are added.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrolab import __version__
+from gyrolab.errors import InputError
+from gyrolab.recording import (
+    ALL_TOPICS,
+    TOPIC_ADC,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    Recording,
+    read_recording,
+)
+from gyrolab.report import figures as F
+from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
+
+METRIC_ROWS: list[tuple[str, str]] = [
+    ("arw_deg_per_sqrt_h", "angle random walk (°/√h)"),
+    ("bias_instability_deg_per_h", "bias instability, Allan floor/0.664 (°/h)"),
+    ("bias_stability_deg_per_h", "bias stability, std of 3.6 s averages (°/h)"),
+    ("drift_pp_deg_per_s", "drift peak-to-peak, 100 s averages (°/s)"),
+    ("rms_deg_per_s", "RMS (°/s)"),
+]
+#: Notable log entries for the run log (everything at warning level or above is kept too).
+LOG_KINDS = {"fault", "recovery", "gap", "retry", "timeout", "abort", "safe_state"}
+MAX_LOG_ROWS = 400
+
+Step = Callable[[str], None]
+
+
+def _noop(_: str) -> None:
+    return None
+
+
+# ------------------------------------------------------------------------- formatting
+
+
+def fmt(x: Any, digits: int = 4) -> str:
+    """A number for a table: ``digits`` significant digits, '—' for missing/NaN."""
+    if x is None:
+        return "—"
+    if isinstance(x, (int, np.integer)) and not isinstance(x, bool):
+        return str(int(x))
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    if not math.isfinite(v):
+        return "—"
+    return f"{v:.{digits}g}"
+
+
+def hms(t: float) -> str:
+    """Seconds since run start as ``h:mm:ss``."""
+    t = max(0.0, float(t))
+    h, rem = divmod(int(round(t)), 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}:{m:02d}:{s:02d}"
+
+
+def _flatten(d: Any, prefix: str = "") -> list[tuple[str, str]]:
+    """Nested metadata as ``(dotted.key, value)`` rows (lists of scalars joined)."""
+    rows: list[tuple[str, str]] = []
+    if isinstance(d, dict):
+        for k, v in d.items():
+            rows.extend(_flatten(v, f"{prefix}.{k}" if prefix else str(k)))
+    elif isinstance(d, list) and d and all(isinstance(v, dict) for v in d):
+        for i, v in enumerate(d):
+            rows.extend(_flatten(v, f"{prefix}[{i}]"))
+    elif isinstance(d, list):
+        rows.append((prefix, ", ".join(str(v) for v in d)))
+    else:
+        rows.append((prefix, "" if d is None else str(d)))
+    return rows
+
+
+def _clean(x: Any) -> Any:
+    """JSON-safe copy: numpy → Python, NaN/inf → None (JSON has neither)."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_run(path: str | Path) -> Recording:
+    """Read every topic but the raw ADC counts (the report uses the rate); check the gyro.
+
+    A recording without ``/gyro/rate`` samples is refused with an :class:`InputError` that
+    names the missing topic and lists the topics the file does have.
+    """
+    topics = [t for t in ALL_TOPICS if t != TOPIC_ADC]
+    rec = read_recording(path, topics=topics)
+    if rec.rate is None or rec.rate.t.size == 0:
+        present = sorted(rec.topic_counts) or ["none"]
+        raise InputError(
+            path,
+            f"no gyro output: topic {TOPIC_RATE} is missing or empty "
+            f"(topics present: {', '.join(present)})",
+        )
+    if rec.rate.t.size < 16:
+        raise InputError(path, f"{TOPIC_RATE} has only {rec.rate.t.size} samples")
+    return rec
+
+
+@dataclass
+class AllanData:
+    """One Allan curve plus its noise terms, in °/h for plotting."""
+
+    label: str
+    tau: np.ndarray
+    adev_dph: np.ndarray
+    lo_dph: np.ndarray
+    hi_dph: np.ndarray
+    arw: float
+    bi: float
+
+
+def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
+    """Allan deviation (octave taus, 1σ Greenhall bounds) and IEEE 952 ARW/B of ``x`` (°/s).
+
+    ``None`` when the series is too short or constant (the figure then omits the curve).
+    """
+    from gyrolab.compensation.allan import allan_deviation, noise_terms
+
+    try:
+        res = allan_deviation(np.asarray(x, dtype=float), rate_hz, taus="octave")
+        terms = noise_terms(res).deg_h()
+    except InputError:
+        return None
+    return AllanData(
+        label=label,
+        tau=res.taus,
+        adev_dph=res.adev * 3600.0,
+        lo_dph=res.adev_lo * 3600.0,
+        hi_dph=res.adev_hi * 3600.0,
+        arw=terms["arw_deg_per_sqrt_h"],
+        bi=terms["bias_instability_deg_per_h"],
+    )
+
+
+def raw_metrics(tb: np.ndarray, xb: np.ndarray, block_s: float) -> dict[str, Any]:
+    """The five DESIGN.md metrics of the averaged raw output (NaN when too short)."""
+    from gyrolab.compensation.pipeline import series_metrics
+
+    try:
+        return series_metrics(xb, block_s)
+    except InputError:
+        return {k: float("nan") for k, _ in METRIC_ROWS}
+
+
+# ------------------------------------------------------------------------- sections
+
+
+def _summary(rec: Recording, model: Any, held_out: bool | None) -> list[tuple[str, str]]:
+    run, bench = rec.run, rec.bench
+    rate = rec.rate
+    assert rate is not None
+    prof = run.get("profile")
+    prof_name = prof.get("name", "?") if isinstance(prof, dict) else str(prof or "?")
+    dur = float(rate.t[-1] - rate.t[0] + rate.period)
+    unit = run.get("unit_serial") or bench.get("unit_serial") or "—"
+    rows = [
+        ("recording", Path(rec.path).name),
+        ("unit under test", str(unit)),
+        ("operator", str(run.get("operator", "—"))),
+        ("start time", str(run.get("start_time", "—"))),
+        ("source", str(run.get("source", "—"))),
+        ("profile", prof_name),
+        ("duration", f"{dur / 3600:.2f} h ({hms(dur)})"),
+        ("gyro samples", f"{rate.t.size:,} at {rate.rate_hz:g} Hz"),
+        ("recorded by", f"gyrolab {run.get('software_version', '?')}"),
+        ("report by", f"gyrolab {__version__}"),
+    ]
+    if model is not None:
+        cal = Path(str(model.calibration.get("path", "?"))).name
+        rows.append(("compensation model", f"fitted on {cal}"))
+        rows.append(
+            (
+                "metrics are",
+                "held out (run not used for fitting)"
+                if held_out
+                else "in sample (this run is the calibration run)",
+            )
+        )
+    else:
+        rows.append(("compensation model", "none (raw record)"))
+    return rows
+
+
+def run_log_rows(rec: Recording) -> tuple[list[list[str]], dict[str, int]]:
+    """Faults, recoveries, warnings and gaps, in time order; plus counts per kind."""
+    rows: list[tuple[float, list[str]]] = []
+    counts: dict[str, int] = {}
+    for m in rec.logs:
+        level = str(m.get("level", ""))
+        kind = str(m.get("kind", ""))
+        if level in ("warning", "error", "fault") or kind in LOG_KINDS:
+            t = float(m.get("t", 0.0))
+            rows.append(
+                (t, [hms(t), level, str(m.get("source", "")), kind, str(m.get("message", ""))])
+            )
+            counts[kind or level] = counts.get(kind or level, 0) + 1
+    logged_gaps = sum(1 for m in rec.logs if m.get("kind") == "gap")
+    assert rec.rate is not None
+    gaps = rec.rate.gaps()
+    counts["gaps in /gyro/rate"] = len(gaps)
+    if len(gaps) > logged_gaps:
+        # Gaps the acquisition did not log (e.g. a recovered file): the reader still sees them.
+        for t, n in gaps:
+            rows.append(
+                (
+                    t,
+                    [
+                        hms(t),
+                        "warning",
+                        "reader",
+                        "gap",
+                        f"{n} samples missing in {TOPIC_RATE} ({n * rec.rate.period:.3g} s)",
+                    ],
+                )
+            )
+    for e in rec.events:
+        ev = str(e.get("event", ""))
+        if ev in ("aborted", "safe_state"):
+            t = float(e.get("t", 0.0))
+            rows.append((t, [hms(t), "fault", "profile", ev, str(e.get("detail", ""))]))
+            counts[ev] = counts.get(ev, 0) + 1
+    rows.sort(key=lambda r: r[0])
+    return [r for _, r in rows], counts
+
+
+def event_rows(rec: Recording) -> list[list[str]]:
+    out = []
+    for e in rec.events:
+        sp = e.get("setpoint_c")
+        out.append(
+            [
+                hms(float(e.get("t", 0.0))),
+                str(e.get("event", "")),
+                str(e.get("step", "")),
+                fmt(sp, 4) if sp is not None else "",
+                str(e.get("detail", "")),
+            ]
+        )
+    return out
+
+
+def _metrics_table(metrics: dict[str, Any], columns: list[tuple[str, str]]) -> TableBlock:
+    """Rows: the five metrics; columns: ``(label, dotted key into metrics)``."""
+
+    def get(path: str) -> dict[str, Any]:
+        d: Any = metrics
+        for p in path.split("."):
+            d = d.get(p, {}) if isinstance(d, dict) else {}
+        return d if isinstance(d, dict) else {}
+
+    rows = []
+    for key, label in METRIC_ROWS:
+        rows.append([label] + [fmt(get(path).get(key)) for _, path in columns])
+    return TableBlock("metrics", "Performance metrics", ["metric"] + [c for c, _ in columns], rows)
+
+
+# -------------------------------------------------------------------------- building
+
+
+def build_report(
+    run_path: str | Path, model_dir: str | Path | None = None, step: Step = _noop
+) -> tuple[Document, dict[str, Any]]:
+    """The report document and ``metrics.json`` content of ``run_path`` (and the model).
+
+    ``step(name)`` is called as each stage starts (progress display). Bad input raises
+    :class:`InputError` before anything heavy runs: the model is loaded (and its format
+    version checked) first, then the recording is checked for a gyro topic.
+    """
+    t_start = time.perf_counter()
+    model = None
+    if model_dir is not None:
+        from gyrolab.compensation.pipeline import load_model
+
+        step("load model")
+        model = load_model(str(model_dir))
+    step("read recording")
+    rec = read_run(run_path)
+    rate = rec.rate
+    assert rate is not None
+    from gyrolab.compensation.pipeline import PAPER_BLOCK_S, block_average
+
+    block_s = model.config.block_s if model is not None else PAPER_BLOCK_S
+    x = np.asarray(rate.values, dtype=float)
+    if rate.t.size and (rate.t[-1] - rate.t[0]) >= 2 * block_s:
+        tb, xb, _ = block_average(rate.t, x, block_s, rate.period)
+    else:
+        tb, xb = rate.t, x
+    has_temp = rec.pt100_t.size > 0
+
+    metrics: dict[str, Any]
+    app = run = None
+    held_out: bool | None = None
+    if model is not None:
+        from gyrolab.compensation.pipeline import compensate_offline, evaluate, prepare_run
+
+        step("apply model")
+        run = prepare_run(rec, model.config)
+        held_out = not _is_calibration_run(model, run)
+        app = compensate_offline(model, run)
+        step("metrics")
+        metrics = evaluate(model, app, run, held_out=held_out)
+        metrics["calibration_run"] = model.calibration.get("path")
+    else:
+        step("metrics")
+        metrics = {
+            "run": str(run_path),
+            "raw": raw_metrics(tb, xb, block_s),
+            "held_out": False,
+            "sample_period_s": block_s,
+            "n_points": int(tb.size),
+        }
+
+    step("figures")
+    doc = Document(
+        title=f"Temperature test report — {rec.run.get('unit_serial') or Path(rec.path).stem}",
+        subtitle="MEMS gyroscope temperature test"
+        + (" with drift compensation" if model is not None else " (raw record)"),
+        summary=_summary(rec, model, held_out),
+    )
+
+    # 1. temperature and raw output
+    sec = Section("run", "Run: temperature profile and raw output")
+    if rec.oven_t.size or has_temp:
+        sec.blocks.append(
+            FigureBlock(
+                "temperature",
+                "Temperature profile",
+                F.temperature_profile(
+                    rec.oven_t, rec.oven_setpoint_c, rec.oven_pv_c, rec.pt100_t, rec.pt100_c
+                ),
+                "Oven setpoint (commanded), chamber air (oven process value) and the PT100 on "
+                "the gyro case.",
+            )
+        )
+    else:
+        sec.blocks.append(TextBlock("No oven or PT100 data in this recording.", "note"))
+    sec.blocks.append(
+        FigureBlock(
+            "raw-output",
+            "Raw output against time and temperature",
+            F.raw_output(tb, xb, rec.pt100_t, rec.pt100_c),
+            f"Gyro output averaged over {block_s:g} s ({3600 / block_s:.0f} points/h, the paper's "
+            "rate); right: against the gyro case temperature, coloured by time (paper Fig. 9).",
+        )
+    )
+    doc.sections.append(sec)
+
+    # 2. compensation model
+    if model is not None and app is not None and run is not None:
+        doc.sections.append(_model_section(model, app, run, held_out))
+
+    # 3. performance: Allan + metrics
+    step("allan")
+    doc.sections.append(_performance_section(metrics, xb, block_s, app, model, rate))
+
+    # 4. run log and bench identity
+    doc.sections.append(_log_section(rec))
+    doc.sections.append(_identity_section(rec, model))
+
+    metrics["timing_s"] = time.perf_counter() - t_start
+    if model is not None and "timing_s" not in metrics.get("model", {}):
+        metrics["model_timing_s"] = model.timing_s
+    return doc, _clean(metrics)
+
+
+def _is_calibration_run(model: Any, run: Any) -> bool:
+    """True when ``run`` is the run the model was fitted on (same averaged series)."""
+    cal = model.diagnostics.get("calib_rate")
+    if cal is None:
+        return Path(str(model.calibration.get("path", ""))).resolve() == Path(run.path).resolve()
+    cal = np.asarray(cal, dtype=float)
+    return cal.shape == run.rate.shape and bool(np.allclose(cal, run.rate, rtol=0, atol=1e-12))
+
+
+def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Section:
+    sec = Section("model", "Compensation model (GPSO-VMD, MPE, FLP, GA-BP)")
+    d = model.diagnostics
+    dec = app.decomposition
+    names = {i: c for c, idx in dec.classes.items() for i in idx}
+    classes = [names.get(i, "?") for i in range(dec.K)]
+    sec.blocks.append(
+        TextBlock(
+            f"VMD parameters K = {model.K}, α = {model.alpha:.0f}; IMF classes by mean MPE: "
+            + "; ".join(
+                f"{c}: {', '.join(f'IMF{i + 1}' for i in dec.classes.get(c, [])) or 'none'}"
+                for c in ("noise", "mixed", "drift")
+            )
+            + f". The model was fitted on {Path(str(model.calibration.get('path', '?'))).name}; "
+            + ("this run is held out." if held_out else "this run is the calibration run.")
+        )
+    )
+    pos = d.get("gpso_positions")
+    best_hist = d.get("gpso_best_history")
+    if pos is not None and best_hist is not None and np.ndim(pos) == 3:
+        fit = d.get("gpso_fitness")
+        mean_fit = None
+        if fit is not None and np.ndim(fit) == 2:
+            f = np.asarray(fit, dtype=float)
+            mean_fit = np.nanmean(np.where(np.isfinite(f), f, np.nan), axis=1)
+        sec.blocks.append(
+            FigureBlock(
+                "gpso",
+                "GPSO search of the VMD parameters",
+                F.gpso(best_hist, pos[:, :, 0], pos[:, :, 1], model.K, model.alpha, mean_fit),
+                "Left: best and mean fitness per generation. Right: every evaluated particle in "
+                "(K, α), shaded by generation; the star is the optimum (paper Fig. 10).",
+            )
+        )
+    else:
+        sec.blocks.append(
+            TextBlock(
+                "GPSO search: not recorded in this model (K and α were fixed in its configuration, "
+                "or the model predates the search history).",
+                "note",
+            )
+        )
+    sec.blocks.append(
+        FigureBlock(
+            "vmd-modes",
+            "VMD modes and their classes",
+            F.vmd_modes(run.t, dec.modes, classes, list(dec.mpe)),
+            "The averaged output of this run decomposed by VMD with the model's (K, α); each "
+            "mode is coloured by its MPE class (red noise, orange mixed, blue drift) "
+            "(paper Fig. 11).",
+        )
+    )
+    sec.blocks.append(
+        FigureBlock(
+            "mpe",
+            "MPE classification",
+            F.mpe_classes(list(dec.mpe), classes),
+            f"Mean multiscale permutation entropy (scales 1–{model.config.mpe_scale}) of each "
+            f"mode; noise ≥ {model.config.mpe_noise_min}, drift ≤ {model.config.mpe_drift_max} "
+            "(paper Fig. 12).",
+        )
+    )
+    sec.blocks.append(
+        FigureBlock(
+            "drift-fit",
+            "Drift model fit",
+            F.drift_fit(run.t, dec.part("drift"), app.series["drift_prediction"], run.temp),
+            "Drift modes of this run and the GA-BP model's prediction from the PT100 temperature "
+            + ("(held out: the model never saw this run)" if held_out else "(calibration run)")
+            + " (paper Fig. 13).",
+        )
+    )
+    sec.blocks.append(
+        FigureBlock(
+            "compensated",
+            "Compensated against raw",
+            F.compensated(run.t, app.series["raw"], app.series["compensated"]),
+            "Raw output and the reconstructed output (noise modes removed, mixed modes filtered, "
+            "temperature drift subtracted) (paper Fig. 14).",
+        )
+    )
+    return sec
+
+
+def _performance_section(
+    metrics: dict[str, Any], xb: np.ndarray, block_s: float, app: Any, model: Any, rate: Any
+) -> Section:
+    sec = Section("performance", "Performance: Allan deviation and metrics")
+    curves: list[F.AllanCurve] = []
+    series = [("raw", xb, F.RAW_COLOR)]
+    if app is not None:
+        series.append(("compensated", app.series["compensated"], F.COMP_COLOR))
+    for label, x, color in series:
+        a = allan_curve(x, 1.0 / block_s, label)
+        if a is not None:
+            curves.append(
+                F.AllanCurve(label, a.tau, a.adev_dph, a.lo_dph, a.hi_dph, a.arw, a.bi, color=color)
+            )
+    if curves:
+        sec.blocks.append(
+            FigureBlock(
+                "allan",
+                "Allan deviation",
+                F.allan(curves),
+                f"Overlapping Allan deviation of the {block_s:g} s averages, with 1σ confidence "
+                "bands (Greenhall EDF); dotted: angle random walk line (−½ slope); dashed: "
+                "bias-instability floor 0.664·B (IEEE 952) (paper Fig. 15).",
+            )
+        )
+    else:
+        sec.blocks.append(TextBlock("Run too short for an Allan deviation.", "note"))
+    cols = [("raw", "raw")]
+    if model is not None:
+        cols.append(("compensated", "compensated"))
+        if "compensated_drift_only" in metrics:
+            cols.append(("drift only (GA-BP)", "compensated_drift_only"))
+        if "compensated_streaming" in metrics:
+            cols.append(("streaming (causal)", "compensated_streaming"))
+    tab = _metrics_table(metrics, cols)
+    tab.note = f"All metrics on {block_s:g} s averages of the output" + (
+        "; held out: the model was not fitted on this run." if metrics.get("held_out") else "."
+    )
+    sec.blocks.append(tab)
+    if model is not None and metrics.get("baselines"):
+        bcols = [
+            ("GPSO-VMD + GA-BP", "compensated"),
+            ("GA-BP drift only", "compensated_drift_only"),
+        ]
+        bcols += [(f"baseline: {n}", f"baselines.{n}") for n in metrics["baselines"]]
+        bt = _metrics_table(metrics, [("raw", "raw")] + bcols)
+        bt.key, bt.title = "baselines", "Baseline comparison"
+        bt.note = (
+            "poly: polynomial in temperature (order by blocked cross-validation); bp: plain BP "
+            "network with random initial weights; both fitted on the calibration run's raw "
+            "averages and applied causally. 'GA-BP drift only' is the paper's drift model "
+            "applied the same way (no noise removal): the like-for-like comparison."
+        )
+        sec.blocks.append(bt)
+    return sec
+
+
+def _log_section(rec: Recording) -> Section:
+    sec = Section("log", "Run log: faults, recoveries, gaps")
+    rows, counts = run_log_rows(rec)
+    sec.blocks.append(
+        TextBlock(
+            "Counts: "
+            + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+            + f"; log messages in all: {len(rec.logs)}; profile events: {len(rec.events)}."
+        )
+    )
+    note = ""
+    if len(rows) > MAX_LOG_ROWS:
+        note = f"First {MAX_LOG_ROWS} of {len(rows)} entries shown; all are in the recording."
+        rows = rows[:MAX_LOG_ROWS]
+    sec.blocks.append(
+        TableBlock(
+            "runlog",
+            "Faults, recoveries, warnings and gaps",
+            ["time", "level", "source", "kind", "message"],
+            rows,
+            note,
+        )
+    )
+    ev = event_rows(rec)
+    evnote = ""
+    if len(ev) > MAX_LOG_ROWS:
+        evnote = f"First {MAX_LOG_ROWS} of {len(ev)} events shown."
+        ev = ev[:MAX_LOG_ROWS]
+    sec.blocks.append(
+        TableBlock(
+            "events",
+            "Profile events",
+            ["time", "event", "step", "setpoint (°C)", "detail"],
+            ev,
+            evnote,
+        )
+    )
+    return sec
+
+
+def _identity_section(rec: Recording, model: Any) -> Section:
+    sec = Section("identity", "Bench identity and software")
+    run = {k: v for k, v in rec.run.items() if k != "profile"}
+    prof = rec.run.get("profile")
+    if isinstance(prof, dict):
+        run["profile.name"] = prof.get("name", "?")
+        run["profile.steps"] = len(prof.get("steps", []))
+    sec.blocks.append(
+        TableBlock("run-meta", "Run", ["field", "value"], [list(r) for r in _flatten(run)])
+    )
+    sec.blocks.append(
+        TableBlock(
+            "bench",
+            "Instruments, serial numbers, calibration",
+            ["field", "value"],
+            [list(r) for r in _flatten(rec.bench)],
+        )
+    )
+    sw = [
+        ["gyrolab (this report)", __version__],
+        ["gyrolab (recording)", str(rec.run.get("software_version", "—"))],
+        ["recording format", str(rec.run.get("format_version", "—"))],
+    ]
+    if model is not None:
+        sw.append(["compensation model calibration run", str(model.calibration.get("path"))])
+    sec.blocks.append(TableBlock("software", "Software", ["component", "version"], sw))
+    return sec
+
+
+__all__ = ["build_report", "read_run", "run_log_rows", "fmt", "hms", "TOPIC_PT100"]

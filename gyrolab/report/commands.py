@@ -1,0 +1,68 @@
+"""``gyrolab report RUN.mcap [--model MODEL_DIR] --out REPORT_DIR`` (DESIGN.md contract).
+
+Writes, atomically (a temporary sibling directory renamed into place):
+
+* ``index.html`` — the self-contained report (figures embedded, opens offline);
+* ``metrics.json`` — DESIGN.md keys (``raw``; with a model also ``compensated``,
+  ``baselines.<name>``, ``vmd``, ``imf_classes``, ``held_out``) and ``timing_s``;
+* ``report.pdf`` — the same content as the HTML page.
+
+Bad input (missing or foreign recording, no gyro topic, a model of another format
+version) is one line and exit 2, and nothing is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from gyrolab.outputs import atomic_dir, check_output
+from gyrolab.progress import progress
+
+STAGES = ["load model", "read recording", "apply model", "metrics", "figures", "allan", "write"]
+
+
+def write_report(
+    run: str | Path,
+    out: str | Path,
+    model: str | Path | None = None,
+    force: bool = False,
+    show_progress: bool = True,
+) -> dict[str, Any]:
+    """Build and write the report of ``run`` into ``out``; returns the metrics."""
+    from gyrolab.report.build import build_report
+    from gyrolab.report.html import render
+    from gyrolab.report.pdf import write_pdf
+
+    check_output(out, force)
+    stages = [s for s in STAGES if model is not None or s not in ("load model", "apply model")]
+    bar = progress(total=len(stages), desc="report", unit="stage")
+    if not show_progress:
+        bar.disable = True
+
+    def step(name: str) -> None:
+        bar.set_postfix_str(name)
+        if bar.n < len(stages) - 1:
+            bar.update(1)
+
+    try:
+        doc, metrics = build_report(run, model, step=step)
+        step("write")
+        with atomic_dir(out, force) as tmp:
+            (tmp / "index.html").write_text(render(doc), encoding="utf-8")
+            (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+            write_pdf(doc, tmp / "report.pdf")
+        bar.update(len(stages) - bar.n)
+    finally:
+        bar.close()
+    return metrics
+
+
+def report(args: argparse.Namespace) -> int:
+    """The ``gyrolab report`` handler."""
+    write_report(args.run, args.out, args.model, args.force)
+    print(f"report written to {Path(args.out) / 'index.html'}", file=sys.stderr)
+    return 0
