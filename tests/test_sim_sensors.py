@@ -44,3 +44,10 @@ def test_adc_rejects_bad_parameters() -> None:
         AdcModel(bits=40)
     with pytest.raises(ValueError):
         AdcModel(gain_v_per_dps=0.0)
+
+
+def test_scalar_and_array_paths_agree() -> None:
+    for t in (-150.0, -40.0, -0.5, 0.0, 60.0, 500.0):
+        r = cvd_resistance(t)
+        assert r == cvd_resistance(np.array([t]))[0]
+        assert cvd_temperature(r) == pytest.approx(cvd_temperature(np.array([r]))[0], abs=1e-12)

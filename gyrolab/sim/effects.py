@@ -113,8 +113,13 @@ class BiasPoly(Effect):
 
     def rate(self, ctx: BlockContext) -> np.ndarray:
         x = _tpow(ctx, self.p["t_ref_c"])
-        coeffs = [self.p[f"c{i}"] for i in range(4, -1, -1)]
-        return np.polyval(coeffs, x) + np.zeros(ctx.n)
+        c = [self.p[f"c{i}"] for i in range(5)]
+        top = max([i for i in range(5) if c[i] != 0.0], default=0)
+        y = np.full(ctx.n, c[top])
+        for i in range(top - 1, -1, -1):  # Horner, skipping the zero high orders
+            y *= x
+            y += c[i]
+        return y
 
 
 class CubicTemp(Effect):

@@ -17,6 +17,7 @@ analogue output ``v = offset_v + gain_v_per_dps · Ω``::
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -30,6 +31,10 @@ PT100_R0 = 100.0
 
 def cvd_resistance(t_c: np.ndarray | float, r0: float = PT100_R0) -> np.ndarray | float:
     """PT100 resistance (Ω) at temperature ``t_c`` (°C), IEC 60751 Callendar–Van Dusen."""
+    if isinstance(t_c, (float, int)):  # scalar fast path: one reading per second
+        x = float(t_c)
+        r = 1.0 + CVD_A * x + CVD_B * x * x
+        return r0 * (r + CVD_C * (x - 100.0) * x**3 if x < 0.0 else r)
     t = np.asarray(t_c, dtype=float)
     r = 1.0 + CVD_A * t + CVD_B * t * t
     r = np.where(t < 0.0, r + CVD_C * (t - 100.0) * t**3, r)
@@ -43,6 +48,8 @@ def cvd_temperature(r_ohm: np.ndarray | float, r0: float = PT100_R0) -> np.ndarr
     Closed form ``T = (−A + √(A² − 4B(1 − R/R0))) / 2B`` for R ≥ R0; below, Newton's method
     on the full equation starting from that root (converges to < 1e-9 °C in a few steps).
     """
+    if isinstance(r_ohm, (float, int)):
+        return _cvd_temperature_scalar(float(r_ohm) / r0)
     r = np.asarray(r_ohm, dtype=float) / r0
     t = (-CVD_A + np.sqrt(np.maximum(CVD_A * CVD_A - 4.0 * CVD_B * (1.0 - r), 0.0))) / (2.0 * CVD_B)
     neg = r < 1.0
@@ -59,6 +66,16 @@ def cvd_temperature(r_ohm: np.ndarray | float, r0: float = PT100_R0) -> np.ndarr
         else:
             t = tn
     return float(t) if np.ndim(t) == 0 else t
+
+
+def _cvd_temperature_scalar(r: float) -> float:
+    t = (-CVD_A + math.sqrt(max(CVD_A * CVD_A - 4.0 * CVD_B * (1.0 - r), 0.0))) / (2.0 * CVD_B)
+    if r < 1.0:
+        for _ in range(8):
+            f = 1.0 + CVD_A * t + CVD_B * t * t + CVD_C * (t - 100.0) * t**3 - r
+            df = CVD_A + 2.0 * CVD_B * t + CVD_C * (4.0 * t**3 - 300.0 * t * t)
+            t -= f / df
+    return t
 
 
 @dataclass(frozen=True)
