@@ -1,0 +1,185 @@
+"""gyrolab report: the raw record, the HTML/PDF writers, the run log, bad input."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrolab.cli import main
+from gyrolab.recording import RecordingWriter
+from gyrolab.report import figures as F
+from gyrolab.report.build import build_report, fmt, hms
+from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
+from gyrolab.report.html import render
+from gyrolab.report.pdf import write_pdf
+
+METRIC_KEYS = {
+    "arw_deg_per_sqrt_h",
+    "bias_instability_deg_per_h",
+    "bias_stability_deg_per_h",
+    "drift_pp_deg_per_s",
+    "rms_deg_per_s",
+}
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A simulated run of the short profile (48 min) at 10 Hz: a few seconds to make."""
+    out = tmp_path_factory.mktemp("run") / "short.mcap"
+    assert (
+        main(["simulate", "--out", str(out), "--profile", "short", "--rate", "10", "--seed", "3"])
+        == 0
+    )
+    return out
+
+
+def _synthetic(path: Path, with_rate: bool = True) -> Path:
+    """A hand-made recording with a fault, a recovery and an unlogged gap in /gyro/rate."""
+    rng = np.random.default_rng(0)
+    with RecordingWriter(
+        path,
+        start_time_ns=0,
+        run={"operator": "test", "unit_serial": "G-42"},
+        bench={"multimeter": {"idn": "HEWLETT-PACKARD,34401A,0,11-5-2", "serial": "MY123"}},
+    ) as w:
+        if with_rate:
+            # two blocks of 600 s at 10 Hz with 50 samples missing between them
+            w.write_rate_block(0.0, 0.1, 0, rng.normal(0.01, 1e-3, 6000))
+            w.write_rate_block(605.0, 0.1, 6050, rng.normal(0.01, 1e-3, 6000))
+        for t in range(0, 1206, 2):
+            w.write_pt100(float(t), 109.7, 25.0 + t / 100)
+            w.write_oven(float(t), 30.0, 25.0 + t / 90, "run")
+        w.write_event(0.0, "run_started")
+        w.write_log(300.0, "fault", "oven", "Modbus timeout", kind="fault")
+        w.write_log(302.0, "info", "oven", "reconnected after 2 s", kind="recovery")
+        w.write_log(400.0, "info", "runner", "routine message")
+    return path
+
+
+def _external_refs(html: str) -> list[str]:
+    refs = re.findall(r"""(?:src|href)\s*=\s*["']([^"']*)["']""", html)
+    refs += re.findall(r"url\(([^)]*)\)", html)
+    return [r for r in refs if not r.startswith(("data:", "#"))]
+
+
+def test_block_average_by_time_keeps_gaps_local() -> None:
+    t = np.concatenate([np.arange(0, 10, 0.5), np.arange(20, 30, 0.5)])
+    x = np.where(t < 15, 1.0, 3.0)
+    tm, xm = F.block_average(t, x, 5.0)
+    np.testing.assert_allclose(xm, [1, 1, 3, 3])
+    np.testing.assert_allclose(tm, [2.25, 7.25, 22.25, 27.25])
+
+
+def test_formatting_helpers() -> None:
+    assert fmt(float("nan")) == "—" and fmt(None) == "—"
+    assert fmt(0.052345678) == "0.05235" and fmt(7) == "7"
+    assert hms(3725.4) == "1:02:05"
+
+
+def test_html_is_self_contained_and_pdf_has_every_page(tmp_path: Path) -> None:
+    fig = F.compensated(np.arange(10.0), np.ones(10), np.zeros(10))
+    doc = Document(
+        "T <&> report",
+        "sub",
+        [("unit", "G-1")],
+        [
+            Section(
+                "a",
+                "Alpha",
+                [FigureBlock("c", "Comp", fig, "a caption"), TextBlock("note text", "note")],
+            ),
+            Section(
+                "b",
+                "Beta",
+                [TableBlock("t", "Tab", ["k", "v"], [[str(i), f"{i * 0.5}"] for i in range(90)])],
+            ),
+        ],
+    )
+    html = render(doc)
+    assert "<script" not in html and _external_refs(html) == []
+    assert "T &lt;&amp;&gt; report" in html  # escaped
+    assert html.count('src="data:image/png;base64,') == 1
+    assert 'id="fig-c"' in html and 'id="tab-t"' in html and "@media print" in html
+    n = write_pdf(doc, tmp_path / "r.pdf")
+    # title + figure + note page + 90 rows over 38-row pages (3 pages)
+    assert n == 1 + 1 + 1 + 3
+    data = (tmp_path / "r.pdf").read_bytes()
+    assert data.startswith(b"%PDF")
+    assert len(re.findall(rb"/Type\s*/Page(?!s)", data)) == n
+
+
+def test_raw_report(short_run: Path, tmp_path: Path) -> None:
+    out = tmp_path / "rep"
+    assert main(["report", str(short_run), "--out", str(out)]) == 0
+    html = (out / "index.html").read_text(encoding="utf-8")
+    for key in ("temperature", "raw-output", "allan"):
+        assert f'id="fig-{key}"' in html
+    for key in ("metrics", "runlog", "events", "bench", "run-meta", "software"):
+        assert f'id="tab-{key}"' in html
+    # without a model there is no model figure
+    assert 'id="fig-vmd-modes"' not in html and 'id="fig-compensated"' not in html
+    assert _external_refs(html) == []
+    m = json.loads((out / "metrics.json").read_text())
+    assert set(m["raw"]) == METRIC_KEYS
+    # simulator defaults: ARW about the paper's 0.0523 deg/rt(h)
+    assert 0.03 < m["raw"]["arw_deg_per_sqrt_h"] < 0.08
+    assert m["raw"]["drift_pp_deg_per_s"] > 0
+    assert (out / "report.pdf").read_bytes().startswith(b"%PDF")
+    # never overwritten without --force
+    assert main(["report", str(short_run), "--out", str(out)]) == 2
+
+
+def test_run_log_lists_faults_recoveries_and_gaps(tmp_path: Path) -> None:
+    rec = _synthetic(tmp_path / "syn.mcap")
+    doc, metrics = build_report(rec)
+    log = next(t for t in doc.tables() if t.key == "runlog")
+    kinds = [r[3] for r in log.rows]
+    assert kinds == ["fault", "recovery", "gap"]
+    assert "50 samples missing" in log.rows[2][4] and log.rows[2][0] == "0:10:00"
+    assert all("routine" not in r[4] for r in log.rows)  # info chatter is not a log entry
+    bench = next(t for t in doc.tables() if t.key == "bench")
+    assert ["multimeter.serial", "MY123"] in bench.rows
+    assert dict(doc.summary)["unit under test"] == "G-42"
+    assert set(metrics["raw"]) == METRIC_KEYS
+
+
+def test_no_gyro_topic_exits_2_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = _synthetic(tmp_path / "nogyro.mcap", with_rate=False)
+    out = tmp_path / "rep"
+    assert main(["report", str(rec), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "/gyro/rate" in err[0] and "nogyro.mcap" in err[0]
+    assert not out.exists()
+
+
+def test_not_an_mcap_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "x.mcap"
+    bad.write_text("hello")
+    assert main(["report", str(bad), "--out", str(tmp_path / "r")]) == 2
+    assert "not an MCAP" in capsys.readouterr().err
+
+
+def test_model_of_another_version_exits_2(
+    short_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gyrolab.compensation.model_dir import MODEL_FORMAT, MODEL_JSON
+
+    model = tmp_path / "model"
+    model.mkdir()
+    (model / MODEL_JSON).write_text(
+        json.dumps({"format": MODEL_FORMAT, "format_version": 99, "software_version": "9.9.9"})
+    )
+    out = tmp_path / "rep"
+    assert main(["report", str(short_run), "--model", str(model), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "format version 99" in err[0] and str(model) in err[0]
+    assert not out.exists()
+    # a directory that is no model at all
+    assert main(["report", str(short_run), "--model", str(tmp_path), "--out", str(out)]) == 2
+    assert "model.json" in capsys.readouterr().err
