@@ -97,6 +97,13 @@ def forward(theta: np.ndarray, Xs: np.ndarray, n_in: int, hidden: int) -> np.nda
     return np.einsum("...nh,...h->...n", Y, w) + b[..., None]
 
 
+def _input_gradient(theta: np.ndarray, Xs: np.ndarray, n_in: int, hidden: int) -> np.ndarray:
+    """∂Z/∂X (standardised units) of eqs 15–17: ``Σ_h W_ih w_h Y_h (1 − Y_h)``, ``(N, n)``."""
+    W, a, w, _ = unpack(theta, n_in, hidden)
+    Y = 0.5 * (1.0 + np.tanh(0.5 * (Xs @ W + a)))
+    return (Y * (1.0 - Y) * w) @ W.T
+
+
 def _nonuniform(
     x: np.ndarray, gen: int, generations: int, lo: float, hi: float, b: float, rng
 ) -> np.ndarray:
@@ -249,21 +256,40 @@ class MLPDriftModel:
     y_mean: float
     y_std: float
     init: str = "ga"
+    x_min: np.ndarray | None = None
+    x_max: np.ndarray | None = None
     ga_best_history: list[float] = field(default_factory=list)
     ga_mean_history: list[float] = field(default_factory=list)
     bp_loss_history: list[float] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
 
     def predict(self, X: np.ndarray, chunk: int = 1 << 18) -> np.ndarray:
-        X = np.atleast_2d(np.asarray(X, dtype=float))
-        if X.shape[0] == 1 and self.n_in != 1 and X.shape[1] != self.n_in:
-            X = X.T
+        """Drift at inputs ``X (N, n)``.
+
+        Inside the training range this is the network (eqs 15–17). Outside it (``x_min`` /
+        ``x_max``, per input) the network is continued *linearly*: the inputs are clipped
+        to the range and the first-order Taylor term at the clipped point is added,
+        ``f(x) ≈ f(x_c) + ∇f(x_c)·(x − x_c)``. A sigmoid network's own extrapolation is
+        arbitrary (it follows whatever sigmoid edge the training left there); a linear
+        continuation is the usual rule for calibration tables."""
+        X = np.asarray(X, dtype=float)
+        X = X[:, None] if X.ndim == 1 else X
         if X.shape[1] != self.n_in:
-            X = X.reshape(-1, self.n_in)
+            raise ValueError(f"expected {self.n_in} input column(s), got {X.shape[1]}")
         out = np.empty(X.shape[0])
+        have_range = self.x_min is not None and self.x_max is not None
         for s in range(0, X.shape[0], chunk):  # bounded memory on long runs
-            Xs = (X[s : s + chunk] - self.x_mean) / self.x_std
-            out[s : s + chunk] = forward(self.theta, Xs, self.n_in, self.hidden)
+            Xr = X[s : s + chunk]
+            Xc = np.clip(Xr, self.x_min, self.x_max) if have_range else Xr
+            Xs = (Xc - self.x_mean) / self.x_std
+            y = forward(self.theta, Xs, self.n_in, self.hidden)
+            if have_range:
+                dx = (Xr - Xc) / self.x_std
+                out_of = np.any(dx != 0, axis=1)
+                if out_of.any():
+                    g = _input_gradient(self.theta, Xs[out_of], self.n_in, self.hidden)
+                    y[out_of] += np.sum(g * dx[out_of], axis=1)
+            out[s : s + chunk] = y
         return out * self.y_std + self.y_mean
 
     def torch_state_dict(self) -> dict[str, Any]:
@@ -294,6 +320,8 @@ class MLPDriftModel:
             f"{prefix}theta": self.theta,
             f"{prefix}x_mean": self.x_mean,
             f"{prefix}x_std": self.x_std,
+            f"{prefix}x_min": np.asarray([] if self.x_min is None else self.x_min, dtype=float),
+            f"{prefix}x_max": np.asarray([] if self.x_max is None else self.x_max, dtype=float),
             f"{prefix}ga_best_history": np.asarray(self.ga_best_history, dtype=float),
             f"{prefix}ga_mean_history": np.asarray(self.ga_mean_history, dtype=float),
             f"{prefix}bp_loss_history": np.asarray(self.bp_loss_history, dtype=float),
@@ -313,11 +341,17 @@ class MLPDriftModel:
             y_mean=float(meta["y_mean"]),
             y_std=float(meta["y_std"]),
             init=str(meta.get("init", "ga")),
+            x_min=_opt(arrays.get(f"{prefix}x_min")),
+            x_max=_opt(arrays.get(f"{prefix}x_max")),
             ga_best_history=list(arrays.get(f"{prefix}ga_best_history", [])),
             ga_mean_history=list(arrays.get(f"{prefix}ga_mean_history", [])),
             bp_loss_history=list(arrays.get(f"{prefix}bp_loss_history", [])),
             config=dict(meta.get("config", {})),
         )
+
+
+def _opt(a: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None or np.size(a) == 0 else np.asarray(a, dtype=float)
 
 
 def _standardise(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -389,6 +423,8 @@ def fit_mlp(
         y_mean=ym,
         y_std=ys_,
         init=init,
+        x_min=X.min(axis=0),
+        x_max=X.max(axis=0),
         ga_best_history=ga_best,
         ga_mean_history=ga_mean,
         bp_loss_history=losses,

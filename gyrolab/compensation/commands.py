@@ -1,0 +1,207 @@
+"""``gyrolab compensate`` and ``gyrolab apply`` (DESIGN.md "Command line" contract).
+
+``gyrolab compensate RUN.mcap --out MODEL_DIR [--validate OTHER.mcap]`` fits the hybrid
+model of :mod:`gyrolab.compensation.pipeline` on RUN and writes MODEL_DIR (layout in
+:mod:`gyrolab.compensation.model_dir`) with ``metrics.json``. With ``--validate`` the
+top-level metrics are those of OTHER (``"held_out": true``) and the calibration run's own
+metrics sit under ``"calibration"``; without it they are RUN's (``"held_out": false``).
+
+``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap`` writes a copy of RUN in which
+
+* ``/gyro/rate`` is the causal, full-rate compensated rate ``raw − f(T)`` (same blocks,
+  timestamps and sample indices as the input);
+* ``/gyro/rate_raw`` is the input's ``/gyro/rate``, byte for byte (same schema);
+* ``/gyro/rate_offline`` is the paper's offline output (noise modes removed, mixed modes
+  FLP-filtered, drift compensated) at 1000 points/h, as ``GyroRateBlock``s of period 3.6 s;
+* every other topic is copied unchanged, and a ``compensation`` metadata record names the
+  model (calibration run, format and software versions, what each topic holds).
+
+Every input is checked before anything is written; bad input is one line and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrolab.errors import InputError
+from gyrolab.outputs import atomic_dir, atomic_file, check_output
+from gyrolab.recording import (
+    ALL_TOPICS,
+    RATE_MESSAGE,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    RecordingWriter,
+    _file_descriptor_set,
+    decode_block,
+    encode_block,
+    iter_messages,
+    read_metadata,
+    read_recording,
+)
+
+TOPIC_RATE_RAW = "/gyro/rate_raw"
+TOPIC_RATE_OFFLINE = "/gyro/rate_offline"
+
+
+def _load_run(path: str, cfg: Any) -> Any:
+    from gyrolab.compensation.pipeline import prepare_run
+
+    rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_PT100])
+    return prepare_run(rec, cfg)
+
+
+def _summary(m: dict[str, Any]) -> str:
+    r, c = m["raw"], m["compensated"]
+
+    def pct(a: float, b: float) -> str:
+        return f"{100.0 * (1.0 - b / a):.1f} %" if a else "n/a"
+
+    tag = "held out" if m["held_out"] else "calibration (in sample)"
+    lines = [
+        f"{m['run']} [{tag}]  VMD K={m['vmd']['K']} alpha={m['vmd']['alpha']:.0f}  "
+        f"classes {m['imf_classes']}",
+        f"  drift p-p    {r['drift_pp_deg_per_s']:.4g} -> {c['drift_pp_deg_per_s']:.4g} deg/s "
+        f"({pct(r['drift_pp_deg_per_s'], c['drift_pp_deg_per_s'])} less)",
+        f"  bias stab.   {r['bias_stability_deg_per_h']:.4g} -> "
+        f"{c['bias_stability_deg_per_h']:.4g} deg/h "
+        f"({pct(r['bias_stability_deg_per_h'], c['bias_stability_deg_per_h'])} less)",
+        f"  ARW          {r['arw_deg_per_sqrt_h']:.4g} -> {c['arw_deg_per_sqrt_h']:.4g} deg/rt(h)"
+        f" (without noise removal {m['compensated_drift_only']['arw_deg_per_sqrt_h']:.4g})",
+    ]
+    for name, b in m["baselines"].items():
+        lines.append(
+            f"  baseline {name:<4} drift p-p {b['drift_pp_deg_per_s']:.4g} deg/s, "
+            f"bias stab. {b['bias_stability_deg_per_h']:.4g} deg/h"
+        )
+    return "\n".join(lines)
+
+
+def compensate(args: argparse.Namespace) -> int:
+    """Fit on ``args.run``, optionally evaluate on ``args.validate``, write ``args.out``."""
+    from gyrolab.compensation.model_dir import write_json
+    from gyrolab.compensation.pipeline import (
+        PipelineConfig,
+        compensate_offline,
+        evaluate,
+        fit,
+        save_model,
+    )
+
+    t_start = time.perf_counter()
+    check_output(args.out, args.force)
+    cfg = PipelineConfig()
+    run = _load_run(args.run, cfg)
+    val = _load_run(args.validate, cfg) if args.validate else None
+    t_read = time.perf_counter() - t_start
+    model, dec = fit(run, cfg, seed=int(getattr(args, "seed", 0) or 0))
+    metrics_cal = evaluate(model, compensate_offline(model, run, dec), run, held_out=False)
+    if val is not None:
+        metrics = evaluate(model, compensate_offline(model, val), val, held_out=True)
+        metrics["calibration"] = metrics_cal
+    else:
+        metrics = metrics_cal
+    total = time.perf_counter() - t_start
+    metrics["timing_s"] = total
+    metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
+    model.timing_s = metrics["timing_breakdown_s"]
+    with atomic_dir(args.out, args.force) as tmp:
+        save_model(model, str(tmp))
+        write_json(Path(tmp) / "metrics.json", metrics)
+    print(_summary(metrics))
+    if val is not None:
+        print(_summary(metrics_cal))
+    print(f"model written to {args.out} in {total:.1f} s", file=sys.stderr)
+    return 0
+
+
+class _CompensatedWriter(RecordingWriter):
+    """A RecordingWriter with the two extra rate channels of a compensated recording."""
+
+    def __init__(self, *a: Any, **kw: Any) -> None:
+        super().__init__(*a, **kw)
+        sid = self._w.register_schema(RATE_MESSAGE, "protobuf", _file_descriptor_set())
+        for topic in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE):
+            self._chan[topic] = self._w.register_channel(topic, "protobuf", sid)
+
+    def put_raw(self, topic: str, t: float, data: bytes) -> None:
+        self._put(topic, t, data)
+
+
+def apply(args: argparse.Namespace) -> int:
+    """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
+    from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
+    from gyrolab.compensation.pipeline import (
+        compensate_offline,
+        load_model,
+        streaming_compensate,
+    )
+
+    model = load_model(args.model)
+    check_output(args.out, args.force)
+    run = _load_run(args.run, model.config)
+    stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
+    offline = compensate_offline(model, run)
+    meta = read_metadata(args.run)
+    start_ns = _start_time_ns(args.run)
+    with atomic_file(args.out, args.force) as tmp:
+        w = _CompensatedWriter(
+            tmp, start_time_ns=start_ns, run=meta.get("run", {}), bench=meta.get("bench", {})
+        )
+        try:
+            for name, values in meta.items():
+                if name not in ("run", "bench", "compensation"):
+                    w.write_metadata(name, values)
+            w.write_metadata(
+                "compensation",
+                {
+                    "model_dir": str(args.model),
+                    "model_format_version": MODEL_FORMAT_VERSION,
+                    "calibration_run": model.calibration.get("path", ""),
+                    "vmd": {"K": model.K, "alpha": model.alpha},
+                    "topics": {
+                        TOPIC_RATE: "causal full-rate compensated rate, raw - f(T)",
+                        TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
+                        TOPIC_RATE_OFFLINE: "offline GPSO-VMD/MPE/FLP/GA-BP output, "
+                        f"{model.config.block_s} s averages",
+                    },
+                },
+            )
+            pos = 0
+            for topic, log_ns, data in iter_messages(args.run):
+                if topic not in ALL_TOPICS:
+                    continue
+                t = (log_ns - start_ns) / 1e9
+                if topic == TOPIC_RATE:
+                    t0, period, first, arr = decode_block(data, "rate")
+                    n = arr.size
+                    w.put_raw(TOPIC_RATE_RAW, t, data)
+                    w.write_rate_block(t0, period, first, stream[pos : pos + n])
+                    pos += n
+                else:
+                    w.put_raw(topic, t, data)
+            _write_offline(w, offline.t, offline.series["compensated"], model.config.block_s)
+        finally:
+            w.close()
+    print(f"compensated recording written to {args.out}", file=sys.stderr)
+    return 0
+
+
+def _write_offline(w: _CompensatedWriter, t: np.ndarray, y: np.ndarray, block_s: float) -> None:
+    per = 1000  # samples per message: 1 h of 1000 points/h
+    for s in range(0, y.size, per):
+        t0 = float(t[s])
+        w.put_raw(TOPIC_RATE_OFFLINE, t0, encode_block(t0, block_s, s, y[s : s + per], "rate"))
+
+
+def _start_time_ns(path: str) -> int:
+    """The run's start (Unix ns): ``log_time − t0·1e9`` of the first rate block."""
+    for _topic, log_ns, data in iter_messages(path, [TOPIC_RATE]):
+        t0 = decode_block(data, "rate")[0]
+        return int(log_ns - round(t0 * 1e9))
+    raise InputError(path, f"recording has no {TOPIC_RATE} data")

@@ -1,0 +1,652 @@
+"""Fit the paper's hybrid compensation model on a calibration run; apply it to any run.
+
+The paper's parallel model (§3.5, Fig. 7), as gyrolab runs it:
+
+1. **Decimate.** The rate is averaged to the paper's 1000 points/h (``block_s`` = 3.6 s:
+   ≈ 13 000 points for a 13 h run, the paper's N); the PT100 temperature is interpolated to
+   the block centres. Everything below runs at that rate.
+2. **GPSO-VMD** (§3.1–3.2) chooses (K, α) and decomposes the averaged rate into K modes.
+3. **MPE** (§3.4, scale 12) classifies the modes: high entropy = *noise*, middle = *mixed*,
+   low = *drift* (thresholds of :func:`gyrolab.compensation.mpe.classify_modes`; when no
+   mode falls below the drift threshold, the most regular mode is taken as the drift).
+4. **Noise** modes are dropped; **mixed** modes are filtered by the forward linear
+   predictor (FLP); **drift** modes are summed into the drift target ``d(t)``.
+5. **GA-BP** (§3.3) learns ``d ≈ f(T)`` (optionally ``f(T, dT/dt)``) from the PT100
+   temperature.
+6. Output: ``y = FLP(mixed) + (drift − f(T))`` (the reconstruction of §3.5 step 3).
+
+Applying a fitted model to a **new** run (held out) keeps what was learned — the drift
+model ``f`` and the decomposition settings (K, α), the class rule and the FLP order — and
+re-runs the signal processing on the new run's own samples: VMD with the stored (K, α),
+MPE classes by the same rule, FLP on its mixed modes. The temperature drift removed is
+always ``f(T_new(t))``: never refitted on held-out data.
+
+Two outputs come from every application:
+
+* **offline** (the paper's method, above) at 1000 points/h — it low-passes the signal
+  (noise modes dropped), so its ARW is *not* the sensor's noise density: the metrics say
+  which bandwidth it leaves (:func:`effective_bandwidth`);
+* **streaming** (causal, full rate): ``y(t) = raw(t) − f(T(t⁻))`` where ``T(t⁻)`` is the
+  last PT100 reading at or before ``t`` (zero-order hold) and dT/dt a backward
+  difference — no future sample is used, so it can run on a live stream. It keeps the
+  sensor's full bandwidth; ``gyrolab apply`` writes it as ``/gyro/rate``.
+
+Baselines, fitted on the same calibration run and applied the same causal way:
+``poly`` (polynomial in T, order by blocked CV) and ``bp`` (plain BP, random initial
+weights), both fitted directly on the averaged raw output (the classical approach, no
+decomposition). ``compensated_drift_only`` is the paper's GA-BP drift model applied the
+same way (no noise removal): the like-for-like comparison with the baselines.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gyrolab.compensation.baselines import PolyDriftModel, fit_plain_bp, fit_poly
+from gyrolab.compensation.gabp import BPConfig, GAConfig, MLPDriftModel, fit_gabp
+from gyrolab.errors import InputError
+from gyrolab.recording import Recording
+
+PAPER_BLOCK_S = 3.6  # 1000 points/h (paper §4.1)
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Settings of the hybrid model; defaults follow the paper where it says."""
+
+    block_s: float = PAPER_BLOCK_S
+    use_dtdt: bool = False  # paper: temperature only
+    dtdt_window_s: float = 300.0
+    hidden: int = 8
+    ga_population: int = 40
+    ga_generations: int = 40
+    bp_max_iter: int = 400
+    k_range: tuple[int, int] = (3, 11)  # paper §4.2
+    alpha_range: tuple[float, float] = (50.0, 5000.0)  # paper §4.2
+    gpso_population: int = 50  # paper §4.2
+    gpso_generations: int = 30
+    mpe_scale: int = 12  # paper §4.2
+    mpe_order: int = 4
+    mpe_delay: int = 1
+    mpe_noise_min: float = 0.85  # mpe.DEFAULT_NOISE_MIN
+    mpe_drift_max: float = 0.5  # mpe.DEFAULT_DRIFT_MAX
+    vmd_K: int | None = None  # fixed (K, alpha): skip the GPSO search
+    vmd_alpha: float | None = None
+    flp_max_order: int = 32
+    flp_criterion: str = "aic"
+    min_blocks: int = 256
+    min_temp_span_c: float = 2.0
+    baselines: tuple[str, ...] = ("poly", "bp")
+
+    def ga(self) -> GAConfig:
+        return GAConfig(population=self.ga_population, generations=self.ga_generations)
+
+    def bp(self) -> BPConfig:
+        return BPConfig(hidden=self.hidden, max_iter=self.bp_max_iter)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PipelineConfig:
+        known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}
+        for k in ("k_range", "alpha_range", "baselines"):
+            if k in known:
+                known[k] = tuple(known[k])
+        return cls(**known)
+
+
+# ------------------------------------------------------------------ run preparation
+
+
+@dataclass
+class PreparedRun:
+    """A run reduced to what the model needs.
+
+    ``t``/``rate``/``temp``/``X``: the 1000 points/h series (s, °/s, °C, features);
+    ``raw_t``/``raw_rate``: full-rate samples; ``pt_t``/``pt_c``: PT100 readings."""
+
+    path: str
+    t: np.ndarray
+    rate: np.ndarray
+    temp: np.ndarray
+    X: np.ndarray
+    raw_t: np.ndarray
+    raw_rate: np.ndarray
+    raw_period: float
+    pt_t: np.ndarray
+    pt_c: np.ndarray
+    filled_blocks: int = 0
+
+
+def block_average(
+    t: np.ndarray, x: np.ndarray, block_s: float, period: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Average ``x`` over consecutive ``block_s`` windows from ``t[0]``.
+
+    Returns block centres, block means and the number of blocks that had fewer than half
+    their samples (recording gaps) and were filled by linear interpolation, so that the
+    series stays uniformly sampled for VMD. A trailing partial block is dropped."""
+    k = np.floor((t - t[0]) / block_s).astype(np.int64)
+    n = int(k[-1]) + 1
+    expected = block_s / period
+    if (t[-1] - t[0] + period) < block_s * (n - 0.5) or (k == n - 1).sum() < 0.5 * expected:
+        n -= 1  # trailing partial block
+    keep_samples = k < n
+    s = np.bincount(k[keep_samples], weights=x[keep_samples], minlength=n)
+    c = np.bincount(k[keep_samples], minlength=n).astype(float)
+    tb = t[0] + (np.arange(n) + 0.5) * block_s
+    good = c >= 0.5 * expected
+    xb = np.full(n, np.nan)
+    xb[good] = s[good] / c[good]
+    filled = int((~good).sum())
+    if filled and good.sum() >= 2:
+        xb[~good] = np.interp(tb[~good], tb[good], xb[good])
+    return tb, xb, filled
+
+
+def causal_temperature(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
+    """PT100 temperature at ``t`` by zero-order hold of the last reading at or before ``t``
+    (the first reading before the first one): causal."""
+    i = np.searchsorted(pt_t, t, side="right") - 1
+    return pt_c[np.clip(i, 0, pt_c.size - 1)]
+
+
+def features(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineConfig) -> np.ndarray:
+    """Drift-model inputs at times ``t``: T (°C) and, with ``use_dtdt``, the backward
+    difference ``(T(t) − T(t − w)) / w`` (°C/s, w = ``dtdt_window_s``). Causal, and the same
+    function for fitting, offline and streaming application."""
+    T = causal_temperature(t, pt_t, pt_c)
+    if not cfg.use_dtdt:
+        return T[:, None]
+    w = cfg.dtdt_window_s
+    Tp = causal_temperature(t - w, pt_t, pt_c)
+    return np.column_stack([T, (T - Tp) / w])
+
+
+def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
+    """Validate a recording and decimate it. Bad input → :class:`InputError` naming it."""
+    rate = rec.require_rate()
+    pt_t, pt_c = rec.require_temperature()
+    path = rec.path
+    x = np.asarray(rate.values, dtype=float)
+    if not np.all(np.isfinite(x)):
+        n_bad = int((~np.isfinite(x)).sum())
+        raise InputError(path, f"/gyro/rate has {n_bad} NaN or infinite samples")
+    if not np.all(np.isfinite(pt_c)) or not np.all(np.isfinite(pt_t)):
+        raise InputError(path, "/temperature/pt100 has NaN or infinite readings")
+    if np.ptp(x) == 0:
+        raise InputError(path, "/gyro/rate is constant: nothing to compensate")
+    if not rate.period > 0:
+        raise InputError(path, "/gyro/rate has no valid sample period")
+    order = np.argsort(pt_t, kind="stable")
+    pt_t, pt_c = pt_t[order], pt_c[order]
+    span_s = float(rate.t[-1] - rate.t[0])
+    need_s = cfg.min_blocks * cfg.block_s
+    if span_s < need_s:
+        raise InputError(
+            path,
+            f"run is {span_s:.0f} s long; the compensation model needs at least "
+            f"{need_s:.0f} s ({cfg.min_blocks} points at {cfg.block_s} s)",
+        )
+    tb, xb, filled = block_average(rate.t, x, cfg.block_s, rate.period)
+    if not np.all(np.isfinite(xb)):
+        raise InputError(path, "/gyro/rate has too many gaps to average")
+    temp = np.interp(tb, pt_t, pt_c)
+    X = features(tb, pt_t, pt_c, cfg)
+    return PreparedRun(
+        path=path,
+        t=tb,
+        rate=xb,
+        temp=temp,
+        X=X,
+        raw_t=rate.t,
+        raw_rate=x,
+        raw_period=float(rate.period),
+        pt_t=pt_t,
+        pt_c=pt_c,
+        filled_blocks=filled,
+    )
+
+
+# ------------------------------------------------- adapters to the other modules
+
+
+@dataclass
+class Decomposition:
+    """VMD modes at 1000 points/h with their MPE values and classes."""
+
+    K: int
+    alpha: float
+    modes: np.ndarray  # (K, N), °/s
+    omega: np.ndarray  # (K,), cycles/sample
+    mpe: np.ndarray  # (K,), mean MPE over scales 1..mpe_scale, in [0, 1]
+    classes: dict[str, list[int]]
+    history: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def part(self, name: str) -> np.ndarray:
+        idx = self.classes.get(name, [])
+        if not idx:
+            return np.zeros(self.modes.shape[1])
+        return self.modes[idx].sum(axis=0)
+
+
+def _vmd_fixed(x: np.ndarray, K: int, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    from gyrolab.compensation.vmd import vmd
+
+    r = vmd(x, alpha=alpha, K=K)
+    return r.modes, r.omega
+
+
+def _gpso_vmd(
+    x: np.ndarray, cfg: PipelineConfig, seed: int
+) -> tuple[int, float, dict[str, np.ndarray]]:
+    """GPSO search of (K, α) in the paper's box (fitness.py's default criterion); returns
+    the choice and the swarm history (every evaluated position and its fitness)."""
+    from gyrolab.compensation.fitness import search_vmd_parameters
+
+    s = search_vmd_parameters(
+        x,
+        K_bounds=cfg.k_range,
+        alpha_bounds=cfg.alpha_range,
+        population=cfg.gpso_population,
+        generations=cfg.gpso_generations,
+        seed=seed,
+    )
+    g = s.gpso
+    history = {
+        "best_fitness": g.best_history,
+        "best_position": g.best_position_history,
+        "positions": g.positions,
+        "fitness": g.fitness,
+    }
+    return s.K, s.alpha, history
+
+
+def _classify(modes: np.ndarray, cfg: PipelineConfig) -> tuple[np.ndarray, dict[str, list[int]]]:
+    """Mean MPE over scales 1..``mpe_scale`` per mode and the threshold classes (mpe.py)."""
+    from gyrolab.compensation.mpe import classify_modes, mean_mpe
+
+    values = mean_mpe(modes, scales=cfg.mpe_scale, order=cfg.mpe_order, delay=cfg.mpe_delay)
+    classes = classify_modes(values, cfg.mpe_noise_min, cfg.mpe_drift_max)
+    if not classes["drift"]:
+        # The temperature drift is always the most regular thing in the run; when the noise
+        # riding on it keeps every mode above drift_max, the most regular mode is the drift.
+        k = int(np.argmin(values))
+        for name in ("noise", "mixed"):
+            if k in classes[name]:
+                classes[name].remove(k)
+        classes["drift"] = [k]
+    return values, classes
+
+
+def _fit_flp(x: np.ndarray, cfg: PipelineConfig):  # -> ForwardLinearPredictor
+    """Forward linear predictor fitted on ``x`` (Burg, order by ``flp_criterion``)."""
+    from gyrolab.compensation.flp import ForwardLinearPredictor
+
+    return ForwardLinearPredictor(max_order=cfg.flp_max_order, criterion=cfg.flp_criterion).fit(x)
+
+
+def _run_flp(flp: Any, x: np.ndarray, block_s: float) -> tuple[np.ndarray, dict[str, Any]]:
+    """Filter ``x`` from a fresh state with a fitted predictor; report what it did."""
+    flp.reset()
+    y = flp.filter(x)
+    info = {
+        "order": flp.order,
+        "variance_in": float(np.var(x)),
+        "variance_out": float(np.var(y)),
+        "bandwidth_hz": float(flp.bandwidth_hz(1.0 / block_s)),
+    }
+    return y, info
+
+
+def decompose(
+    x: np.ndarray, cfg: PipelineConfig, seed: int, K: int | None = None, alpha: float | None = None
+) -> Decomposition:
+    """GPSO-VMD (or VMD at a given (K, α)) + MPE classes of the averaged rate ``x``."""
+    history: dict[str, np.ndarray] = {}
+    if K is None or alpha is None:
+        K, alpha = cfg.vmd_K, cfg.vmd_alpha
+    if K is None or alpha is None:
+        K, alpha, history = _gpso_vmd(x, cfg, seed)
+    modes, omega = _vmd_fixed(x, int(K), float(alpha))
+    mpe, classes = _classify(modes, cfg)
+    return Decomposition(int(K), float(alpha), modes, omega, mpe, classes, history)
+
+
+# ------------------------------------------------------------------------ the model
+
+
+DriftModel = MLPDriftModel | PolyDriftModel
+
+
+@dataclass
+class CompensationModel:
+    """What ``gyrolab compensate`` fits and ``gyrolab apply`` uses."""
+
+    config: PipelineConfig
+    drift: MLPDriftModel
+    baselines: dict[str, DriftModel]
+    K: int
+    alpha: float
+    calibration: dict[str, Any]
+    flp_mixed: Any = None  # ForwardLinearPredictor on the mixed modes (None: no mixed mode)
+    flp_stream: Any = None  # ForwardLinearPredictor on the causal drift-compensated series
+    diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+    decomposition_info: dict[str, Any] = field(default_factory=dict)
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+
+def fit(
+    run: PreparedRun, cfg: PipelineConfig = PipelineConfig(), seed: int = 0
+) -> tuple[CompensationModel, Decomposition]:
+    """Fit the hybrid model (and the baselines) on a prepared calibration run."""
+    import torch
+
+    torch.manual_seed(seed)
+    timing: dict[str, float] = {}
+    t0 = time.perf_counter()
+    dec = decompose(run.rate, cfg, seed)
+    timing["gpso_vmd_mpe"] = time.perf_counter() - t0
+    drift = dec.part("drift")
+    if not dec.classes.get("drift"):
+        raise InputError(run.path, "no VMD mode was classified as drift: nothing to model")
+    t1 = time.perf_counter()
+    gabp = fit_gabp(run.X, drift, ga=cfg.ga(), bp=cfg.bp(), seed=seed)
+    timing["gabp"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    baselines: dict[str, DriftModel] = {}
+    if "poly" in cfg.baselines:
+        baselines["poly"] = fit_poly(run.X, run.rate)
+    if "bp" in cfg.baselines:
+        baselines["bp"] = fit_plain_bp(run.X, run.rate, bp=cfg.bp(), seed=seed)
+    timing["baselines"] = time.perf_counter() - t2
+    mixed = dec.part("mixed")
+    flp_mixed = _fit_flp(mixed, cfg) if dec.classes.get("mixed") else None
+    flp_stream = _fit_flp(run.rate - gabp.predict(run.X), cfg)
+    diagnostics = {
+        "calib_t": run.t,
+        "calib_rate": run.rate,
+        "calib_temp": run.temp,
+        "calib_X": run.X,
+        "calib_modes": dec.modes,
+        "calib_omega": dec.omega,
+        "calib_mpe": dec.mpe,
+        "drift_target": drift,
+        "drift_fit": gabp.predict(run.X),
+    }
+    for k, v in dec.history.items():
+        diagnostics[f"gpso_{k}"] = np.asarray(v)
+    model = CompensationModel(
+        config=cfg,
+        drift=gabp,
+        baselines=baselines,
+        K=dec.K,
+        alpha=dec.alpha,
+        calibration={
+            "path": run.path,
+            "n_points": int(run.t.size),
+            "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
+            "temp_min_c": float(run.temp.min()),
+            "temp_max_c": float(run.temp.max()),
+            "raw_rate_hz": 1.0 / run.raw_period,
+            "filled_blocks": run.filled_blocks,
+        },
+        flp_mixed=flp_mixed,
+        flp_stream=flp_stream,
+        diagnostics=diagnostics,
+        decomposition_info={"classes": dec.classes, "mpe": dec.mpe.tolist()},
+        timing_s=timing,
+    )
+    return model, dec
+
+
+# ---------------------------------------------------------------------- application
+
+
+@dataclass
+class Application:
+    """A model applied to one run, at 1000 points/h (``series``) plus diagnostics."""
+
+    t: np.ndarray
+    series: dict[str, np.ndarray]  # raw, compensated, compensated_drift_only, baselines.*
+    decomposition: Decomposition
+    flp_info: dict[str, Any]
+    bandwidth: dict[str, float]
+
+
+def compensate_offline(
+    model: CompensationModel,
+    run: PreparedRun,
+    dec: Decomposition | None = None,
+) -> Application:
+    """The paper's reconstruction on ``run`` (module docstring), plus the causal outputs of
+    the drift-only model and the baselines averaged to the same rate."""
+    cfg = model.config
+    if dec is None:
+        dec = decompose(run.rate, cfg, 0, K=model.K, alpha=model.alpha)
+    mixed = dec.part("mixed")
+    flp_info: dict[str, Any] = {}
+    mixed_f = mixed
+    if dec.classes.get("mixed"):
+        # the calibration run's predictor; a run whose modes were all mixed-free at
+        # calibration but not now gets one fitted on its own mixed modes (recorded)
+        flp = model.flp_mixed if model.flp_mixed is not None else _fit_flp(mixed, cfg)
+        mixed_f, flp_info = _run_flp(flp, mixed, cfg.block_s)
+        flp_info["fitted_on"] = "calibration" if model.flp_mixed is not None else "this run"
+    drift = dec.part("drift")
+    pred = model.drift.predict(run.X)
+    denoised = mixed_f + drift
+    drift_only = run.rate - pred
+    stream_flp, _ = _run_flp(model.flp_stream, drift_only, cfg.block_s)
+    series = {
+        "raw": run.rate,
+        "compensated": denoised - pred,
+        "compensated_drift_only": drift_only,
+        "compensated_streaming_flp": stream_flp,
+        "denoised": denoised,
+        "drift_prediction": pred,
+    }
+    for name, m in model.baselines.items():
+        series[f"baselines.{name}"] = run.rate - m.predict(run.X)
+    return Application(
+        t=run.t,
+        series=series,
+        decomposition=dec,
+        flp_info=flp_info,
+        bandwidth=effective_bandwidth(run.rate, denoised, cfg.block_s),
+    )
+
+
+def streaming_compensate(
+    model: CompensationModel,
+    t: np.ndarray,
+    rate: np.ndarray,
+    pt_t: np.ndarray,
+    pt_c: np.ndarray,
+    which: str = "gabp",
+) -> np.ndarray:
+    """Causal full-rate compensation ``raw(t) − f(T(t⁻))`` (module docstring).
+
+    The drift model is evaluated once per PT100 reading (it only changes there, by the
+    zero-order hold) and looked up per sample, so a 47 M-sample run costs one
+    ``searchsorted``. With ``use_dtdt`` the inputs change between readings only through the
+    ``t − w`` lookup, so they are evaluated per sample in chunks instead."""
+    m = model.drift if which == "gabp" else model.baselines[which]
+    cfg = model.config
+    out = np.empty(rate.size)
+    chunk = 1 << 20
+    if not cfg.use_dtdt:
+        pred_at_reading = m.predict(pt_c[:, None])
+        for s in range(0, rate.size, chunk):
+            i = np.searchsorted(pt_t, t[s : s + chunk], side="right") - 1
+            out[s : s + chunk] = rate[s : s + chunk] - pred_at_reading[np.clip(i, 0, None)]
+        return out
+    for s in range(0, rate.size, chunk):
+        X = features(t[s : s + chunk], pt_t, pt_c, cfg)
+        out[s : s + chunk] = rate[s : s + chunk] - m.predict(X)
+    return out
+
+
+def effective_bandwidth(raw: np.ndarray, filtered: np.ndarray, block_s: float) -> dict[str, float]:
+    """Bandwidth the offline filtering leaves, from the estimated transfer function
+    ``H(f) = P_xy(f) / P_xx(f)`` (Welch, raw x → filtered y, at 1000 points/h):
+
+    * ``f3db_hz`` — the lowest frequency where ``|H|² < ½``;
+    * ``enbw_hz`` — equivalent noise bandwidth ``∫₀^{f_N} |H|² df`` (white noise of
+      density S leaves the filter with variance S·ENBW);
+    * ``nyquist_hz`` — ``1 / (2 block_s)``, what 1000 points/h alone keeps."""
+    from scipy import signal
+
+    nper = int(min(1024, max(16, raw.size // 8)))
+    f, pxx = signal.welch(raw, fs=1.0 / block_s, nperseg=nper, detrend="linear")
+    _, pxy = signal.csd(raw, filtered, fs=1.0 / block_s, nperseg=nper, detrend="linear")
+    h2 = np.abs(pxy / np.where(pxx > 0, pxx, np.inf)) ** 2
+    h2 = np.minimum(h2, 1.0)
+    below = np.flatnonzero((h2 < 0.5) & (f > 0))
+    f3 = float(f[below[0]]) if below.size else float(f[-1])
+    enbw = float(np.trapezoid(h2, f))
+    return {"f3db_hz": f3, "enbw_hz": enbw, "nyquist_hz": 0.5 / block_s}
+
+
+# ---------------------------------------------------------------------- persistence
+
+
+def _drift_from_state(meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str):
+    if meta["kind"] == "mlp":
+        return MLPDriftModel.from_state(meta, arrays, prefix)
+    if meta["kind"] == "poly":
+        return PolyDriftModel.from_state(meta, arrays, prefix)
+    raise ValueError(f"unknown drift model kind {meta['kind']!r}")
+
+
+def save_model(model: CompensationModel, directory: str) -> None:
+    """Write ``model`` into an existing directory (see :mod:`.model_dir` for the layout)."""
+    from gyrolab.compensation.model_dir import save_model_dir
+
+    arrays: dict[str, np.ndarray] = dict(model.diagnostics)
+    dmeta, darr = model.drift.to_state("drift.")
+    arrays.update(darr)
+    bmeta: dict[str, Any] = {}
+    for name, m in model.baselines.items():
+        meta, arr = m.to_state(f"baseline.{name}.")
+        bmeta[name] = meta
+        arrays.update(arr)
+    meta = {
+        "config": model.config.to_dict(),
+        "vmd": {"K": model.K, "alpha": model.alpha},
+        "decomposition": model.decomposition_info,
+        "drift_model": dmeta,
+        "baselines": bmeta,
+        "calibration": model.calibration,
+        "flp": {
+            "mixed": None if model.flp_mixed is None else model.flp_mixed.to_dict(),
+            "stream": None if model.flp_stream is None else model.flp_stream.to_dict(),
+        },
+        "timing_s": model.timing_s,
+        "streaming": {
+            "temperature": "zero-order hold of the last PT100 reading",
+            "dtdt": "backward difference over config.dtdt_window_s"
+            if model.config.use_dtdt
+            else None,
+        },
+    }
+    torch_states = {"drift_gabp": model.drift.torch_state_dict()}
+    bp = model.baselines.get("bp")
+    if isinstance(bp, MLPDriftModel):
+        torch_states["baseline_bp"] = bp.torch_state_dict()
+    save_model_dir(directory, meta, arrays, torch_states)
+
+
+def load_model(directory: str) -> CompensationModel:
+    """Read a model directory written by :func:`save_model` (format checked)."""
+    from gyrolab.compensation.flp import ForwardLinearPredictor
+    from gyrolab.compensation.model_dir import load_model_dir
+
+    meta, arrays = load_model_dir(directory)
+    try:
+        flp = meta.get("flp") or {}
+        flp_mixed = flp.get("mixed")
+        flp_stream = flp.get("stream")
+        cfg = PipelineConfig.from_dict(meta["config"])
+        drift = _drift_from_state(meta["drift_model"], arrays, "drift.")
+        baselines = {
+            name: _drift_from_state(bm, arrays, f"baseline.{name}.")
+            for name, bm in meta.get("baselines", {}).items()
+        }
+        diagnostics = {k: v for k, v in arrays.items() if not k.startswith(("drift.", "baseline."))}
+        return CompensationModel(
+            config=cfg,
+            drift=drift,
+            baselines=baselines,
+            K=int(meta["vmd"]["K"]),
+            alpha=float(meta["vmd"]["alpha"]),
+            calibration=dict(meta.get("calibration", {})),
+            flp_mixed=None if flp_mixed is None else ForwardLinearPredictor.from_dict(flp_mixed),
+            flp_stream=None if flp_stream is None else ForwardLinearPredictor.from_dict(flp_stream),
+            diagnostics=diagnostics,
+            decomposition_info=dict(meta.get("decomposition", {})),
+            timing_s=dict(meta.get("timing_s", {})),
+        )
+    except (KeyError, TypeError, ValueError) as e:
+        raise InputError(directory, f"incomplete or damaged model ({e!r})") from None
+
+
+# -------------------------------------------------------------------------- metrics
+
+
+def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
+    """The five DESIGN.md metrics (:func:`gyrolab.compensation.metrics.signal_metrics`) of a
+    series sampled every ``block_s`` seconds (°/s). Every series is compared at the paper's
+    1000 points/h, so ``rms_deg_per_s`` is that of the 3.6 s averages, and bias stability
+    and drift peak-to-peak are those of the series itself."""
+    from gyrolab.compensation.metrics import signal_metrics
+
+    return signal_metrics(x, 1.0 / block_s, stability_window_s=block_s, drift_window_s=block_s)
+
+
+def evaluate(
+    model: CompensationModel, app: Application, run: PreparedRun, held_out: bool
+) -> dict[str, Any]:
+    """metrics.json content for one application (DESIGN.md keys plus diagnostics)."""
+    bs = model.config.block_s
+    m: dict[str, Any] = {"run": run.path, "held_out": bool(held_out)}
+    for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):
+        m[key] = series_metrics(app.series[key], bs)
+    stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
+    _, stream_d, _ = block_average(run.raw_t, stream, bs, run.raw_period)
+    m["compensated_streaming"] = series_metrics(stream_d, bs)
+    m["baselines"] = {
+        name: series_metrics(app.series[f"baselines.{name}"], bs) for name in model.baselines
+    }
+    dec = app.decomposition
+    m["vmd"] = {"K": dec.K, "alpha": dec.alpha}
+    m["imf_classes"] = dec.classes
+    m["mpe_mean"] = [float(v) for v in dec.mpe]
+    m["vmd_center_frequency_hz"] = [float(w) / bs for w in dec.omega]
+    m["denoising"] = {
+        "arw_with_noise_removal_deg_per_sqrt_h": m["compensated"]["arw_deg_per_sqrt_h"],
+        "arw_without_noise_removal_deg_per_sqrt_h": m["compensated_drift_only"][
+            "arw_deg_per_sqrt_h"
+        ],
+        "bandwidth": app.bandwidth,
+        "raw_bandwidth_hz": 0.5 / run.raw_period,
+        "flp": app.flp_info,
+    }
+    lo, hi = model.calibration.get("temp_min_c"), model.calibration.get("temp_max_c")
+    if lo is not None and hi is not None:
+        outside = (run.temp < lo) | (run.temp > hi)
+        m["temperature"] = {
+            "min_c": float(run.temp.min()),
+            "max_c": float(run.temp.max()),
+            "calibration_min_c": lo,
+            "calibration_max_c": hi,
+            "fraction_outside_calibration": float(outside.mean()),
+        }
+    m["sample_period_s"] = bs
+    m["n_points"] = int(run.t.size)
+    return m
