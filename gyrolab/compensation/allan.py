@@ -59,13 +59,22 @@ ONE_SIGMA = 0.6826894921370859
 #: sqrt(2 ln 2 / pi): sigma of flicker rate noise B on the flat part of the curve.
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)  # 0.6643
 #: Longest block-averaged series used for lag-1 noise identification (statistical precision of
-#: the lag-1 autocorrelation is then ~1e-3, far finer than the 0.25 decision steps).
-NOISE_ID_MAX_POINTS = 1 << 18
+#: the lag-1 autocorrelation is then ~3e-3, far finer than the 0.25 decision steps).
+NOISE_ID_MAX_POINTS = 1 << 17
 
 
 # --------------------------------------------------------------------------------------------
 # numba kernels
 # --------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _all_finite(y: np.ndarray) -> bool:
+    # np.all(np.isfinite(y)) without its n-byte temporary
+    for i in range(y.size):
+        if not math.isfinite(y[i]):
+            return False
+    return True
 
 
 @numba.njit(cache=True)
@@ -317,11 +326,20 @@ def edf_greenhall(alpha: int, m: int, n_phase: int, overlapping: bool = True, d:
 
 
 def _lag1_acf(z: np.ndarray) -> float:
-    zc = z - z.mean()
-    den = float(np.dot(zc, zc))
+    # z is already mean-free (detrended or differenced-then-centred by the caller)
+    den = float(np.dot(z, z))
     if den == 0.0:
         return float("nan")
-    return float(np.dot(zc[:-1], zc[1:])) / den
+    return float(np.dot(z[:-1], z[1:])) / den
+
+
+def _detrend_inplace(z: np.ndarray) -> None:
+    # least-squares line removed with closed-form sums: no Vandermonde matrix, one index array
+    n = z.size
+    t = np.arange(n, dtype=float)
+    t -= (n - 1) / 2.0
+    z -= z.mean()
+    z -= (float(np.dot(t, z)) / float(np.dot(t, t))) * t
 
 
 def noise_id_lag1(ybar: np.ndarray, dmax: int = 2) -> tuple[int, float]:
@@ -333,13 +351,14 @@ def noise_id_lag1(ybar: np.ndarray, dmax: int = 2) -> tuple[int, float]:
     (the range where the Allan variance converges). Needs at least 30 points.
     Returns (alpha_int, alpha_float).
     """
-    z = np.asarray(ybar, dtype=float)
+    z = np.array(ybar, dtype=float)  # private copy, detrended in place
     if z.size < 30:
         raise ValueError("noise identification needs at least 30 points")
-    t = np.arange(z.size, dtype=float)
-    z = z - np.polyval(np.polyfit(t, z, 1), t)
+    _detrend_inplace(z)
     d = 0
     while True:
+        if d:
+            z -= z.mean()
         r1 = _lag1_acf(z)
         if not np.isfinite(r1):
             return 0, float("nan")
@@ -387,7 +406,7 @@ def _check_input(data: np.ndarray, rate: float) -> None:
         raise InputError(None, f"Allan deviation needs a 1-D series, got shape {data.shape}")
     if data.size < 3:
         raise InputError(None, f"series too short for an Allan deviation ({data.size} samples)")
-    if not np.all(np.isfinite(data)):
+    if not _all_finite(data):
         raise InputError(None, "series contains NaN or infinite values")
 
 
@@ -459,7 +478,9 @@ def allan_deviation(
                 nb = min((n_phase - 1) // int(m), NOISE_ID_MAX_POINTS)
                 if nb >= 30:
                     xs = phase[: nb * int(m) + 1 : int(m)]
-                    last_alpha, _ = noise_id_lag1(np.diff(xs))
+                    ybar = np.diff(xs)
+                    last_alpha, _ = noise_id_lag1(ybar)
+                    del ybar
                 # fewer than 30 averages: keep the exponent of the previous tau
             a = last_alpha
             alphas[k] = a
