@@ -18,6 +18,7 @@ import itertools
 import shutil
 import tempfile
 import threading
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -92,6 +93,8 @@ class SimBench:
             units_c=oven_units_c,
             faults=self.faults.oven,
         )
+        # (t_sim, noise-free Ω, Ω as read) of every reading the meter took, for tests
+        self.dmm_truth: deque[tuple[float, float, float]] = deque(maxlen=100_000)
         self.dmm = Scpi34401A(self._read_ohm, self.clock)
         self._servers: list[Any] = [
             ModbusRtuServer(self.oven, self.oven_pty),
@@ -124,7 +127,9 @@ class SimBench:
 
     def _read_ohm(self) -> float:
         with self.lock:
-            return float(self.physics.pt100_ohm())
+            r = float(self.physics.pt100_ohm())
+            self.dmm_truth.append((self.physics.t, float(self.physics.pt100_true_ohm()), r))
+            return r
 
     # ---------------------------------------------------------------- addresses
     @property
@@ -165,10 +170,13 @@ class SimBench:
 
     # ---------------------------------------------------------------- faults
     def inject(self, event: FaultEvent) -> None:
-        """Schedule ``event`` at its ``t_s`` (simulated), or at the next tick if None."""
-        t = self.clock.now() if event.t_s is None else float(event.t_s)
+        """Fire ``event`` now if its ``t_s`` is None (before returning), else schedule it
+        at simulated time ``t_s``."""
+        if event.t_s is None:
+            self._fire(self.clock.now(), "start", event)
+            return
         with self.lock:
-            heapq.heappush(self._events, (t, next(self._tie), "start", event))
+            heapq.heappush(self._events, (float(event.t_s), next(self._tie), "start", event))
 
     def _fire_due(self) -> None:
         now = self.clock.now()
