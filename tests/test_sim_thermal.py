@@ -116,3 +116,21 @@ def test_block_counts_are_the_adc_of_the_rate() -> None:
     assert np.max(np.abs(p.adc.counts_to_dps(b.counts) - b.rate_dps)) <= p.adc.lsb_dps
     assert (b.t0, b.first_index, p.index) == (0.0, 0, 250)
     assert p.advance(10).t0 == pytest.approx(2.5)
+
+
+def test_flicker_stream_is_independent_of_request_sizes() -> None:
+    from gyrolab.sim.noise import FlickerStream, effect_rng
+
+    def make() -> FlickerStream:
+        return FlickerStream(1.0, effect_rng(0, "bias_instability"), nfft=1 << 10, chunk=1 << 7)
+
+    whole = make().value_at(0, 50_000, 100.0)  # spans many chunks in one request
+    fl = make()
+    rng = np.random.default_rng(0)
+    parts, i = [], 0
+    while i < 50_000:
+        n = int(min(rng.integers(1, 3000), 50_000 - i))
+        parts.append(fl.value_at(i, n, 100.0))
+        i += n
+    np.testing.assert_array_equal(whole, np.concatenate(parts))
+    assert len(fl._chunks) <= 3  # chunks behind are dropped: bounded memory

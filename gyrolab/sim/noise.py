@@ -52,7 +52,7 @@ class FlickerStream:
 
     ``value_at(index, rate_hz)`` returns the noise at ADC sample indices (times
     ``index / rate_hz``), generating decimated chunks as time moves on and dropping the
-    ones behind. Requests must not go backwards by more than one chunk.
+    ones behind. Requests must not go back before the previous request's start.
     """
 
     def __init__(
@@ -81,14 +81,14 @@ class FlickerStream:
         self._chunks[self._next] = y[self.taps - 1 : self.taps - 1 + self.m]
         self._hist = seq[self.m :]
         self._next += 1
-        for old in [k for k in self._chunks if k < self._next - 2]:
-            del self._chunks[old]
 
     def _decimated(self, k0: int, k1: int) -> np.ndarray:
         """Decimated samples k0..k1 inclusive."""
-        while (k1 // self.m) >= self._next:
-            self._make_chunk()
         c0, c1 = k0 // self.m, k1 // self.m
+        for old in [k for k in self._chunks if k < c0]:  # time only moves forward
+            del self._chunks[old]
+        while c1 >= self._next:
+            self._make_chunk()
         parts = [self._chunks[c] for c in range(c0, c1 + 1)]
         seq = parts[0] if len(parts) == 1 else np.concatenate(parts)
         off = c0 * self.m
