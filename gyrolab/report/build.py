@@ -39,7 +39,7 @@ METRIC_ROWS: list[tuple[str, str]] = [
     ("arw_deg_per_sqrt_h", "angle random walk (°/√h)"),
     ("bias_instability_deg_per_h", "bias instability, Allan floor/0.664 (°/h)"),
     ("bias_stability_deg_per_h", "bias stability, std of 3.6 s averages (°/h)"),
-    ("drift_pp_deg_per_s", "drift peak-to-peak, 100 s averages (°/s)"),
+    ("drift_pp_deg_per_s", "drift peak-to-peak (°/s)"),
     ("rms_deg_per_s", "RMS (°/s)"),
 ]
 #: Notable log entries for the run log (everything at warning level or above is kept too).
@@ -430,7 +430,7 @@ def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Sec
         )
     )
     pos = d.get("gpso_positions")
-    best_hist = d.get("gpso_best_history")
+    best_hist = d.get("gpso_best_fitness", d.get("gpso_best_history"))
     if pos is not None and best_hist is not None and np.ndim(pos) == 3:
         fit = d.get("gpso_fitness")
         mean_fit = None

@@ -184,7 +184,7 @@ def gpso(
         a1.plot(it, mean_fitness, color="#999999", lw=1, label="swarm mean")
         a1.legend(fontsize=8)
     a1.set_xlabel("iteration")
-    a1.set_ylabel("fitness (envelope entropy)")
+    a1.set_ylabel("fitness (lower is better)")
     a1.set_title("GPSO convergence")
     a1.grid(alpha=0.3)
     pk = np.asarray(particles_k, dtype=float)
