@@ -183,8 +183,10 @@ class Hysteresis(Effect):
         "width_c": Param(1.0, "degC", "temperature reversal that flips the branch", "pos"),
     }
 
-    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
-        super().__init__(*a, **k)
+    def __init__(
+        self, params: dict[str, float], rng: np.random.Generator | None, rate_hz: float
+    ) -> None:
+        super().__init__(params, rng, rate_hz)
         self._p: float | None = None
 
     def rate(self, ctx: BlockContext) -> np.ndarray:
@@ -260,8 +262,10 @@ class BiasInstability(Effect):
     stochastic = True
     PARAMS = {"B": Param(0.25, "deg/h", "Allan deviation floor", "nonneg")}
 
-    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
-        super().__init__(*a, **k)
+    def __init__(
+        self, params: dict[str, float], rng: np.random.Generator | None, rate_hz: float
+    ) -> None:
+        super().__init__(params, rng, rate_hz)
         self._fl = FlickerStream(self.p["B"] / 3600.0, self.rng)  # type: ignore[arg-type]
 
     def rate(self, ctx: BlockContext) -> np.ndarray:
@@ -276,8 +280,10 @@ class RateRandomWalk(Effect):
     stochastic = True
     PARAMS = {"K": Param(1.0, "deg/h/sqrt(h)", "rate random walk coefficient", "nonneg")}
 
-    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
-        super().__init__(*a, **k)
+    def __init__(
+        self, params: dict[str, float], rng: np.random.Generator | None, rate_hz: float
+    ) -> None:
+        super().__init__(params, rng, rate_hz)
         self._b = 0.0
 
     def rate(self, ctx: BlockContext) -> np.ndarray:
@@ -300,8 +306,10 @@ class Quantization(Effect):
     target = "post"
     PARAMS = {"q": Param(1.0e-3, "deg/s", "output step (LSB)", "pos")}
 
-    def __init__(self, *a, **k) -> None:  # type: ignore[no-untyped-def]
-        super().__init__(*a, **k)
+    def __init__(
+        self, params: dict[str, float], rng: np.random.Generator | None, rate_hz: float
+    ) -> None:
+        super().__init__(params, rng, rate_hz)
         self._resid = 0.0  # carried angle, in units of q·Δt, relative to the last output
 
     def post(self, out: np.ndarray, ctx: BlockContext) -> np.ndarray:
