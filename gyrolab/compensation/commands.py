@@ -22,8 +22,10 @@ Every input is checked before anything is written; bad input is one line and exi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +49,17 @@ from gyrolab.recording import (
 
 TOPIC_RATE_RAW = "/gyro/rate_raw"
 TOPIC_RATE_OFFLINE = "/gyro/rate_offline"
+
+
+@contextlib.contextmanager
+def _named(path: str) -> Iterator[None]:
+    """Give an error raised deep in the numerics (no file attached) the run's name."""
+    try:
+        yield
+    except InputError as e:
+        if e.path is None:
+            raise InputError(path, e.problem) from None
+        raise
 
 
 def _load_run(path: str, cfg: Any) -> Any:
@@ -84,25 +97,22 @@ def _summary(m: dict[str, Any]) -> str:
 
 def compensate(args: argparse.Namespace) -> int:
     """Fit on ``args.run``, optionally evaluate on ``args.validate``, write ``args.out``."""
+    from gyrolab.compensation import pipeline as pl
     from gyrolab.compensation.model_dir import write_json
-    from gyrolab.compensation.pipeline import (
-        PipelineConfig,
-        compensate_offline,
-        evaluate,
-        fit,
-        save_model,
-    )
 
     t_start = time.perf_counter()
     check_output(args.out, args.force)
-    cfg = PipelineConfig()
+    cfg = pl.DEFAULT_CONFIG
     run = _load_run(args.run, cfg)
     val = _load_run(args.validate, cfg) if args.validate else None
     t_read = time.perf_counter() - t_start
-    model, dec = fit(run, cfg, seed=int(getattr(args, "seed", 0) or 0))
-    metrics_cal = evaluate(model, compensate_offline(model, run, dec), run, held_out=False)
+    with _named(args.run):
+        model, dec = pl.fit(run, cfg, seed=int(getattr(args, "seed", 0) or 0))
+        app = pl.compensate_offline(model, run, dec)
+        metrics_cal = pl.evaluate(model, app, run, held_out=False)
     if val is not None:
-        metrics = evaluate(model, compensate_offline(model, val), val, held_out=True)
+        with _named(args.validate):
+            metrics = pl.evaluate(model, pl.compensate_offline(model, val), val, held_out=True)
         metrics["calibration"] = metrics_cal
     else:
         metrics = metrics_cal
@@ -111,7 +121,7 @@ def compensate(args: argparse.Namespace) -> int:
     metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
     model.timing_s = metrics["timing_breakdown_s"]
     with atomic_dir(args.out, args.force) as tmp:
-        save_model(model, str(tmp))
+        pl.save_model(model, str(tmp))
         write_json(Path(tmp) / "metrics.json", metrics)
     print(_summary(metrics))
     if val is not None:
@@ -145,8 +155,9 @@ def apply(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     check_output(args.out, args.force)
     run = _load_run(args.run, model.config)
-    stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
-    offline = compensate_offline(model, run)
+    with _named(args.run):
+        stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
+        offline = compensate_offline(model, run)
     meta = read_metadata(args.run)
     start_ns = _start_time_ns(args.run)
     with atomic_file(args.out, args.force) as tmp:
@@ -180,6 +191,8 @@ def apply(args: argparse.Namespace) -> int:
                 if topic == TOPIC_RATE:
                     t0, period, first, arr = decode_block(data, "rate")
                     n = arr.size
+                    if pos + n > stream.size or run.raw_t[pos] != t0:
+                        raise InputError(args.run, "/gyro/rate blocks changed while reading")
                     w.put_raw(TOPIC_RATE_RAW, t, data)
                     w.write_rate_block(t0, period, first, stream[pos : pos + n])
                     pos += n

@@ -100,6 +100,8 @@ class PipelineConfig:
         return cls(**known)
 
 
+DEFAULT_CONFIG = PipelineConfig()  # what `gyrolab compensate` uses (tests swap in a small one)
+
 # ------------------------------------------------------------------ run preparation
 
 
@@ -131,10 +133,11 @@ def block_average(
     Returns block centres, block means and the number of blocks that had fewer than half
     their samples (recording gaps) and were filled by linear interpolation, so that the
     series stays uniformly sampled for VMD. A trailing partial block is dropped."""
-    k = np.floor((t - t[0]) / block_s).astype(np.int64)
+    # the 1e-9 keeps a sample that sits exactly on a boundary in the block it starts
+    k = np.floor((t - t[0]) / block_s + 1e-9).astype(np.int64)
     n = int(k[-1]) + 1
     expected = block_s / period
-    if (t[-1] - t[0] + period) < block_s * (n - 0.5) or (k == n - 1).sum() < 0.5 * expected:
+    if (t[-1] - t[0] + period) < block_s * n * (1.0 - 1e-9):
         n -= 1  # trailing partial block
     keep_samples = k < n
     s = np.bincount(k[keep_samples], weights=x[keep_samples], minlength=n)
@@ -342,11 +345,18 @@ class CompensationModel:
 
 
 def fit(
-    run: PreparedRun, cfg: PipelineConfig = PipelineConfig(), seed: int = 0
+    run: PreparedRun, cfg: PipelineConfig = DEFAULT_CONFIG, seed: int = 0
 ) -> tuple[CompensationModel, Decomposition]:
     """Fit the hybrid model (and the baselines) on a prepared calibration run."""
     import torch
 
+    span = float(np.ptp(run.temp))
+    if span < cfg.min_temp_span_c:
+        raise InputError(
+            run.path,
+            f"temperature spans only {span:.2f} °C; fitting a temperature model needs a "
+            f"sweep of at least {cfg.min_temp_span_c} °C",
+        )
     torch.manual_seed(seed)
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
