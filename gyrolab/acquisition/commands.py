@@ -156,7 +156,7 @@ def connect_instruments(
             dmm = Agilent34401A(
                 dmm_resource,
                 visa_library=visa_library,
-                timeout_s=scaled(cfg.multimeter.timeout_s, 0.25),
+                timeout_s=scaled(cfg.multimeter.timeout_s, 0.5),
                 range_ohm=cfg.multimeter.range_ohm,
                 nplc=cfg.multimeter.nplc,
                 r0_ohm=cfg.multimeter.r0_ohm,
@@ -182,7 +182,7 @@ def connect_instruments(
                 oven_port,
                 address=cfg.oven.slave_address,
                 baudrate=cfg.oven.baud_rate,
-                timeout_s=scaled(cfg.oven.timeout_s, 0.1),
+                timeout_s=scaled(cfg.oven.timeout_s, 0.5),
                 setpoint_limits_c=(cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c),
             )
             inst.closers.append(oven.close)
@@ -248,6 +248,7 @@ class SimHandle:
         clock: Any,
         stop: Callable[[], None],
         time_scale: float,
+        speed: float | None = None,
         bench: Any = None,
         provenance: dict[str, Any] | None = None,
     ) -> None:
@@ -257,6 +258,7 @@ class SimHandle:
         self.clock = clock
         self.stop = stop
         self.time_scale = time_scale
+        self.speed = speed
         self.bench = bench
         self.provenance = provenance or {}
 
@@ -282,43 +284,73 @@ def start_sim_bench(
     *,
     seed: int,
     speed: float | None,
-    workdir: Path,
+    workdir: Path | None = None,
     faults: Any = None,
     keep_truth: bool = False,
-) -> SimHandle:
-    """Start the wire-level simulated bench (``gyrolab.sim.bench.SimBench``)."""
-    try:
-        from gyrolab.sim.bench import SimBench  # type: ignore[attr-defined]
-    except ImportError:
-        from gyrolab.errors import NotYetAvailable
+    model: Any = None,
+) -> tuple[SimHandle, BenchConfig]:
+    """Start the wire-level simulated bench; returns it and the bench config to use.
 
-        raise NotYetAvailable(
-            "gyrolab acquire --bench sim: the simulated bench is not available"
-        ) from None
+    The config's ADC calibration is the simulated gyro's (what a lab takes from the
+    unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
+    the same path as ``examples/lab.toml``.
+    """
+    from gyrolab.sim.bench import SimBench
+    from gyrolab.sim.simulate import provenance
+
     bench = SimBench(
+        model=model,
         seed=seed,
-        rate_hz=cfg.adc.sample_rate_hz,
+        adc_rate_hz=cfg.adc.sample_rate_hz,
         samples_per_frame=cfg.adc.samples_per_frame,
         ambient_c=profile.ambient_c,
-        speed=speed,
         workdir=workdir,
         faults=faults,
         keep_truth=keep_truth,
+        tcp=False,
+        tick_s=sim_tick_s(speed),
+        # Real time while the drivers connect (imports, port set-up: wall seconds that
+        # would be hundreds of simulated seconds); run_acquisition sets ``speed`` after.
+        speed=1.0,
+    )
+    adc = bench.physics.adc
+    cfg = replace(
+        cfg,
+        adc=replace(
+            cfg.adc,
+            bits=int(adc.bits),
+            vref_v=float(adc.vref_v),
+            gain_v_per_dps=float(adc.gain_v_per_dps),
+            offset_v=float(adc.offset_v),
+        ),
     )
     bench.start()
-    clock = bench.clock
-    scale = speed if speed is not None else _SIM_FAST_SCALE
-    return SimHandle(
-        dmm_resource=bench.dmm_resource,
+    handle = SimHandle(
+        dmm_resource=bench.dmm_serial_resource,
         oven_port=bench.oven_port,
         adc_port=bench.adc_port,
-        clock=clock,
+        clock=bench.clock,
         stop=bench.stop,
-        time_scale=scale,
+        time_scale=speed if speed is not None else _SIM_FAST_SCALE,
+        speed=speed,
         bench=bench,
-        provenance=getattr(bench, "provenance", lambda: {})(),
+        provenance=provenance(bench.physics.model, seed),
     )
+    return handle, cfg
 
+
+def sim_tick_s(speed: float | None) -> float:
+    """Simulated seconds per bench tick: 0.1 s in real time (a smooth stream), up to 1 s
+    when fast (about 100-300 ticks per wall second: each tick wakes every waiting thread,
+    and fewer wake-ups leave the GIL to the drivers)."""
+    if speed is None:
+        return 1.0
+    return float(min(1.0, max(0.1, speed / 100.0)))
+
+
+# Lost communication with a simulated instrument also needs this much wall time of
+# silence (see Acquisition._watchdog); a real bench runs in real time and needs none.
+SIM_COMM_MIN_WALL_S = 1.0
 
 # Timeouts of a free-running simulated bench are scaled as if it ran this much faster
 # than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
@@ -373,7 +405,8 @@ def _hms(s: float) -> str:
 
 
 def _trace_writer() -> Callable[[float], None] | None:
-    """``GYROLAB_TRACE_FD``: write each recorded block's end time there (kill tests)."""
+    """``GYROLAB_TRACE_FD``: write the run time up to which ADC samples have been
+    received there, as they arrive (the kill test's measure of what a crash lost)."""
     fd = os.environ.get("GYROLAB_TRACE_FD")
     if not fd:
         return None
@@ -411,7 +444,7 @@ def run_acquisition(
     seed: int | None = None,
     speed: float | None = None,
     on_status: Callable[[Status], None] | None = None,
-    on_block: Callable[[float], None] | None = None,
+    on_samples: Callable[[float], None] | None = None,
     acquisition_hook: Callable[[Acquisition], None] | None = None,
 ) -> RunResult:
     """Connect, record one run to ``out`` and end cleanly; returns how it ended."""
@@ -483,10 +516,13 @@ def run_acquisition(
                 pt100_period_s=cfg.multimeter.period_s,
                 oven_period_s=cfg.oven.period_s,
                 on_status=on_status,
-                on_block=on_block,
+                on_samples=on_samples,
+                comm_timeout_min_wall_s=0.0 if sim is None else SIM_COMM_MIN_WALL_S,
             )
             if acquisition_hook is not None:
                 acquisition_hook(acq)
+            if sim is not None:
+                sim.clock.speed = sim.speed  # connected: now run at the asked speed
             try:
                 result = acq.run()
             finally:
@@ -518,9 +554,16 @@ def acquire(args: argparse.Namespace) -> int:
     sim: SimHandle | None = None
     import tempfile
 
+    old_switch = sys.getswitchinterval()
+    if args.bench == "sim":
+        # The simulated instruments share this process (and its GIL) with the drivers:
+        # hand the GIL over sooner so that a waiting driver thread is not held 5 ms per
+        # switch by the busy ones (a Modbus transaction needs several switches).
+        sys.setswitchinterval(0.0005)
+
     with tempfile.TemporaryDirectory(prefix="gyrolab-sim-") as work:
         if args.bench == "sim":
-            sim = start_sim_bench(
+            sim, cfg = start_sim_bench(
                 cfg, profile, seed=args.seed, speed=args.speed, workdir=Path(work)
             )
         speed_note = "" if sim is None else f" ×{args.speed or 'max'}"
@@ -536,12 +579,13 @@ def acquire(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 speed=args.speed,
                 on_status=show,
-                on_block=_trace_writer(),
+                on_samples=_trace_writer(),
             )
         finally:
             bar.close()
             if sim is not None:
                 sim.stop()
+            sys.setswitchinterval(old_switch)
     wall = time.monotonic() - t0
     msg = (
         f"gyrolab acquire: {result.outcome} ({result.reason}); {result.t_end:.0f} s recorded in "
