@@ -1,0 +1,301 @@
+"""What the discrepancy workflow sees of a run: the bench channels, decimated early.
+
+Only what a real bench records is read: ``/gyro/rate``, ``/temperature/pt100``,
+``/oven/state`` and ``/profile/event``. Metadata records (where a simulator may store its
+provenance) are never opened.
+
+The 100 Hz rate stream is reduced in one pass to
+
+* low-frequency bin means ``y_j`` over ``bin_s`` seconds (deterministic effects live
+  below ~0.01 Hz, so 10 s bins lose nothing and a 13 h run becomes 4 680 points);
+* high-rate statistics: the robust white-noise level, isolated spikes (outliers), the
+  output's value lattice (quantization), first differences for the sample-distribution
+  gap, and the Allan deviation at τ shorter than one bin.
+
+Spikes are detected by the centred second difference
+``e_i = x_i − (x_{i−1} + x_{i+1})/2`` against ``k · 1.4826 · MAD(e)`` (k = 8: a Gaussian
+exceeds it once in ~10¹⁵ samples) and replaced by the mean of their neighbours before
+binning, so that a bad sample does not leak into the low-frequency fit.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gyrolab.errors import InputError
+from gyrolab.recording import (
+    TOPIC_EVENT,
+    TOPIC_OVEN,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    decode_block,
+    iter_messages,
+)
+from gyrolab.sim.discrepancy.allan import oadev
+
+SPIKE_K = 8.0
+"""Spike threshold in robust standard deviations of the centred second difference."""
+TAIL_K = 3.0
+"""Lower edge of the tail of |e| kept for the outlier mixture fit (robust σ units)."""
+
+
+@dataclass
+class HighRate:
+    """Statistics of the full-rate gyro stream (units °/s unless stated)."""
+
+    dt: float
+    n: int
+    white_sigma: float
+    """Robust per-sample standard deviation of the white part: 1.4826·MAD(Δx)/√2."""
+    spike_t: np.ndarray
+    spike_amp: np.ndarray
+    """Times (s) and heights (°/s) of the certain spikes (> SPIKE_K σ_e), removed."""
+    e_sigma: float
+    """Robust σ of the centred second difference ``e`` (°/s)."""
+    e_tail: np.ndarray
+    """Every |e| above ``TAIL_K · e_sigma``: the tail the outlier test fits."""
+    lattice_step: float
+    """Estimated spacing of the output's values (0 when the values look continuous)."""
+    lattice_fraction: float
+    """Fraction of first differences that are integer multiples of ``lattice_step``."""
+    diffs: np.ndarray
+    """A contiguous sample of first differences Δx (despiked), for distribution checks."""
+    tau: np.ndarray
+    adev: np.ndarray
+
+
+@dataclass
+class Step:
+    """One constant-setpoint segment of the oven channel."""
+
+    index: int
+    t0: float
+    t1: float
+    setpoint_c: float
+
+
+@dataclass
+class BenchData:
+    """Arrays of one run, as the workflow uses them."""
+
+    t: np.ndarray
+    """Bin centres, s since power-on."""
+    y: np.ndarray
+    """Gyro output, bin means, °/s."""
+    bin_s: float
+    temp_c: np.ndarray
+    """PT100 temperature at the bin centres, °C."""
+    pt100_t: np.ndarray
+    pt100_c: np.ndarray
+    oven_t: np.ndarray
+    oven_sp: np.ndarray
+    oven_pv: np.ndarray
+    hr: HighRate
+    steps: list[Step] = field(default_factory=list)
+    source: str = "<arrays>"
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t[-1] - self.t[0] + self.bin_s)
+
+
+def choose_bin_s(duration_s: float) -> float:
+    """10 s bins, shorter for short runs so that there are at least ~2 000 bins."""
+    return float(np.clip(np.floor(duration_s / 2000.0), 1.0, 10.0))
+
+
+def _spikes(x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Indices of certain spikes, the robust σ of the centred second difference and the
+    tail of |e| (every value above ``TAIL_K σ``)."""
+    e = x[1:-1] - 0.5 * (x[:-2] + x[2:])
+    sub = e[:: max(1, e.size // 400_000)]
+    s = 1.4826 * float(np.median(np.abs(sub - np.median(sub))))
+    if s <= 0:
+        return np.empty(0, dtype=np.int64), s, np.empty(0)
+    ae = np.abs(e)
+    big = np.flatnonzero(ae > TAIL_K * s)
+    # A spike at i also makes e_{i±1} ≈ −A/2: keep only the local maxima of |e|.
+    lo = np.clip(big - 1, 0, e.size - 1)
+    hi = np.clip(big + 1, 0, e.size - 1)
+    peak = big[(ae[big] >= ae[lo]) & (ae[big] >= ae[hi])]
+    certain = peak[ae[peak] > SPIKE_K * s]
+    return certain + 1, s, ae[big]
+
+
+def _lattice(x: np.ndarray) -> tuple[float, float]:
+    """Spacing ``q`` of the values of ``x`` and the fraction of Δx on multiples of it."""
+    sub = x[: min(x.size, 200_000)]
+    u = np.unique(sub)
+    if u.size < 3:
+        return 0.0, 0.0
+    du = np.diff(u)
+    # Values stored as float32: spacings closer than its resolution are not a lattice.
+    tol = 4.0 * np.finfo(np.float32).eps * max(1e-12, float(np.max(np.abs(u))))
+    du = du[du > tol]
+    if du.size == 0:
+        return 0.0, 0.0
+    q = float(np.median(du[du <= 1.5 * np.min(du)]))
+    d = np.diff(sub)
+    r = d / q
+    frac = float(np.mean(np.abs(r - np.rint(r)) < 0.05))
+    return q, frac
+
+
+def high_rate_stats(
+    x: np.ndarray, dt: float, bin_n: int, n_diffs: int = 500_000
+) -> tuple[HighRate, np.ndarray, np.ndarray]:
+    """High-rate statistics of ``x``; returns them, the despiked series and spike indices."""
+    idx, e_sigma, e_tail = _spikes(x)
+    xd = x
+    amps = np.empty(0)
+    if idx.size:
+        xd = x.copy()
+        lo = np.clip(idx - 1, 0, x.size - 1)
+        hi = np.clip(idx + 1, 0, x.size - 1)
+        fill = 0.5 * (x[lo] + x[hi])
+        amps = x[idx] - fill
+        xd[idx] = fill
+    d = np.diff(xd[: min(xd.size, n_diffs + 1)])
+    white = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
+    q, frac = _lattice(xd)
+    m = 2 ** np.arange(int(np.floor(np.log2(max(1, bin_n)))) + 1)
+    tau, ad = oadev(xd, dt, m)
+    hr = HighRate(
+        dt=dt,
+        n=int(x.size),
+        white_sigma=white,
+        spike_t=idx * dt,
+        spike_amp=amps,
+        e_sigma=e_sigma,
+        e_tail=e_tail,
+        lattice_step=q,
+        lattice_fraction=frac,
+        diffs=d,
+        tau=tau,
+        adev=ad,
+    )
+    return hr, xd, idx
+
+
+def steps_from_setpoint(t: np.ndarray, sp: np.ndarray, t_end: float) -> list[Step]:
+    """Constant-setpoint segments of the oven setpoint channel."""
+    if t.size == 0:
+        return []
+    change = np.flatnonzero(np.abs(np.diff(sp)) > 1e-6) + 1
+    starts = np.concatenate([[0], change])
+    out = []
+    for k, s in enumerate(starts):
+        t1 = float(t[starts[k + 1]]) if k + 1 < starts.size else float(t_end)
+        out.append(Step(k, float(t[s]), t1, float(sp[s])))
+    return out
+
+
+def from_arrays(
+    rate_t0: float,
+    rate_dt: float,
+    rate: np.ndarray,
+    pt100_t: np.ndarray,
+    pt100_c: np.ndarray,
+    oven_t: np.ndarray,
+    oven_sp: np.ndarray,
+    oven_pv: np.ndarray,
+    *,
+    rate_index: np.ndarray | None = None,
+    bin_s: float | None = None,
+    source: str = "<arrays>",
+) -> BenchData:
+    """Build :class:`BenchData` from bench arrays (rate samples at ``rate_t0 + k·rate_dt``,
+    or at ``rate_t0 + rate_index·rate_dt`` when the stream has gaps)."""
+    x = np.asarray(rate, dtype=float)
+    if x.size < 100:
+        raise InputError(source, "too few gyro rate samples for a discrepancy analysis")
+    if np.asarray(pt100_t).size < 10 or np.asarray(oven_t).size < 10:
+        raise InputError(source, "too few temperature/oven samples for a discrepancy analysis")
+    index = np.arange(x.size) if rate_index is None else np.asarray(rate_index, dtype=np.int64)
+    duration = (index[-1] - index[0] + 1) * rate_dt
+    bs = choose_bin_s(duration) if bin_s is None else float(bin_s)
+    bin_n = max(1, int(round(bs / rate_dt)))
+    bs = bin_n * rate_dt
+    hr, xd, _ = high_rate_stats(x, rate_dt, bin_n)
+    b = (index - index[0]) // bin_n
+    cnt = np.bincount(b)
+    ysum = np.bincount(b, weights=xd)
+    ok = cnt >= max(1, bin_n // 2)
+    bins = np.flatnonzero(ok)
+    y = ysum[ok] / cnt[ok]
+    t = rate_t0 + (index[0] + (bins + 0.5) * bin_n) * rate_dt
+    pt_t = np.asarray(pt100_t, dtype=float)
+    pt_c = np.asarray(pt100_c, dtype=float)
+    temp = np.interp(t, pt_t, pt_c)
+    ot = np.asarray(oven_t, dtype=float)
+    sp = np.asarray(oven_sp, dtype=float)
+    pv = np.asarray(oven_pv, dtype=float)
+    return BenchData(
+        t=t,
+        y=y,
+        bin_s=bs,
+        temp_c=temp,
+        pt100_t=pt_t,
+        pt100_c=pt_c,
+        oven_t=ot,
+        oven_sp=sp,
+        oven_pv=pv,
+        hr=hr,
+        steps=steps_from_setpoint(ot, sp, float(t[-1] + bs / 2)),
+        source=source,
+    )
+
+
+def load_recording(path: str | os.PathLike[str], bin_s: float | None = None) -> BenchData:
+    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
+    blocks = []
+    pt: list[tuple[float, float]] = []
+    oven: list[tuple[float, float, float]] = []
+    for topic, _ts, data in iter_messages(path, [TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN]):
+        if topic == TOPIC_RATE:
+            blocks.append(decode_block(data, "rate"))
+        elif topic == TOPIC_PT100:
+            m = json.loads(data)
+            pt.append((m["t"], m["temperature_c"]))
+        elif topic == TOPIC_OVEN:
+            m = json.loads(data)
+            oven.append((m["t"], m["setpoint_c"], m["process_value_c"]))
+    if not blocks:
+        raise InputError(path, f"recording has no {TOPIC_RATE} data")
+    if not pt:
+        raise InputError(path, f"recording has no {TOPIC_PT100} data")
+    if not oven:
+        raise InputError(path, f"recording has no {TOPIC_OVEN} data")
+    blocks.sort(key=lambda b: b[2])
+    period = float(np.median([b[1] for b in blocks]))
+    n = sum(b[3].size for b in blocks)
+    x = np.empty(n)
+    idx = np.empty(n, dtype=np.int64)
+    pos = 0
+    for _t0, _p, first, arr in blocks:
+        x[pos : pos + arr.size] = arr
+        idx[pos : pos + arr.size] = first + np.arange(arr.size)
+        pos += arr.size
+    t0 = blocks[0][0] - blocks[0][2] * period
+    p = np.asarray(sorted(pt), dtype=float)
+    o = np.asarray(sorted(oven), dtype=float)
+    return from_arrays(
+        t0,
+        period,
+        x,
+        p[:, 0],
+        p[:, 1],
+        o[:, 0],
+        o[:, 1],
+        o[:, 2],
+        rate_index=idx,
+        bin_s=bin_s,
+        source=str(path),
+    )
+
+
+_ = TOPIC_EVENT  # profile events are not needed: steps come from the setpoint channel

@@ -1,0 +1,295 @@
+"""Deterministic gyro terms: regressors from the recorded temperatures and time, fitted by
+AR-noise least squares on the low-frequency output (see :mod:`.gls`).
+
+Every vocabulary effect that is a function of the temperature history and time becomes
+columns of a design matrix evaluated at the bin centres (``x = T − 25 °C``; ``T`` the
+bias-setting temperature: the case, or with ``thermal_lag`` the die)::
+
+    bias_poly     1, x, x²  (+ x³, x⁴ when the starting model uses them)   → c0, c1, c2 …
+    cubic_temp    x³                                                       → c3
+    thermal_rate  60 · dT/dt   (dT/dt in °C/s; the column is °C/min)       → k
+    hysteresis    s/2, s = (T − p)/(w/2), p the play operator of width w   → h   [w]
+    warmup        exp(−t/τw)                                               → A   [τw]
+    aging_ramp    t / 3600                                                 → r
+    periodic      sin(2πt/P), cos(2πt/P)                                   → A, φ [P]
+    thermal_lag   T ← Td, τ dTd/dt = Tc − Td, dT/dt ← (Tc − Td)/τ          [τ]
+
+(brackets: nonlinear parameters, chosen by a grid scan and a bounded 1-D refinement with
+the noise model held fixed, then refitted with the full GLS). The case temperature is the
+PT100 reading minus the model's PT100 offset; its rate of change comes from the fitted case
+model, ``dTc/dt = (PV + ΔT_self − Tc)/τ_case``, which is smooth where a numerical
+derivative of the reading would be noisy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from gyrolab.sim.discrepancy.gls import GlsResult, ar_whiten, gls_ar
+from gyrolab.sim.effects import _play
+
+AR_ORDER = 8
+GYRO_EFFECTS = (
+    "bias_poly",
+    "cubic_temp",
+    "thermal_rate",
+    "thermal_lag",
+    "hysteresis",
+    "warmup",
+    "aging_ramp",
+    "periodic",
+)
+NONLINEAR = {
+    "thermal_lag": "tau_s",
+    "hysteresis": "width_c",
+    "warmup": "tau_s",
+    "periodic": "period_s",
+}
+
+
+@dataclass
+class GyroContext:
+    """Arrays the regressors are built from."""
+
+    t: np.ndarray  # bin centres, s
+    y: np.ndarray  # bin means, °/s
+    grid_t: np.ndarray  # 1 s thermal grid, s
+    case_c: np.ndarray  # case temperature on the grid, °C
+    dcase: np.ndarray  # dTc/dt on the grid, °C/s
+    duration_s: float
+    bin_s: float
+    poly_order: int = 2
+
+
+def nonlinear_grid(name: str, ctx: GyroContext) -> np.ndarray:
+    """Scan grid of an effect's nonlinear parameter."""
+    if name == "thermal_lag":
+        return np.geomspace(20.0, max(200.0, ctx.duration_s / 3), 36)
+    if name == "hysteresis":
+        return np.geomspace(0.05, 20.0, 30)
+    if name == "warmup":
+        return np.geomspace(max(30.0, 3 * ctx.bin_s), max(300.0, ctx.duration_s / 2), 40)
+    if name == "periodic":
+        # uniform in frequency, 3× oversampled against the run's resolution 1/T
+        # compressor-like cycles: minutes to two hours, and at least six per run
+        f_lo = max(1.0 / 7200.0, 6.0 / ctx.duration_s)
+        f_hi = 1.0 / max(120.0, 4.0 * ctx.bin_s)
+        nf = int(min(3000, max(20, 3 * (f_hi - f_lo) * ctx.duration_s)))
+        return 1.0 / np.linspace(f_lo, f_hi, nf)
+    raise KeyError(name)
+
+
+def _bounds(name: str, ctx: GyroContext) -> tuple[float, float]:
+    g = nonlinear_grid(name, ctx)
+    return float(g.min()), float(g.max())
+
+
+@dataclass
+class GyroStructure:
+    """Active gyro effects and their nonlinear parameters."""
+
+    names: list[str]
+    theta: dict[str, float] = field(default_factory=dict)
+
+    def with_effect(self, name: str, value: float | None = None) -> GyroStructure:
+        th = dict(self.theta)
+        if value is not None:
+            th[name] = value
+        return GyroStructure(self.names + [name], th)
+
+
+def _temps(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, np.ndarray]:
+    """Bias-setting temperature and its rate on the grid."""
+    if "thermal_lag" in struct.names:
+        tau = struct.theta["thermal_lag"]
+        alpha = 1.0 - math.exp(-1.0 / tau)
+        from gyrolab.sim.discrepancy.thermal_fit import _lowpass
+
+        die = _lowpass(ctx.case_c, alpha, float(ctx.case_c[0]))
+        return die, (ctx.case_c - die) / tau
+    return ctx.case_c, ctx.dcase
+
+
+def design(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, list[str]]:
+    """Design matrix at the bin centres and the names of its columns."""
+    temp_g, dtemp_g = _temps(struct, ctx)
+    T = np.interp(ctx.t, ctx.grid_t, temp_g)
+    x = T - 25.0
+    cols: list[np.ndarray] = []
+    names: list[str] = []
+    for name in struct.names:
+        if name == "bias_poly":
+            for i in range(ctx.poly_order + 1):
+                cols.append(x**i)
+                names.append(f"bias_poly.c{i}")
+        elif name == "cubic_temp":
+            cols.append(x**3)
+            names.append("cubic_temp.c3")
+        elif name == "thermal_rate":
+            cols.append(60.0 * np.interp(ctx.t, ctx.grid_t, dtemp_g))
+            names.append("thermal_rate.k")
+        elif name == "hysteresis":
+            half = 0.5 * struct.theta["hysteresis"]
+            s = np.empty(temp_g.size)
+            _play(temp_g, float(temp_g[0]), half, s)
+            cols.append(0.5 * np.interp(ctx.t, ctx.grid_t, s))
+            names.append("hysteresis.h")
+        elif name == "warmup":
+            cols.append(np.exp(-ctx.t / struct.theta["warmup"]))
+            names.append("warmup.A")
+        elif name == "aging_ramp":
+            cols.append(ctx.t / 3600.0)
+            names.append("aging_ramp.r")
+        elif name == "periodic":
+            w = 2.0 * np.pi / struct.theta["periodic"]
+            cols += [np.sin(w * ctx.t), np.cos(w * ctx.t)]
+            names += ["periodic.a_sin", "periodic.a_cos"]
+        elif name == "thermal_lag":
+            pass  # changes the temperature the other columns see
+        else:
+            raise KeyError(name)
+    return np.column_stack(cols), names
+
+
+@dataclass
+class GyroFit:
+    """A fitted deterministic structure."""
+
+    struct: GyroStructure
+    gls: GlsResult
+    columns: list[str]
+    pred: np.ndarray
+
+    @property
+    def bic(self) -> float:
+        return self.gls.bic
+
+    def coef(self) -> dict[str, float]:
+        return dict(zip(self.columns, map(float, self.gls.beta), strict=True))
+
+
+def _fit_fixed(struct: GyroStructure, ctx: GyroContext, phi: np.ndarray | None = None) -> GyroFit:
+    X, cols = design(struct, ctx)
+    n_nl = sum(1 for n in struct.names if n in NONLINEAR)
+    g = gls_ar(ctx.y, X, AR_ORDER, extra_params=n_nl, phi=phi)
+    return GyroFit(struct, g, cols, X @ g.beta)
+
+
+def _periodic_scan(
+    struct: GyroStructure, ctx: GyroContext, phi: np.ndarray, periods: np.ndarray
+) -> np.ndarray:
+    """Whitened RSS of the structure with its sine/cosine pair at each period, vectorized:
+    the other columns are whitened and orthogonalized once (QR), each pair is projected
+    out of their complement, and RSS = ‖r‖² − (Zᵀr)ᵀ(ZᵀZ)⁻¹(Zᵀr) with Z ⟂ the base."""
+    base = GyroStructure([n for n in struct.names if n != "periodic"], struct.theta)
+    X, _ = design(base, ctx)
+    scale = np.sqrt(np.mean(X * X, axis=0))
+    scale[scale == 0] = 1.0
+    Xw = ar_whiten(X / scale, phi)
+    yw = ar_whiten(ctx.y, phi)
+    Q, _ = np.linalg.qr(Xw)
+    r = yw - Q @ (Q.T @ yw)
+    rss0 = float(r @ r)
+    out = np.empty(periods.size)
+    for i0 in range(0, periods.size, 256):
+        w = 2.0 * np.pi / periods[i0 : i0 + 256]
+        ph = np.outer(ctx.t, w)
+        S = ar_whiten(np.sin(ph), phi)
+        C = ar_whiten(np.cos(ph), phi)
+        S -= Q @ (Q.T @ S)
+        C -= Q @ (Q.T @ C)
+        a, b = S.T @ r, C.T @ r
+        ss, cc, sc = (S * S).sum(0), (C * C).sum(0), (S * C).sum(0)
+        det = ss * cc - sc * sc
+        red = (cc * a * a - 2 * sc * a * b + ss * b * b) / np.where(det > 0, det, np.inf)
+        out[i0 : i0 + 256] = rss0 - red
+    return out
+
+
+def fit_structure(
+    struct: GyroStructure, ctx: GyroContext, passes: int = 2, scan: tuple[str, ...] = ()
+) -> GyroFit:
+    """Fit a structure: nonlinear parameters (``scan`` first by a grid; the others refined
+    around their current values) by coordinate search, then the full GLS fit."""
+    nl = [n for n in struct.names if n in NONLINEAR]
+    need = set(scan) | {n for n in nl if n not in struct.theta}
+    theta = dict(struct.theta)
+    for n in nl:
+        if n not in theta:
+            g = nonlinear_grid(n, ctx)
+            theta[n] = float(g[g.size // 2])
+    struct = GyroStructure(struct.names, theta)
+    cur = _fit_fixed(struct, ctx)
+    for _ in range(passes if nl else 0):
+        phi = cur.gls.phi
+        for name in nl:
+            lo, hi = _bounds(name, ctx)
+
+            def cost(
+                v: float, name: str = name, th: dict = cur.struct.theta, phi: np.ndarray = phi
+            ) -> float:
+                s = GyroStructure(struct.names, {**th, name: v})
+                return _fit_fixed(s, ctx, phi).gls.rss
+
+            if name in need:
+                grid = nonlinear_grid(name, ctx)
+                if name == "periodic":
+                    costs = _periodic_scan(cur.struct, ctx, phi, grid)
+                else:
+                    costs = np.array([cost(float(v)) for v in grid])
+                i = int(np.argmin(costs))
+                a = float(grid[max(i - 1, 0)])
+                b = float(grid[min(i + 1, grid.size - 1)])
+                start = float(grid[i])
+            else:
+                start = cur.struct.theta[name]
+                a, b = max(lo, start / 1.5), min(hi, start * 1.5)
+            if b > a:
+                r = minimize_scalar(
+                    lambda lv, c=cost: c(math.exp(lv)),
+                    bounds=(math.log(a), math.log(b)),
+                    method="bounded",
+                    options={"xatol": 1e-3},
+                )
+                best = math.exp(float(r.x)) if r.fun <= cost(start) else start
+            else:
+                best = start
+            cur = _fit_fixed(GyroStructure(struct.names, {**cur.struct.theta, name: best}), ctx)
+        need = set()
+    return cur
+
+
+def effect_params(fit: GyroFit) -> dict[str, dict[str, float]]:
+    """Simulator parameters of every gyro effect of a fit (°/s units as in effects.py)."""
+    c = fit.coef()
+    th = fit.struct.theta
+    out: dict[str, dict[str, float]] = {}
+    for name in fit.struct.names:
+        if name == "bias_poly":
+            p = {f"c{i}": c[f"bias_poly.c{i}"] for i in range(5) if f"bias_poly.c{i}" in c}
+            p["t_ref_c"] = 25.0
+            out[name] = p
+        elif name == "cubic_temp":
+            out[name] = {"c3": c["cubic_temp.c3"], "t_ref_c": 25.0}
+        elif name == "thermal_rate":
+            out[name] = {"k": c["thermal_rate.k"]}
+        elif name == "thermal_lag":
+            out[name] = {"tau_s": th["thermal_lag"]}
+        elif name == "hysteresis":
+            out[name] = {"h": c["hysteresis.h"], "width_c": th["hysteresis"]}
+        elif name == "warmup":
+            out[name] = {"A": c["warmup.A"], "tau_s": th["warmup"]}
+        elif name == "aging_ramp":
+            out[name] = {"r": c["aging_ramp.r"]}
+        elif name == "periodic":
+            a, b = c["periodic.a_sin"], c["periodic.a_cos"]
+            out[name] = {
+                "A": float(math.hypot(a, b)),
+                "period_s": th["periodic"],
+                "phase_rad": float(math.atan2(b, a)),
+            }
+    return out

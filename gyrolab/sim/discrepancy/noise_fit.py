@@ -1,0 +1,261 @@
+"""Stochastic terms: the Allan curve of the residual, the spike tail, the value lattice.
+
+**Allan fit.** The measured curve is the overlapping ADEV of the despiked output at
+τ ≤ one bin and of the low-frequency residual (output − deterministic fit) above. The model
+(IEEE 952 Annex C; ``Q = q Δt/√12`` for the simulator's angle-carrying quantization)::
+
+    σ²(τ) = 3Q²/τ² + N²/τ + B² + K²τ/3
+
+is fitted by weighted least squares on ``ln σ²`` with weights ``edf/2`` (the variance of
+``ln σ̂²`` is ≈ 2/edf); ``χ² = Σ (edf_i/2)(ln σ̂²_i − ln σ²_i)²``. ``rate_random_walk`` is
+named when adding ``K`` lowers χ² by more than :data:`RRW_CHI2`.
+
+**Outliers.** Every centred second difference ``e_i = x_i − (x_{i−1}+x_{i+1})/2`` is
+``N(0, σ_e²)`` for Gaussian noise. A spike of height ±A adds one value near A and two near
+A/2 (its neighbours). Above ``c = 3σ_e`` the values of ``|e|`` are fitted as a Poisson
+process of intensity::
+
+    λ(v) = n [2φ(v/σ)/σ + p (g(v; A) + 2 g(v; A/2))],   g(v; a) = [φ((v−a)/σ) + φ((v+a)/σ)]/σ
+
+(σ free, p the spike probability per sample) and compared with p = 0 by the likelihood
+ratio (:data:`OUTLIER_LR`).
+
+**Quantization.** Every output of a quantizer of step q is a multiple of q; the bench ADC
+already quantizes at its LSB. ``quantization`` is named when the output's value lattice is
+at least :data:`LATTICE_RATIO` LSBs wide and most first differences sit on it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares, minimize
+from scipy.special import log_ndtr, ndtr
+
+from gyrolab.sim.discrepancy.allan import edf_estimate, oadev
+from gyrolab.sim.discrepancy.data import BenchData
+
+RRW_CHI2 = 40.0
+OUTLIER_LR = 40.0
+LATTICE_RATIO = 3.0
+LATTICE_FRACTION = 0.5
+
+
+@dataclass
+class AllanCurve:
+    tau: np.ndarray
+    adev: np.ndarray
+    edf: np.ndarray
+
+
+def measured_allan(d: BenchData, resid_bins: np.ndarray) -> AllanCurve:
+    """ADEV of the despiked output (τ ≤ bin) joined to that of the residual bins (τ > bin)."""
+    hr = d.hr
+    m_hr = np.rint(hr.tau / hr.dt)
+    tau_b, ad_b = oadev(resid_bins, d.bin_s)
+    keep = tau_b > d.bin_s * 1.01
+    m_b = np.rint(tau_b[keep] / d.bin_s)
+    tau = np.concatenate([hr.tau, tau_b[keep]])
+    ad = np.concatenate([hr.adev, ad_b[keep]])
+    edf = np.concatenate([edf_estimate(hr.n, m_hr), edf_estimate(resid_bins.size, m_b)])
+    ok = edf >= 4.0
+    return AllanCurve(tau[ok], ad[ok], edf[ok])
+
+
+def model_avar(
+    tau: np.ndarray, n: float, b: float, k: float = 0.0, q: float = 0.0, dt: float = 0.01
+) -> np.ndarray:
+    """Model Allan variance (module docstring); units °/s."""
+    qq = q * dt / math.sqrt(12.0)
+    return 3.0 * qq * qq / tau**2 + n * n / tau + b * b + k * k * tau / 3.0
+
+
+@dataclass
+class NoiseFit:
+    """Fitted noise terms (°/s units: N in °/s/√Hz, B in °/s, K in °/s/√s, q in °/s)."""
+
+    n_white: float
+    b_floor: float
+    k_rrw: float
+    q: float
+    chi2: float
+    curve: AllanCurve
+    dt: float
+
+    def model_adev(self, tau: np.ndarray | None = None) -> np.ndarray:
+        t = self.curve.tau if tau is None else tau
+        return np.sqrt(model_avar(t, self.n_white, self.b_floor, self.k_rrw, self.q, self.dt))
+
+    def sim_params(self) -> dict[str, dict[str, float]]:
+        """Simulator parameters (effects.py units: N °/√h, B °/h, K °/h/√h)."""
+        return {
+            "arw": {"N": self.n_white * 60.0},
+            "bias_instability": {"B": self.b_floor * 3600.0},
+            "rate_random_walk": {"K": self.k_rrw * 3600.0 * 60.0},
+        }
+
+
+def fit_allan(
+    curve: AllanCurve, dt: float, terms: set[str], q: float = 0.0, white0: float = 0.0
+) -> NoiseFit:
+    """Weighted log-domain fit of the noise terms in ``terms`` (arw, bias_instability,
+    rate_random_walk) with the quantization step ``q`` held fixed."""
+    tau, s2, w = curve.tau, curve.adev**2, np.sqrt(curve.edf / 2.0)
+    names = [t for t in ("arw", "bias_instability", "rate_random_walk") if t in terms]
+    n0 = white0 * math.sqrt(dt) if white0 > 0 else float(curve.adev[0] * math.sqrt(tau[0]))
+    b0 = float(np.min(curve.adev)) * 0.7
+    k0 = float(curve.adev[-1] / math.sqrt(tau[-1] / 3.0)) * 0.3
+    start = {"arw": n0, "bias_instability": b0, "rate_random_walk": k0}
+
+    def unpack(x: np.ndarray) -> tuple[float, float, float]:
+        v = dict(zip(names, np.exp(x), strict=True))
+        return v.get("arw", 0.0), v.get("bias_instability", 0.0), v.get("rate_random_walk", 0.0)
+
+    def res(x: np.ndarray) -> np.ndarray:
+        n, b, k = unpack(x)
+        m = model_avar(tau, n, b, k, q, dt) + 1e-300
+        return w * (np.log(s2) - np.log(m))
+
+    if names:
+        x0 = np.log([max(start[nm], 1e-15) for nm in names])
+        best = None
+        # a few starts: a term may be negligible, which a log-parameter reaches only far out
+        for shift in (0.0, -3.0):
+            for j in range(len(names)):
+                x = x0.copy()
+                x[j] += shift
+                r = least_squares(res, x, method="lm", max_nfev=400)
+                if best is None or r.cost < best.cost:
+                    best = r
+        assert best is not None
+        n, b, k = unpack(best.x)
+        chi2 = 2.0 * float(best.cost)
+    else:
+        n = b = k = 0.0
+        chi2 = float(np.sum(res(np.empty(0)) ** 2))
+    return NoiseFit(n, b, k, q, chi2, curve, dt)
+
+
+# ------------------------------------------------------------------------- outliers
+
+
+@dataclass
+class OutlierFit:
+    """Spike-tail fit: null (σ only) against spikes (σ, p, A)."""
+
+    lr: float
+    sigma: float
+    p: float
+    amplitude: float
+    n: int
+
+    def sim_params(self, dt: float) -> dict[str, float]:
+        return {"rate_per_h": self.p * 3600.0 / dt, "amplitude": self.amplitude}
+
+
+def _tail_loglik(v: np.ndarray, n: int, c: float, s: float, p: float, a: float) -> float:
+    z = v / s
+
+    def g_pdf(aa: float) -> np.ndarray:
+        return (np.exp(-0.5 * ((v - aa) / s) ** 2) + np.exp(-0.5 * ((v + aa) / s) ** 2)) / (
+            s * math.sqrt(2 * math.pi)
+        )
+
+    def g_tail(aa: float) -> float:
+        return float(ndtr((aa - c) / s) + ndtr((-aa - c) / s))
+
+    log_gauss = math.log(2.0 * n) - 0.5 * z * z - math.log(s * math.sqrt(2 * math.pi))
+    if p > 0:
+        lam = np.exp(log_gauss) + n * p * (g_pdf(a) + 2.0 * g_pdf(0.5 * a))
+        loglam = np.log(lam + 1e-300)
+        integral = 2.0 * n * math.exp(log_ndtr(-c / s)) + n * p * (g_tail(a) + 2 * g_tail(a / 2))
+    else:
+        loglam = log_gauss
+        integral = 2.0 * n * math.exp(log_ndtr(-c / s))
+    return float(np.sum(loglam) - integral)
+
+
+def fit_outliers(d: BenchData) -> OutlierFit:
+    """Likelihood-ratio test of spikes in the tail of the second differences."""
+    hr = d.hr
+    v = hr.e_tail
+    n = max(1, hr.n - 2)
+    s0 = hr.e_sigma
+    if s0 <= 0 or v.size < 5:
+        return OutlierFit(0.0, s0, 0.0, 0.0, n)
+    c = float(v.min()) if v.size else 3.0 * s0
+    c = min(c, 3.0 * s0)
+    r0 = minimize(
+        lambda x: -_tail_loglik(v, n, c, math.exp(x[0]), 0.0, 0.0),
+        [math.log(s0)],
+        method="Nelder-Mead",
+        options={"xatol": 1e-6, "fatol": 1e-4},
+    )
+    best = None
+    vmax = float(v.max())
+    for a0 in np.geomspace(4.0 * s0, max(5.0 * s0, vmax), 6):
+        p0 = max(1e-9, 10.0 / n)
+        r = minimize(
+            lambda x: (
+                -_tail_loglik(
+                    v, n, c, math.exp(x[0]), 1.0 / (1.0 + math.exp(-x[1])), math.exp(x[2])
+                )
+            ),
+            [math.log(s0), math.log(p0 / (1 - p0)), math.log(a0)],
+            method="Nelder-Mead",
+            options={"xatol": 1e-5, "fatol": 1e-4, "maxiter": 2000},
+        )
+        if best is None or r.fun < best.fun:
+            best = r
+    assert best is not None
+    lr = max(0.0, 2.0 * (float(r0.fun) - float(best.fun)))
+    s, p, a = (
+        math.exp(best.x[0]),
+        1.0 / (1.0 + math.exp(-best.x[1])),
+        math.exp(best.x[2]),
+    )
+    return OutlierFit(lr, s, p, a, n)
+
+
+def spike_counts(d: BenchData, k: float = 5.0) -> tuple[int, float]:
+    """Observed number of |e| > k σ_e, and the Gaussian expectation."""
+    hr = d.hr
+    n = max(1, hr.n - 2)
+    obs = int(np.sum(hr.e_tail > k * hr.e_sigma))
+    return obs, float(2.0 * n * ndtr(-k))
+
+
+def expected_spike_excess(d: BenchData, rate_per_h: float, amp: float, k: float = 5.0) -> float:
+    """Expected extra |e| > k σ_e from the model's spikes (centre + two neighbours)."""
+    hr = d.hr
+    s = hr.e_sigma
+    p = rate_per_h / 3600.0 * hr.dt
+    n = max(1, hr.n - 2)
+
+    def tail(a: float) -> float:
+        return float(ndtr((abs(a) - k * s) / s) + ndtr((-abs(a) - k * s) / s))
+
+    return n * p * (tail(amp) + 2.0 * tail(0.5 * amp))
+
+
+# ---------------------------------------------------------------------- quantization
+
+
+def lattice_phase_hist(d: BenchData, q: float, bins: int = 21) -> np.ndarray:
+    """Histogram (fractions) of the phase of first differences on a lattice of step q."""
+    r = d.hr.diffs / q
+    ph = r - np.rint(r)
+    h, _ = np.histogram(ph, bins=bins, range=(-0.5, 0.5))
+    return h / max(1, h.sum())
+
+
+def model_phase_hist(q_data: float, q_model: float, bins: int = 21) -> np.ndarray:
+    """What the model predicts for :func:`lattice_phase_hist` at step ``q_data``: all on
+    the lattice when its own lattice step is the same, else spread evenly."""
+    h = np.full(bins, 1.0 / bins)
+    if q_model > 0 and abs(q_data / q_model - 1.0) < 0.1:
+        h = np.zeros(bins)
+        h[bins // 2] = 1.0
+    return h

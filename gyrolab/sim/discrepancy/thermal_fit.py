@@ -1,0 +1,248 @@
+"""Fit the simulator's thermal model to the oven and PT100 channels.
+
+Two stages, each driven by what the bench measured (docs/sim-model.md has the model):
+
+1. **Oven air** from the setpoint channel: the recorded process value ``PV`` against the
+   simulator's controller, first order with rate limits (nominal) or second order
+   (``oven_overshoot``), integrated with the simulator's own kernel on a 0.25 s grid;
+   parameters by nonlinear least squares (``scipy.optimize.least_squares``).
+2. **Gyro case** from the recorded air: ``τ_case dTc/dt = PV + ΔT_self − Tc`` with the case
+   at the air temperature at power-on, and the PT100 reading ``Tc + δ`` (``δ`` is the
+   ``rtd_self_heating`` offset, 0 in the nominal model). For a fixed ``τ_case`` the reading
+   is linear in ``(ΔT_self, δ)``: ``PT100 = F_τ[PV] + ΔT_self·(1 − e^{−t/τ}) + δ``, so
+   ``τ_case`` is a one-dimensional search. ``δ`` and the gyro's self-heating differ only
+   in the power-on transient: at power-on the case is at the air temperature and only
+   ``δ`` is already there.
+
+The scores are Gaussian log-likelihoods with the residual variance floored at
+``(resolution)²`` (the oven's process value is assumed known to 0.02 °C, the PT100 to its
+fitted white-noise level) so that an exact fit cannot make a meaningless gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares, minimize_scalar
+from scipy.signal import lfilter
+
+from gyrolab.sim.discrepancy.data import BenchData
+from gyrolab.sim.thermal import ThermalParams, thermal_kernel
+
+OVEN_DT_S = 0.25
+OVEN_FLOOR_C = 0.02
+"""Resolution floor of the oven process value in the likelihood, °C."""
+
+
+def overshoot_to_omega_zeta(overshoot: float, period_s: float) -> tuple[float, float]:
+    """(ω_n rad/s, ζ) of a second-order step response (as ``effects.OvenOvershoot``)."""
+    lo = math.log(overshoot)
+    zeta = -lo / math.sqrt(math.pi**2 + lo * lo)
+    wd = 2.0 * math.pi / period_s
+    return wd / math.sqrt(1.0 - zeta * zeta), zeta
+
+
+@dataclass
+class OvenFit:
+    """Fitted oven air model."""
+
+    params: dict[str, float]
+    overshoot: tuple[float, float] | None
+    pred: np.ndarray
+    resid: np.ndarray
+
+    @property
+    def rms(self) -> float:
+        return float(np.sqrt(np.mean(self.resid**2)))
+
+    def loglik(self) -> float:
+        n = self.resid.size
+        return -0.5 * n * math.log(max(np.mean(self.resid**2), OVEN_FLOOR_C**2))
+
+    @property
+    def k(self) -> int:
+        return 5 + (2 if self.overshoot else 0)
+
+
+def _air_model(
+    t_obs: np.ndarray,
+    sp_t: np.ndarray,
+    sp: np.ndarray,
+    a0: float,
+    x: np.ndarray,
+    overshoot: tuple[float, float] | None,
+) -> np.ndarray:
+    """Air temperature at ``t_obs`` from the setpoint history (kernel on a 0.25 s grid)."""
+    tau, rh, rc, knee, gap = x[:5]
+    w = z = 0.0
+    if overshoot is not None:
+        w, z = overshoot_to_omega_zeta(*overshoot)
+    p = np.array([tau, rh, rc, knee, knee - gap, 1000.0, 0.0, 0.0, w, z])
+    state = np.array([a0, 0.0, a0, a0])
+    t_end = float(t_obs[-1])
+    n_tot = int(math.ceil((t_end - t_obs[0]) / OVEN_DT_S)) + 1
+    air = np.empty(n_tot)
+    scratch = np.empty((3, n_tot))
+    # setpoint segments on the grid
+    k_sp = np.clip(np.round((sp_t - t_obs[0]) / OVEN_DT_S).astype(np.int64), 0, n_tot)
+    change = np.flatnonzero(np.abs(np.diff(sp)) > 1e-9) + 1
+    starts = np.concatenate([[0], k_sp[change]])
+    values = np.concatenate([[sp[0]], sp[change]])
+    ends = np.concatenate([starts[1:], [n_tot]])
+    for s0, s1, v in zip(starts, ends, values, strict=True):
+        if s1 > s0:
+            thermal_kernel(
+                int(s1 - s0),
+                OVEN_DT_S,
+                float(v),
+                state,
+                p,
+                air[s0:s1],
+                scratch[0, s0:s1],
+                scratch[1, s0:s1],
+                scratch[2, s0:s1],
+            )
+    grid_t = t_obs[0] + np.arange(n_tot) * OVEN_DT_S
+    return np.interp(t_obs, grid_t, air)
+
+
+def fit_oven(
+    d: BenchData,
+    th: ThermalParams,
+    overshoot: tuple[float, float] | None = None,
+    with_overshoot: bool = False,
+) -> OvenFit:
+    """Least-squares fit of the oven air model to the recorded process value."""
+    t, sp, pv = d.oven_t, d.oven_sp, d.oven_pv
+    x0 = np.array(
+        [
+            th.air_tau_s,
+            th.heat_rate_c_per_s,
+            th.cool_rate_c_per_s,
+            th.cool_knee_c,
+            th.cool_knee_c - th.cool_floor_c,
+        ]
+    )
+    lo = np.array([1.0, 1e-5, 1e-5, -150.0, 0.1])
+    hi = np.array([1e4, 1.0, 1.0, 300.0, 400.0])
+    a0 = float(pv[0])
+
+    if not with_overshoot:
+
+        def res1(x: np.ndarray) -> np.ndarray:
+            return _air_model(t, t, sp, a0, x, None) - pv
+
+        r = least_squares(res1, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=60)
+        x, os_ = r.x, None
+    else:
+        # coarse start for (overshoot, period), then all seven parameters together
+        starts = [overshoot] if overshoot else []
+        starts += [(o, p) for o in (0.05, 0.15, 0.35) for p in (400.0, 1200.0, 3000.0)]
+        best = None
+        for o, p in starts:
+            e = _air_model(t, t, sp, a0, x0, (o, p)) - pv
+            c = float(e @ e)
+            if best is None or c < best[0]:
+                best = (c, o, p)
+        assert best is not None
+        lo7 = np.concatenate([lo, [1e-3, 30.0]])
+        hi7 = np.concatenate([hi, [0.95, 2e4]])
+
+        def res2(x: np.ndarray) -> np.ndarray:
+            return _air_model(t, t, sp, a0, x[:5], (x[5], x[6])) - pv
+
+        x7 = np.clip(np.concatenate([x0, [best[1], best[2]]]), lo7, hi7)
+        r = least_squares(res2, x7, bounds=(lo7, hi7), x_scale="jac", max_nfev=120)
+        x, os_ = r.x[:5], (float(r.x[5]), float(r.x[6]))
+    pred = _air_model(t, t, sp, a0, x, os_)
+    params = {
+        "air_tau_s": float(x[0]),
+        "heat_rate_c_per_s": float(x[1]),
+        "cool_rate_c_per_s": float(x[2]),
+        "cool_knee_c": float(x[3]),
+        "cool_floor_c": float(x[3] - x[4]),
+    }
+    return OvenFit(params, os_, pred, pred - pv)
+
+
+@dataclass
+class CaseFit:
+    """Fitted case model and the PT100 reading it predicts."""
+
+    tau_s: float
+    self_heating_c: float
+    offset_c: float
+    with_offset: bool
+    grid_t: np.ndarray
+    case_c: np.ndarray
+    """Model case temperature on ``grid_t`` (true case, without the PT100 offset)."""
+    dcase_c_per_s: np.ndarray
+    resid: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def rms(self) -> float:
+        return float(np.sqrt(np.mean(self.resid**2)))
+
+    def loglik(self, floor_c: float) -> float:
+        n = self.resid.size
+        return -0.5 * n * math.log(max(float(np.mean(self.resid**2)), floor_c**2))
+
+    @property
+    def k(self) -> int:
+        return 2 + int(self.with_offset)
+
+
+def _lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
+    """``c_{k+1} = c_k + α (u_k − c_k)``, ``c_0 = c0``."""
+    c = np.empty(u.size)
+    c[0] = c0
+    if u.size > 1:
+        c[1:], _ = lfilter([alpha], [1.0, alpha - 1.0], u[:-1], zi=[(1.0 - alpha) * c0])
+    return c
+
+
+def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
+    """Fit ``τ_case``, ``ΔT_self`` (and the PT100 offset ``δ``) to the PT100 channel."""
+    t0 = float(min(d.pt100_t[0], d.oven_t[0]))
+    t1 = float(max(d.pt100_t[-1], d.t[-1] + d.bin_s))
+    grid = np.arange(t0, t1 + 1.0, 1.0)
+    air = np.interp(grid, d.oven_t, d.oven_pv)
+    a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
+    pt_t, pt_c = d.pt100_t, d.pt100_c
+
+    def solve(log_tau: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        tau = math.exp(log_tau)
+        alpha = 1.0 - math.exp(-1.0 / tau)
+        f = _lowpass(a_mid, alpha, float(air[0]))
+        g = _lowpass(np.ones_like(a_mid), alpha, 0.0)
+        cols = [np.interp(pt_t, grid, g)]
+        if with_offset:
+            cols.append(np.ones_like(pt_t))
+        A = np.column_stack(cols)
+        rhs = pt_c - np.interp(pt_t, grid, f)
+        coef, *_ = np.linalg.lstsq(A, rhs, rcond=None)
+        r = A @ coef - rhs
+        return float(r @ r), coef, f, g
+
+    res = minimize_scalar(
+        lambda lt: solve(lt)[0],
+        bounds=(math.log(max(5.0, tau0 / 20)), math.log(tau0 * 20)),
+        method="bounded",
+        options={"xatol": 1e-4},
+    )
+    _, coef, f, g = solve(float(res.x))
+    tau = math.exp(float(res.x))
+    dself = float(coef[0])
+    off = float(coef[1]) if with_offset else 0.0
+    case = f + dself * g
+    dcase = (a_mid + dself - case) / tau
+    resid = np.interp(pt_t, grid, case) + off - pt_c
+    return CaseFit(tau, dself, off, with_offset, grid, case, dcase, resid)
+
+
+def pt100_noise_c(d: BenchData) -> float:
+    """White noise of the PT100 channel from its second differences, °C."""
+    e = d.pt100_c[1:-1] - 0.5 * (d.pt100_c[:-2] + d.pt100_c[2:])
+    return float(1.4826 * np.median(np.abs(e - np.median(e))) / math.sqrt(1.5))

@@ -1,0 +1,571 @@
+"""The discrepancy loop: fit the current model, compare, localize, name, add, repeat.
+
+Channels and their candidate effects (each scored against the current model by a
+likelihood criterion on the data it lives in):
+
+=================  ==========================================  ==================
+channel            candidates                                  score
+=================  ==========================================  ==================
+temperature        ``oven_overshoot`` (oven PV),               ΔBIC
+                   ``rtd_self_heating`` (PT100)
+gyro, < 0.01 Hz    ``cubic_temp`` ``thermal_rate``             ΔBIC, AR(4) noise
+                   ``thermal_lag`` ``hysteresis`` ``warmup``
+                   ``aging_ramp`` ``periodic``
+gyro noise         ``rate_random_walk`` (Allan curve),         Δχ², LR, lattice
+                   ``outliers`` (spike tail),
+                   ``quantization`` (value lattice)
+=================  ==========================================  ==================
+
+``ΔBIC = BIC(current) − BIC(current + candidate)``. Each iteration looks at the channels in
+that order (temperatures feed the gyro regressors; the deterministic fit feeds the Allan
+curve of the residual) and adds the best candidate of the first channel that has a
+significant one. Candidates whose score is within :data:`AMBIGUITY_MARGIN` of the best are
+reported with it as an ``ambiguous`` set (at most three, best first): the data cannot tell
+them apart, and the best is the one added. The loop stops when no channel has a
+significant candidate.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from gyrolab.sim.discrepancy import noise_fit as nf
+from gyrolab.sim.discrepancy.data import BenchData
+from gyrolab.sim.discrepancy.gyro_fit import (
+    GYRO_EFFECTS,
+    NONLINEAR,
+    GyroContext,
+    GyroFit,
+    GyroStructure,
+    effect_params,
+    fit_structure,
+)
+from gyrolab.sim.discrepancy.thermal_fit import (
+    CaseFit,
+    OvenFit,
+    fit_case,
+    fit_oven,
+    pt100_noise_c,
+)
+from gyrolab.sim.model import SimModel, make_effect_spec
+from gyrolab.sim.thermal import ThermalParams
+
+GYRO_SIG = 10.0
+"""ΔBIC above which a gyro-channel candidate is significant."""
+TEMP_SIG = 25.0
+"""ΔBIC above which a temperature-channel candidate is significant."""
+TEMP_MIN_GAIN = 0.3
+"""…and it must also cut that channel's residual RMS by at least this fraction."""
+AMBIGUITY_MARGIN = 10.0
+"""Candidates within this many score units of the best are reported as ambiguous."""
+MAX_ITER = 6
+LF_WINDOW_S = 100.0
+"""Moving-average window of the low-frequency residual (0.01 Hz)."""
+
+TEMP_EFFECTS = ("oven_overshoot", "rtd_self_heating")
+NOISE_EFFECTS = ("rate_random_walk", "outliers", "quantization")
+STOCHASTIC_BASE = ("arw", "bias_instability")
+GAP_KEYS = (
+    "lf_residual_rms_dps",
+    "allan_log_distance",
+    "temperature_rms_c",
+    "oven_rms_c",
+    "pt100_rms_c",
+    "spike_log_ratio",
+    "lattice_tv_distance",
+)
+PRIMARY_GAP = {
+    **{n: "lf_residual_rms_dps" for n in GYRO_EFFECTS},
+    "oven_overshoot": "temperature_rms_c",
+    "rtd_self_heating": "temperature_rms_c",
+    "rate_random_walk": "allan_log_distance",
+    "arw": "allan_log_distance",
+    "bias_instability": "allan_log_distance",
+    "outliers": "spike_log_ratio",
+    "quantization": "lattice_tv_distance",
+}
+
+
+@dataclass
+class Structure:
+    """Which effects the model has, plus the values carried between iterations."""
+
+    effects: list[str]
+    theta: dict[str, float] = field(default_factory=dict)
+    overshoot: tuple[float, float] | None = None
+
+    def has(self, name: str) -> bool:
+        return name in self.effects
+
+    def plus(self, name: str) -> Structure:
+        return Structure(self.effects + [name], dict(self.theta), self.overshoot)
+
+
+@dataclass
+class Fitted:
+    """Everything fitted for one structure."""
+
+    structure: Structure
+    oven: OvenFit
+    case: CaseFit
+    gyro: GyroFit
+    ctx: GyroContext
+    noise: nf.NoiseFit
+    outliers: nf.OutlierFit | None
+    quant_q: float
+    gaps: dict[str, float]
+
+    @property
+    def resid(self) -> np.ndarray:
+        return self.ctx.y - self.gyro.pred
+
+
+def _poly_order(model: SimModel) -> int:
+    bp = model.get("bias_poly")
+    if bp is None:
+        return 2
+    return 4 if bp.params.get("c4", 0.0) else 3 if bp.params.get("c3", 0.0) else 2
+
+
+def moving_average(x: np.ndarray, k: int) -> np.ndarray:
+    """Centred moving average of ``k`` samples (edges use what is there)."""
+    if k <= 1:
+        return x
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    i = np.arange(x.size)
+    lo = np.clip(i - k // 2, 0, x.size)
+    hi = np.clip(i - k // 2 + k, 0, x.size)
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+class Workflow:
+    """Runs the discrepancy analysis of one recording against a starting model."""
+
+    def __init__(self, data: BenchData, model: SimModel) -> None:
+        self.d = data
+        self.model0 = model
+        self.pt_noise = max(pt100_noise_c(data), 1e-4)
+        self.lsb = model.sensors.adc.lsb_dps
+        self.poly_order = _poly_order(model)
+        self._oven_cache: dict[Any, OvenFit] = {}
+        self._case_cache: dict[bool, CaseFit] = {}
+
+    # ------------------------------------------------------------------ fitting
+    def _oven(self, st: Structure) -> OvenFit:
+        key = ("os", st.overshoot) if st.has("oven_overshoot") else "first"
+        if key not in self._oven_cache:
+            th = self.model0.thermal
+            if st.has("oven_overshoot"):
+                base = self._oven_cache.get("first") or fit_oven(self.d, th)
+                th = replace(th, **base.params)
+                self._oven_cache[key] = fit_oven(self.d, th, st.overshoot, with_overshoot=True)
+            else:
+                self._oven_cache[key] = fit_oven(self.d, th)
+        return self._oven_cache[key]
+
+    def _case(self, st: Structure) -> CaseFit:
+        k = st.has("rtd_self_heating")
+        if k not in self._case_cache:
+            self._case_cache[k] = fit_case(self.d, self.model0.thermal.case_tau_s, k)
+        return self._case_cache[k]
+
+    def _ctx(self, case: CaseFit) -> GyroContext:
+        d = self.d
+        # measured case temperature (reading minus the model's PT100 offset) on the grid
+        meas = np.interp(case.grid_t, d.pt100_t, d.pt100_c) - case.offset_c
+        return GyroContext(
+            t=d.t,
+            y=d.y,
+            grid_t=case.grid_t,
+            case_c=meas,
+            dcase=case.dcase_c_per_s,
+            duration_s=d.duration_s,
+            bin_s=d.bin_s,
+            poly_order=self.poly_order,
+        )
+
+    def _gyro_struct(self, st: Structure) -> GyroStructure:
+        names = [n for n in st.effects if n in GYRO_EFFECTS]
+        if "bias_poly" not in names:
+            names = ["bias_poly"] + names
+        theta = {n: st.theta[n] for n in names if n in NONLINEAR and n in st.theta}
+        return GyroStructure(names, theta)
+
+    def fit(self, st: Structure, scan: tuple[str, ...] = ()) -> Fitted:
+        oven = self._oven(st)
+        if st.has("oven_overshoot"):
+            st.overshoot = oven.overshoot
+        case = self._case(st)
+        ctx = self._ctx(case)
+        gyro = fit_structure(self._gyro_struct(st), ctx, scan=scan)
+        st.theta.update(gyro.struct.theta)
+        curve = nf.measured_allan(self.d, ctx.y - gyro.pred)
+        q = self.d.hr.lattice_step if st.has("quantization") else 0.0
+        terms = {n for n in st.effects if n in ("arw", "bias_instability", "rate_random_walk")}
+        noise = nf.fit_allan(curve, self.d.hr.dt, terms, q=q, white0=self.d.hr.white_sigma)
+        outl = nf.fit_outliers(self.d) if st.has("outliers") else None
+        f = Fitted(st, oven, case, gyro, ctx, noise, outl, q, {})
+        f.gaps = self.gaps(f)
+        return f
+
+    # --------------------------------------------------------------------- gaps
+    def gaps(self, f: Fitted) -> dict[str, float]:
+        d = self.d
+        k = max(1, int(round(LF_WINDOW_S / d.bin_s)))
+        lf = moving_average(f.resid, k)
+        ratio = np.log10(f.noise.curve.adev / f.noise.model_adev())
+        obs, gauss = nf.spike_counts(d)
+        model_spikes = 0.0
+        if f.outliers is not None:
+            sp = f.outliers.sim_params(d.hr.dt)
+            model_spikes = nf.expected_spike_excess(d, sp["rate_per_h"], sp["amplitude"])
+        q_data = d.hr.lattice_step
+        if q_data > 0:
+            q_model = f.quant_q if f.quant_q > 0 else self.lsb
+            h = nf.lattice_phase_hist(d, q_data)
+            hm = nf.model_phase_hist(q_data, q_model)
+            tv = 0.5 * float(np.sum(np.abs(h - hm)))
+        else:
+            tv = 0.0
+        return {
+            "lf_residual_rms_dps": float(np.sqrt(np.mean(lf**2))),
+            "allan_log_distance": float(np.sqrt(np.mean(ratio**2))),
+            "temperature_rms_c": float(math.sqrt(0.5 * (f.oven.rms**2 + f.case.rms**2))),
+            "oven_rms_c": f.oven.rms,
+            "pt100_rms_c": f.case.rms,
+            "spike_log_ratio": float(abs(math.log((obs + 1.0) / (gauss + model_spikes + 1.0)))),
+            "lattice_tv_distance": tv,
+        }
+
+    # --------------------------------------------------------------- candidates
+    def score_temperature(self, cur: Fitted) -> list[dict[str, Any]]:
+        out = []
+        st = cur.structure
+        if not st.has("oven_overshoot"):
+            cand = self.fit_oven_candidate(st)
+            n = cur.oven.resid.size
+            dbic = 2.0 * (cand.loglik() - cur.oven.loglik()) - 2.0 * math.log(n)
+            gain = 1.0 - cand.rms / max(cur.oven.rms, 1e-12)
+            out.append(
+                {
+                    "effect": "oven_overshoot",
+                    "channel": "temperature",
+                    "score": dbic,
+                    "significant": dbic > TEMP_SIG and gain > TEMP_MIN_GAIN,
+                    "evidence": {
+                        "oven_rms_c": [cur.oven.rms, cand.rms],
+                        "overshoot": cand.overshoot[0] if cand.overshoot else None,
+                        "period_s": cand.overshoot[1] if cand.overshoot else None,
+                    },
+                }
+            )
+        if not st.has("rtd_self_heating"):
+            cand_c = fit_case(self.d, self.model0.thermal.case_tau_s, True)
+            n = cur.case.resid.size
+            fl = 0.5 * self.pt_noise
+            dbic = 2.0 * (cand_c.loglik(fl) - cur.case.loglik(fl)) - math.log(n)
+            gain = 1.0 - cand_c.rms / max(cur.case.rms, 1e-12)
+            out.append(
+                {
+                    "effect": "rtd_self_heating",
+                    "channel": "temperature",
+                    "score": dbic,
+                    "significant": dbic > TEMP_SIG and gain > TEMP_MIN_GAIN,
+                    "evidence": {
+                        "pt100_rms_c": [cur.case.rms, cand_c.rms],
+                        "offset_c": cand_c.offset_c,
+                        "pt100_noise_c": self.pt_noise,
+                    },
+                }
+            )
+        return out
+
+    def fit_oven_candidate(self, st: Structure) -> OvenFit:
+        tmp = st.plus("oven_overshoot")
+        return self._oven(tmp)
+
+    def score_gyro(self, cur: Fitted) -> list[dict[str, Any]]:
+        out = []
+        st = cur.structure
+        base_struct = self._gyro_struct(st)
+        for name in GYRO_EFFECTS:
+            if name in base_struct.names or name == "bias_poly":
+                continue
+            if name == "cubic_temp" and self.poly_order >= 3:
+                continue
+            s2 = GyroStructure(base_struct.names + [name], dict(cur.gyro.struct.theta))
+            g = fit_structure(s2, cur.ctx, scan=(name,) if name in NONLINEAR else ())
+            dbic = cur.gyro.bic - g.bic
+            params = effect_params(g).get(name, {})
+            out.append(
+                {
+                    "effect": name,
+                    "channel": "gyro",
+                    "score": float(dbic),
+                    "significant": bool(dbic > GYRO_SIG),
+                    "evidence": {"delta_bic": float(dbic), "params": params},
+                    "_theta": g.struct.theta.get(name),
+                }
+            )
+        return out
+
+    def score_noise(self, cur: Fitted) -> list[dict[str, Any]]:
+        out = []
+        st = cur.structure
+        d = self.d
+        if not st.has("rate_random_walk"):
+            terms = {n for n in st.effects if n in ("arw", "bias_instability")}
+            terms.add("rate_random_walk")
+            k = nf.fit_allan(cur.noise.curve, d.hr.dt, terms, cur.quant_q, d.hr.white_sigma)
+            dchi = cur.noise.chi2 - k.chi2
+            out.append(
+                {
+                    "effect": "rate_random_walk",
+                    "channel": "noise",
+                    "score": float(dchi),
+                    "significant": bool(dchi > nf.RRW_CHI2),
+                    "evidence": {
+                        "allan_chi2": [cur.noise.chi2, k.chi2],
+                        "K_deg_per_h_sqrt_h": k.k_rrw * 3600 * 60,
+                    },
+                }
+            )
+        if not st.has("outliers"):
+            o = nf.fit_outliers(d)
+            obs, gauss = nf.spike_counts(d)
+            out.append(
+                {
+                    "effect": "outliers",
+                    "channel": "noise",
+                    "score": float(o.lr),
+                    "significant": bool(o.lr > nf.OUTLIER_LR and o.amplitude > 4.0 * o.sigma),
+                    "evidence": {
+                        "likelihood_ratio": o.lr,
+                        "exceedances_5sigma": obs,
+                        "gaussian_expectation_5sigma": gauss,
+                        **o.sim_params(d.hr.dt),
+                    },
+                }
+            )
+        if not st.has("quantization"):
+            q, frac = d.hr.lattice_step, d.hr.lattice_fraction
+            ratio = q / self.lsb if self.lsb > 0 else float("inf")
+            sig = ratio > nf.LATTICE_RATIO and frac > nf.LATTICE_FRACTION
+            out.append(
+                {
+                    "effect": "quantization",
+                    "channel": "noise",
+                    "score": float(1e3 * frac if sig else 0.0),
+                    "significant": bool(sig),
+                    "evidence": {
+                        "lattice_step_dps": q,
+                        "adc_lsb_dps": self.lsb,
+                        "fraction_on_lattice": frac,
+                    },
+                }
+            )
+        return out
+
+    # --------------------------------------------------------------- localize
+    def localize(self, f: Fitted) -> dict[str, Any]:
+        d = self.d
+        r = moving_average(f.resid, max(1, int(round(LF_WINDOW_S / d.bin_s))))
+        steps = []
+        for s in d.steps:
+            m = (d.t >= s.t0) & (d.t < s.t1)
+            if m.sum() >= 2:
+                steps.append(
+                    {
+                        "step": s.index,
+                        "setpoint_c": s.setpoint_c,
+                        "lf_rms_dps": float(np.sqrt(np.mean(r[m] ** 2))),
+                    }
+                )
+        worst = sorted(steps, key=lambda x: -x["lf_rms_dps"])[:3]
+        T = np.interp(d.t, f.ctx.grid_t, f.ctx.case_c)
+        edges = np.arange(np.floor(T.min() / 10) * 10, np.ceil(T.max() / 10) * 10 + 10, 10)
+        tbins = []
+        for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+            m = (T >= lo) & (T < hi)
+            if m.sum() >= 3:
+                tbins.append(
+                    {
+                        "range_c": [float(lo), float(hi)],
+                        "mean_dps": float(np.mean(r[m])),
+                        "rms_dps": float(np.sqrt(np.mean(r[m] ** 2))),
+                    }
+                )
+        dT = 60.0 * np.interp(d.t, f.ctx.grid_t, f.ctx.dcase)
+        corr = float(np.corrcoef(r, dT)[0, 1]) if np.std(dT) > 0 and np.std(r) > 0 else 0.0
+        c = f.noise.curve
+        z = np.log(c.adev / f.noise.model_adev()) * np.sqrt(c.edf / 2.0) * 2.0
+        bad = np.abs(z) > 3.0
+        tau_range = [float(c.tau[bad].min()), float(c.tau[bad].max())] if bad.any() else None
+        ov = f.oven.resid
+        oven_steps = []
+        for s in d.steps:
+            m = (d.oven_t >= s.t0) & (d.oven_t < s.t1)
+            if m.any():
+                oven_steps.append({"step": s.index, "max_abs_c": float(np.max(np.abs(ov[m])))})
+        return {
+            "worst_steps": worst,
+            "temperature_bins": tbins,
+            "corr_residual_dTdt": corr,
+            "allan_tau_range_s": tau_range,
+            "oven_worst_steps": sorted(oven_steps, key=lambda x: -x["max_abs_c"])[:3],
+        }
+
+    # ----------------------------------------------------------------- the loop
+    def run(self, log: Any = None) -> Result:
+        t_start = time.perf_counter()
+        names0 = self.model0.effect_names()
+        st = Structure(
+            [n for n in names0 if n != "thermal_lag"]
+            + (["thermal_lag"] if "thermal_lag" in names0 else [])
+        )
+        for n in NONLINEAR:
+            spec = self.model0.get(n)
+            if spec is not None:
+                st.theta[n] = float(spec.params[{"periodic": "period_s"}.get(n, NONLINEAR[n])])
+        ovs = self.model0.get("oven_overshoot")
+        if ovs is not None:
+            st.overshoot = (ovs.params["overshoot"], ovs.params["period_s"])
+        cur = self.fit(st)
+        first = cur
+        found: list[str] = []
+        ambiguous: list[list[str]] = []
+        steps: list[dict[str, Any]] = []
+        for it in range(MAX_ITER):
+            cands: list[dict[str, Any]] = []
+            chosen = None
+            for scorer in (self.score_temperature, self.score_gyro, self.score_noise):
+                cs = scorer(cur)
+                cands += cs
+                sig = [c for c in cs if c["significant"]]
+                if sig:
+                    chosen = sorted(sig, key=lambda c: -c["score"])
+                    break
+            entry: dict[str, Any] = {
+                "iteration": it,
+                "model_effects": list(cur.structure.effects),
+                "gap": dict(cur.gaps),
+                "localize": self.localize(cur),
+                "candidates": [
+                    {k: v for k, v in c.items() if not k.startswith("_")} for c in cands
+                ],
+            }
+            if not chosen:
+                entry["added"] = None
+                steps.append(entry)
+                break
+            best = chosen[0]
+            amb = [best["effect"]] + [
+                c["effect"] for c in chosen[1:] if best["score"] - c["score"] < AMBIGUITY_MARGIN
+            ]
+            amb = amb[:3]
+            new = cur.structure.plus(best["effect"])
+            if best.get("_theta") is not None:
+                new.theta[best["effect"]] = float(best["_theta"])
+            nxt = self.fit(new)
+            key = PRIMARY_GAP.get(best["effect"], "lf_residual_rms_dps")
+            entry["added"] = best["effect"]
+            entry["ambiguous_with"] = amb[1:]
+            entry["gap_metric"] = key
+            entry["gap_metric_before_after"] = [cur.gaps[key], nxt.gaps[key]]
+            steps.append(entry)
+            found.append(best["effect"])
+            if len(amb) > 1:
+                ambiguous.append(amb)
+            if log:
+                log(
+                    f"iteration {it}: added {best['effect']}"
+                    + (f" (ambiguous: {amb})" if len(amb) > 1 else "")
+                )
+            cur = nxt
+        model = self.updated_model(cur)
+        return Result(
+            effects_found=found,
+            ambiguous=ambiguous,
+            gap_before=first.gaps,
+            gap_after=cur.gaps,
+            steps=steps,
+            model=model,
+            first=first,
+            final=cur,
+            elapsed_s=time.perf_counter() - t_start,
+        )
+
+    # ------------------------------------------------------------- the model
+    def updated_model(self, f: Fitted) -> SimModel:
+        m0 = self.model0
+        th = dict(m0.thermal.to_dict())
+        th.update(f.oven.params)
+        tau, dself = f.case.tau_s, f.case.self_heating_c
+        p = th["gyro_power_w"]
+        if dself > 1e-6 and p > 0:
+            r = dself / p
+        else:
+            th["gyro_power_w"] = 0.0
+            r = th["case_resistance_k_per_w"]
+        th["case_resistance_k_per_w"] = r
+        th["case_capacity_j_per_k"] = tau / r
+        params: dict[str, dict[str, float]] = effect_params(f.gyro)
+        params.update({k: v for k, v in f.noise.sim_params().items() if k in f.structure.effects})
+        if f.outliers is not None:
+            params["outliers"] = f.outliers.sim_params(self.d.hr.dt)
+        if f.structure.has("quantization"):
+            params["quantization"] = {"q": self.d.hr.lattice_step}
+        if f.oven.overshoot is not None:
+            params["oven_overshoot"] = {
+                "overshoot": f.oven.overshoot[0],
+                "period_s": f.oven.overshoot[1],
+            }
+        if f.structure.has("rtd_self_heating"):
+            params["rtd_self_heating"] = {"offset_c": f.case.offset_c}
+        order = [n for n in m0.effect_names()] + [
+            n for n in f.structure.effects if n not in m0.effect_names()
+        ]
+        if "bias_poly" not in order:
+            order.insert(0, "bias_poly")
+        specs = []
+        for n in order:
+            base = m0.get(n).params if m0.get(n) is not None else {}
+            specs.append(make_effect_spec(n, {**base, **params.get(n, {})}))
+        return SimModel(thermal=ThermalParams(**th), sensors=m0.sensors, effects=tuple(specs))
+
+
+@dataclass
+class Result:
+    """Outcome of a discrepancy analysis (DESIGN.md ``discrepancy.json`` contract)."""
+
+    effects_found: list[str]
+    ambiguous: list[list[str]]
+    gap_before: dict[str, float]
+    gap_after: dict[str, float]
+    steps: list[dict[str, Any]]
+    model: SimModel
+    first: Fitted
+    final: Fitted
+    elapsed_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "effects_found": self.effects_found,
+            "ambiguous": self.ambiguous,
+            "gap_before": self.gap_before,
+            "gap_after": self.gap_after,
+            "steps": self.steps,
+            "elapsed_s": self.elapsed_s,
+        }
+
+
+def run_discrepancy(data: BenchData, model: SimModel | None = None, log: Any = None) -> Result:
+    """Analyse ``data`` against ``model`` (default: the simulator's nominal model)."""
+    from gyrolab.sim.model import nominal_model
+
+    return Workflow(data, model or nominal_model()).run(log)
