@@ -212,3 +212,15 @@ def test_memory_is_one_phase_array() -> None:
     tracemalloc.stop()
     assert ours < 8 * y.size + 12e6  # one float64 phase array + noise-ID scratch
     assert ours <= 0.5 * peer, (ours, peer)
+
+
+def test_to_dict_round_trips_through_json() -> None:
+    import json
+
+    rng = np.random.default_rng(10)
+    r = allan_deviation(rng.standard_normal(5000), 2.0)
+    d = json.loads(json.dumps(r.to_dict()))
+    np.testing.assert_allclose(d["adev"], r.adev)
+    assert d["duration_s"] == pytest.approx(2500.0)
+    t = json.loads(json.dumps(noise_terms(r).to_dict()))
+    assert t["arw_deg_per_sqrt_h"] == pytest.approx(60 * t["N"])

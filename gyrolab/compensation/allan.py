@@ -398,6 +398,28 @@ class AllanResult:
     def avar(self) -> np.ndarray:
         return self.adev**2
 
+    @property
+    def duration_s(self) -> float:
+        """Length of the record (s) the curve was computed on."""
+        return float(self.extra.get("record_s", float("nan")))
+
+    def to_dict(self) -> dict:
+        """JSON-ready copy (lists of floats; NaN stays NaN)."""
+        d: dict = {
+            k: [float(v) for v in getattr(self, k)]
+            for k in ("taus", "adev", "adev_lo", "adev_hi", "edf", "alpha")
+        }
+        d.update(
+            n=[int(v) for v in self.n],
+            m=[int(v) for v in self.m],
+            rate=self.rate,
+            overlapping=self.overlapping,
+            confidence=self.confidence,
+            data_type=self.data_type,
+            duration_s=self.duration_s,
+        )
+        return d
+
 
 def _check_input(data: np.ndarray, rate: float) -> None:
     if not (np.isfinite(rate) and rate > 0):
@@ -542,6 +564,16 @@ class NoiseTerms:
     tau_b: float = float("nan")  #: tau (s) of the minimum of the curve (B read there)
     slopes: dict = field(default_factory=dict)  #: local slope actually used per term
 
+    def to_dict(self) -> dict:
+        """JSON-ready: the raw terms, the customary units, method, tau_b and slopes."""
+        return {
+            **{k: getattr(self, k) for k in "QNBKR"},
+            **self.deg_h(),
+            "method": self.method,
+            "tau_b": self.tau_b,
+            "slopes": dict(self.slopes),
+        }
+
     def deg_h(self) -> dict[str, float]:
         """The terms for data in deg/s, in the customary gyro units."""
         return {
@@ -581,7 +613,7 @@ def noise_terms(
     edf = np.asarray(result.edf, dtype=float)[ok]
     if taus.size == 0:
         raise InputError(None, "Allan deviation curve is empty or zero")
-    record_s = float(result.extra.get("record_s", np.inf))
+    record_s = result.duration_s if np.isfinite(result.duration_s) else np.inf
     usable = taus <= b_max_tau_fraction * record_s
     if not usable.any():
         usable[:] = True
