@@ -206,12 +206,14 @@ class WatlowF4:
         return self._units
 
     def _to_c(self, raw: int) -> float:
-        v = raw / 10**self.decimals
+        scale = 10**self.decimals  # read 606 before 901, always in that order
+        v = raw / scale
         return v if self.units == UNITS_C else (v - 32.0) * 5.0 / 9.0
 
     def _to_raw(self, value_c: float) -> int:
+        scale = 10**self.decimals
         v = value_c if self.units == UNITS_C else value_c * 9.0 / 5.0 + 32.0
-        return round(v * 10**self.decimals)
+        return round(v * scale)
 
     @property
     def process_value_c(self) -> float:

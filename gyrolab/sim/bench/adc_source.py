@@ -76,6 +76,7 @@ class AdcSource:
         self._stall_backlog: list[tuple[int, bytes]] | None = None
         self._lock = threading.Lock()
         self._frame_bytes = frame_size(self.n)
+        self._congested = False
 
     # ----------------------------------------------------------------- faults
     def start_stall(self) -> None:
@@ -143,12 +144,15 @@ class AdcSource:
             self._mark(slots, UNPLUGGED)
             return
         try:
-            done = self.port.write(data, self.write_timeout_s)
+            # While nobody drains the port (no reader, or it fell behind), do not wait on
+            # it again: a UART transmits regardless and the receiver overruns.
+            done = self.port.write(data, 0.0 if self._congested else self.write_timeout_s)
         except PortClosed:
             self.stats.unplugged += len(frames)
             self._mark(slots, UNPLUGGED)
             return
         self.stats.bytes_written += done
+        self._congested = done < len(data)
         if done < len(data):
             # Frames from the one cut short onward never made it out whole.
             pos = 0

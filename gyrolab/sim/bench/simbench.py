@@ -13,6 +13,7 @@ speed.
 
 from __future__ import annotations
 
+import copy
 import heapq
 import itertools
 import shutil
@@ -86,6 +87,9 @@ class SimBench:
             rate_hz=self.rate_hz,
             faults=self.faults.adc,
             keep_truth=keep_truth,
+            # Back-pressure only when running as fast as possible; paced, a slow reader
+            # overruns like a real UART receiver would.
+            write_timeout_s=0.5 if speed is None else 0.05,
         )
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint),
@@ -214,6 +218,9 @@ class SimBench:
     # ---------------------------------------------------------------- running
     def start(self) -> SimBench:
         """Plug in the ports, start the servers and the tick thread."""
+        # Compile the physics' JIT kernels on a throwaway copy first (about 1 s, once per
+        # process), so the first tick does not hold the physics lock while responders wait.
+        copy.deepcopy(self.physics).advance(self.frames_per_tick * self.samples_per_frame)
         for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
             p.connect()
         for s in self._servers:

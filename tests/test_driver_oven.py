@@ -1,0 +1,226 @@
+"""Watlow F4 driver: the Modbus RTU bytes (PyMeasure-style expected request → reply
+lists), limits checked before any I/O, read-back, retries, and end to end over a pty."""
+
+from __future__ import annotations
+
+import os
+
+import minimalmodbus
+import pytest
+
+from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.acquisition.oven import WatlowF4
+from gyrolab.sim.bench import FaultEvent, SimBench
+from gyrolab.sim.bench.oven_modbus import crc16_modbus, with_crc
+from gyrolab.sim.bench.serial_pty import PtyPort
+
+H = bytes.fromhex
+# Requests (slave 1) and replies, CRC included, written out byte by byte.
+READ_DP = H("01 03 02 5e 00 01 e4 60")
+DP_1 = H("01 03 02 00 01 79 84")
+READ_UNITS = H("01 03 03 85 00 01 95 a7")
+UNITS_C = DP_1  # register value 1 = °C
+READ_SP = H("01 03 01 2c 00 01 44 3f")
+WRITE_SP_M40 = H("01 06 01 2c fe 70 08 7b")  # setpoint -40.0 °C = raw -400
+SP_M40 = H("01 03 02 fe 70 f9 c0")
+READ_PV = H("01 03 00 64 00 01 c5 d5")
+PV_25_3 = H("01 03 02 00 fd 79 c5")  # 25.3 °C = raw 253
+BUSY = H("01 86 06 c2 62")  # exception 06, slave device busy
+
+
+class ExpectedSerial:
+    """A pyserial stand-in that checks every request against the expected list and
+    plays the paired reply (None: stay silent)."""
+
+    def __init__(self, dialogue: list[tuple[bytes, bytes | None]]) -> None:
+        self.dialogue = list(dialogue)
+        self.written: list[bytes] = []
+        self._rx = b""
+        self.is_open = True
+        self.port = "expected"
+        self.baudrate = 19200
+        self.timeout = 0.05
+
+    def open(self) -> None:
+        self.is_open = True
+
+    def close(self) -> None:
+        self.is_open = False
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        assert self.dialogue, f"unexpected request {data.hex(' ')}"
+        want, reply = self.dialogue.pop(0)
+        assert data == want, f"sent {data.hex(' ')}, expected {want.hex(' ')}"
+        self._rx += reply or b""
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        out, self._rx = self._rx[:n], self._rx[n:]
+        return out
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._rx)
+
+    def reset_input_buffer(self) -> None:
+        self._rx = b""
+
+    def reset_output_buffer(self) -> None:
+        pass
+
+    def assert_done(self) -> None:
+        assert not self.dialogue, f"never sent: {[d[0].hex(' ') for d in self.dialogue]}"
+
+
+def test_crc_matches_minimalmodbus() -> None:
+    frame = H("01 03 00 64 00 01")
+    assert with_crc(frame) == READ_PV
+    assert crc16_modbus(frame).to_bytes(2, "little") == minimalmodbus._calculate_crc(frame)
+
+
+def test_set_setpoint_bytes_and_readback() -> None:
+    fake = ExpectedSerial(
+        [
+            (READ_DP, DP_1),
+            (READ_UNITS, UNITS_C),
+            (WRITE_SP_M40, WRITE_SP_M40),  # function 06 echoes the request
+            (READ_SP, SP_M40),
+        ]
+    )
+    oven = WatlowF4(fake)
+    assert oven.set_setpoint(-40.0) == -40.0
+    fake.assert_done()
+
+
+def test_process_value_signed_with_implied_decimals() -> None:
+    fake = ExpectedSerial([(READ_PV, PV_25_3), (READ_DP, DP_1), (READ_UNITS, UNITS_C)])
+    assert WatlowF4(fake).process_value_c == pytest.approx(25.3)
+    fake.assert_done()
+
+
+def test_fahrenheit_controller_is_converted() -> None:
+    f_units = with_crc(H("01 03 02 00 00"))  # 0 = °F
+    raw_104f = with_crc(H("01 03 02 04 10"))  # 104.0 °F = 40.0 °C
+    fake = ExpectedSerial(
+        [
+            (READ_DP, DP_1),
+            (READ_UNITS, f_units),
+            (with_crc(H("01 06 01 2c 04 10")), with_crc(H("01 06 01 2c 04 10"))),
+            (READ_SP, raw_104f),
+        ]
+    )
+    assert WatlowF4(fake).set_setpoint(40.0) == pytest.approx(40.0)
+    fake.assert_done()
+
+
+@pytest.mark.parametrize("bad", [80.0, -60.0, float("nan"), float("inf")])
+def test_out_of_limit_setpoint_refused_before_any_byte(bad: float) -> None:
+    fake = ExpectedSerial([])  # any write fails the test
+    oven = WatlowF4(fake, setpoint_limits_c=(-45.0, 70.0))
+    with pytest.raises(LimitError):
+        oven.set_setpoint(bad)
+    assert fake.written == []
+
+
+def test_out_of_limit_setpoint_puts_nothing_on_a_real_port() -> None:
+    port = PtyPort()
+    port.connect()
+    try:
+        oven = WatlowF4(port.path, setpoint_limits_c=(-45.0, 70.0))
+        with pytest.raises(LimitError):
+            oven.setpoint_c = 100.0
+        oven.close()
+        assert port.read(0.2) == b""  # not one byte reached the far end of the wire
+    finally:
+        port.disconnect()
+
+
+def test_readback_mismatch_raises() -> None:
+    fake = ExpectedSerial(
+        [
+            (READ_DP, DP_1),
+            (READ_UNITS, UNITS_C),
+            (WRITE_SP_M40, WRITE_SP_M40),
+            (READ_SP, PV_25_3),  # the controller kept another value
+        ]
+    )
+    with pytest.raises(InstrumentError, match="read-back 253 != written -400"):
+        WatlowF4(fake).set_setpoint(-40.0)
+
+
+def test_exception_response_retried_then_succeeds() -> None:
+    fake = ExpectedSerial([(READ_PV, BUSY), (READ_PV, PV_25_3)])
+    oven = WatlowF4(fake, retries=2)
+    assert oven.read_register(100) == 253
+    assert oven.stats.exceptions == 1 and oven.stats.retries == 1
+
+
+def test_crc_error_and_silence_exhaust_retries() -> None:
+    bad_crc = PV_25_3[:-1] + bytes([PV_25_3[-1] ^ 0xFF])
+    fake = ExpectedSerial([(READ_PV, bad_crc), (READ_PV, bad_crc), (READ_PV, bad_crc)])
+    oven = WatlowF4(fake, retries=2)
+    with pytest.raises(InstrumentError, match="failed after 3 tries"):
+        oven.read_register(100)
+    assert oven.stats.bad_reply == 3
+    silent = ExpectedSerial([(READ_PV, None), (READ_PV, None)])
+    with pytest.raises(InstrumentTimeout):
+        WatlowF4(silent, retries=1).read_register(100)
+
+
+# ------------------------------------------------------------------- end to end
+
+
+def test_end_to_end_setpoint_moves_the_simulated_oven() -> None:
+    with SimBench(speed=200.0) as bench:
+        with WatlowF4(bench.oven_port) as oven:
+            info = oven.connect()
+            assert info["units"] == "C" and info["decimals"] == 1
+            assert info["process_value_c"] == pytest.approx(25.0, abs=0.1)
+            assert oven.set_setpoint(45.5) == 45.5
+            assert bench.physics.setpoint_c == 45.5
+            assert oven.status.heating
+            t0 = bench.clock.now()
+            bench.clock.wait_until(t0 + 120.0, timeout_wall_s=10.0)
+            pv = oven.process_value_c
+            with bench.lock:
+                air = bench.physics.chamber_c()
+            assert 25.5 < pv <= 46.0  # the chamber is heating toward the setpoint
+            assert pv == pytest.approx(air, abs=0.5)  # PV is the simulated air (0.1 °C steps)
+
+
+def test_end_to_end_modbus_fault_burst_is_retried() -> None:
+    with SimBench(speed=50.0) as bench:
+        with WatlowF4(bench.oven_port, retries=3, timeout_s=0.2) as oven:
+            oven.connect()
+            for kind in ("modbus_exception", "modbus_crc", "modbus_no_reply"):
+                bench.inject(FaultEvent(kind, count=2))
+                assert oven.process_value_c == pytest.approx(25.0, abs=0.2)
+            assert oven.stats.exceptions == 2
+            assert oven.stats.bad_reply == 2
+            assert oven.stats.no_reply == 2
+            bench.inject(FaultEvent("modbus_no_reply", count=10))
+            with pytest.raises(InstrumentTimeout):
+                _ = oven.process_value_c
+
+
+def test_simulated_controller_rejects_its_own_out_of_range_setpoint() -> None:
+    # The driver's limits are the lab's; the controller has its own (-73…190 °C) too.
+    with SimBench(speed=50.0) as bench:
+        with WatlowF4(bench.oven_port, setpoint_limits_c=(-100.0, 300.0), retries=0) as oven:
+            with pytest.raises(InstrumentError, match="failed"):
+                oven.set_setpoint(250.0)
+            assert bench.physics.setpoint_c == 25.0
+
+
+def test_pty_unplugged_port_raises_instrument_error(tmp_path: os.PathLike[str]) -> None:
+    with pytest.raises(InstrumentError, match="cannot open"):
+        WatlowF4(os.path.join(tmp_path, "ttyUSB9"))
+
+
+@pytest.mark.hardware
+@pytest.mark.skipif(not os.environ.get("GYROLAB_OVEN_PORT"), reason="set GYROLAB_OVEN_PORT")
+def test_real_oven_reads_only() -> None:
+    with WatlowF4(os.environ["GYROLAB_OVEN_PORT"]) as oven:
+        info = oven.connect()
+        assert -80.0 < info["process_value_c"] < 200.0
