@@ -7,6 +7,8 @@ from pathlib import Path
 import allantools
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gyrolab.compensation.allan import (
     allan_deviation,
@@ -224,3 +226,21 @@ def test_to_dict_round_trips_through_json() -> None:
     assert d["duration_s"] == pytest.approx(2500.0)
     t = json.loads(json.dumps(noise_terms(r).to_dict()))
     assert t["arw_deg_per_sqrt_h"] == pytest.approx(60 * t["N"])
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(8, 3000),
+    scale=st.floats(1e-6, 1e6),
+    offset=st.floats(-1e3, 1e3),
+)
+def test_invariances(seed: int, n: int, scale: float, offset: float) -> None:
+    """sigma(c (y + b)) = |c| sigma(y); reversing the record leaves it unchanged."""
+    y = np.random.default_rng(seed).standard_normal(n)
+    a = allan_deviation(y, 1.0, taus="all", confidence=None)
+    # offset relative to the scale: float64 itself keeps ~1e-16 of |c y + b|
+    b = allan_deviation(scale * (y + offset), 1.0, taus="all", confidence=None)
+    r = allan_deviation(y[::-1], 1.0, taus="all", confidence=None)
+    np.testing.assert_allclose(b.adev, scale * a.adev, rtol=1e-7)
+    np.testing.assert_allclose(r.adev, a.adev, rtol=1e-9)
