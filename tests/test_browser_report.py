@@ -22,8 +22,9 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from test_demo import MODEL_FIGURES, make_demo
 
-from gyrolab.cli import main
+RAW_FIGURES = ("temperature", "raw-output", "allan")
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(
@@ -88,6 +89,12 @@ def _chromium(args: list[str], timeout: float = 60.0) -> subprocess.CompletedPro
         )
 
 
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The demo of tests/test_demo.py (made once per session, whichever test asks first)."""
+    return make_demo(tmp_path_factory)
+
+
 def probe(html_path: Path) -> dict:
     """Load ``html_path`` (a probed copy) in Chromium and return what the probe saw."""
     html = html_path.read_text(encoding="utf-8")
@@ -113,18 +120,6 @@ def screenshot(html_path: Path, png: Path, size: str = "1200,2600") -> None:
     assert png.is_file() and png.stat().st_size > 10_000, res.stderr[-2000:]
 
 
-@pytest.fixture(scope="module")
-def raw_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    d = tmp_path_factory.mktemp("browser")
-    run = d / "short.mcap"
-    assert (
-        main(["simulate", "--out", str(run), "--profile", "short", "--rate", "10", "--seed", "5"])
-        == 0
-    )
-    assert main(["report", str(run), "--out", str(d / "report")]) == 0
-    return d / "report" / "index.html"
-
-
 def test_probe_catches_errors(tmp_path: Path) -> None:
     """The probe is real: a page with a script error and a missing image is caught."""
     page = tmp_path / "bad.html"
@@ -139,11 +134,38 @@ def test_probe_catches_errors(tmp_path: Path) -> None:
     assert seen["images"][0]["w"] == 0
 
 
-def test_raw_report_renders_without_errors(raw_report: Path) -> None:
-    seen = probe(raw_report)
+@pytest.mark.parametrize(
+    ("report", "figures"),
+    [
+        ("report", RAW_FIGURES + MODEL_FIGURES),  # held-out run with the model
+        ("calibration-report", RAW_FIGURES),  # raw record
+    ],
+)
+def test_report_renders_every_figure_without_errors(
+    demo_run: Path, report: str, figures: tuple[str, ...]
+) -> None:
+    seen = probe(demo_run / report / "index.html")
     assert seen["errors"] == []
-    ids = {im["id"] for im in seen["images"]}
-    assert {"fig-temperature", "fig-raw-output", "fig-allan"} <= ids
+    ids = [im["id"] for im in seen["images"]]
+    assert sorted(ids) == sorted(f"fig-{f}" for f in figures)
     for im in seen["images"]:
         assert im["complete"] and im["w"] > 300 and im["h"] > 150 and im["shown"] > 300, im
-    assert seen["sections"] >= 4
+    assert seen["sections"] >= (5 if report == "report" else 4)
+
+
+def test_screenshot(demo_run: Path, tmp_path: Path) -> None:
+    """A screenshot of the top of the report is not blank; GYROLAB_UPDATE_SCREENSHOT=1 also
+    copies it to docs/img/report-screenshot.png (the docs image)."""
+    png = tmp_path / "shot.png"
+    screenshot(demo_run / "report" / "index.html", png, size="1200,2250")
+    from PIL import Image
+
+    im = Image.open(png).convert("L")
+    assert im.size == (1200, 2250)
+    hist = im.histogram()
+    # mostly white page, but a real share of non-white pixels (text, figures)
+    assert sum(hist[:200]) > 0.03 * im.size[0] * im.size[1]
+    if os.environ.get("GYROLAB_UPDATE_SCREENSHOT") == "1":
+        dest = Path(__file__).resolve().parents[1] / "docs" / "img" / "report-screenshot.png"
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(png, dest)

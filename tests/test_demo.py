@@ -1,0 +1,110 @@
+"""gyrolab demo and the report with a model: simulate -> compensate -> report, end to end.
+
+The demo runs once per session on the short profile at 10 Hz (the paper profile at 100 Hz
+is the command's default and is timed in docs/report.md); the browser test reuses it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from gyrolab.cli import main
+from gyrolab.report.demo import run_demo
+
+METRIC_KEYS = {
+    "arw_deg_per_sqrt_h",
+    "bias_instability_deg_per_h",
+    "bias_stability_deg_per_h",
+    "drift_pp_deg_per_s",
+    "rms_deg_per_s",
+}
+MODEL_FIGURES = ("gpso", "vmd-modes", "mpe", "drift-fit", "compensated")
+
+
+def make_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One small demo (short profile, 10 Hz) per session, shared by the tests (the browser
+    test too) that need a model: made on first use, found in the session's temp dir after."""
+    out = tmp_path_factory.getbasetemp() / "demo"
+    if not (out / "report" / "index.html").is_file():
+        run_demo(out, profile="short", seed=1, rate_hz=10.0)
+    return out
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return make_demo(tmp_path_factory)
+
+
+def test_demo_writes_every_stage(demo_run: Path) -> None:
+    for name in (
+        "calibration.mcap",
+        "heldout.mcap",
+        "model/model.json",
+        "model/metrics.json",
+        "report/index.html",
+        "report/metrics.json",
+        "report/report.pdf",
+        "calibration-report/index.html",
+        "demo.json",
+    ):
+        assert (demo_run / name).is_file(), name
+    timing = json.loads((demo_run / "demo.json").read_text())["timing_s"]
+    assert timing["total"] > 0 and set(timing) >= {"compensate", "report"}
+
+
+def test_model_report_contract(demo_run: Path) -> None:
+    m = json.loads((demo_run / "report" / "metrics.json").read_text())
+    # DESIGN.md keys, with held-out metrics (the model was fitted on the other seed)
+    assert m["held_out"] is True
+    for key in ("raw", "compensated"):
+        assert set(m[key]) >= METRIC_KEYS
+    assert m["baselines"] and all(set(b) >= METRIC_KEYS for b in m["baselines"].values())
+    assert isinstance(m["vmd"]["K"], int) and m["vmd"]["alpha"] > 0
+    assert set(m["imf_classes"]) == {"noise", "mixed", "drift"} and m["imf_classes"]["drift"]
+    assert m["timing_s"] > 0
+    # the compensation removes most of the temperature drift of the held-out run
+    assert m["compensated"]["drift_pp_deg_per_s"] < 0.6 * m["raw"]["drift_pp_deg_per_s"]
+    # the report's numbers are the compensate command's numbers for the same run
+    mm = json.loads((demo_run / "model" / "metrics.json").read_text())
+    assert mm["held_out"] is True
+    for key in METRIC_KEYS:
+        assert m["compensated"][key] == pytest.approx(mm["compensated"][key], rel=1e-9)
+    html = (demo_run / "report" / "index.html").read_text(encoding="utf-8")
+    for key in ("temperature", "raw-output", "allan", *MODEL_FIGURES):
+        assert f'id="fig-{key}"' in html, key
+    assert 'id="tab-baselines"' in html and "held out" in html
+
+
+def test_report_on_the_calibration_run_is_in_sample(demo_run: Path, tmp_path: Path) -> None:
+    out = tmp_path / "cal"
+    assert (
+        main(
+            [
+                "report",
+                str(demo_run / "calibration.mcap"),
+                "--model",
+                str(demo_run / "model"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["held_out"] is False
+    raw_only = json.loads((demo_run / "calibration-report" / "metrics.json").read_text())
+    for key in METRIC_KEYS:  # same run, same raw metrics with or without the model
+        assert m["raw"][key] == pytest.approx(raw_only["raw"][key], rel=1e-9)
+
+
+def test_demo_bad_input_exits_2(
+    demo_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["demo", "--out", str(demo_run)]) == 2  # exists, no --force
+    assert "already exists" in capsys.readouterr().err
+    assert main(["demo", "--out", str(tmp_path / "d"), "--profile", "nope.toml"]) == 2
+    assert "nope.toml" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
