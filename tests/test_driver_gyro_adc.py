@@ -258,3 +258,17 @@ def test_reader_reports_open_failure_then_recovers(tmp_path: os.PathLike[str]) -
     assert not reader.connected
     assert any(e.kind == "open_failed" for e in r.events)
     assert reader._backoff > 0.01  # backoff grew
+
+
+@pytest.mark.hardware
+@pytest.mark.skipif(not os.environ.get("GYROLAB_ADC_PORT"), reason="set GYROLAB_ADC_PORT")
+def test_real_adc_stream() -> None:
+    rate = float(os.environ.get("GYROLAB_ADC_RATE_HZ", "1000"))
+    spf = int(os.environ.get("GYROLAB_ADC_SAMPLES_PER_FRAME", str(N)))
+    with GyroAdcReader(os.environ["GYROLAB_ADC_PORT"], samples_per_frame=spf, rate_hz=rate) as rd:
+        got = 0
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0:
+            got += rd.read(0.1).samples
+    assert got > 0.5 * rate  # at least a second's worth in two seconds
+    assert rd.decoder.stats.frames_ok > 0
