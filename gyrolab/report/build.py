@@ -595,14 +595,30 @@ def _log_section(rec: Recording) -> Section:
 
 def _identity_section(rec: Recording, model: Any) -> Section:
     sec = Section("identity", "Bench identity and software")
-    run = {k: v for k, v in rec.run.items() if k != "profile"}
-    prof = rec.run.get("profile")
-    if isinstance(prof, dict):
-        run["profile.name"] = prof.get("name", "?")
-        run["profile.steps"] = len(prof.get("steps", []))
+    run: dict[str, Any] = {}
+    steps: list[dict[str, Any]] = []
+    for k, v in rec.run.items():
+        key = next((s for s in ("steps", "step") if isinstance(v, dict) and s in v), None)
+        if key and isinstance(v[key], list):
+            # a profile table: its steps get a table of their own below
+            steps = [s for s in v[key] if isinstance(s, dict)]
+            v = {kk: vv for kk, vv in v.items() if kk != key}
+            v["steps"] = f"{len(steps)} (table below)"
+        run[k] = v
     sec.blocks.append(
         TableBlock("run-meta", "Run", ["field", "value"], [list(r) for r in _flatten(run)])
     )
+    if steps:
+        cols = ["label", "setpoint_c", "duration_s"]
+        cols += sorted({c for s in steps for c in s} - set(cols))
+        sec.blocks.append(
+            TableBlock(
+                "profile-steps",
+                "Profile steps (as commanded)",
+                ["#"] + cols,
+                [[str(i)] + [fmt(s.get(c, "")) for c in cols] for i, s in enumerate(steps)],
+            )
+        )
     sec.blocks.append(
         TableBlock(
             "bench",

@@ -38,7 +38,10 @@ def _table_pages(block: TableBlock, heading: str) -> list[Figure]:
     """One or more A4 pages holding ``block`` (the header repeats on every page)."""
     rows: Sequence[Sequence[str]] = block.rows or [["(none)"] + [""] * (len(block.header) - 1)]
     ncol = max(1, len(block.header))
-    width = max(12, 110 // ncol)
+    # The first column holds labels (metric names, dotted keys): give it more room.
+    first = 48 if ncol > 1 else 120
+    rest = max(12, (150 - first) // max(1, ncol - 1))
+    widths = [first] + [rest] * (ncol - 1)
     pages = []
     for start in range(0, len(rows), ROWS_PER_PAGE):
         chunk = rows[start : start + ROWS_PER_PAGE]
@@ -50,8 +53,8 @@ def _table_pages(block: TableBlock, heading: str) -> list[Figure]:
         ax = fig.add_axes((0.06, 0.92 - h, 0.88, h))
         ax.axis("off")
         tab = ax.table(
-            cellText=[[_clip(c, width) for c in r] for r in chunk],
-            colLabels=[_clip(c, width) for c in block.header],
+            cellText=[[_clip(c, w) for c, w in zip(r, widths, strict=True)] for r in chunk],
+            colLabels=[_clip(c, w) for c, w in zip(block.header, widths, strict=True)],
             loc="upper left",
             cellLoc="left",
         )
@@ -65,11 +68,11 @@ def _table_pages(block: TableBlock, heading: str) -> list[Figure]:
         if block.note:
             fig.text(
                 0.06,
-                0.90 - h - 0.02,
+                0.03,
                 textwrap.fill(block.note, 110),
                 fontsize=8,
                 color="#555555",
-                va="top",
+                va="bottom",
             )
         pages.append(fig)
     return pages
