@@ -1,0 +1,294 @@
+"""`gyrolab acquire --bench sim`: the real drivers over real pseudo-terminals, end to end.
+
+Timings on a loaded 2-core machine are noisy; the speeds below leave room for that.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrolab.acquisition.bench_config import AdcConfig
+from gyrolab.cli import main
+from gyrolab.recording import TOPIC_LOG, read_recording
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int]:
+    """The built-in short profile (48 min) at 200x through the simulated bench."""
+    out = tmp_path_factory.mktemp("acq") / "short.mcap"
+    rc = main(
+        ["acquire", "--bench", "sim", "--profile", "short", "--speed", "200", "--out", str(out)]
+    )
+    return out, rc
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("sim") / "short-sim.mcap"
+    assert main(["simulate", "--profile", "short", "--seed", "0", "--out", str(out)]) == 0
+    return out
+
+
+def test_short_profile_completes_with_every_transition_recorded(short_run) -> None:
+    out, rc = short_run
+    assert rc == 0
+    rec = read_recording(out)
+    names = [e["event"] for e in rec.events]
+    assert names[0] == "run_started" and names.count("step_started") == 12
+    assert names.count("soaked") == names.count("step_ended") == 12
+    assert names[-2:] == ["run_ended", "safe_state"]
+    starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
+    # Steps start on the 240 s schedule (within the bench's 1 s tick and a little slack).
+    assert np.allclose(np.diff(starts), 240.0, atol=4.0)
+    assert "verified" in rec.events[-1]["detail"] and rec.oven_mode[-1] == "safe"
+    assert rec.oven_setpoint_c[-1] == 25.0
+    # Every setpoint of the profile was written and read back by the oven driver.
+    verified = [m["data"]["setpoint_c"] for m in rec.logs if m.get("kind") == "command"]
+    assert verified == [25.0, 60.0, 50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0, -30.0, -40.0]
+    assert not [m for m in rec.logs if m.get("kind") in ("fault", "abort")]
+
+
+def test_short_run_adc_stream_is_whole_and_converted_exactly(short_run) -> None:
+    rec = read_recording(short_run[0])
+    adc, rate = rec.adc, rec.rate
+    assert adc.gaps() == [] and adc.index[0] == 0
+    assert np.array_equal(adc.index, np.arange(adc.index.size))
+    assert adc.period == pytest.approx(0.01)
+    # 100 Hz for the whole run (the stream starts within 2 s of t = 0).
+    assert abs(adc.index.size - 100 * rec.events[-2]["t"]) < 300
+    assert np.array_equal(adc.index, rate.index) and np.allclose(adc.t, rate.t)
+    expect = AdcConfig().to_dps(adc.values.astype(np.float64)).astype(np.float32)
+    assert np.array_equal(rate.values.astype(np.float32), expect)
+    # PT100 read about once a (simulated) second; the oven every ~2 s.
+    assert np.median(np.diff(rec.pt100_t)) == pytest.approx(1.0, abs=0.2)
+    assert np.median(np.diff(rec.oven_t)) <= 3.0
+
+
+def test_short_run_metadata(short_run) -> None:
+    rec = read_recording(short_run[0])
+    run, bench = rec.run, rec.bench
+    assert run["source"] == "acquire" and run["operator"] == "simulated"
+    assert run["unit_serial"] == "SIM-0" and run["profile"]["name"] == "short"
+    assert run["speed"] == 200
+    assert "34401A" in bench["multimeter"]["idn"]
+    assert bench["multimeter"]["resource"].startswith("ASRL")
+    assert bench["oven"]["registers"]["units"] == "C"
+    assert bench["adc"]["dps_per_count"] == pytest.approx(2.5 / 2**23 / 0.01)
+    assert bench["recorder"]["flush_every_s"] == 1.0
+    assert "sim_provenance" in rec.metadata
+
+
+def test_acquire_and_simulate_show_the_same_physics(short_run, simulated) -> None:
+    """Same profile and seed: the wire-level bench and `simulate` agree within noise."""
+    a, s = read_recording(short_run[0]), read_recording(simulated)
+    assert a.pt100_c.min() == pytest.approx(s.pt100_c.min(), abs=0.3)
+    assert a.pt100_c.max() == pytest.approx(s.pt100_c.max(), abs=0.3)
+    assert a.oven_pv_c.min() == pytest.approx(s.oven_pv_c.min(), abs=0.5)
+    assert a.oven_pv_c.max() == pytest.approx(s.oven_pv_c.max(), abs=0.5)
+    for k in range(12):  # per step: PT100 at its end and the gyro drift over its 2nd half
+        lo, hi = k * 240.0 + 120.0, (k + 1) * 240.0 - 5.0
+
+        def mean(t: np.ndarray, v: np.ndarray, lo: float = lo, hi: float = hi) -> float:
+            return float(v[(t >= lo) & (t < hi)].mean())
+
+        assert mean(a.pt100_t, a.pt100_c) == pytest.approx(mean(s.pt100_t, s.pt100_c), abs=0.15)
+        # ARW noise of a 115 s mean is ~1e-4 °/s; the step-to-step drift is ~1e-3.
+        assert mean(a.rate.t, a.rate.values) == pytest.approx(
+            mean(s.rate.t, s.rate.values), abs=4e-4
+        )
+
+
+def _profile(tmp_path: Path, steps: list[tuple[float, float]]) -> Path:
+    text = 'name = "t"\n' + "".join(
+        f"[[step]]\nsetpoint_c = {sp}\nduration_s = {d}\n" for sp, d in steps
+    )
+    f = tmp_path / "p.toml"
+    f.write_text(text)
+    return f
+
+
+def test_refuses_bad_requests_before_touching_anything(tmp_path: Path, capsys) -> None:
+    existing = tmp_path / "run.mcap"
+    existing.write_bytes(b"precious")
+    assert main(["acquire", "--bench", "sim", "--profile", "short", "--out", str(existing)]) == 2
+    assert existing.read_bytes() == b"precious"
+    assert "already exists" in capsys.readouterr().err
+    hot = _profile(tmp_path, [(25, 60), (90, 60)])
+    out = tmp_path / "x.mcap"
+    assert main(["acquire", "--bench", "sim", "--profile", str(hot), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "step 2 setpoint 90 °C is outside the bench limits" in err[0]
+    assert not out.exists()
+    lab = REPO / "examples" / "lab.toml"
+    assert main(["acquire", "--bench", str(lab), "--speed", "10", "--out", str(out)]) == 2
+    assert "--speed applies to --bench sim only" in capsys.readouterr().err
+    # The example bench's ports do not exist here: one line naming the file and the port.
+    assert main(["acquire", "--bench", str(lab), "--profile", "short", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "lab.toml" in err[0] and "[multimeter]" in err[0]
+    assert not out.exists()
+
+
+def _run_in_process(tmp_path: Path, profile: Path, *, speed: float, faults, limits=None):
+    """run_acquisition against a SimBench built here (for faults and ground truth)."""
+    from dataclasses import replace
+
+    from gyrolab.acquisition.commands import run_acquisition, sim_bench_config, start_sim_bench
+    from gyrolab.profile import load_profile
+
+    prof = load_profile(profile)
+    sim, cfg = start_sim_bench(
+        sim_bench_config(0), prof, seed=0, speed=speed, keep_truth=True, faults=faults
+    )
+    if limits is not None:
+        cfg = replace(cfg, limits=limits)
+    out = tmp_path / "run.mcap"
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
+    try:
+        res = run_acquisition(cfg=cfg, profile=prof, out=out, force=False, sim=sim)
+    finally:
+        sys.setswitchinterval(old)
+        sim.stop()
+    return res, read_recording(out), sim.bench
+
+
+def test_fault_run_completes_logs_every_fault_and_never_alters_a_sample(tmp_path: Path) -> None:
+    """ADC byte corruption, a 30 s multimeter outage and Modbus error bursts in one run."""
+    from gyrolab.sim.bench import ByteFaults, FaultEvent, FaultPlan
+
+    faults = FaultPlan(
+        adc=ByteFaults(corrupt_prob=2e-4, seed=5),
+        events=[
+            FaultEvent("outage", t_s=30.0, duration_s=30.0),
+            FaultEvent("modbus_exception", t_s=90.0, count=4),
+            FaultEvent("modbus_crc", t_s=110.0, count=4),
+            FaultEvent("modbus_no_reply", t_s=130.0, count=2),
+        ],
+    )
+    prof = _profile(tmp_path, [(25, 40), (35, 70), (30, 70)])
+    # 10x: the drivers' timeouts cannot go below ~0.5 s wall (scheduling jitter on a
+    # loaded machine), which is 5 simulated seconds here; faster, a burst of timeouts
+    # would add up past the 60 s communication timeout, as it would with a slow bench.
+    res, rec, bench = _run_in_process(tmp_path, prof, speed=10.0, faults=faults)
+    assert res.outcome == "completed", res.reason
+    fired = {k for _, k, _ in bench.log}
+    assert {"outage:start", "modbus_exception:start", "modbus_crc:start"} <= fired
+    logs = rec.logs
+    by_kind = lambda src, kind: [m for m in logs if m["source"] == src and m.get("kind") == kind]  # noqa: E731
+    # The multimeter outage: a fault, then a recovery after about 30 s.
+    (dmm_fault,) = [m for m in by_kind("multimeter", "fault") if 25 < m["t"] < 65]
+    rec_dmm = [m for m in by_kind("multimeter", "recovery") if m["t"] > dmm_fault["t"]]
+    assert rec_dmm and 25.0 <= rec_dmm[0]["data"]["outage_s"] <= 45.0
+    pt_gap = np.diff(rec.pt100_t).max()
+    assert 25.0 <= pt_gap <= 45.0  # explicit: no PT100 readings invented in the outage
+    # The Modbus bursts: the oven driver's retries absorb some; what got through is
+    # logged as a fault and a recovery, and the oven's setpoints were still all verified.
+    assert by_kind("oven", "fault") and by_kind("oven", "recovery")
+    assert [m["data"]["setpoint_c"] for m in by_kind("oven", "command")] == [25.0, 35.0, 30.0]
+    # ADC corruption: damaged frames rejected and counted; each loss is an explicit gap.
+    assert res.gaps > 0 and by_kind("adc", "corruption")
+    gap_logs = by_kind("adc", "gap")
+    assert len(gap_logs) == res.gaps == len(rec.adc.gaps())
+    assert sum(m["data"]["n_missing"] for m in gap_logs) == res.samples_missing
+    # Ground truth: every recorded sample is exactly what the source sent for that index,
+    # no index appears twice, and every missing index was a frame damaged on the wire.
+    seq, counts, status = bench.truth.arrays()
+    truth = counts.reshape(-1)
+    n = bench.samples_per_frame
+    dev_idx = rec.adc.index + res.first_device_index
+    assert np.unique(dev_idx).size == dev_idx.size
+    assert np.array_equal(rec.adc.values, truth[dev_idx - seq[0] * n])
+    present = np.zeros(truth.size, bool)
+    present[dev_idx - seq[0] * n] = True
+    span = slice(dev_idx[0] - seq[0] * n, dev_idx[-1] - seq[0] * n + 1)
+    missing_frames = np.unique(np.flatnonzero(~present[span]) // n + (span.start // n))
+    assert set(status[missing_frames]) <= {"damaged"}
+    assert (status[span.start // n : span.stop // n] == "damaged").sum() >= missing_frames.size
+
+
+def test_over_temperature_watchdog_puts_the_oven_in_the_safe_state(tmp_path: Path) -> None:
+    from gyrolab.acquisition.bench_config import Limits
+    from gyrolab.sim.bench import FaultPlan
+
+    prof = _profile(tmp_path, [(25, 30), (60, 900)])
+    res, rec, bench = _run_in_process(
+        tmp_path, prof, speed=50.0, faults=FaultPlan(), limits=Limits(pt100_max_c=27.0)
+    )
+    assert res.outcome == "fault" and "over-temperature" in res.reason and res.exit_code == 1
+    assert res.safe_state_ok and bench.physics.setpoint_c == 25.0
+    ev = [e["event"] for e in rec.events]
+    assert ev[-2:] == ["aborted", "safe_state"]
+    assert any(m["level"] == "fault" and "over-temperature" in m["message"] for m in rec.logs)
+    assert np.all(rec.pt100_c[-3:] > 27.0) and np.all(rec.pt100_c[:-3] <= 27.05)
+
+
+def test_lost_multimeter_ends_the_run_safely(tmp_path: Path) -> None:
+    from gyrolab.sim.bench import FaultEvent, FaultPlan
+
+    prof = _profile(tmp_path, [(25, 30), (40, 600)])
+    faults = FaultPlan(events=[FaultEvent("outage", t_s=40.0, duration_s=10_000.0)])
+    res, rec, bench = _run_in_process(tmp_path, prof, speed=50.0, faults=faults)
+    assert res.outcome == "fault" and "lost communication with multimeter" in res.reason
+    assert res.safe_state_ok and bench.physics.setpoint_c == 25.0
+    assert rec.events[-1]["event"] == "safe_state"
+    assert 95.0 < rec.events[-2]["t"] < 200.0  # 60 s after the last reading, plus timeouts
+
+
+def test_sigint_ends_cleanly_with_the_oven_safe_and_exit_130(tmp_path: Path) -> None:
+    prof = _profile(tmp_path, [(25, 30), (60, 3600)])
+    out = tmp_path / "int.mcap"
+    env = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
+    cmd = [sys.executable, "-m", "gyrolab", "acquire", "--bench", "sim", "--profile", str(prof)]
+    p = subprocess.Popen(
+        [*cmd, "--speed", "50", "--out", str(out)], env=env, stderr=subprocess.PIPE, text=True
+    )
+    # Interrupt once the 60 °C step is under way (the file grows as chunks are flushed).
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not out.exists() or out.stat().st_size < 60_000):
+        time.sleep(0.1)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    assert "interrupted" in err
+    rec = read_recording(out)  # finalized: readable as is, no recovery needed
+    ev = rec.events
+    assert ev[-2]["event"] == "aborted" and "SIGINT" in ev[-2]["detail"]
+    assert ev[-1]["event"] == "safe_state" and "verified" in ev[-1]["detail"]
+    assert rec.oven_mode[-1] == "safe" and rec.oven_setpoint_c[-1] == 25.0
+    assert 60.0 in rec.oven_setpoint_c  # it really was at 60 °C before
+    assert rec.adc.gaps() == [] and rec.adc.index.size > 1000
+    assert any(m.get("kind") == "abort" for m in rec.logs)
+    assert rec.topic_counts[TOPIC_LOG] >= 4
+
+
+@pytest.mark.slow
+def test_kill_9_at_random_moments_loses_at_most_2_s(tmp_path: Path) -> None:
+    """Ten SIGKILLs of a running acquisition; each file recovers; loss <= 2 s of data."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_acquire", REPO / "benchmarks" / "bench_acquire.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    rows = mod.kill_campaign(
+        10, profile="short", speed=100.0, seed=11, max_delay_s=2.5, work=tmp_path
+    )
+    print(json.dumps(rows))
+    assert len(rows) == 10
+    for row in rows:
+        assert row["messages"] > 0 and row["contiguous"]
+        assert -1e-6 <= row["lost_s"] <= 2.0, row
