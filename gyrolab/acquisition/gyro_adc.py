@@ -189,7 +189,8 @@ class GyroAdcReader:
                     return b""
         ser = self._ser
         try:
-            ser.timeout = timeout_s
+            if ser.timeout != timeout_s:  # pyserial re-applies termios on every set
+                ser.timeout = timeout_s
             data = ser.read(max(1, ser.in_waiting))
             if data:
                 more = ser.in_waiting  # take the rest without waiting again

@@ -144,9 +144,11 @@ class AdcSource:
             self._mark(slots, UNPLUGGED)
             return
         try:
-            # While nobody drains the port (no reader, or it fell behind), do not wait on
-            # it again: a UART transmits regardless and the receiver overruns.
-            done = self.port.write(data, 0.0 if self._congested else self.write_timeout_s)
+            # While nobody drains the port (no reader, or it stopped), wait at most 50 ms
+            # per write: a UART transmits regardless and the receiver overruns. A reader
+            # that comes back drains the pty, a write completes, and the wait is restored.
+            timeout = min(self.write_timeout_s, 0.05) if self._congested else self.write_timeout_s
+            done = self.port.write(data, timeout)
         except PortClosed:
             self.stats.unplugged += len(frames)
             self._mark(slots, UNPLUGGED)
