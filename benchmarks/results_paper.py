@@ -91,25 +91,20 @@ def verdicts(m: dict[str, Any]) -> list[str]:
 
 
 def _compare(how: str, d: dict[str, float], bases: dict[str, dict[str, float]]) -> list[str]:
+    """Baseline vs GA-BP on drift p-p and bias stability; a 2 % margin is a tie."""
     lines = []
+    keys = {"drift_pp_deg_per_s": "drift p-p", "bias_stability_deg_per_h": "bias stability"}
     for name, b in bases.items():
-        better = [
-            k for k in ("drift_pp_deg_per_s", "bias_stability_deg_per_h") if b[k] < d[k] * 0.98
-        ]
-        if better:
-            lines.append(
-                f"- {how}: baseline **{name} wins** over the GA-BP drift model on "
-                f"{', '.join(better)}: "
-                + ", ".join(f"{b[k]:.3g} vs {d[k]:.3g}" for k in better)
-                + "."
-            )
-        else:
-            lines.append(
-                f"- {how}: baseline {name} does not beat the GA-BP drift model "
-                f"(drift p-p {b['drift_pp_deg_per_s']:.3g} vs {d['drift_pp_deg_per_s']:.3g} °/s,"
-                f" bias stability {b['bias_stability_deg_per_h']:.3g} vs "
-                f"{d['bias_stability_deg_per_h']:.3g} °/h; within 2 % counts as a tie)."
-            )
+        parts = []
+        for k, label in keys.items():
+            if b[k] < 0.98 * d[k]:
+                who = f"**{name} wins**"
+            elif b[k] > 1.02 * d[k]:
+                who = "GA-BP wins"
+            else:
+                who = "tie (within 2 %)"
+            parts.append(f"{label} {b[k]:.3g} vs GA-BP {d[k]:.3g}: {who}")
+        lines.append(f"- {how}, baseline {name}: " + "; ".join(parts) + ".")
     return lines
 
 
@@ -242,6 +237,23 @@ def main() -> int:
         f" → {m_s2['compensated_streaming_flp']['arw_deg_per_sqrt_h']:.4g} | "
         f"{m_s2['raw']['bias_stability_deg_per_h']:.4g} → "
         f"{m_s2['compensated_streaming_flp']['bias_stability_deg_per_h']:.3g} |",
+        "",
+        "## Reading these numbers",
+        "",
+        "- The drift removal is what the temperature model does; the rest of the gain in the "
+        "paper method's row is low-pass filtering. Dropping the noise modes keeps only "
+        "the slow part of the output (the bandwidth figures above), so its ARW and Allan "
+        "bias instability are those of a filtered signal, not the sensor's noise density: "
+        "the rows without noise removal give the sensor's real ARW after compensation.",
+        "- The GA-BP + causal FLP row reproduces the paper's ARW figure (≈ 3.8e-3 °/√h) "
+        "for the same reason: a forward linear predictor outputs only what is predictable "
+        "from the past, so white noise is removed — and so would be any real, unpredictable "
+        "rotation. It is a static-test figure, not a usable gyro output.",
+        "- Drift peak-to-peak without noise removal (≈ 0.004 °/s) is set by the white noise "
+        "of the 3.6 s averages (σ ≈ 4.6e-4 °/s, so ≈ 8σ over 13 000 points), not by the "
+        "drift model; the noise-removal rows show the drift models' differences.",
+        "- The residual after any temperature model is dominated by the simulated 1/f bias "
+        "instability wander (hour-scale, ~1e-4 °/s), which no temperature model can remove.",
         "",
         "## Time",
         "",
