@@ -7,11 +7,13 @@ import os
 
 import minimalmodbus
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.acquisition.oven import WatlowF4
 from gyrolab.sim.bench import FaultEvent, SimBench
-from gyrolab.sim.bench.oven_modbus import crc16_modbus, with_crc
+from gyrolab.sim.bench.oven_modbus import OvenHooks, WatlowF4Slave, crc16_modbus, with_crc
 from gyrolab.sim.bench.serial_pty import PtyPort
 
 H = bytes.fromhex
@@ -224,3 +226,39 @@ def test_real_oven_reads_only() -> None:
     with WatlowF4(os.environ["GYROLAB_OVEN_PORT"]) as oven:
         info = oven.connect()
         assert -80.0 < info["process_value_c"] < 200.0
+
+
+class LoopbackSerial(ExpectedSerial):
+    """The driver's bytes go straight into a simulated controller (no pty, no thread)."""
+
+    def __init__(self, slave: WatlowF4Slave) -> None:
+        super().__init__([])
+        self.slave = slave
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        self._rx += self.slave.process(bytes(data)) or b""
+        return len(data)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    setpoint=st.floats(-45.0, 70.0, allow_nan=False),
+    decimals=st.sampled_from([0, 1, 2]),
+    units_c=st.booleans(),
+)
+def test_setpoint_roundtrip_any_scaling(setpoint: float, decimals: int, units_c: bool) -> None:
+    state = {"sp": 25.0}
+    slave = WatlowF4Slave(
+        OvenHooks(lambda: 20.0, lambda: state["sp"], lambda v: state.update(sp=v)),
+        decimals=decimals,
+        units_c=units_c,
+    )
+    oven = WatlowF4(LoopbackSerial(slave))
+    got = oven.set_setpoint(setpoint)
+    # Quantized to the controller's resolution (in its own units), and nothing else.
+    step_c = 10.0**-decimals * (1.0 if units_c else 5.0 / 9.0)
+    assert abs(got - setpoint) <= step_c / 2 + 1e-9
+    assert state["sp"] == pytest.approx(got, abs=1e-9)
+    assert oven.process_value_c == pytest.approx(20.0, abs=step_c / 2 + 1e-9)
+    assert slave.writes == [(300, slave._to_raw(got))]

@@ -109,8 +109,9 @@ class SimBench:
             self._servers.append(self.dmm_tcp)
         self._events: list[tuple[float, int, str, FaultEvent]] = []
         self._tie = itertools.count()
-        for ev in self.faults.events:
-            self.inject(ev)
+        for ev in self.faults.events:  # t_s None here means: at the first tick
+            t = self.clock.now() if ev.t_s is None else float(ev.t_s)
+            heapq.heappush(self._events, (t, next(self._tie), "start", ev))
         self.log: list[tuple[float, str, str]] = []  # (t_sim, kind, detail) of faults fired
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
