@@ -13,7 +13,7 @@ import pytest
 import gyrolab.sim.bench as bench_pkg
 from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.acquisition.multimeter import Agilent34401A
-from gyrolab.pt100 import cvd_resistance
+from gyrolab.pt100 import cvd_resistance, cvd_temperature
 from gyrolab.sim.bench import FaultEvent, SimBench
 
 IDN = "HEWLETT-PACKARD,34401A,0,11-5-2"
@@ -208,3 +208,32 @@ def test_real_meter() -> None:
         assert "34401" in dmm.connect()
         r = dmm.read()
         assert 80.0 < r.resistance_ohm < 130.0  # a PT100 somewhere in -50…80 °C
+
+
+# ------------------------------------------------------------------- PT100 (IEC 60751)
+
+
+@pytest.mark.parametrize(
+    ("t_c", "r_ohm"),
+    [
+        (-200.0, 18.52),
+        (-40.0, 84.27),
+        (0.0, 100.0),
+        (60.0, 123.24),
+        (100.0, 138.51),
+        (850.0, 390.48),
+    ],
+)
+def test_cvd_matches_iec_60751_table(t_c: float, r_ohm: float) -> None:
+    assert cvd_resistance(t_c) == pytest.approx(r_ohm, abs=0.005)  # table is to 0.01 Ω
+    assert cvd_temperature(r_ohm) == pytest.approx(t_c, abs=0.02)
+
+
+def test_cvd_inverse_roundtrip_and_agrees_with_the_simulator() -> None:
+    from gyrolab.sim import sensors  # the simulator's own, independent implementation
+
+    t = np.linspace(-200.0, 850.0, 2101)
+    r = cvd_resistance(t)
+    assert np.max(np.abs(cvd_temperature(r) - t)) < 1e-9
+    assert np.max(np.abs(sensors.cvd_resistance(t) - r)) < 1e-9
+    assert np.isnan(cvd_temperature(-1.0))
