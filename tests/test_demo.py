@@ -51,8 +51,12 @@ def test_demo_writes_every_stage(demo_run: Path) -> None:
         "demo.json",
     ):
         assert (demo_run / name).is_file(), name
-    timing = json.loads((demo_run / "demo.json").read_text())["timing_s"]
-    assert timing["total"] > 0 and set(timing) >= {"compensate", "report"}
+    info = json.loads((demo_run / "demo.json").read_text())
+    assert info["timing_s"]["total"] > 0 and set(info["timing_s"]) >= {"compensate", "report"}
+    # the held-out run went through the wire-level simulated bench (drivers, runner)
+    assert info["heldout_source"] == "acquire --bench sim"
+    html = (demo_run / "report" / "index.html").read_text(encoding="utf-8")
+    assert "34401A" in html and "Watlow" in html  # instrument identities from the bench
 
 
 def test_model_report_contract(demo_run: Path) -> None:

@@ -141,6 +141,8 @@ def test_run_log_lists_faults_recoveries_and_gaps(tmp_path: Path) -> None:
     assert kinds == ["fault", "recovery", "gap"]
     assert "50 samples missing" in log.rows[2][4] and log.rows[2][0] == "0:10:00"
     assert all("routine" not in r[4] for r in log.rows)  # info chatter is not a log entry
+    everything = next(t for t in doc.tables() if t.key == "alllog")
+    assert [r[4] for r in everything.rows][-1] == "routine message" and len(everything.rows) == 3
     bench = next(t for t in doc.tables() if t.key == "bench")
     assert ["multimeter.serial", "MY123"] in bench.rows
     assert dict(doc.summary)["unit under test"] == "G-42"

@@ -576,6 +576,30 @@ def _log_section(rec: Recording) -> Section:
             note,
         )
     )
+    # Every message, info included: the full story of the run (commands, transitions).
+    all_rows = [
+        [
+            hms(float(m.get("t", 0.0))),
+            str(m.get("level", "")),
+            str(m.get("source", "")),
+            str(m.get("kind", "")),
+            str(m.get("message", "")),
+        ]
+        for m in sorted(rec.logs, key=lambda m: float(m.get("t", 0.0)))
+    ]
+    all_note = ""
+    if len(all_rows) > MAX_LOG_ROWS:
+        all_note = f"First {MAX_LOG_ROWS} of {len(all_rows)} messages shown."
+        all_rows = all_rows[:MAX_LOG_ROWS]
+    sec.blocks.append(
+        TableBlock(
+            "alllog",
+            "All log messages",
+            ["time", "level", "source", "kind", "message"],
+            all_rows,
+            all_note,
+        )
+    )
     ev = event_rows(rec)
     evnote = ""
     if len(ev) > MAX_LOG_ROWS:
