@@ -113,3 +113,22 @@ def test_state_round_trip_predicts_identically() -> None:
 def test_bad_training_data_is_rejected() -> None:
     with pytest.raises(ValueError, match="finite"):
         fit_gabp(np.array([[1.0], [np.nan], [2.0], [3.0]]), np.ones(4), ga=SMALL_GA)
+
+
+def test_outside_the_training_range_the_network_continues_linearly() -> None:
+    rng = np.random.default_rng(4)
+    T = rng.uniform(-20, 40, 1500)
+    m = fit_gabp(T[:, None], _drift(T), ga=SMALL_GA, bp=SMALL_BP, seed=1)
+    hi = m.x_max[0]
+    eps = 1e-4
+    slope = (m.predict(np.array([[hi]])) - m.predict(np.array([[hi - eps]]))) / eps
+    beyond = hi + np.array([1.0, 5.0, 10.0])
+    expect = m.predict(np.array([[hi]])) + slope * (beyond - hi)
+    np.testing.assert_allclose(m.predict(beyond[:, None]), expect, rtol=1e-4, atol=1e-9)
+    # continuous at the edge, and inside the range the plain network is untouched
+    assert m.predict(np.array([[hi + 1e-9]]))[0] == pytest.approx(m.predict(np.array([[hi]]))[0])
+    inside = np.linspace(-19, 39, 50)[:, None]
+    Xs = (inside - m.x_mean) / m.x_std
+    np.testing.assert_allclose(
+        m.predict(inside), forward(m.theta, Xs, 1, m.hidden) * m.y_std + m.y_mean, rtol=1e-12
+    )

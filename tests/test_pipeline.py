@@ -243,3 +243,27 @@ def test_constant_temperature_cannot_be_fitted(tmp_path: Path) -> None:
             w.write_pt100(float(s), 100.0, 25.0)
     with pytest.raises(InputError, match="temperature spans only"):
         pl.fit(load(p), SMALL)
+
+
+def test_dtdt_input_learns_a_thermal_rate_term(tmp_path: Path) -> None:
+    """With ``use_dtdt`` the drift model sees dT/dt and removes a rate-sensitive bias that a
+    temperature-only model cannot (the `thermal_rate` effect of DESIGN.md)."""
+    fs, n = 10.0, int(1.2 * 3600 * 10)
+    t = np.arange(n) / fs
+    temp = 15 + 30 * np.sin(2 * np.pi * t / 2400.0)  # heats and cools: dT/dt of both signs
+    dtdt = np.gradient(temp, t)
+    rng = np.random.default_rng(5)
+    rate = true_bias(temp) + 0.5 * dtdt + rng.normal(0, 1e-4, n)
+    p = tmp_path / "rate.mcap"
+    with RecordingWriter(p, start_time_ns=0) as w:
+        for s in range(0, n, 10):
+            w.write_rate_block(t[s], 0.1, s, rate[s : s + 10].astype(np.float32))
+            w.write_pt100(t[s], 100.0, float(temp[s]))
+    res = {}
+    for use in (False, True):
+        cfg = replace(SMALL, use_dtdt=use, dtdt_window_s=30.0)
+        run = load(p, cfg)
+        model, dec = pl.fit(run, cfg)
+        app = pl.compensate_offline(model, run, dec)
+        res[use] = np.std(app.series["compensated_drift_only"])
+    assert res[True] < 0.3 * res[False]
