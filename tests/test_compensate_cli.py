@@ -113,6 +113,8 @@ def test_apply_writes_compensated_recording(
     off = list(iter_blocks(out, TOPIC_RATE_OFFLINE))
     assert off and off[0][1] == pytest.approx(3.6)
     meta = read_metadata(out)
+    src_meta = read_metadata(runs["val"])
+    assert {k: v for k, v in meta.items() if k != "compensation"} == src_meta
     assert meta["compensation"]["vmd"]["K"] == model.K
     assert TOPIC_RATE in meta["compensation"]["topics"]
 

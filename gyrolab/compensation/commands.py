@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import sys
 import time
 from collections.abc import Iterator
@@ -31,19 +32,16 @@ from typing import Any
 
 import numpy as np
 
+from gyrolab import __version__
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
 from gyrolab.recording import (
-    ALL_TOPICS,
-    RATE_MESSAGE,
+    PROFILE,
     TOPIC_PT100,
     TOPIC_RATE,
-    RecordingWriter,
-    _file_descriptor_set,
     decode_block,
     encode_block,
     iter_messages,
-    read_metadata,
     read_recording,
 )
 
@@ -130,19 +128,6 @@ def compensate(args: argparse.Namespace) -> int:
     return 0
 
 
-class _CompensatedWriter(RecordingWriter):
-    """A RecordingWriter with the two extra rate channels of a compensated recording."""
-
-    def __init__(self, *a: Any, **kw: Any) -> None:
-        super().__init__(*a, **kw)
-        sid = self._w.register_schema(RATE_MESSAGE, "protobuf", _file_descriptor_set())
-        for topic in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE):
-            self._chan[topic] = self._w.register_channel(topic, "protobuf", sid)
-
-    def put_raw(self, topic: str, t: float, data: bytes) -> None:
-        self._put(topic, t, data)
-
-
 def apply(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
     from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
@@ -158,58 +143,120 @@ def apply(args: argparse.Namespace) -> int:
     with _named(args.run):
         stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
         offline = compensate_offline(model, run)
-    meta = read_metadata(args.run)
-    start_ns = _start_time_ns(args.run)
+    info = {
+        "model_dir": str(args.model),
+        "model_format_version": MODEL_FORMAT_VERSION,
+        "software_version": __version__,
+        "calibration_run": model.calibration.get("path", ""),
+        "vmd": {"K": model.K, "alpha": model.alpha},
+        "topics": {
+            TOPIC_RATE: "causal full-rate compensated rate, raw - f(T)",
+            TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
+            TOPIC_RATE_OFFLINE: "offline GPSO-VMD/MPE/FLP/GA-BP output, "
+            f"{model.config.block_s} s averages",
+        },
+    }
     with atomic_file(args.out, args.force) as tmp:
-        w = _CompensatedWriter(
-            tmp, start_time_ns=start_ns, run=meta.get("run", {}), bench=meta.get("bench", {})
+        _write_compensated(
+            args.run,
+            tmp,
+            stream,
+            offline.t,
+            offline.series["compensated"],
+            model.config.block_s,
+            info,
         )
-        try:
-            for name, values in meta.items():
-                if name not in ("run", "bench", "compensation"):
-                    w.write_metadata(name, values)
-            w.write_metadata(
-                "compensation",
-                {
-                    "model_dir": str(args.model),
-                    "model_format_version": MODEL_FORMAT_VERSION,
-                    "calibration_run": model.calibration.get("path", ""),
-                    "vmd": {"K": model.K, "alpha": model.alpha},
-                    "topics": {
-                        TOPIC_RATE: "causal full-rate compensated rate, raw - f(T)",
-                        TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
-                        TOPIC_RATE_OFFLINE: "offline GPSO-VMD/MPE/FLP/GA-BP output, "
-                        f"{model.config.block_s} s averages",
-                    },
-                },
-            )
-            pos = 0
-            for topic, log_ns, data in iter_messages(args.run):
-                if topic not in ALL_TOPICS:
-                    continue
-                t = (log_ns - start_ns) / 1e9
-                if topic == TOPIC_RATE:
-                    t0, period, first, arr = decode_block(data, "rate")
-                    n = arr.size
-                    if pos + n > stream.size or run.raw_t[pos] != t0:
-                        raise InputError(args.run, "/gyro/rate blocks changed while reading")
-                    w.put_raw(TOPIC_RATE_RAW, t, data)
-                    w.write_rate_block(t0, period, first, stream[pos : pos + n])
-                    pos += n
-                else:
-                    w.put_raw(topic, t, data)
-            _write_offline(w, offline.t, offline.series["compensated"], model.config.block_s)
-        finally:
-            w.close()
     print(f"compensated recording written to {args.out}", file=sys.stderr)
     return 0
 
 
-def _write_offline(w: _CompensatedWriter, t: np.ndarray, y: np.ndarray, block_s: float) -> None:
-    per = 1000  # samples per message: 1 h of 1000 points/h
-    for s in range(0, y.size, per):
-        t0 = float(t[s])
-        w.put_raw(TOPIC_RATE_OFFLINE, t0, encode_block(t0, block_s, s, y[s : s + per], "rate"))
+def _write_compensated(
+    src: str,
+    dst: Path,
+    stream: np.ndarray,
+    t_off: np.ndarray,
+    y_off: np.ndarray,
+    block_s: float,
+    info: dict[str, Any],
+) -> None:
+    """Copy ``src`` to ``dst`` record by record (schemas, channels, messages with their
+    times and sequence numbers, metadata), with ``/gyro/rate`` re-encoded from ``stream``
+    and the two extra rate channels added (module docstring)."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    start_ns = _start_time_ns(src)
+    with open(src, "rb") as fh, open(dst, "wb") as out:
+        try:
+            reader = make_reader(fh)
+            header = reader.get_header()
+            w = Writer(out, chunk_size=1 << 20, compression=CompressionType.ZSTD)
+            w.start(profile=header.profile or PROFILE, library=f"gyrolab {__version__}")
+            sids: dict[int, int] = {}
+            cids: dict[int, int] = {}
+            extra: dict[str, int] = {}
+            pos = 0
+            for schema, channel, msg in reader.iter_messages(log_time_order=True):
+                if channel.id not in cids:
+                    sid = 0
+                    if schema is not None:
+                        if schema.id not in sids:
+                            sids[schema.id] = w.register_schema(
+                                schema.name, schema.encoding, schema.data
+                            )
+                        sid = sids[schema.id]
+                    cids[channel.id] = w.register_channel(
+                        channel.topic, channel.message_encoding, sid, dict(channel.metadata)
+                    )
+                    if channel.topic == TOPIC_RATE:
+                        for topic in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE):
+                            extra[topic] = w.register_channel(
+                                topic, channel.message_encoding, sid, dict(channel.metadata)
+                            )
+                data = msg.data
+                if channel.topic == TOPIC_RATE:
+                    t0, period, first, arr = decode_block(data, "rate")
+                    n = arr.size
+                    if pos + n > stream.size:
+                        raise InputError(src, "/gyro/rate blocks changed while reading")
+                    w.add_message(
+                        extra[TOPIC_RATE_RAW],
+                        log_time=msg.log_time,
+                        data=data,
+                        publish_time=msg.publish_time,
+                        sequence=msg.sequence,
+                    )
+                    data = encode_block(t0, period, first, stream[pos : pos + n], "rate")
+                    pos += n
+                w.add_message(
+                    cids[channel.id],
+                    log_time=msg.log_time,
+                    data=data,
+                    publish_time=msg.publish_time,
+                    sequence=msg.sequence,
+                )
+            if pos != stream.size:
+                raise InputError(src, "/gyro/rate blocks changed while reading")
+            per = 1000  # offline samples per message: 1 h at 1000 points/h
+            for k, s in enumerate(range(0, y_off.size, per)):
+                t0 = float(t_off[s])
+                ts = start_ns + int(round(t0 * 1e9))
+                w.add_message(
+                    extra[TOPIC_RATE_OFFLINE],
+                    log_time=ts,
+                    data=encode_block(t0, block_s, s, y_off[s : s + per], "rate"),
+                    publish_time=ts,
+                    sequence=k,
+                )
+            for m in reader.iter_metadata():
+                if m.name != "compensation":
+                    w.add_metadata(m.name, dict(m.metadata))
+            w.add_metadata("compensation", {k: json.dumps(v) for k, v in info.items()})
+            w.finish()
+        except InputError:
+            raise
+        except Exception as e:  # mcap raises many types on damaged files
+            raise InputError(src, f"damaged or truncated MCAP ({e})") from None
 
 
 def _start_time_ns(path: str) -> int:
