@@ -3,8 +3,9 @@
 The paper's parallel model (§3.5, Fig. 7), as gyrolab runs it:
 
 1. **Decimate.** The rate is averaged to the paper's 1000 points/h (``block_s`` = 3.6 s:
-   ≈ 13 000 points for a 13 h run, the paper's N); the PT100 temperature is interpolated to
-   the block centres. Everything below runs at that rate.
+   ≈ 13 000 points for a 13 h run, the paper's N). The drift model's input at each block
+   centre is the last PT100 reading (the same causal rule as the streaming path, see
+   :func:`features`). Everything below runs at that rate.
 2. **GPSO-VMD** (§3.1–3.2) chooses (K, α) and decomposes the averaged rate into K modes.
 3. **MPE** (§3.4, scale 12) classifies the modes: high entropy = *noise*, middle = *mixed*,
    low = *drift* (thresholds of :func:`gyrolab.compensation.mpe.classify_modes`; when no
@@ -16,10 +17,11 @@ The paper's parallel model (§3.5, Fig. 7), as gyrolab runs it:
 6. Output: ``y = FLP(mixed) + (drift − f(T))`` (the reconstruction of §3.5 step 3).
 
 Applying a fitted model to a **new** run (held out) keeps what was learned — the drift
-model ``f`` and the decomposition settings (K, α), the class rule and the FLP order — and
-re-runs the signal processing on the new run's own samples: VMD with the stored (K, α),
-MPE classes by the same rule, FLP on its mixed modes. The temperature drift removed is
-always ``f(T_new(t))``: never refitted on held-out data.
+model ``f``, the decomposition settings (K, α), the class rule and the FLP coefficients
+fitted on the calibration run's mixed modes — and re-runs the signal processing on the new
+run's own samples: VMD with the stored (K, α), MPE classes by the same rule, the stored FLP
+on its mixed modes. The temperature drift removed is always ``f(T_new(t))``: never
+refitted on held-out data.
 
 Two outputs come from every application:
 
