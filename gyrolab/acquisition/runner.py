@@ -891,57 +891,77 @@ class Acquisition:
 
     # -- ending
     def _shutdown(self, outcome: str, reason: str, threads: list[threading.Thread]) -> bool:
-        t = self.t()
+        """Stop the device threads, put the oven in the safe state, write the rest.
+
+        The oven comes first: if the recording cannot be written (disk full, a bug in a
+        record), the oven is still commanded to the safe state before anything is raised.
+        """
+        t_end = self.t()
         if outcome != "completed":
             self.plan.abort()
+        self.stop_ev.set()
+        for th in threads:
+            th.join(timeout=5.0)
+        ok, attempts = self._command_safe_state()
+        if outcome != "completed":
             self.w.write_event(
-                t,
+                t_end,
                 "aborted",
                 self.plan.step_index,
                 self.plan.step.setpoint_c if self.plan.step else None,
                 reason,
             )
             level = "fault" if outcome == "fault" else "warning"
-            self.log(level, "runner", f"run aborted: {reason}", "abort", None, t)
-        self.stop_ev.set()
-        for th in threads:
-            th.join(timeout=5.0)
-        # Write what the device threads had already delivered (no sample is dropped here).
+            self.log(level, "runner", f"run aborted: {reason}", "abort", None, t_end)
+        # What the device threads had already delivered: no sample is dropped here.
         while True:
             try:
                 self._handle(self.q.get_nowait())
             except queue.Empty:
                 break
         self._emit_block()
-        ok = self._go_safe()
+        self._record_safe_state(ok, attempts)
         self.w.flush()
         return ok
 
-    def _go_safe(self) -> bool:
-        """Command the oven to the safe state and verify it; log every attempt."""
+    def _command_safe_state(self) -> tuple[bool, list[tuple[float, str, Any]]]:
+        """Command the safe setpoint and verify it by reading it back (three attempts).
+
+        Returns ``(ok, attempts)``: each attempt ``(t, error or "", (sp, pv) or None)``.
+        """
         ss = self.safe
-        err = ""
-        for attempt in range(1, 4):
+        attempts: list[tuple[float, str, Any]] = []
+        for _ in range(3):
             t = self.t()
             try:
                 self.oven.set_setpoint(ss.setpoint_c)
                 sp, pv = self.oven.read()
                 if abs(sp - ss.setpoint_c) > 0.05:
                     raise RuntimeError(f"setpoint read back {sp:g} °C")
-                detail = f"setpoint {ss.setpoint_c:g} °C verified"
             except Exception as e:
-                err = f"{type(e).__name__}: {e}"
+                attempts.append((t, f"{type(e).__name__}: {e}", None))
+                self.clock.sleep(0.2)
+                continue
+            attempts.append((self.t(), "", (sp, pv)))
+            return True, attempts
+        return False, attempts
+
+    def _record_safe_state(self, ok: bool, attempts: list[tuple[float, str, Any]]) -> None:
+        ss = self.safe
+        for k, (t, err, _res) in enumerate(attempts, start=1):
+            if err:
                 self.log(
                     "error",
                     self.oven.name,
-                    f"safe-state attempt {attempt} failed: {err}",
+                    f"safe-state attempt {k} failed: {err}",
                     "fault",
                     None,
                     t,
                 )
-                self.clock.sleep(0.2)
-                continue
-            t = self.t()
+        t, err, res = attempts[-1]
+        if ok:
+            sp, pv = res
+            detail = f"setpoint {ss.setpoint_c:g} °C verified"
             self.w.write_oven(t, sp, pv, "safe")
             self.w.write_event(t, "safe_state", -1, sp, detail)
             self.log(
@@ -952,15 +972,13 @@ class Acquisition:
                 {"setpoint_c": sp, "process_value_c": pv},
                 t,
             )
-            return True
-        t = self.t()
-        self.w.write_event(t, "safe_state", -1, None, f"FAILED: {err}")
-        self.log(
-            "fault",
-            self.oven.name,
-            f"could not put the oven in the safe state: {err}",
-            "fault",
-            None,
-            t,
-        )
-        return False
+        else:
+            self.w.write_event(t, "safe_state", -1, None, f"FAILED: {err}")
+            self.log(
+                "fault",
+                self.oven.name,
+                f"could not put the oven in the safe state: {err}",
+                "fault",
+                None,
+                t,
+            )
