@@ -360,6 +360,17 @@ def build_report(
 
     # 1. temperature and raw output
     sec = Section("run", "Run: temperature profile and raw output")
+    comp_meta = rec.metadata.get("compensation")
+    if isinstance(comp_meta, dict):
+        # A `gyrolab apply` output: its /gyro/rate is already compensated; say so up front.
+        sec.blocks.append(
+            TextBlock(
+                "This recording was written by gyrolab apply: its /gyro/rate is the compensated "
+                f"output of the model in {comp_meta.get('model_dir', '?')} (the input's rate is "
+                "kept as /gyro/rate_raw). 'Raw' below means this recording's /gyro/rate.",
+                "note",
+            )
+        )
     if rec.oven_t.size or has_temp:
         sec.blocks.append(
             FigureBlock(
