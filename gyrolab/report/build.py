@@ -641,7 +641,13 @@ def _identity_section(rec: Recording, model: Any) -> Section:
             v["steps"] = f"{len(steps)} (table below)"
         run[k] = v
     sec.blocks.append(
-        TableBlock("run-meta", "Run", ["field", "value"], [list(r) for r in _flatten(run)])
+        TableBlock(
+            "run-meta",
+            "Run",
+            ["field", "value"],
+            [list(r) for r in _flatten(run)],
+            align_numbers=False,
+        )
     )
     if steps:
         cols = ["label", "setpoint_c", "duration_s"]
@@ -660,6 +666,7 @@ def _identity_section(rec: Recording, model: Any) -> Section:
             "Instruments, serial numbers, calibration",
             ["field", "value"],
             [list(r) for r in _flatten(rec.bench)],
+            align_numbers=False,
         )
     )
     sw = [

@@ -30,6 +30,7 @@ class TableBlock:
     header: list[str]
     rows: list[list[str]]
     note: str = ""
+    align_numbers: bool = True  # right-align numeric cells (off for field/value lists)
 
 
 @dataclass

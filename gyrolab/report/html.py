@@ -85,7 +85,10 @@ def render_table(block: TableBlock) -> str:
     rows = []
     for row in block.rows:
         cells = "".join(
-            f'<td class="num">{_e(c)}</td>' if _is_num(str(c)) else f"<td>{_e(c)}</td>" for c in row
+            f'<td class="num">{_e(c)}</td>'
+            if block.align_numbers and _is_num(str(c))
+            else f"<td>{_e(c)}</td>"
+            for c in row
         )
         rows.append(f"<tr>{cells}</tr>")
     if not rows:
