@@ -390,8 +390,12 @@ def recover_recording(
     if Path(out).resolve() == Path(broken).resolve():
         raise InputError(out, "--out must differ from the broken file (it is kept as evidence)")
     rep, content = scan(broken)
+    if not content["channels"] and not content["metadata"]:
+        raise InputError(broken, "no complete record survived; nothing to recover")
     if not content["channels"]:
-        raise InputError(broken, "no complete chunk survived; nothing to recover")
+        # Killed before its first flush: the header and metadata are still a valid (empty)
+        # recording of the run, and say what it was.
+        rep.problems.append("no chunk was complete: the recovered file holds no messages")
     with atomic_file(out, force) as tmp:
         with open(tmp, "wb") as fh:
             write_salvaged(content, fh)
