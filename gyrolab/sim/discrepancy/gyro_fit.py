@@ -72,13 +72,14 @@ def nonlinear_grid(name: str, ctx: GyroContext) -> np.ndarray:
     if name == "hysteresis":
         return np.geomspace(0.05, 20.0, 30)
     if name == "warmup":
-        return np.geomspace(max(30.0, 3 * ctx.bin_s), max(300.0, ctx.duration_s / 2), 40)
+        # a warm-up settles within the run; slower drifts are aging_ramp's business
+        return np.geomspace(max(30.0, 3 * ctx.bin_s), max(300.0, ctx.duration_s / 6), 40)
     if name == "periodic":
-        # uniform in frequency, 3× oversampled against the run's resolution 1/T
+        # uniform in frequency, 2× oversampled against the run's resolution 1/T
         # compressor-like cycles: minutes to two hours, and at least six per run
         f_lo = max(1.0 / 7200.0, 6.0 / ctx.duration_s)
         f_hi = 1.0 / max(120.0, 4.0 * ctx.bin_s)
-        nf = int(min(3000, max(20, 3 * (f_hi - f_lo) * ctx.duration_s)))
+        nf = int(min(2000, max(20, 2 * (f_hi - f_lo) * ctx.duration_s)))
         return 1.0 / np.linspace(f_lo, f_hi, nf)
     raise KeyError(name)
 

@@ -39,6 +39,7 @@ from gyrolab.sim.discrepancy.data import BenchData
 
 RRW_CHI2 = 40.0
 OUTLIER_LR = 40.0
+SPIKE_K_HARD = 8.0
 LATTICE_RATIO = 3.0
 LATTICE_FRACTION = 0.5
 
@@ -110,7 +111,7 @@ def fit_allan(
     start = {"arw": n0, "bias_instability": b0, "rate_random_walk": k0}
 
     def unpack(x: np.ndarray) -> tuple[float, float, float]:
-        v = dict(zip(names, np.exp(x), strict=True))
+        v = dict(zip(names, np.exp(np.clip(x, -80.0, 20.0)), strict=True))
         return v.get("arw", 0.0), v.get("bias_instability", 0.0), v.get("rate_random_walk", 0.0)
 
     def res(x: np.ndarray) -> np.ndarray:
@@ -177,12 +178,24 @@ def _tail_loglik(v: np.ndarray, n: int, c: float, s: float, p: float, a: float) 
     return float(np.sum(loglam) - integral)
 
 
-def fit_outliers(d: BenchData) -> OutlierFit:
-    """Likelihood-ratio test of spikes in the tail of the second differences."""
+def fit_outliers(d: BenchData, lattice_q: float = 0.0) -> OutlierFit:
+    """Likelihood-ratio test of spikes in the tail of the second differences.
+
+    On a coarsely quantized output (``lattice_q`` > 0) ``e`` carries a bounded quantization
+    term (|·| ≤ 2q) that the Gaussian tail model does not describe; there only values
+    beyond ``SPIKE_K σ_e + 2q`` count, each taken as a spike (none are expected otherwise).
+    """
     hr = d.hr
     v = hr.e_tail
     n = max(1, hr.n - 2)
     s0 = hr.e_sigma
+    if lattice_q > 0:
+        big = v[v > SPIKE_K_HARD * s0 + 2.0 * lattice_q]
+        # centre values only: neighbours sit near A/2
+        a = float(np.median(big)) if big.size else 0.0
+        cnt = int(np.sum(big > 0.75 * a)) if big.size else 0
+        lr = 2.0 * cnt * 5.0 if cnt >= 3 else 0.0
+        return OutlierFit(lr, s0, cnt / n, a, n)
     if s0 <= 0 or v.size < 5:
         return OutlierFit(0.0, s0, 0.0, 0.0, n)
     c = float(v.min()) if v.size else 3.0 * s0

@@ -4,7 +4,7 @@ Two stages, each driven by what the bench measured (docs/sim-model.md has the mo
 
 1. **Oven air** from the setpoint channel: the recorded process value ``PV`` against the
    simulator's controller, first order with rate limits (nominal) or second order
-   (``oven_overshoot``), integrated with the simulator's own kernel on a 0.25 s grid;
+   (``oven_overshoot``), integrated with the simulator's own kernel on a 0.5 s grid;
    parameters by nonlinear least squares (``scipy.optimize.least_squares``).
 2. **Gyro case** from the recorded air: ``τ_case dTc/dt = PV + ΔT_self − Tc`` with the case
    at the air temperature at power-on, and the PT100 reading ``Tc + δ`` (``δ`` is the
@@ -31,7 +31,9 @@ from scipy.signal import lfilter
 from gyrolab.sim.discrepancy.data import BenchData
 from gyrolab.sim.thermal import ThermalParams, thermal_kernel
 
-OVEN_DT_S = 0.25
+OVEN_DT_S = 0.5
+OVEN_MAX_POINTS = 6000
+"""The oven fit uses at most this many (evenly spaced) process-value samples."""
 OVEN_FLOOR_C = 0.02
 """Resolution floor of the oven process value in the likelihood, °C."""
 
@@ -74,7 +76,7 @@ def _air_model(
     x: np.ndarray,
     overshoot: tuple[float, float] | None,
 ) -> np.ndarray:
-    """Air temperature at ``t_obs`` from the setpoint history (kernel on a 0.25 s grid)."""
+    """Air temperature at ``t_obs`` from the setpoint history (kernel on a 0.5 s grid)."""
     tau, rh, rc, knee, gap = x[:5]
     w = z = 0.0
     if overshoot is not None:
@@ -116,6 +118,8 @@ def fit_oven(
 ) -> OvenFit:
     """Least-squares fit of the oven air model to the recorded process value."""
     t, sp, pv = d.oven_t, d.oven_sp, d.oven_pv
+    step = max(1, t.size // OVEN_MAX_POINTS)
+    to, pvo = t[::step], pv[::step]
     x0 = np.array(
         [
             th.air_tau_s,
@@ -132,9 +136,9 @@ def fit_oven(
     if not with_overshoot:
 
         def res1(x: np.ndarray) -> np.ndarray:
-            return _air_model(t, t, sp, a0, x, None) - pv
+            return _air_model(to, t, sp, a0, x, None) - pvo
 
-        r = least_squares(res1, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=60)
+        r = least_squares(res1, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=40)
         x, os_ = r.x, None
     else:
         # coarse start for (overshoot, period), then all seven parameters together
@@ -142,7 +146,7 @@ def fit_oven(
         starts += [(o, p) for o in (0.05, 0.15, 0.35) for p in (400.0, 1200.0, 3000.0)]
         best = None
         for o, p in starts:
-            e = _air_model(t, t, sp, a0, x0, (o, p)) - pv
+            e = _air_model(to, t, sp, a0, x0, (o, p)) - pvo
             c = float(e @ e)
             if best is None or c < best[0]:
                 best = (c, o, p)
@@ -151,10 +155,10 @@ def fit_oven(
         hi7 = np.concatenate([hi, [0.95, 2e4]])
 
         def res2(x: np.ndarray) -> np.ndarray:
-            return _air_model(t, t, sp, a0, x[:5], (x[5], x[6])) - pv
+            return _air_model(to, t, sp, a0, x[:5], (x[5], x[6])) - pvo
 
         x7 = np.clip(np.concatenate([x0, [best[1], best[2]]]), lo7, hi7)
-        r = least_squares(res2, x7, bounds=(lo7, hi7), x_scale="jac", max_nfev=120)
+        r = least_squares(res2, x7, bounds=(lo7, hi7), x_scale="jac", max_nfev=60)
         x, os_ = r.x[:5], (float(r.x[5]), float(r.x[6]))
     pred = _air_model(t, t, sp, a0, x, os_)
     params = {

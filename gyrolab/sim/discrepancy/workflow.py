@@ -36,12 +36,14 @@ import numpy as np
 
 from gyrolab.sim.discrepancy import noise_fit as nf
 from gyrolab.sim.discrepancy.data import BenchData
+from gyrolab.sim.discrepancy.gls import CovWhitener, bin_noise_autocov, gls_cov
 from gyrolab.sim.discrepancy.gyro_fit import (
     GYRO_EFFECTS,
     NONLINEAR,
     GyroContext,
     GyroFit,
     GyroStructure,
+    design,
     effect_params,
     fit_structure,
 )
@@ -119,6 +121,7 @@ class Fitted:
     outliers: nf.OutlierFit | None
     quant_q: float
     gaps: dict[str, float]
+    whitener: CovWhitener | None = None
 
     @property
     def resid(self) -> np.ndarray:
@@ -208,10 +211,28 @@ class Workflow:
         q = self.d.hr.lattice_step if st.has("quantization") else 0.0
         terms = {n for n in st.effects if n in ("arw", "bias_instability", "rate_random_walk")}
         noise = nf.fit_allan(curve, self.d.hr.dt, terms, q=q, white0=self.d.hr.white_sigma)
-        outl = nf.fit_outliers(self.d) if st.has("outliers") else None
-        f = Fitted(st, oven, case, gyro, ctx, noise, outl, q, {})
+        outl = nf.fit_outliers(self.d, self.coarse_lattice()) if st.has("outliers") else None
+        # final deterministic fit and its score with the fitted noise model's covariance
+        w = self.whitener(noise)
+        gyro = self.cov_fit(gyro.struct, ctx, w)
+        f = Fitted(st, oven, case, gyro, ctx, noise, outl, q, {}, w)
         f.gaps = self.gaps(f)
         return f
+
+    def whitener(self, noise: nf.NoiseFit) -> CovWhitener:
+        """Whitener of the bins' noise covariance implied by the fitted noise terms."""
+        r = bin_noise_autocov(
+            self.d.t.size, self.d.bin_s, noise.n_white, noise.b_floor, noise.k_rrw
+        )
+        return CovWhitener(r)
+
+    @staticmethod
+    def cov_fit(struct: GyroStructure, ctx: GyroContext, w: CovWhitener) -> GyroFit:
+        """GLS of a structure (nonlinear parameters fixed) with a known noise covariance."""
+        X, cols = design(struct, ctx)
+        n_nl = sum(1 for n in struct.names if n in NONLINEAR)
+        g = gls_cov(ctx.y, X, w, n_nl)
+        return GyroFit(struct, g, cols, X @ g.beta)
 
     # --------------------------------------------------------------------- gaps
     def gaps(self, f: Fitted) -> dict[str, float]:
@@ -293,6 +314,15 @@ class Workflow:
         out = []
         st = cur.structure
         base_struct = self._gyro_struct(st)
+        w, base = cur.whitener, cur.gyro
+        assert w is not None
+        if not st.has("rate_random_walk"):
+            # If a random walk explains the Allan curve better, judge the deterministic
+            # candidates against that noise: slow wander must not pass for a ramp or a step.
+            alt = self._rrw_alt(cur)
+            if cur.noise.chi2 - alt.chi2 > nf.RRW_CHI2:
+                w = self.whitener(alt)
+                base = self.cov_fit(cur.gyro.struct, cur.ctx, w)
         for name in GYRO_EFFECTS:
             if name in base_struct.names or name == "bias_poly":
                 continue
@@ -300,7 +330,8 @@ class Workflow:
                 continue
             s2 = GyroStructure(base_struct.names + [name], dict(cur.gyro.struct.theta))
             g = fit_structure(s2, cur.ctx, scan=(name,) if name in NONLINEAR else ())
-            dbic = cur.gyro.bic - g.bic
+            g = self.cov_fit(g.struct, cur.ctx, w)
+            dbic = base.bic - g.bic
             params = effect_params(g).get(name, {})
             out.append(
                 {
@@ -314,14 +345,18 @@ class Workflow:
             )
         return out
 
-    def score_noise(self, cur: Fitted) -> list[dict[str, Any]]:
+    def _rrw_alt(self, cur: Fitted) -> nf.NoiseFit:
+        """The current noise fit with a rate random walk added."""
+        d = self.d
+        terms = {n for n in cur.structure.effects if n in ("arw", "bias_instability")}
+        terms.add("rate_random_walk")
+        return nf.fit_allan(cur.noise.curve, d.hr.dt, terms, cur.quant_q, d.hr.white_sigma)
+
+    def score_rrw(self, cur: Fitted) -> list[dict[str, Any]]:
         out = []
         st = cur.structure
-        d = self.d
         if not st.has("rate_random_walk"):
-            terms = {n for n in st.effects if n in ("arw", "bias_instability")}
-            terms.add("rate_random_walk")
-            k = nf.fit_allan(cur.noise.curve, d.hr.dt, terms, cur.quant_q, d.hr.white_sigma)
+            k = self._rrw_alt(cur)
             dchi = cur.noise.chi2 - k.chi2
             out.append(
                 {
@@ -335,8 +370,21 @@ class Workflow:
                     },
                 }
             )
+        return out
+
+    def coarse_lattice(self) -> float:
+        """The output's lattice step when it is coarser than the ADC LSB, else 0."""
+        q = self.d.hr.lattice_step
+        ok = q / self.lsb > nf.LATTICE_RATIO and self.d.hr.lattice_fraction > nf.LATTICE_FRACTION
+        return q if ok else 0.0
+
+    def score_sample(self, cur: Fitted) -> list[dict[str, Any]]:
+        """Sample-level effects, read off the full-rate stream (independent of the fits)."""
+        out = []
+        st = cur.structure
+        d = self.d
         if not st.has("outliers"):
-            o = nf.fit_outliers(d)
+            o = nf.fit_outliers(d, self.coarse_lattice())
             obs, gauss = nf.spike_counts(d)
             out.append(
                 {
@@ -443,7 +491,12 @@ class Workflow:
         for it in range(MAX_ITER):
             cands: list[dict[str, Any]] = []
             chosen = None
-            for scorer in (self.score_temperature, self.score_gyro, self.score_noise):
+            for scorer in (
+                self.score_sample,
+                self.score_temperature,
+                self.score_gyro,
+                self.score_rrw,
+            ):
                 cs = scorer(cur)
                 cands += cs
                 sig = [c for c in cs if c["significant"]]
