@@ -292,3 +292,36 @@ def test_kill_9_at_random_moments_loses_at_most_2_s(tmp_path: Path) -> None:
     for row in rows:
         assert row["messages"] > 0 and row["contiguous"]
         assert -1e-6 <= row["lost_s"] <= 2.0, row
+
+
+def test_lab_bench_file_path_runs_in_real_time_against_instruments_on_ptys(
+    tmp_path: Path,
+) -> None:
+    """`--bench BENCH.toml` (the lab path: wall clock, ports from the file) against the
+    simulated instruments running in real time: what a lab sees, minus the hardware."""
+    from gyrolab.sim.bench import SimBench
+
+    prof = _profile(tmp_path, [(25, 2), (30, 2)])
+    with SimBench(seed=3, speed=1.0, tcp=False, tick_s=0.1) as bench:
+        text = (REPO / "examples" / "lab.toml").read_text()
+        text = text.replace('"ASRL/dev/ttyUSB0::INSTR"', f'"{bench.dmm_serial_resource}"')
+        text = text.replace('"/dev/ttyUSB1"', f'"{bench.oven_port}"')
+        text = text.replace('"/dev/ttyUSB2"', f'"{bench.adc_port}"')
+        text = text.replace('profile = "paper"', f'profile = "{prof}"')
+        text = text.replace("nplc = 10.0", "nplc = 1.0").replace("period_s = 1.0", "period_s = 0.5")
+        cfg = tmp_path / "lab.toml"
+        cfg.write_text(text)
+        out = tmp_path / "lab.mcap"
+        t0 = time.monotonic()
+        assert main(["acquire", "--bench", str(cfg), "--out", str(out)]) == 0
+        wall = time.monotonic() - t0
+        assert bench.physics.setpoint_c == 25.0  # safe state after the 30 °C step
+    assert 4.0 <= wall < 15.0  # real time: the profile's 4 s, plus connecting
+    rec = read_recording(out)
+    assert rec.run["operator"] == "A. Engineer" and rec.run["unit_serial"] == "MG-2021-0042"
+    assert rec.bench["name"] == "oven-bench-1" and rec.bench["simulated"] is False
+    assert rec.bench["multimeter"]["calibration_due"] == "2027-03-01"
+    starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
+    assert starts[0] < 0.01 and starts[1] == pytest.approx(2.0, abs=0.3)
+    assert rec.adc.gaps() == [] and rec.adc.index.size >= 350
+    assert rec.pt100_t.size >= 6 and rec.events[-1]["event"] == "safe_state"
