@@ -309,9 +309,10 @@ def start_sim_bench(
         keep_truth=keep_truth,
         tcp=False,
         tick_s=sim_tick_s(speed),
-        # Real time while the drivers connect (imports, port set-up: wall seconds that
-        # would be hundreds of simulated seconds); run_acquisition sets ``speed`` after.
-        speed=1.0,
+        # Slow while the drivers connect (imports, port set-up: wall seconds that would be
+        # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
+        # that the change to ``speed`` (run_acquisition) takes effect at once.
+        speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
     )
     adc = bench.physics.adc
     cfg = replace(
@@ -347,6 +348,9 @@ def sim_tick_s(speed: float | None) -> float:
         return 1.0
     return float(min(1.0, max(0.1, speed / 100.0)))
 
+
+# Simulated-bench speed while the drivers connect (see start_sim_bench).
+CONNECT_SPEED = 10.0
 
 # Lost communication with a simulated instrument also needs this much wall time of
 # silence (see Acquisition._watchdog); a real bench runs in real time and needs none.
@@ -499,33 +503,34 @@ def run_acquisition(
                 flush_every_s=r.flush_every_s,
                 fsync_every_s=r.fsync_every_s,
             )
-            if sim is not None and sim.provenance:
-                writer.write_metadata("sim_provenance", sim.provenance)
-            fh.flush()  # header + metadata on disk before the first reading
-            assert inst.thermometer and inst.oven and inst.gyro
-            acq = Acquisition(
-                profile=profile,
-                writer=writer,
-                clock=clock,
-                thermometer=inst.thermometer,
-                oven=inst.oven,
-                gyro=inst.gyro,
-                adc=cfg.adc,
-                limits=cfg.limits,
-                safe_state=cfg.safe_state,
-                pt100_period_s=cfg.multimeter.period_s,
-                oven_period_s=cfg.oven.period_s,
-                on_status=on_status,
-                on_samples=on_samples,
-                comm_timeout_min_wall_s=0.0 if sim is None else SIM_COMM_MIN_WALL_S,
-            )
-            if acquisition_hook is not None:
-                acquisition_hook(acq)
-            if sim is not None:
-                sim.clock.speed = sim.speed  # connected: now run at the asked speed
             try:
+                if sim is not None and sim.provenance:
+                    writer.write_metadata("sim_provenance", sim.provenance)
+                fh.flush()  # header + metadata on disk before the first reading
+                assert inst.thermometer and inst.oven and inst.gyro
+                acq = Acquisition(
+                    profile=profile,
+                    writer=writer,
+                    clock=clock,
+                    thermometer=inst.thermometer,
+                    oven=inst.oven,
+                    gyro=inst.gyro,
+                    adc=cfg.adc,
+                    limits=cfg.limits,
+                    safe_state=cfg.safe_state,
+                    pt100_period_s=cfg.multimeter.period_s,
+                    oven_period_s=cfg.oven.period_s,
+                    on_status=on_status,
+                    on_samples=on_samples,
+                    comm_timeout_min_wall_s=0.0 if sim is None else SIM_COMM_MIN_WALL_S,
+                )
+                if acquisition_hook is not None:
+                    acquisition_hook(acq)
+                if sim is not None:
+                    sim.clock.speed = sim.speed  # connected: now run at the asked speed
                 result = acq.run()
             finally:
+                # Also on an interrupt before the run started: a finished, readable file.
                 writer.close()
         return result
     finally:

@@ -221,7 +221,8 @@ class ProfilePlan:
         if self.state != "step":
             return []
         s = self.profile.steps[self.step_index]
-        if pt100_c is not None and math.isfinite(pt100_c):
+        # A reading taken before this step began (delivered late) says nothing about it.
+        if pt100_c is not None and math.isfinite(pt100_c) and t >= self.step_started_at:
             self._hist.append((t, pt100_c))
             keep = s.stable_window_s if s.stable_slope_c_per_min is not None else 0.0
             while self._hist and self._hist[0][0] < t - keep:
