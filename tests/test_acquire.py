@@ -325,3 +325,17 @@ def test_lab_bench_file_path_runs_in_real_time_against_instruments_on_ptys(
     assert starts[0] < 0.01 and starts[1] == pytest.approx(2.0, abs=0.3)
     assert rec.adc.gaps() == [] and rec.adc.index.size >= 350
     assert rec.pt100_t.size >= 6 and rec.events[-1]["event"] == "safe_state"
+
+
+@pytest.mark.hardware
+def test_one_minute_on_a_real_bench(tmp_path: Path) -> None:
+    """On real instruments: GYROLAB_BENCH_FILE=BENCH.toml pytest -m hardware."""
+    bench = os.environ.get("GYROLAB_BENCH_FILE")
+    if not bench:
+        pytest.skip("set GYROLAB_BENCH_FILE=BENCH.toml to run on real instruments")
+    prof = _profile(tmp_path, [(25, 60)])  # one minute at room temperature
+    out = tmp_path / "hw.mcap"
+    assert main(["acquire", "--bench", bench, "--profile", str(prof), "--out", str(out)]) == 0
+    rec = read_recording(out)
+    assert rec.adc.index.size > 0 and rec.pt100_t.size >= 30
+    assert "verified" in rec.events[-1]["detail"]
