@@ -47,11 +47,11 @@ def _sign(rng: np.random.Generator) -> float:
 RANGES: dict[str, Sampler] = {
     # deterministic gyro terms (°/s units as in gyrolab/sim/effects.py)
     "cubic_temp": lambda r: {"c3": _sign(r) * r.uniform(2e-8, 6e-8)},
-    "thermal_rate": lambda r: {"k": _sign(r) * r.uniform(1.5e-3, 5e-3)},
+    "thermal_rate": lambda r: {"k": _sign(r) * r.uniform(2.5e-3, 6e-3)},
     "thermal_lag": lambda r: {"tau_s": r.uniform(300.0, 1800.0)},
     "hysteresis": lambda r: {"h": _sign(r) * r.uniform(1.5e-3, 4e-3), "width_c": r.uniform(0.5, 2)},
     "warmup": lambda r: {"A": _sign(r) * r.uniform(3e-3, 1e-2), "tau_s": r.uniform(300, 1800)},
-    "aging_ramp": lambda r: {"r": _sign(r) * r.uniform(1e-4, 4e-4)},
+    "aging_ramp": lambda r: {"r": _sign(r) * r.uniform(2e-4, 5e-4)},
     "periodic": lambda r: {
         "A": r.uniform(3e-4, 2e-3),
         "period_s": r.uniform(300.0, 2400.0),

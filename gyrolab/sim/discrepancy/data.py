@@ -159,9 +159,9 @@ def high_rate_stats(
         fill = 0.5 * (x[lo] + x[hi])
         amps = x[idx] - fill
         xd[idx] = fill
-    d = np.diff(xd[: min(xd.size, n_diffs + 1)])
+    d = np.diff(x[: min(x.size, n_diffs + 1)])
     white = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
-    q, frac = _lattice(xd)
+    q, frac = _lattice(x)  # raw: despiking fills in off-lattice means
     m = 2 ** np.arange(int(np.floor(np.log2(max(1, bin_n)))) + 1)
     tau, ad = oadev(xd, dt, m)
     hr = HighRate(

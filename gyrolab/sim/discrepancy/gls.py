@@ -112,7 +112,7 @@ def bin_noise_autocov(
     """Autocovariance ``R_j`` (lags ``j·Δ``, j = 0..n−1) of Δ-second means of white +
     flicker (+ random-walk) rate noise, from their one-sided PSDs (IEEE 952 Annex C)::
 
-        S(f) = 2N² + B²/(2 ln 2 · f) + K²/(4π² f²)
+        S(f) = 2N² + B²/(2 ln 2 · f) + K²/(2π² f²)
 
     weighted by the averaging window's ``sinc²(π f Δ)`` and folded into the bins' Nyquist
     band (aliasing) on a grid of ``Δf = 1/(8 n Δ)``, then ``R = irfft``. White noise only
@@ -123,7 +123,7 @@ def bin_noise_autocov(
     df = 1.0 / (m * bin_s)
     k = np.arange(1, 6 * m + 1)  # up to 3/Δ: the sinc² tail beyond is negligible
     f = k * df
-    s = b_floor**2 / (2.0 * np.log(2.0) * f) + k_rrw**2 / (4.0 * np.pi**2 * f * f)
+    s = b_floor**2 / (2.0 * np.log(2.0) * f) + k_rrw**2 / (2.0 * np.pi**2 * f * f)
     s *= np.sinc(f * bin_s) ** 2  # np.sinc(x) = sin(πx)/(πx)
     # fold onto 0..m/2 (bins of the length-m periodic grid), then to lags
     idx = k % m
