@@ -12,6 +12,11 @@ trusts a summary), keeps every complete record whose CRC checks, skips a damaged
 the salvaged schemas, channels, messages and metadata to a new, complete MCAP file, and
 returns a :class:`RecoveryReport` saying what was kept and what was lost: the truncated
 tail's size and, when the cut chunk's header survived, the time span its messages covered.
+
+Why not ``mcap.stream_reader.StreamReader``: on a cut file it yields records until it
+raises ``EndOfFile`` (or a struct error) inside the last one, and a damaged chunk (with
+``validate_crcs``) ends the iteration too; it cannot skip a bad chunk and go on, nor say
+what the cut record held. Walking the length prefixes here does both.
 """
 
 from __future__ import annotations
@@ -294,6 +299,8 @@ def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
         rep.salvaged_bytes = i
         if op == _OP_FOOTER:
             rep.complete = True
+            if data[i : i + len(MAGIC)] == MAGIC:
+                rep.salvaged_bytes += len(MAGIC)
             break
     return rep, content
 
