@@ -37,12 +37,10 @@ from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
 from gyrolab.recording import (
     PROFILE,
-    TOPIC_PT100,
     TOPIC_RATE,
     decode_block,
     encode_block,
     iter_messages,
-    read_recording,
 )
 
 TOPIC_RATE_RAW = "/gyro/rate_raw"
@@ -61,10 +59,9 @@ def _named(path: str) -> Iterator[None]:
 
 
 def _load_run(path: str, cfg: Any) -> Any:
-    from gyrolab.compensation.pipeline import prepare_run
+    from gyrolab.compensation.pipeline import prepare_file
 
-    rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_PT100])
-    return prepare_run(rec, cfg)
+    return prepare_file(path, cfg)
 
 
 def _summary(m: dict[str, Any]) -> str:
@@ -131,18 +128,14 @@ def compensate(args: argparse.Namespace) -> int:
 def apply(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
     from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
-    from gyrolab.compensation.pipeline import (
-        compensate_offline,
-        load_model,
-        streaming_compensate,
-    )
+    from gyrolab.compensation.pipeline import StreamingCompensator, compensate_offline, load_model
 
     model = load_model(args.model)
     check_output(args.out, args.force)
     run = _load_run(args.run, model.config)
     with _named(args.run):
-        stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
         offline = compensate_offline(model, run)
+    comp = StreamingCompensator(model, run.pt_t, run.pt_c)
     info = {
         "model_dir": str(args.model),
         "model_format_version": MODEL_FORMAT_VERSION,
@@ -160,7 +153,7 @@ def apply(args: argparse.Namespace) -> int:
         _write_compensated(
             args.run,
             tmp,
-            stream,
+            comp,
             offline.t,
             offline.series["compensated"],
             model.config.block_s,
@@ -173,15 +166,16 @@ def apply(args: argparse.Namespace) -> int:
 def _write_compensated(
     src: str,
     dst: Path,
-    stream: np.ndarray,
+    comp: Any,
     t_off: np.ndarray,
     y_off: np.ndarray,
     block_s: float,
     info: dict[str, Any],
 ) -> None:
     """Copy ``src`` to ``dst`` record by record (schemas, channels, messages with their
-    times and sequence numbers, metadata), with ``/gyro/rate`` re-encoded from ``stream``
-    and the two extra rate channels added (module docstring)."""
+    times and sequence numbers, metadata), with ``/gyro/rate`` compensated block by block
+    by ``comp`` (a :class:`~gyrolab.compensation.pipeline.StreamingCompensator`) and the two
+    extra rate channels added (module docstring). Memory: one block at a time."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
 
@@ -195,7 +189,6 @@ def _write_compensated(
             sids: dict[int, int] = {}
             cids: dict[int, int] = {}
             extra: dict[str, int] = {}
-            pos = 0
             for schema, channel, msg in reader.iter_messages(log_time_order=True):
                 if channel.id not in cids:
                     sid = 0
@@ -216,9 +209,6 @@ def _write_compensated(
                 data = msg.data
                 if channel.topic == TOPIC_RATE:
                     t0, period, first, arr = decode_block(data, "rate")
-                    n = arr.size
-                    if pos + n > stream.size:
-                        raise InputError(src, "/gyro/rate blocks changed while reading")
                     w.add_message(
                         extra[TOPIC_RATE_RAW],
                         log_time=msg.log_time,
@@ -226,8 +216,9 @@ def _write_compensated(
                         publish_time=msg.publish_time,
                         sequence=msg.sequence,
                     )
-                    data = encode_block(t0, period, first, stream[pos : pos + n], "rate")
-                    pos += n
+                    t = t0 + np.arange(arr.size) * period
+                    y = comp(t, arr.astype(float))
+                    data = encode_block(t0, period, first, y, "rate")
                 w.add_message(
                     cids[channel.id],
                     log_time=msg.log_time,
@@ -235,8 +226,6 @@ def _write_compensated(
                     publish_time=msg.publish_time,
                     sequence=msg.sequence,
                 )
-            if pos != stream.size:
-                raise InputError(src, "/gyro/rate blocks changed while reading")
             per = 1000  # offline samples per message: 1 h at 1000 points/h
             for k, s in enumerate(range(0, y_off.size, per)):
                 t0 = float(t_off[s])

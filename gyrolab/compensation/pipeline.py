@@ -45,6 +45,7 @@ removal instead of GA-BP: the like-for-like comparison with the paper's full met
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -121,12 +122,86 @@ class PreparedRun:
     rate: np.ndarray
     temp: np.ndarray
     X: np.ndarray
-    raw_t: np.ndarray
-    raw_rate: np.ndarray
+    raw_t: np.ndarray | None  # None when prepared from the file by streaming
+    raw_rate: np.ndarray | None
     raw_period: float
     pt_t: np.ndarray
     pt_c: np.ndarray
     filled_blocks: int = 0
+
+
+class BlockAverager:
+    """Streaming 3.6 s block means: feed sample blocks in time order with :meth:`add`,
+    read the result with :meth:`result`. Memory is that of the averaged series, so a
+    47 M-sample run is decimated without holding its samples. Also counts non-finite
+    samples and tracks the range and duration the input checks need."""
+
+    def __init__(self, block_s: float) -> None:
+        self.block_s = float(block_s)
+        self.t_first: float | None = None
+        self.t_last = -np.inf
+        self.sums = np.zeros(4096)
+        self.counts = np.zeros(4096)
+        self.n_bins = 0
+        self.periods: list[float] = []
+        self.n_samples = 0
+        self.n_bad = 0
+        self.vmin = np.inf
+        self.vmax = -np.inf
+
+    def add(self, t: np.ndarray, x: np.ndarray, period: float) -> None:
+        """Add samples ``x`` at times ``t`` (s, increasing, after every earlier block)."""
+        if t.size == 0:
+            return
+        if self.t_first is None:
+            self.t_first = float(t[0])
+        x = np.asarray(x, dtype=float)
+        fin = np.isfinite(x)
+        if not fin.all():
+            self.n_bad += int((~fin).sum())
+            t, x = t[fin], x[fin]
+        self.periods.append(float(period))
+        self.n_samples += int(fin.size)
+        if t.size == 0:
+            return
+        self.t_last = max(self.t_last, float(t[-1]))
+        self.vmin = min(self.vmin, float(x.min()))
+        self.vmax = max(self.vmax, float(x.max()))
+        # the 1e-9 keeps a sample that sits exactly on a boundary in the block it starts
+        k = np.floor((t - self.t_first) / self.block_s + 1e-9).astype(np.int64)
+        k0, k1 = int(k.min()), int(k.max()) + 1
+        if k0 < 0:
+            raise ValueError("samples out of time order")
+        if k1 > self.sums.size:
+            grow = max(k1, 2 * self.sums.size)
+            self.sums = np.concatenate([self.sums, np.zeros(grow - self.sums.size)])
+            self.counts = np.concatenate([self.counts, np.zeros(grow - self.counts.size)])
+        self.sums[k0:k1] += np.bincount(k - k0, weights=x, minlength=k1 - k0)
+        self.counts[k0:k1] += np.bincount(k - k0, minlength=k1 - k0)
+        self.n_bins = max(self.n_bins, k1)
+
+    @property
+    def period(self) -> float:
+        return float(np.median(self.periods)) if self.periods else float("nan")
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """Block centres, block means and the number of gap-filled blocks (see
+        :func:`block_average`)."""
+        if self.t_first is None or not self.period > 0:
+            return np.empty(0), np.empty(0), 0
+        n = self.n_bins
+        if (self.t_last - self.t_first + self.period) < self.block_s * n * (1.0 - 1e-9):
+            n -= 1  # trailing partial block
+        expected = self.block_s / self.period
+        s, c = self.sums[:n], self.counts[:n]
+        tb = self.t_first + (np.arange(n) + 0.5) * self.block_s
+        good = c >= 0.5 * expected
+        xb = np.full(n, np.nan)
+        xb[good] = s[good] / c[good]
+        filled = int((~good).sum())
+        if filled and good.sum() >= 2:
+            xb[~good] = np.interp(tb[~good], tb[good], xb[good])
+        return tb, xb, filled
 
 
 def block_average(
@@ -137,23 +212,9 @@ def block_average(
     Returns block centres, block means and the number of blocks that had fewer than half
     their samples (recording gaps) and were filled by linear interpolation, so that the
     series stays uniformly sampled for VMD. A trailing partial block is dropped."""
-    # the 1e-9 keeps a sample that sits exactly on a boundary in the block it starts
-    k = np.floor((t - t[0]) / block_s + 1e-9).astype(np.int64)
-    n = int(k[-1]) + 1
-    expected = block_s / period
-    if (t[-1] - t[0] + period) < block_s * n * (1.0 - 1e-9):
-        n -= 1  # trailing partial block
-    keep_samples = k < n
-    s = np.bincount(k[keep_samples], weights=x[keep_samples], minlength=n)
-    c = np.bincount(k[keep_samples], minlength=n).astype(float)
-    tb = t[0] + (np.arange(n) + 0.5) * block_s
-    good = c >= 0.5 * expected
-    xb = np.full(n, np.nan)
-    xb[good] = s[good] / c[good]
-    filled = int((~good).sum())
-    if filled and good.sum() >= 2:
-        xb[~good] = np.interp(tb[~good], tb[good], xb[good])
-    return tb, xb, filled
+    acc = BlockAverager(block_s)
+    acc.add(np.asarray(t, dtype=float), x, period)
+    return acc.result()
 
 
 def causal_temperature(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
@@ -175,24 +236,26 @@ def features(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineCon
     return np.column_stack([T, (T - Tp) / w])
 
 
-def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
-    """Validate a recording and decimate it. Bad input → :class:`InputError` naming it."""
-    rate = rec.require_rate()
-    pt_t, pt_c = rec.require_temperature()
-    path = rec.path
-    x = np.asarray(rate.values, dtype=float)
-    if not np.all(np.isfinite(x)):
-        n_bad = int((~np.isfinite(x)).sum())
-        raise InputError(path, f"/gyro/rate has {n_bad} NaN or infinite samples")
+def _check_temperature(path: str, pt_t: np.ndarray, pt_c: np.ndarray) -> tuple[np.ndarray, ...]:
     if not np.all(np.isfinite(pt_c)) or not np.all(np.isfinite(pt_t)):
         raise InputError(path, "/temperature/pt100 has NaN or infinite readings")
-    if np.ptp(x) == 0:
-        raise InputError(path, "/gyro/rate is constant: nothing to compensate")
-    if not rate.period > 0:
-        raise InputError(path, "/gyro/rate has no valid sample period")
     order = np.argsort(pt_t, kind="stable")
-    pt_t, pt_c = pt_t[order], pt_c[order]
-    span_s = float(rate.t[-1] - rate.t[0])
+    return pt_t[order], pt_c[order]
+
+
+def _finish(
+    path: str, acc: BlockAverager, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineConfig
+) -> tuple[np.ndarray, ...]:
+    """Input checks on the accumulated rate, then the 1000 points/h series."""
+    if acc.n_bad:
+        raise InputError(path, f"/gyro/rate has {acc.n_bad} NaN or infinite samples")
+    if acc.t_first is None:
+        raise InputError(path, "recording has no /gyro/rate data")
+    if acc.vmax == acc.vmin:
+        raise InputError(path, "/gyro/rate is constant: nothing to compensate")
+    if not acc.period > 0:
+        raise InputError(path, "/gyro/rate has no valid sample period")
+    span_s = acc.t_last - acc.t_first
     need_s = cfg.min_blocks * cfg.block_s
     if span_s < need_s:
         raise InputError(
@@ -200,13 +263,23 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
             f"run is {span_s:.0f} s long; the compensation model needs at least "
             f"{need_s:.0f} s ({cfg.min_blocks} points at {cfg.block_s} s)",
         )
-    tb, xb, filled = block_average(rate.t, x, cfg.block_s, rate.period)
+    tb, xb, filled = acc.result()
     if not np.all(np.isfinite(xb)):
         raise InputError(path, "/gyro/rate has too many gaps to average")
-    temp = np.interp(tb, pt_t, pt_c)
-    X = features(tb, pt_t, pt_c, cfg)
+    return tb, xb, np.interp(tb, pt_t, pt_c), features(tb, pt_t, pt_c, cfg), filled
+
+
+def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
+    """Validate a recording read into memory and decimate it (keeps the full-rate samples).
+    Bad input → :class:`InputError` naming it."""
+    rate = rec.require_rate()
+    pt_t, pt_c = _check_temperature(rec.path, *rec.require_temperature())
+    x = np.asarray(rate.values, dtype=float)
+    acc = BlockAverager(cfg.block_s)
+    acc.add(rate.t, x, rate.period)
+    tb, xb, temp, X, filled = _finish(rec.path, acc, pt_t, pt_c, cfg)
     return PreparedRun(
-        path=path,
+        path=rec.path,
         t=tb,
         rate=xb,
         temp=temp,
@@ -214,6 +287,64 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
         raw_t=rate.t,
         raw_rate=x,
         raw_period=float(rate.period),
+        pt_t=pt_t,
+        pt_c=pt_c,
+        filled_blocks=filled,
+    )
+
+
+def iter_rate_batches(
+    path: str, min_samples: int = 1 << 20
+) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
+    """``(t, rate, period)`` for runs of consecutive ``/gyro/rate`` messages holding at
+    least ``min_samples`` samples (the last one fewer): per-sample times built for the
+    whole batch at once, so the per-message Python cost is one decode."""
+    from gyrolab.recording import TOPIC_RATE, iter_blocks
+
+    t0s: list[float] = []
+    pers: list[float] = []
+    arrs: list[np.ndarray] = []
+    n = 0
+
+    def flush() -> tuple[np.ndarray, np.ndarray, float]:
+        sizes = np.array([a.size for a in arrs])
+        start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+        t = np.repeat(t0s, sizes) + (np.arange(sizes.sum()) - start) * np.repeat(pers, sizes)
+        return t, np.concatenate(arrs).astype(float), float(np.median(pers))
+
+    for t0, period, _first, arr in iter_blocks(path, TOPIC_RATE):
+        t0s.append(t0)
+        pers.append(period)
+        arrs.append(arr)
+        n += arr.size
+        if n >= min_samples:
+            yield flush()
+            t0s, pers, arrs, n = [], [], [], 0
+    if arrs:
+        yield flush()
+
+
+def prepare_file(path: str, cfg: PipelineConfig) -> PreparedRun:
+    """Like :func:`prepare_run`, streaming ``/gyro/rate`` from the file block by block:
+    memory is that of the 1000 points/h series, not of the run (``raw_t``/``raw_rate`` are
+    ``None``; :func:`streaming_block_means` re-reads the file when it needs the samples)."""
+    from gyrolab.recording import TOPIC_PT100, read_recording
+
+    rec = read_recording(path, topics=[TOPIC_PT100])
+    pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
+    acc = BlockAverager(cfg.block_s)
+    for t, x, period in iter_rate_batches(path):
+        acc.add(t, x, period)
+    tb, xb, temp, X, filled = _finish(str(path), acc, pt_t, pt_c, cfg)
+    return PreparedRun(
+        path=str(path),
+        t=tb,
+        rate=xb,
+        temp=temp,
+        X=X,
+        raw_t=None,
+        raw_rate=None,
+        raw_period=acc.period,
         pt_t=pt_t,
         pt_c=pt_c,
         filled_blocks=filled,
@@ -480,6 +611,36 @@ def compensate_offline(
     )
 
 
+class StreamingCompensator:
+    """Causal full-rate compensation ``raw(t) − f(T(t⁻))`` (module docstring), block by
+    block: ``comp(t, rate)`` for any run of samples in time order.
+
+    Without dT/dt the drift model is evaluated once per PT100 reading (the zero-order hold
+    only changes there) and looked up per sample with one ``searchsorted``; with dT/dt the
+    inputs also change through the ``t − w`` lookup, so they are evaluated per sample."""
+
+    def __init__(
+        self, model: CompensationModel, pt_t: np.ndarray, pt_c: np.ndarray, which: str = "gabp"
+    ) -> None:
+        self.model = model.drift if which == "gabp" else model.baselines[which]
+        self.cfg = model.config
+        self.pt_t, self.pt_c = pt_t, pt_c
+        self._at_reading = None if self.cfg.use_dtdt else self.model.predict(pt_c[:, None])
+
+    def drift(self, t: np.ndarray) -> np.ndarray:
+        if self._at_reading is not None:
+            i = np.searchsorted(self.pt_t, t, side="right") - 1
+            return self._at_reading[np.clip(i, 0, None)]
+        return self.model.predict(features(t, self.pt_t, self.pt_c, self.cfg))
+
+    def __call__(self, t: np.ndarray, rate: np.ndarray) -> np.ndarray:
+        out = np.empty(rate.size)
+        chunk = 1 << 20  # bounded temporaries on long runs
+        for s in range(0, rate.size, chunk):
+            out[s : s + chunk] = rate[s : s + chunk] - self.drift(t[s : s + chunk])
+        return out
+
+
 def streaming_compensate(
     model: CompensationModel,
     t: np.ndarray,
@@ -488,26 +649,21 @@ def streaming_compensate(
     pt_c: np.ndarray,
     which: str = "gabp",
 ) -> np.ndarray:
-    """Causal full-rate compensation ``raw(t) − f(T(t⁻))`` (module docstring).
+    """:class:`StreamingCompensator` applied to whole arrays."""
+    return StreamingCompensator(model, pt_t, pt_c, which)(t, np.asarray(rate, dtype=float))
 
-    The drift model is evaluated once per PT100 reading (it only changes there, by the
-    zero-order hold) and looked up per sample, so a 47 M-sample run costs one
-    ``searchsorted``. With ``use_dtdt`` the inputs change between readings only through the
-    ``t − w`` lookup, so they are evaluated per sample in chunks instead."""
-    m = model.drift if which == "gabp" else model.baselines[which]
-    cfg = model.config
-    out = np.empty(rate.size)
-    chunk = 1 << 20
-    if not cfg.use_dtdt:
-        pred_at_reading = m.predict(pt_c[:, None])
-        for s in range(0, rate.size, chunk):
-            i = np.searchsorted(pt_t, t[s : s + chunk], side="right") - 1
-            out[s : s + chunk] = rate[s : s + chunk] - pred_at_reading[np.clip(i, 0, None)]
-        return out
-    for s in range(0, rate.size, chunk):
-        X = features(t[s : s + chunk], pt_t, pt_c, cfg)
-        out[s : s + chunk] = rate[s : s + chunk] - m.predict(X)
-    return out
+
+def streaming_block_means(model: CompensationModel, run: PreparedRun) -> np.ndarray:
+    """The causal full-rate output averaged to the run's 1000 points/h grid: from the
+    samples in memory, or by streaming the file again when the run was prepared from it."""
+    comp = StreamingCompensator(model, run.pt_t, run.pt_c)
+    acc = BlockAverager(model.config.block_s)
+    if run.raw_rate is not None and run.raw_t is not None:
+        acc.add(run.raw_t, comp(run.raw_t, run.raw_rate), run.raw_period)
+    else:
+        for t, x, period in iter_rate_batches(run.path):
+            acc.add(t, comp(t, x), period)
+    return acc.result()[1]
 
 
 def effective_bandwidth(raw: np.ndarray, filtered: np.ndarray, block_s: float) -> dict[str, float]:
@@ -645,9 +801,7 @@ def evaluate(
     m: dict[str, Any] = {"run": run.path, "held_out": bool(held_out)}
     for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):
         m[key] = series_metrics(app.series[key], bs)
-    stream = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
-    _, stream_d, _ = block_average(run.raw_t, stream, bs, run.raw_period)
-    m["compensated_streaming"] = series_metrics(stream_d, bs)
+    m["compensated_streaming"] = series_metrics(streaming_block_means(model, run), bs)
     m["baselines"] = {
         name: series_metrics(app.series[f"baselines.{name}"], bs) for name in model.baselines
     }
