@@ -191,9 +191,10 @@ def fit_outliers(d: BenchData, lattice_q: float = 0.0) -> OutlierFit:
     s0 = hr.e_sigma
     if lattice_q > 0:
         big = v[v > SPIKE_K_HARD * s0 + 2.0 * lattice_q]
-        # centre values only: neighbours sit near A/2
-        a = float(np.median(big)) if big.size else 0.0
-        cnt = int(np.sum(big > 0.75 * a)) if big.size else 0
+        # centre values only: a spike's neighbours sit near A/2
+        centre = big[big > 0.7 * np.percentile(big, 90)] if big.size else big
+        a = float(np.median(centre)) if centre.size else 0.0
+        cnt = int(centre.size)
         lr = 2.0 * cnt * 5.0 if cnt >= 3 else 0.0
         return OutlierFit(lr, s0, cnt / n, a, n)
     if s0 <= 0 or v.size < 5:
