@@ -480,10 +480,12 @@ def _vmd_batch_numba(x, alphas, Ks, tau, tol, max_iter, init, dc, chunk) -> list
 def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk):
     """The same ADMM as :func:`_admm_one`, as batched tensor operations over candidates.
 
-    Each line is one pass over a (B, N) array, so on the CPU this is bandwidth-bound and
-    slower than the fused numba kernel; it is meant for CUDA, where the passes are cheap.
-    Candidates with fewer modes than the largest carry masked, never-updated modes;
-    converged candidates are frozen, so every candidate equals its own :func:`vmd` call.
+    Candidates are sorted by K (descending), so the candidates that have a mode k form a
+    prefix and each mode update works on a slice, not a mask; candidates that converge are
+    written out and dropped from the working tensors, so every candidate equals its own
+    :func:`vmd` call and finished ones cost nothing. Each line is still one pass over a
+    (B, N) array: on the CPU this is bandwidth-bound and far slower than the fused numba
+    kernel; it is meant for CUDA, where the passes are cheap.
     """
     import torch
 
@@ -491,58 +493,64 @@ def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk)
     n = x.size
     B = alphas.size
     chunk = B if chunk is None else int(chunk)
-    results: list[VMDResult] = []
     f64 = torch.float64
+    order = np.argsort(-Ks, kind="stable")
+    out: list[VMDResult | None] = [None] * B
     with torch.no_grad():
         fd = torch.as_tensor(_real_spectrum(x), device=dev)
         fr = torch.arange(n, device=dev, dtype=f64) / (2.0 * n)
         for start in range(0, B, chunk):
-            a_np, k_np = alphas[start : start + chunk], Ks[start : start + chunk]
-            b, kmax = a_np.size, int(k_np.max())
+            ids = order[start : start + chunk]  # original indices, K descending
+            k_np = Ks[ids]
+            kmax = int(k_np[0])
             omega = torch.as_tensor(_initial_block(k_np, init, n, dc), device=dev)
-            alpha = torch.as_tensor(a_np, device=dev)[:, None]
-            kk = torch.as_tensor(k_np, device=dev)[:, None]
-            active = torch.arange(kmax, device=dev)[None, :] < kk
-            u = torch.zeros((b, kmax, n), dtype=f64, device=dev)
-            S = torch.zeros((b, n), dtype=f64, device=dev)
+            alpha = torch.as_tensor(alphas[ids], device=dev)[:, None]
+            u = torch.zeros((ids.size, kmax, n), dtype=f64, device=dev)
+            S = torch.zeros((ids.size, n), dtype=f64, device=dev)
             lam = torch.zeros_like(S)
-            n_iter = torch.zeros(b, dtype=torch.int64, device=dev)
-            running = torch.ones(b, dtype=torch.bool, device=dev)
-            conv = torch.zeros(b, dtype=torch.bool, device=dev)
-            while bool(running.any()):  # one host sync per iteration
-                diff = torch.zeros(b, dtype=f64, device=dev)
+            n_iter = 0
+            while ids.size:
+                # how many of the (sorted) candidates have a mode k, for every k
+                nk = [int((k_np > k).sum()) for k in range(kmax)]
+                diff = torch.zeros(ids.size, dtype=f64, device=dev)
                 for k in range(kmax):
-                    upd = active[:, k] & running
-                    old = u[:, k]
-                    oth = S - old
-                    g = 1.0 + alpha * (fr[None, :] - omega[:, k : k + 1]) ** 2
-                    new = torch.where(upd[:, None], (fd - oth - 0.5 * lam) / g, old)
+                    m = nk[k]
+                    if m == 0:
+                        break
+                    old = u[:m, k]
+                    oth = S[:m] - old
+                    g = 1.0 + alpha[:m] * (fr[None, :] - omega[:m, k : k + 1]) ** 2
+                    new = ((fd - oth - 0.5 * lam[:m]) if tau != 0.0 else (fd - oth)) / g
                     p = new * new
                     den = p.sum(1)
-                    move = upd & (den > 0) & (not (dc and k == 0))
-                    safe = torch.where(den > 0, den, torch.ones_like(den))
-                    omega[:, k] = torch.where(move, (fr * p).sum(1) / safe, omega[:, k])
-                    diff += ((new - old) ** 2).sum(1)
-                    u[:, k] = new
-                    S = oth + new
+                    if not (dc and k == 0):
+                        num = (fr * p).sum(1)
+                        omega[:m, k] = torch.where(den > 0, num / torch.where(den > 0, den, 1.0),
+                                                   omega[:m, k])  # fmt: skip
+                    diff[:m] += ((new - old) ** 2).sum(1)
+                    u[:m, k] = new
+                    S[:m] = oth + new
                 if tau != 0.0:
-                    lam = torch.where(running[:, None], lam + tau * (S - fd), lam)
-                n_iter += running.long()
-                ok = (_EPS + diff / (2.0 * n)) <= tol
-                conv |= running & ok
-                running &= ~ok & (n_iter < max_iter)
-            u_c, om_c = u.cpu().numpy(), omega.cpu().numpy()
-            n_c, conv_c = n_iter.cpu().numpy(), conv.cpu().numpy()
-            for i in range(b):
-                k = int(k_np[i])
-                results.append(
-                    VMDResult(
-                        _modes_from_real(u_c[i, :k], n),
-                        om_c[i, :k].copy(),
-                        int(n_c[i]),
-                        bool(conv_c[i]),
-                        float(a_np[i]),
-                        k,
+                    lam += tau * (S - fd)
+                n_iter += 1
+                ok = ((_EPS + diff / (2.0 * n)) <= tol).cpu().numpy()  # one sync per iteration
+                done = ok | (n_iter >= max_iter)
+                if not done.any():
+                    continue
+                fin = np.flatnonzero(done)
+                u_c, om_c = u[fin].cpu().numpy(), omega[fin].cpu().numpy()
+                for i, row in enumerate(fin):
+                    k = int(k_np[row])
+                    out[ids[row]] = VMDResult(
+                        _modes_from_real(u_c[i, :k], n), om_c[i, :k].copy(), n_iter,
+                        bool(ok[row]), float(alphas[ids[row]]), k,
                     )  # fmt: skip
-                )
-    return results
+                keep = np.flatnonzero(~done)
+                kt = torch.as_tensor(keep, device=dev)
+                ids, k_np = ids[keep], k_np[keep]
+                u, S, lam = u[kt], S[kt], lam[kt]
+                omega, alpha = omega[kt], alpha[kt]
+                kmax = int(k_np[0]) if ids.size else 0
+                u = u[:, :kmax]
+                omega = omega[:, :kmax]
+    return out
