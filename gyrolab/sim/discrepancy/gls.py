@@ -61,10 +61,19 @@ class GlsResult:
     rss: float
     n: int
     k: int
+    logdet: float = 0.0
+    """ln det of the (unit-scale) noise covariance, when it is a known one."""
 
     @property
     def bic(self) -> float:
-        return self.n * np.log(self.rss / self.n) + (self.k + self.phi.size) * np.log(self.n)
+        """``n ln(RSS/n) + ln det Σ₀ + (k + p) ln n``: −2 × the Gaussian log-likelihood with
+        the noise scale profiled out, plus the BIC penalty. The ``ln det`` term lets two
+        different noise covariances be compared on the same data."""
+        return (
+            self.n * np.log(self.rss / self.n)
+            + self.logdet
+            + (self.k + self.phi.size) * np.log(self.n)
+        )
 
     @property
     def sigma(self) -> float:
@@ -162,6 +171,8 @@ class CovWhitener:
             self.v[k] = self.v[k - 1] * (1.0 - kap * kap)
             self.rows.append(a.copy())
         self.a = a
+        # ln det Σ = Σ_t ln v_t (prediction-error variances; v_p for every t ≥ p)
+        self.logdet = float(np.sum(np.log(self.v[:p])) + (n - p) * np.log(self.v[p]))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         from scipy.signal import lfilter
@@ -186,4 +197,6 @@ def gls_cov(y: np.ndarray, X: np.ndarray, w: CovWhitener, extra_params: int = 0)
     yw, Xw = w(y), w(X / scale)
     b = _ls(Xw, yw)
     e = yw - Xw @ b
-    return GlsResult(b / scale, np.empty(0), float(e @ e), e.size, X.shape[1] + extra_params)
+    return GlsResult(
+        b / scale, np.empty(0), float(e @ e), e.size, X.shape[1] + extra_params, w.logdet
+    )

@@ -314,15 +314,22 @@ class Workflow:
         out = []
         st = cur.structure
         base_struct = self._gyro_struct(st)
-        w, base = cur.whitener, cur.gyro
-        assert w is not None
+        assert cur.whitener is not None
+        # Noise models to judge against: the current one and, unless the model already has
+        # it, the one with a rate random walk. A candidate must beat the better of the two
+        # base models (full likelihood, ln det Σ included): slow wander must not pass for a
+        # ramp or a step, and a real slow term must not be explained away as wander.
+        noises: list[tuple[CovWhitener, int]] = [(cur.whitener, 0)]
         if not st.has("rate_random_walk"):
-            # If a random walk explains the Allan curve better, judge the deterministic
-            # candidates against that noise: slow wander must not pass for a ramp or a step.
-            alt = self._rrw_alt(cur)
-            if cur.noise.chi2 - alt.chi2 > nf.RRW_CHI2:
-                w = self.whitener(alt)
-                base = self.cov_fit(cur.gyro.struct, cur.ctx, w)
+            noises.append((self.whitener(self._rrw_alt(cur)), 1))
+        ln_n = math.log(cur.ctx.y.size)
+
+        def best_bic(struct: GyroStructure) -> tuple[float, int]:
+            bics = [self.cov_fit(struct, cur.ctx, w).bic + extra * ln_n for w, extra in noises]
+            i = int(np.argmin(bics))
+            return bics[i], i
+
+        base_bic, base_noise = best_bic(cur.gyro.struct)
         for name in GYRO_EFFECTS:
             if name in base_struct.names or name == "bias_poly":
                 continue
@@ -330,8 +337,8 @@ class Workflow:
                 continue
             s2 = GyroStructure(base_struct.names + [name], dict(cur.gyro.struct.theta))
             g = fit_structure(s2, cur.ctx, scan=(name,) if name in NONLINEAR else ())
-            g = self.cov_fit(g.struct, cur.ctx, w)
-            dbic = base.bic - g.bic
+            cand_bic, cand_noise = best_bic(g.struct)
+            dbic = base_bic - cand_bic
             params = effect_params(g).get(name, {})
             out.append(
                 {
@@ -339,7 +346,11 @@ class Workflow:
                     "channel": "gyro",
                     "score": float(dbic),
                     "significant": bool(dbic > GYRO_SIG),
-                    "evidence": {"delta_bic": float(dbic), "params": params},
+                    "evidence": {
+                        "delta_bic": float(dbic),
+                        "params": params,
+                        "noise_with_rrw": [bool(base_noise), bool(cand_noise)],
+                    },
                     "_theta": g.struct.theta.get(name),
                 }
             )
