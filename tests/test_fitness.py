@@ -85,6 +85,8 @@ def test_vmd_fitness_is_the_criterion_of_each_candidate() -> None:
         got = VMDFitness(x, name)(X)
         want = [fn(x, vmd(x, a, int(k))) for k, a in X]
         np.testing.assert_allclose(got, want, rtol=1e-10)
+        one_at_a_time = VMDFitness(x, name, {"fitness_chunk": 1})(X)
+        np.testing.assert_array_equal(one_at_a_time, got)
     with pytest.raises(ValueError, match="unknown fitness"):
         VMDFitness(x, "kurtosis")
 
