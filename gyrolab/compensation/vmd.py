@@ -21,8 +21,11 @@ What this implementation does differently from the reference code (and from ``vm
 * only the non-negative half spectrum is stored (the negative half is identically zero
   for the analytic modes), and no iteration history is kept: memory is O(K N), not
   O(500 K N);
-* one ADMM mode update is a single fused pass over memory (a numba kernel), so one
-  iteration of one mode on 11 000 samples costs a few microseconds;
+* that half spectrum is a fixed phase times a real array (the DCT-II of the signal, see
+  the kernel notes), so the iteration runs in real arithmetic and the modes come back by
+  inverse DCTs of length N;
+* the ADMM update is one fused, tiled, vectorised pass over memory per iteration (a
+  numba kernel): about 3.6 us per mode per iteration on 11 000 samples;
 * odd lengths are decomposed in full (the reference code silently drops the last
   sample): the signal is mirrored to ``T = 2 N`` samples in every case;
 * many ``(K, alpha)`` candidates are decomposed in one call (:func:`vmd_batch`), in
