@@ -4,6 +4,8 @@ lists), limits checked before any I/O, read-back, retries, and end to end over a
 from __future__ import annotations
 
 import os
+import threading
+import time
 
 import minimalmodbus
 import pytest
@@ -262,3 +264,100 @@ def test_setpoint_roundtrip_any_scaling(setpoint: float, decimals: int, units_c:
     assert state["sp"] == pytest.approx(got, abs=1e-9)
     assert oven.process_value_c == pytest.approx(20.0, abs=step_c / 2 + 1e-9)
     assert slave.writes == [(300, slave._to_raw(got))]
+
+
+# ------------------------------------------------------------------- late replies
+
+
+class LateSlave:
+    """A Watlow F4 slave on a real pty that answers the requests numbered in ``late``
+    (0-based) ``delay_s`` after they arrive, i.e. after the master has given up; every
+    other one ``turnaround_s`` after it arrives. One thread, like a real controller: a
+    request that arrives while a late reply is pending is served after it."""
+
+    def __init__(self, late: set[int], delay_s: float, turnaround_s: float = 0.0) -> None:
+        self.slave = WatlowF4Slave(OvenHooks(lambda: 25.3, lambda: 25.0, lambda v: None))
+        self.late, self.delay_s, self.turnaround_s = late, delay_s, turnaround_s
+        self.port = PtyPort()
+        self.seen: list[int] = []  # register of every request, in order
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> LateSlave:
+        self.port.connect()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.port.disconnect()
+
+    def _run(self) -> None:
+        buf = b""
+        while not self._stop.is_set():
+            buf += self.port.read(0.01)
+            while len(buf) >= 8:  # functions 03 and 06: 8-byte requests
+                req, buf = buf[:8], buf[8:]
+                k = len(self.seen)
+                self.seen.append(int.from_bytes(req[2:4], "big"))
+                time.sleep(self.delay_s if k in self.late else self.turnaround_s)
+                reply = self.slave.process(req)
+                if reply:
+                    self.port.write(reply)
+
+
+def test_late_reply_is_not_taken_as_the_next_registers_value() -> None:
+    # The reply to "read 300" (raw 250) comes 50 ms after the 0.1 s timeout. Without the
+    # wait for line silence the next request, "read 606", read back 250 (seen on a bench).
+    # silence_s is generous so that a loaded test machine cannot push the late reply out
+    # of the window the driver guards (timeout_s + silence_s after the request).
+    with LateSlave(late={0}, delay_s=0.15) as sim:
+        with WatlowF4(sim.port.path, timeout_s=0.1, retries=0, silence_s=0.3) as oven:
+            with pytest.raises(InstrumentTimeout):
+                oven.read_register(300)
+            assert oven.read_register(606) == 1
+            assert oven.read_register(901) == 1
+            assert oven.read_register(100) == 253
+            assert oven.stats.late_bytes == 7  # the late reply, discarded
+    assert sim.seen == [300, 606, 901, 100]
+
+
+def test_late_reply_during_retries_leaves_every_later_read_in_step() -> None:
+    # A retry must not take the first try's late reply either: its own reply would then
+    # be left over as the answer to the next request, and every read after it off by one
+    # (the 30 ms turnaround makes that leftover arrive after the next request is sent).
+    with LateSlave(late={0}, delay_s=0.15, turnaround_s=0.03) as sim:
+        with WatlowF4(sim.port.path, timeout_s=0.1, retries=2, silence_s=0.3) as oven:
+            assert oven.read_register(300) == 250
+            assert (oven.stats.no_reply, oven.stats.retries, oven.stats.late_bytes) == (1, 1, 7)
+            assert [oven.read_register(r) for r in (606, 901, 100, 300)] == [1, 1, 253, 250]
+    assert sim.seen == [300, 300, 606, 901, 100, 300]
+
+
+def test_silence_wait_is_bounded_on_a_line_that_never_goes_quiet() -> None:
+    # Another talker (or a wrong baud rate) keeps the line busy: the wait ends at its cap
+    # and is counted; the transaction then fails its checks instead of hanging.
+    port = PtyPort()
+    port.connect()
+    stop = threading.Event()
+
+    def chatter() -> None:
+        while not stop.is_set():
+            port.write(b"\x55")
+            time.sleep(0.002)
+
+    th = threading.Thread(target=chatter, daemon=True)
+    try:
+        with WatlowF4(port.path, timeout_s=0.02, retries=1) as oven:
+            th.start()
+            t0 = time.monotonic()
+            with pytest.raises(InstrumentError):
+                oven.read_register(100)
+            assert time.monotonic() - t0 < 3.0  # cap: 10·silence + 1 s, once
+            assert oven.stats.noisy_line == 1 and oven.stats.late_bytes > 0
+    finally:
+        stop.set()
+        if th.is_alive():
+            th.join(1.0)
+        port.disconnect()

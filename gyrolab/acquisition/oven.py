@@ -19,11 +19,21 @@ scaling) raises :class:`LimitError` before a single byte is written. Every setpo
 is read back and compared. Transport errors (no reply, CRC error, exception response)
 are retried ``retries`` times, then raised as :class:`InstrumentError` /
 :class:`InstrumentTimeout`.
+
+Late replies. An RTU reply carries no transaction id (a function-03 reply does not even
+name the register), so a reply that arrives after the driver gave up on it would be taken
+as the answer to the next request — the next read returns another register's value. So
+after any failed transaction (timeout, CRC error, malformed or partial reply) the driver
+reads and discards until the line has been quiet for ``silence_s`` (at least 3.5
+character times) before it sends anything again, and the input buffer is cleared before
+every request. A reply later than ``timeout_s + silence_s`` cannot be told apart from the
+answer to the next request on any RTU master; raise ``silence_s`` for such a slave.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,6 +95,8 @@ class ModbusStats:
     bad_reply: int = 0  # CRC error or malformed
     exceptions: int = 0  # slave exception responses
     retries: int = 0
+    late_bytes: int = 0  # bytes discarded while waiting for line silence after a failure
+    noisy_line: int = 0  # waits for silence that ended at the cap, line still busy
     last_error: str = ""
     by_kind: dict[str, int] = field(default_factory=dict)
 
@@ -103,6 +115,8 @@ class WatlowF4:
 
     ``port`` is a device path (``/dev/ttyUSB0``, a pty) or an open pyserial-like object
     (tests). Line: 19200 baud 8N1 by default (the F4 supports 9600/19200/38400).
+    ``silence_s`` (default ``timeout_s``): after a failed transaction, how long the line
+    must stay quiet before the next request (late replies are discarded meanwhile).
     """
 
     def __init__(
@@ -114,6 +128,7 @@ class WatlowF4:
         timeout_s: float = 0.3,
         setpoint_limits_c: tuple[float, float] = (-45.0, 70.0),
         retries: int = 2,
+        silence_s: float | None = None,
     ) -> None:
         lo, hi = setpoint_limits_c
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
@@ -121,6 +136,12 @@ class WatlowF4:
         self.setpoint_limits_c = (float(lo), float(hi))
         self.retries = retries
         self.stats = ModbusStats()
+        # RTU frames are delimited by 3.5 character times of silence (11 bits a character;
+        # fixed 1.75 ms above 19200 baud, Modbus over serial line spec §2.5.1.1).
+        self.frame_gap_s = 3.5 * 11 / baudrate if baudrate <= 19200 else 0.00175
+        self.silence_s = max(self.frame_gap_s, timeout_s if silence_s is None else silence_s)
+        # Wall time of the last failed transaction while its reply may still be in flight.
+        self._dirty_since: float | None = None
         if isinstance(port, str):
             self.port_name = port
             try:
@@ -134,11 +155,41 @@ class WatlowF4:
             ser = port
         self.serial = ser
         self._mb = minimalmodbus.Instrument(ser, address, mode=minimalmodbus.MODE_RTU)
-        self._mb.clear_buffers_before_each_transaction = True  # drop late/garbled replies
+        # Drops whatever arrived since the last transaction (minimalmodbus resets the
+        # input buffer before writing). Not enough on its own: a late reply can still
+        # arrive after the request is written; _await_silence covers that.
+        self._mb.clear_buffers_before_each_transaction = True
         self._decimals: int | None = None
         self._units: int | None = None
 
     # ----------------------------------------------------------------- transport
+    def _await_silence(self) -> None:
+        """Read and discard until the line has been quiet for ``silence_s``.
+
+        Called before the first request after a failed transaction: the slave may still
+        be answering the request the driver gave up on. Quiet time counts from the
+        failure, so a poll long after it waits only if late bytes are found. Bounded (a
+        line that never goes quiet, e.g. another master or a wrong baud rate, is counted
+        and left to fail the next transaction's checks)."""
+        ser = self.serial
+        poll = min(0.005, self.silence_s / 4)
+        last = self._dirty_since if self._dirty_since is not None else time.monotonic()
+        cap = time.monotonic() + 10 * self.silence_s + 1.0
+        while True:
+            n = ser.in_waiting
+            now = time.monotonic()
+            if n:
+                self.stats.late_bytes += len(ser.read(n))
+                last = now  # arrival time unknown: count the quiet from now
+            elif now - last >= self.silence_s:
+                break
+            if now >= cap:
+                self.stats.noisy_line += 1
+                break
+            time.sleep(poll)
+        ser.reset_input_buffer()
+        self._dirty_since = None
+
     def _call(self, what: str, fn: Any, *args: Any, **kw: Any) -> Any:
         last: Exception | None = None
         for attempt in range(self.retries + 1):
@@ -146,17 +197,24 @@ class WatlowF4:
             if attempt:
                 self.stats.retries += 1
             try:
+                if self._dirty_since is not None:
+                    self._await_silence()
                 return fn(*args, **kw)
             except minimalmodbus.NoResponseError as e:
                 self.stats.no_reply += 1
                 last = e
+                self._dirty_since = time.monotonic()  # the reply may yet come
             except minimalmodbus.SlaveReportedException as e:
+                # A complete, valid frame from the slave: the line is in step.
                 self.stats.exceptions += 1
                 last = e
             except (minimalmodbus.InvalidResponseError, minimalmodbus.ModbusException) as e:
+                # Bad CRC, wrong length or a partial reply: where the frame ends is unknown.
                 self.stats.bad_reply += 1
                 last = e
+                self._dirty_since = time.monotonic()
             except (serial.SerialException, OSError) as e:
+                self._dirty_since = time.monotonic()
                 raise InstrumentError(NAME, f"{what}: port error {e}") from e
             kind = type(last).__name__
             self.stats.by_kind[kind] = self.stats.by_kind.get(kind, 0) + 1
