@@ -102,3 +102,18 @@ def test_spike_detection_and_lattice():
     assert dq.hr.lattice_fraction > 0.95
     h = lattice_phase_hist(dq, dq.hr.lattice_step)
     assert h.max() > 0.95
+
+
+def test_select_reports_indistinguishable_candidates_together():
+    from gyrolab.sim.discrepancy.workflow import AMBIGUITY_MARGIN, select
+
+    def c(name: str, score: float) -> dict:
+        return {"effect": name, "score": score, "significant": True}
+
+    best, amb = select([c("warmup", 150.0), c("aging_ramp", 157.0), c("hysteresis", 60.0)])
+    assert best["effect"] == "aging_ramp"
+    assert amb == ["aging_ramp", "warmup"]
+    close = [c(n, 100.0 - i) for i, n in enumerate(["a", "b", "c", "d"])]
+    assert select(close)[1] == ["a", "b", "c"]  # at most three
+    _, alone = select([c("cubic_temp", 80.0), c("thermal_rate", 80.0 - AMBIGUITY_MARGIN)])
+    assert alone == ["cubic_temp"]

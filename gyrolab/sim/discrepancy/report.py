@@ -78,10 +78,12 @@ def figures(res: Result) -> dict[str, str]:
     axs[0].set_xlabel("frequency (Hz)")
     axs[0].set_ylabel("residual PSD ((°/s)²/Hz)")
     axs[0].legend(fontsize=8)
-    for f, lab in ((a, "before"), (b, "after")):
+    for f, lab, col in ((a, "before", "C0"), (b, "after", "C1")):
         c = f.noise.curve
-        axs[1].loglog(c.tau, c.adev * 3600, "o", ms=3, label=f"measured, {lab}")
-        axs[1].loglog(c.tau, f.noise.model_adev() * 3600, "-", lw=1, label=f"model, {lab}")
+        axs[1].loglog(c.tau, c.adev * 3600, "o", ms=3, color=col, label=f"residual, {lab}")
+        axs[1].loglog(
+            c.tau, f.noise.model_adev() * 3600, "-", lw=1, color=col, label=f"model noise, {lab}"
+        )
     axs[1].set_xlabel("τ (s)")
     axs[1].set_ylabel("Allan deviation (°/h)")
     axs[1].legend(fontsize=7)

@@ -527,11 +527,7 @@ class Workflow:
                 entry["added"] = None
                 steps.append(entry)
                 break
-            best = chosen[0]
-            amb = [best["effect"]] + [
-                c["effect"] for c in chosen[1:] if best["score"] - c["score"] < AMBIGUITY_MARGIN
-            ]
-            amb = amb[:3]
+            best, amb = select(chosen)
             new = cur.structure.plus(best["effect"])
             if best.get("_theta") is not None:
                 new.theta[best["effect"]] = float(best["_theta"])
@@ -601,6 +597,18 @@ class Workflow:
             base = m0.get(n).params if m0.get(n) is not None else {}
             specs.append(make_effect_spec(n, {**base, **params.get(n, {})}))
         return SimModel(thermal=ThermalParams(**th), sensors=m0.sensors, effects=tuple(specs))
+
+
+def select(significant: list[dict[str, Any]]) -> tuple[dict[str, Any], list[str]]:
+    """The best of one channel's significant candidates, and the set it cannot be told
+    apart from: every candidate within :data:`AMBIGUITY_MARGIN` of the best score (best
+    first, at most three)."""
+    ranked = sorted(significant, key=lambda c: -c["score"])
+    best = ranked[0]
+    amb = [best["effect"]] + [
+        c["effect"] for c in ranked[1:] if best["score"] - c["score"] < AMBIGUITY_MARGIN
+    ]
+    return best, amb[:3]
 
 
 @dataclass
