@@ -22,12 +22,20 @@ law holds down to 1/(25 h), longer than the paper's 13 h run), and linearly inte
 the ADC's sample times. Above fs_d/2 the flicker is negligible beside the white rate noise.
 The white history starts at zero at power-on (Kasdin's construction), so memory is one
 chunk plus the filter, whatever the run's length.
+
+A chunk costs two 2²⁰-point FFTs (about 0.1–0.3 s). The simulated bench must not spend
+that inside its physics lock, so :meth:`FlickerStream.prefetch` lets another thread make
+the next chunk ahead of time (numpy's FFT releases the GIL). Chunks are always made in
+order from the one generator, whichever thread makes them, so the noise is bit-identical
+with or without prefetching.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import zlib
+from typing import Any
 
 import numpy as np
 
@@ -53,6 +61,7 @@ class FlickerStream:
     ``value_at(index, rate_hz)`` returns the noise at ADC sample indices (times
     ``index / rate_hz``), generating decimated chunks as time moves on and dropping the
     ones behind. Requests must not go back before the previous request's start.
+    ``value_at`` is for one consumer thread; :meth:`prefetch` may run in another.
     """
 
     def __init__(
@@ -72,24 +81,63 @@ class FlickerStream:
         self._h_f = np.fft.rfft(kasdin_coefficients(self.taps), self.nfft)
         self._hist = np.zeros(self.taps - 1)
         self._chunks: dict[int, np.ndarray] = {}
-        self._next = 0
+        self._next = 0  # the next chunk to make
+        self._init_locks()
+
+    def _init_locks(self) -> None:
+        # _gen serializes chunk making (generator, history, _next): held for a whole chunk.
+        # _dict guards _chunks only, for microseconds, so that the consumer never waits
+        # for a chunk it does not need.
+        self._gen = threading.Lock()
+        self._dict = threading.Lock()
+
+    def __getstate__(self) -> dict[str, Any]:  # copy/deepcopy/pickle: locks are not state
+        state = self.__dict__.copy()
+        del state["_gen"], state["_dict"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._init_locks()
 
     def _make_chunk(self) -> None:
+        """Make chunk ``_next`` (caller holds ``_gen``)."""
         w = self._rng.standard_normal(self.m) * self.sigma_w
         seq = np.concatenate([self._hist, w])
         y = np.fft.irfft(np.fft.rfft(seq, self.nfft) * self._h_f, self.nfft)
-        self._chunks[self._next] = y[self.taps - 1 : self.taps - 1 + self.m]
+        with self._dict:
+            self._chunks[self._next] = y[self.taps - 1 : self.taps - 1 + self.m]
         self._hist = seq[self.m :]
         self._next += 1
+
+    def _ensure(self, c: int) -> None:
+        """Make chunks up to ``c`` inclusive (waits for one being made elsewhere)."""
+        if c < self._next:
+            return
+        with self._gen:
+            while c >= self._next:
+                self._make_chunk()
+
+    def _chunk_of(self, index: int, rate_hz: float) -> int:
+        """The last chunk ``value_at`` needs for ADC sample ``index``."""
+        return (int(math.floor(index * (self.fs_d / rate_hz))) + 1) // self.m
+
+    def prefetch(self, first_index: int, n: int, rate_hz: float) -> None:
+        """Make now the chunks that ``value_at(first_index, n, rate_hz)`` would need.
+
+        Thread-safe against ``value_at`` in another thread; the result is unchanged."""
+        if n > 0:
+            self._ensure(self._chunk_of(first_index + n - 1, rate_hz))
 
     def _decimated(self, k0: int, k1: int) -> np.ndarray:
         """Decimated samples k0..k1 inclusive."""
         c0, c1 = k0 // self.m, k1 // self.m
-        for old in [k for k in self._chunks if k < c0]:  # time only moves forward
-            del self._chunks[old]
-        while c1 >= self._next:
-            self._make_chunk()
-        parts = [self._chunks[c] for c in range(c0, c1 + 1)]
+        with self._dict:
+            for old in [k for k in self._chunks if k < c0]:  # time only moves forward
+                del self._chunks[old]
+        self._ensure(c1)
+        with self._dict:
+            parts = [self._chunks[c] for c in range(c0, c1 + 1)]
         seq = parts[0] if len(parts) == 1 else np.concatenate(parts)
         off = c0 * self.m
         return seq[k0 - off : k1 - off + 1]

@@ -18,7 +18,7 @@ import numpy as np
 
 from gyrolab.sim.effects import EFFECTS, BlockContext, Effect
 from gyrolab.sim.model import SimModel
-from gyrolab.sim.noise import effect_rng
+from gyrolab.sim.noise import FlickerStream, effect_rng
 from gyrolab.sim.sensors import AdcModel, cvd_resistance
 from gyrolab.sim.thermal import kernel_params, thermal_kernel
 
@@ -88,6 +88,10 @@ class Physics:
             self.effects.append(cls(spec.params, rng, self.rate_hz))
         self._rate_fx = [e for e in self.effects if e.target == "rate"]
         self._post_fx = [e for e in self.effects if e.target == "post"]
+        # Streamed noise sources whose blocks are costly to make (see prefetch).
+        self._streams = [
+            v for e in self.effects for v in vars(e).values() if isinstance(v, FlickerStream)
+        ]
 
         lag = model.get("thermal_lag")
         self._bias_from_die = lag is not None
@@ -119,6 +123,18 @@ class Physics:
         if not np.isfinite(setpoint_c):
             raise ValueError("setpoint must be finite")
         self.setpoint_c = float(setpoint_c)
+
+    def prefetch(self, n_samples: int) -> None:
+        """Do now the costly work the next ``n_samples`` of :meth:`advance` would do:
+        make the flicker-noise chunks they need (0.1–0.3 s each, one per 3.6 h).
+
+        Safe to call from another thread while :meth:`advance` runs, and needs no lock
+        around the physics (the simulated bench calls it from a helper thread so that its
+        lock is never held for that long). Changes no result: the same numbers are made
+        in the same order, only earlier."""
+        first = self.index  # one read: advance may move it meanwhile
+        for s in self._streams:
+            s.prefetch(first, int(n_samples), self.rate_hz)
 
     def advance(self, n_samples: int) -> PhysicsBlock:
         """Advance the world by ``n_samples`` ADC samples and return them."""

@@ -9,6 +9,12 @@ tick, streams the frames, and fires scheduled faults. Drivers connect to
 ``bench.dmm_tcp_resource`` exactly as they would to hardware. The runner uses
 ``bench.clock`` (``now()``, ``sleep()``) as its time base so that it runs at the bench's
 speed.
+
+``bench.lock`` guards the physics; the instruments' replies take it, so the tick thread
+holds it only for a tick's :meth:`Physics.advance` (well under a millisecond). The costly
+part of advancing — a flicker-noise chunk, 0.1–0.3 s every 3.6 simulated hours — is made
+ahead of need by a prefetch thread, outside the lock (:meth:`Physics.prefetch`), so
+neither a Modbus/SCPI reply nor the simulated clock waits for it.
 """
 
 from __future__ import annotations
@@ -29,6 +35,12 @@ from gyrolab.sim.bench.dmm_scpi import Scpi34401A, ScpiSerialServer, ScpiTcpServ
 from gyrolab.sim.bench.faults import FaultEvent, FaultPlan
 from gyrolab.sim.bench.oven_modbus import ModbusRtuServer, OvenHooks, WatlowF4Slave
 from gyrolab.sim.bench.serial_pty import PtyPort
+
+# Simulated seconds of costly physics (flicker-noise chunks) made ahead of the tick thread,
+# and how often (wall seconds) the prefetch thread looks. An hour ahead is seconds of wall
+# time even when free-running, against 0.1-0.3 s to make a chunk.
+PREFETCH_LEAD_S = 3600.0
+PREFETCH_POLL_S = 0.05
 
 
 class SimBench:
@@ -114,6 +126,7 @@ class SimBench:
             heapq.heappush(self._events, (t, next(self._tie), "start", ev))
         self.log: list[tuple[float, str, str]] = []  # (t_sim, kind, detail) of faults fired
         self._thread: threading.Thread | None = None
+        self._prefetcher: threading.Thread | None = None
         self._stop = threading.Event()
         self.error: BaseException | None = None
 
@@ -219,9 +232,13 @@ class SimBench:
     # ---------------------------------------------------------------- running
     def start(self) -> SimBench:
         """Plug in the ports, start the servers and the tick thread."""
+        n = self.frames_per_tick * self.samples_per_frame
+        # The first tick's noise chunk now, before anything waits on the lock; the copy
+        # below then reuses it.
+        self.physics.prefetch(n)
         # Compile the physics' JIT kernels on a throwaway copy first (about 1 s, once per
         # process), so the first tick does not hold the physics lock while responders wait.
-        copy.deepcopy(self.physics).advance(self.frames_per_tick * self.samples_per_frame)
+        copy.deepcopy(self.physics).advance(n)
         for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
             p.connect()
         for s in self._servers:
@@ -229,7 +246,22 @@ class SimBench:
         self.clock.speed = self.clock.speed  # re-anchor pacing: construction time is not run time
         self._thread = threading.Thread(target=self._run, name="sim-bench-tick", daemon=True)
         self._thread.start()
+        self._prefetcher = threading.Thread(
+            target=self._prefetch, name="sim-bench-prefetch", daemon=True
+        )
+        self._prefetcher.start()
         return self
+
+    def _prefetch(self) -> None:
+        """Keep the costly physics work ``PREFETCH_LEAD_S`` ahead of the tick thread."""
+        lead = round(PREFETCH_LEAD_S * self.rate_hz)
+        try:
+            while not self._stop.is_set():
+                self.physics.prefetch(lead)  # no lock: see Physics.prefetch
+                self._stop.wait(PREFETCH_POLL_S)
+        except BaseException as e:  # surfaced like the tick thread's; ticks still work
+            self.error = e
+            raise
 
     def _run(self) -> None:
         n = self.frames_per_tick * self.samples_per_frame
@@ -250,8 +282,9 @@ class SimBench:
         """Stop the tick thread and servers, unplug every port, remove the links."""
         self._stop.set()
         self.clock.stop()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        for th in (self._thread, self._prefetcher):
+            if th is not None:
+                th.join(timeout=5.0)
         for s in self._servers:
             s.stop()
         for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
