@@ -93,13 +93,14 @@ def test_batch_numba_equals_single_calls() -> None:
         np.testing.assert_allclose(b.omega, s.omega, atol=1e-12)
 
 
-def test_batch_torch_cpu_equals_single_calls() -> None:
+@pytest.mark.parametrize(("tau", "dc"), [(0.0, False), (0.1, True)])
+def test_batch_torch_cpu_equals_single_calls(tau: float, dc: bool) -> None:
     pytest.importorskip("torch")
     x = _signal(1001, seed=2)
     alphas, Ks = [2000.0, 50.0, 700.0], [3, 6, 2]
-    batch = vmd_batch(x, alphas, Ks, backend="torch", device="cpu", max_iter=150)
+    batch = vmd_batch(x, alphas, Ks, backend="torch", device="cpu", max_iter=150, tau=tau, dc=dc)
     for a, k, b in zip(alphas, Ks, batch, strict=True):
-        s = vmd(x, a, k, max_iter=150)
+        s = vmd(x, a, k, max_iter=150, tau=tau, dc=dc)
         assert b.n_iter == s.n_iter and b.modes.shape == (k, 1001)
         assert _rel(b.modes, s.modes) < 1e-9
         np.testing.assert_allclose(b.omega, s.omega, atol=1e-9)
