@@ -272,12 +272,16 @@ def test_setpoint_roundtrip_any_scaling(setpoint: float, decimals: int, units_c:
 class LateSlave:
     """A Watlow F4 slave on a real pty that answers the requests numbered in ``late``
     (0-based) ``delay_s`` after they arrive, i.e. after the master has given up; every
-    other one ``turnaround_s`` after it arrives. One thread, like a real controller: a
-    request that arrives while a late reply is pending is served after it."""
+    other one ``turnaround_s`` after it arrives. ``split`` bytes of a late reply go out at
+    once, the rest late (a reply straddling the timeout). One thread, like a real
+    controller: a request that arrives while a late reply is pending is served after it."""
 
-    def __init__(self, late: set[int], delay_s: float, turnaround_s: float = 0.0) -> None:
+    def __init__(
+        self, late: set[int], delay_s: float, turnaround_s: float = 0.0, split: int = 0
+    ) -> None:
         self.slave = WatlowF4Slave(OvenHooks(lambda: 25.3, lambda: 25.0, lambda v: None))
         self.late, self.delay_s, self.turnaround_s = late, delay_s, turnaround_s
+        self.split = split
         self.port = PtyPort()
         self.seen: list[int] = []  # register of every request, in order
         self._stop = threading.Event()
@@ -301,10 +305,12 @@ class LateSlave:
                 req, buf = buf[:8], buf[8:]
                 k = len(self.seen)
                 self.seen.append(int.from_bytes(req[2:4], "big"))
+                reply = self.slave.process(req) or b""
+                if k in self.late:
+                    self.port.write(reply[: self.split])
+                    reply = reply[self.split :]
                 time.sleep(self.delay_s if k in self.late else self.turnaround_s)
-                reply = self.slave.process(req)
-                if reply:
-                    self.port.write(reply)
+                self.port.write(reply)
 
 
 def test_late_reply_is_not_taken_as_the_next_registers_value() -> None:
@@ -333,6 +339,35 @@ def test_late_reply_during_retries_leaves_every_later_read_in_step() -> None:
             assert (oven.stats.no_reply, oven.stats.retries, oven.stats.late_bytes) == (1, 1, 7)
             assert [oven.read_register(r) for r in (606, 901, 100, 300)] == [1, 1, 253, 250]
     assert sim.seen == [300, 300, 606, 901, 100, 300]
+
+
+def test_reply_straddling_the_timeout_is_waited_out_whole() -> None:
+    # 3 bytes in time, 4 after the timeout: a partial reply (bad_reply). The rest is still
+    # coming, so the full silence applies, not just the trailing-bytes wait.
+    with LateSlave(late={0}, delay_s=0.15, split=3) as sim:
+        with WatlowF4(sim.port.path, timeout_s=0.1, retries=0, silence_s=0.3) as oven:
+            with pytest.raises(InstrumentError, match="failed after 1 tries"):
+                oven.read_register(300)
+            assert oven.stats.bad_reply == 1
+            assert [oven.read_register(r) for r in (606, 901, 100)] == [1, 1, 253]
+            assert oven.stats.late_bytes == 4 and oven.stats.bad_reply == 1
+    assert sim.seen == [300, 606, 901, 100]
+
+
+def test_whole_reply_with_bad_crc_waits_only_for_trailing_bytes() -> None:
+    # The slave has finished answering: no silence_s wait (a burst of CRC errors must not
+    # cost a timeout each), unlike silence, which waits silence_s before the retry.
+    bad_crc = PV_25_3[:-1] + bytes([PV_25_3[-1] ^ 0xFF])
+    fake = ExpectedSerial([(READ_PV, bad_crc), (READ_PV, PV_25_3)])
+    oven = WatlowF4(fake, timeout_s=0.3)
+    t0 = time.monotonic()
+    assert oven.read_register(100) == 253
+    assert time.monotonic() - t0 < 0.2 and oven.stats.bad_reply == 1
+    fake = ExpectedSerial([(READ_PV, None), (READ_PV, PV_25_3)])
+    oven = WatlowF4(fake, timeout_s=0.3)
+    t0 = time.monotonic()
+    assert oven.read_register(100) == 253
+    assert time.monotonic() - t0 >= 0.3 and oven.stats.no_reply == 1
 
 
 def test_silence_wait_is_bounded_on_a_line_that_never_goes_quiet() -> None:

@@ -23,11 +23,14 @@ are retried ``retries`` times, then raised as :class:`InstrumentError` /
 Late replies. An RTU reply carries no transaction id (a function-03 reply does not even
 name the register), so a reply that arrives after the driver gave up on it would be taken
 as the answer to the next request — the next read returns another register's value. So
-after any failed transaction (timeout, CRC error, malformed or partial reply) the driver
-reads and discards until the line has been quiet for ``silence_s`` (at least 3.5
-character times) before it sends anything again, and the input buffer is cleared before
-every request. A reply later than ``timeout_s + silence_s`` cannot be told apart from the
-answer to the next request on any RTU master; raise ``silence_s`` for such a slave.
+after a transaction that ended without a whole reply (no reply, or a partial one: the
+read timed out) the driver reads and discards until the line has been quiet for
+``silence_s`` (default ``timeout_s``) before it sends anything again. After a whole but
+bad reply (CRC error, malformed) the slave has finished answering, so only trailing bytes
+are waited out (quiet for 3.5 character times, at least 20 ms for USB adapters' latency).
+The input buffer is also cleared before every request. A reply later than ``timeout_s +
+silence_s`` cannot be told apart from the answer to the next request on any RTU master;
+raise ``silence_s`` for such a slave.
 """
 
 from __future__ import annotations
@@ -140,6 +143,8 @@ class WatlowF4:
         # fixed 1.75 ms above 19200 baud, Modbus over serial line spec §2.5.1.1).
         self.frame_gap_s = 3.5 * 11 / baudrate if baudrate <= 19200 else 0.00175
         self.silence_s = max(self.frame_gap_s, timeout_s if silence_s is None else silence_s)
+        self.trailing_quiet_s = min(self.silence_s, max(self.frame_gap_s, 0.02))
+        self._quiet_s = 0.0  # quiet time the line needs before the next request
         # Wall time of the last failed transaction while its reply may still be in flight.
         self._dirty_since: float | None = None
         if isinstance(port, str):
@@ -163,8 +168,23 @@ class WatlowF4:
         self._units: int | None = None
 
     # ----------------------------------------------------------------- transport
+    def _reply_was_whole(self) -> bool:
+        """Whether minimalmodbus's last read got every byte it asked for: it returned
+        before the port's timeout. (Round trip = write + read, so a slow write can only
+        make a whole reply look partial: the safe side.)"""
+        rt = self._mb.roundtrip_time
+        timeout = getattr(self.serial, "timeout", None)
+        if rt is None:
+            return False
+        return timeout is None or rt < timeout
+
+    def _mark_dirty(self, quiet_s: float) -> None:
+        self._dirty_since = time.monotonic()
+        self._quiet_s = max(self._quiet_s, quiet_s)
+
     def _await_silence(self) -> None:
-        """Read and discard until the line has been quiet for ``silence_s``.
+        """Read and discard until the line has been quiet for the time the last failure
+        needs (``silence_s`` when a reply may still be on its way).
 
         Called before the first request after a failed transaction: the slave may still
         be answering the request the driver gave up on. Quiet time counts from the
@@ -172,16 +192,17 @@ class WatlowF4:
         line that never goes quiet, e.g. another master or a wrong baud rate, is counted
         and left to fail the next transaction's checks)."""
         ser = self.serial
-        poll = min(0.005, self.silence_s / 4)
+        quiet = self._quiet_s
+        poll = min(0.005, quiet / 4)
         last = self._dirty_since if self._dirty_since is not None else time.monotonic()
-        cap = time.monotonic() + 10 * self.silence_s + 1.0
+        cap = time.monotonic() + 10 * quiet + 1.0
         while True:
             n = ser.in_waiting
             now = time.monotonic()
             if n:
                 self.stats.late_bytes += len(ser.read(n))
                 last = now  # arrival time unknown: count the quiet from now
-            elif now - last >= self.silence_s:
+            elif now - last >= quiet:
                 break
             if now >= cap:
                 self.stats.noisy_line += 1
@@ -189,6 +210,7 @@ class WatlowF4:
             time.sleep(poll)
         ser.reset_input_buffer()
         self._dirty_since = None
+        self._quiet_s = 0.0
 
     def _call(self, what: str, fn: Any, *args: Any, **kw: Any) -> Any:
         last: Exception | None = None
@@ -203,18 +225,20 @@ class WatlowF4:
             except minimalmodbus.NoResponseError as e:
                 self.stats.no_reply += 1
                 last = e
-                self._dirty_since = time.monotonic()  # the reply may yet come
+                self._mark_dirty(self.silence_s)  # the reply may yet come
             except minimalmodbus.SlaveReportedException as e:
                 # A complete, valid frame from the slave: the line is in step.
                 self.stats.exceptions += 1
                 last = e
             except (minimalmodbus.InvalidResponseError, minimalmodbus.ModbusException) as e:
-                # Bad CRC, wrong length or a partial reply: where the frame ends is unknown.
+                # Bad CRC or content: if the reply was whole the slave is done and only
+                # trailing bytes can follow; a partial one may still be arriving.
                 self.stats.bad_reply += 1
                 last = e
-                self._dirty_since = time.monotonic()
+                whole = self._reply_was_whole()
+                self._mark_dirty(self.trailing_quiet_s if whole else self.silence_s)
             except (serial.SerialException, OSError) as e:
-                self._dirty_since = time.monotonic()
+                self._mark_dirty(self.silence_s)
                 raise InstrumentError(NAME, f"{what}: port error {e}") from e
             kind = type(last).__name__
             self.stats.by_kind[kind] = self.stats.by_kind.get(kind, 0) + 1
