@@ -25,11 +25,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from gyrolab.sim.discrepancy.gls import GlsResult, ar_whiten, gls_ar
+from gyrolab.sim.discrepancy.gls import GlsResult, ar_whiten, gls_ar, gls_cov
 from gyrolab.sim.effects import _play
 
 AR_ORDER = 8
@@ -212,12 +213,24 @@ def _periodic_scan(
 
 
 def fit_structure(
-    struct: GyroStructure, ctx: GyroContext, passes: int = 2, scan: tuple[str, ...] = ()
+    struct: GyroStructure,
+    ctx: GyroContext,
+    passes: int = 2,
+    scan: tuple[str, ...] = (),
+    whitener: Any = None,
 ) -> GyroFit:
-    """Fit a structure: nonlinear parameters (``scan`` first by a grid; the others refined
-    around their current values) by coordinate search, then the full GLS fit."""
+    """Fit a structure's nonlinear parameters by coordinate search, then its linear ones.
+
+    With ``scan`` (a candidate being tried) only those parameters move — a grid scan, then
+    a bounded 1-D refinement — and the others stay where the current model has them, so
+    a candidate's score is its own. Without, every nonlinear parameter is refined locally
+    (a periodic term within ± one frequency-resolution cell, whose likelihood is
+    multimodal in P). The scan uses an AR(8) noise model held fixed; the refinement the
+    known-covariance ``whitener`` when given (the criterion the score uses).
+    """
     nl = [n for n in struct.names if n in NONLINEAR]
     need = set(scan) | {n for n in nl if n not in struct.theta}
+    move = [n for n in nl if n in need] if scan else nl
     theta = dict(struct.theta)
     for n in nl:
         if n not in theta:
@@ -225,40 +238,54 @@ def fit_structure(
             theta[n] = float(g[g.size // 2])
     struct = GyroStructure(struct.names, theta)
     cur = _fit_fixed(struct, ctx)
-    for _ in range(passes if nl else 0):
+    for _ in range(passes if move else 0):
         phi = cur.gls.phi
-        for name in nl:
+        for name in move:
             lo, hi = _bounds(name, ctx)
 
-            def cost(
+            def rss(
                 v: float, name: str = name, th: dict = cur.struct.theta, phi: np.ndarray = phi
             ) -> float:
                 s = GyroStructure(struct.names, {**th, name: v})
-                return _fit_fixed(s, ctx, phi).gls.rss
+                if whitener is None:
+                    return _fit_fixed(s, ctx, phi).gls.rss
+                X, _ = design(s, ctx)
+                return gls_cov(ctx.y, X, whitener).rss
 
             if name in need:
                 grid = nonlinear_grid(name, ctx)
                 if name == "periodic":
                     costs = _periodic_scan(cur.struct, ctx, phi, grid)
                 else:
-                    costs = np.array([cost(float(v)) for v in grid])
+
+                    def ar_rss(
+                        v: float, name: str = name, th: dict = cur.struct.theta, phi=phi
+                    ) -> float:
+                        s = GyroStructure(struct.names, {**th, name: v})
+                        return _fit_fixed(s, ctx, phi).gls.rss
+
+                    costs = np.array([ar_rss(float(v)) for v in grid])
                 i = int(np.argmin(costs))
                 a = float(grid[max(i - 1, 0)])
                 b = float(grid[min(i + 1, grid.size - 1)])
                 start = float(grid[i])
             else:
                 start = cur.struct.theta[name]
-                a, b = max(lo, start / 1.5), min(hi, start * 1.5)
+                if name == "periodic":
+                    half = start * start / ctx.duration_s
+                    a, b = max(lo, start - half), min(hi, start + half)
+                else:
+                    a, b = max(lo, start / 1.5), min(hi, start * 1.5)
+            best = start
             if b > a:
                 r = minimize_scalar(
-                    lambda lv, c=cost: c(math.exp(lv)),
+                    lambda lv, c=rss: c(math.exp(lv)),
                     bounds=(math.log(a), math.log(b)),
                     method="bounded",
-                    options={"xatol": 1e-3},
+                    options={"xatol": 1e-4},
                 )
-                best = math.exp(float(r.x)) if r.fun <= cost(start) else start
-            else:
-                best = start
+                if r.fun <= rss(start):
+                    best = math.exp(float(r.x))
             cur = _fit_fixed(GyroStructure(struct.names, {**cur.struct.theta, name: best}), ctx)
         need = set()
     return cur

@@ -214,6 +214,9 @@ class Workflow:
         outl = nf.fit_outliers(self.d, self.coarse_lattice()) if st.has("outliers") else None
         # final deterministic fit and its score with the fitted noise model's covariance
         w = self.whitener(noise)
+        if any(n in NONLINEAR for n in gyro.struct.names):
+            gyro = fit_structure(gyro.struct, ctx, passes=1, whitener=w)
+            st.theta.update(gyro.struct.theta)
         gyro = self.cov_fit(gyro.struct, ctx, w)
         f = Fitted(st, oven, case, gyro, ctx, noise, outl, q, {}, w)
         f.gaps = self.gaps(f)
@@ -336,7 +339,12 @@ class Workflow:
             if name == "cubic_temp" and self.poly_order >= 3:
                 continue
             s2 = GyroStructure(base_struct.names + [name], dict(cur.gyro.struct.theta))
-            g = fit_structure(s2, cur.ctx, scan=(name,) if name in NONLINEAR else ())
+            g = fit_structure(
+                s2,
+                cur.ctx,
+                scan=(name,) if name in NONLINEAR else (),
+                whitener=cur.whitener,
+            )
             cand_bic, cand_noise = best_bic(g.struct)
             dbic = base_bic - cand_bic
             params = effect_params(g).get(name, {})
