@@ -139,3 +139,16 @@ def test_cli_reads_only_bench_channels_and_writes_contract(tmp_path, monkeypatch
     assert main(["discrepancy", str(run), "--out", str(out)]) == 2
     assert main(["discrepancy", str(tmp_path / "nope.mcap"), "--out", str(tmp_path / "x")]) == 2
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.slow
+def test_short_thermal_lag_is_reported_ambiguous_with_thermal_rate():
+    """A die lag of 100 s is, on a step profile, a rate sensitivity k ≈ −τ·bias′(T)/60:
+    the workflow adds the better of the two and reports both (docs/discrepancy.md)."""
+    from gyrolab.profile import load_profile
+
+    model = nominal_model().with_effect("thermal_lag", tau_s=100.0)
+    res = run_discrepancy(simulate_bench(model, load_profile("paper"), 2.0, 7))
+    assert res.effects_found == ["thermal_lag"]
+    assert res.ambiguous == [["thermal_lag", "thermal_rate"]]
+    assert res.steps[0]["ambiguous_with"] == ["thermal_rate"]
