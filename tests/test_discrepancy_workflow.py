@@ -152,3 +152,18 @@ def test_short_thermal_lag_is_reported_ambiguous_with_thermal_rate():
     assert res.effects_found == ["thermal_lag"]
     assert res.ambiguous == [["thermal_lag", "thermal_rate"]]
     assert res.steps[0]["ambiguous_with"] == ["thermal_rate"]
+
+
+@pytest.mark.slow
+def test_starting_model_without_noise_terms_gets_them_named():
+    """White and flicker noise are vocabulary effects too (the 13 h run is needed to see
+    the flicker floor clearly)."""
+    from gyrolab.profile import load_profile
+    from gyrolab.sim.model import SimModel, make_effect_spec
+
+    bare = SimModel(effects=(make_effect_spec("bias_poly"),))
+    data = simulate_bench(nominal_model(), load_profile("paper"), RATE, 15)
+    res = run_discrepancy(data, bare)
+    assert set(res.effects_found) == {"arw", "bias_instability"}
+    assert res.model.get("arw").params["N"] == pytest.approx(0.0523, rel=0.1)
+    assert res.gap_after["allan_log_distance"] < 0.5 * res.gap_before["allan_log_distance"]

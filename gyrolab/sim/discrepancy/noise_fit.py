@@ -87,7 +87,9 @@ class NoiseFit:
 
     def model_adev(self, tau: np.ndarray | None = None) -> np.ndarray:
         t = self.curve.tau if tau is None else tau
-        return np.sqrt(model_avar(t, self.n_white, self.b_floor, self.k_rrw, self.q, self.dt))
+        avar = model_avar(t, self.n_white, self.b_floor, self.k_rrw, self.q, self.dt)
+        # floor: a model without any noise term compares finitely (and very badly)
+        return np.sqrt(np.maximum(avar, 1e-24))
 
     def sim_params(self) -> dict[str, dict[str, float]]:
         """Simulator parameters (effects.py units: N °/√h, B °/h, K °/h/√h)."""

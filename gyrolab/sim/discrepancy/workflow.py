@@ -213,7 +213,13 @@ class Workflow:
         noise = nf.fit_allan(curve, self.d.hr.dt, terms, q=q, white0=self.d.hr.white_sigma)
         outl = nf.fit_outliers(self.d, self.coarse_lattice()) if st.has("outliers") else None
         # final deterministic fit and its score with the fitted noise model's covariance
-        w = self.whitener(noise)
+        # (white and flicker noise are always there physically: a starting model without
+        # them still gets them in the covariance, and they are candidates of their own)
+        base_terms = {"arw", "bias_instability"}
+        wn = noise
+        if not base_terms <= terms:
+            wn = nf.fit_allan(curve, self.d.hr.dt, terms | base_terms, q, self.d.hr.white_sigma)
+        w = self.whitener(wn)
         if any(n in NONLINEAR for n in gyro.struct.names):
             gyro = fit_structure(gyro.struct, ctx, passes=1, whitener=w)
             st.theta.update(gyro.struct.theta)
@@ -364,28 +370,36 @@ class Workflow:
             )
         return out
 
+    def _noise_terms(self, cur: Fitted) -> set[str]:
+        return {n for n in cur.structure.effects if n in STOCHASTIC_BASE + ("rate_random_walk",)}
+
     def _rrw_alt(self, cur: Fitted) -> nf.NoiseFit:
-        """The current noise fit with a rate random walk added."""
+        """The current noise fit (white and flicker always) with a rate random walk added."""
         d = self.d
-        terms = {n for n in cur.structure.effects if n in ("arw", "bias_instability")}
-        terms.add("rate_random_walk")
+        terms = self._noise_terms(cur) | set(STOCHASTIC_BASE) | {"rate_random_walk"}
         return nf.fit_allan(cur.noise.curve, d.hr.dt, terms, cur.quant_q, d.hr.white_sigma)
 
     def score_rrw(self, cur: Fitted) -> list[dict[str, Any]]:
+        """Allan-curve terms missing from the model: χ² drop when each is added."""
         out = []
-        st = cur.structure
-        if not st.has("rate_random_walk"):
-            k = self._rrw_alt(cur)
-            dchi = cur.noise.chi2 - k.chi2
+        d = self.d
+        have = self._noise_terms(cur)
+        for name in STOCHASTIC_BASE + ("rate_random_walk",):
+            if name in have:
+                continue
+            alt = nf.fit_allan(
+                cur.noise.curve, d.hr.dt, have | {name}, cur.quant_q, d.hr.white_sigma
+            )
+            dchi = cur.noise.chi2 - alt.chi2
             out.append(
                 {
-                    "effect": "rate_random_walk",
+                    "effect": name,
                     "channel": "noise",
                     "score": float(dchi),
                     "significant": bool(dchi > nf.RRW_CHI2),
                     "evidence": {
-                        "allan_chi2": [cur.noise.chi2, k.chi2],
-                        "K_deg_per_h_sqrt_h": k.k_rrw * 3600 * 60,
+                        "allan_chi2": [cur.noise.chi2, alt.chi2],
+                        "params": alt.sim_params()[name],
                     },
                 }
             )
