@@ -600,7 +600,7 @@ class Workflow:
         params.update({k: v for k, v in f.noise.sim_params().items() if k in f.structure.effects})
         if f.outliers is not None:
             params["outliers"] = f.outliers.sim_params(self.d.hr.dt)
-        if f.structure.has("quantization"):
+        if f.structure.has("quantization") and self.d.hr.lattice_step > 0:
             params["quantization"] = {"q": self.d.hr.lattice_step}
         if f.oven.overshoot is not None:
             params["oven_overshoot"] = {
