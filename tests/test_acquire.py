@@ -49,13 +49,20 @@ def test_short_profile_completes_with_every_transition_recorded(short_run) -> No
     assert names.count("soaked") == names.count("step_ended") == 12
     assert names[-2:] == ["run_ended", "safe_state"]
     starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
-    # Steps start on the 240 s schedule (within the bench's 1 s tick and a little slack).
-    assert np.allclose(np.diff(starts), 240.0, atol=4.0)
+    # Steps start on the run clock, on the 240 s schedule exactly, however late the busy
+    # engine noticed the boundary (docs/reliability.md, "Timing").
+    assert starts == pytest.approx([240.0 * k for k in range(12)], abs=1e-6)
+    assert [e["t"] for e in rec.events if e["event"] == "run_ended"] == [pytest.approx(2880.0)]
     assert "verified" in rec.events[-1]["detail"] and rec.oven_mode[-1] == "safe"
     assert rec.oven_setpoint_c[-1] == 25.0
-    # Every setpoint of the profile was written and read back by the oven driver.
-    verified = [m["data"]["setpoint_c"] for m in rec.logs if m.get("kind") == "command"]
+    # Every setpoint of the profile was written and read back by the oven driver, soon
+    # after its step began: the engine's reaction time, a few to tens of ms wall, is
+    # seconds at 200x; 15 s (75 ms wall) would be a command held back a whole poll cycle.
+    cmds = [m for m in rec.logs if m.get("kind") == "command"]
+    verified = [m["data"]["setpoint_c"] for m in cmds]
     assert verified == [25.0, 60.0, 50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0, -30.0, -40.0]
+    lag = np.array([m["t"] for m in cmds]) - np.array(starts)
+    assert np.all(lag >= 0.0) and np.all(lag < 15.0), lag
     assert not [m for m in rec.logs if m.get("kind") in ("fault", "abort")]
 
 
@@ -65,8 +72,16 @@ def test_short_run_adc_stream_is_whole_and_converted_exactly(short_run) -> None:
     assert adc.gaps() == [] and adc.index[0] == 0
     assert np.array_equal(adc.index, np.arange(adc.index.size))
     assert adc.period == pytest.approx(0.01)
-    # 100 Hz for the whole run (the stream starts within 2 s of t = 0).
-    assert abs(adc.index.size - 100 * rec.events[-2]["t"]) < 300
+    # 100 Hz for the whole run. The stream starts with the bench's first 1 s tick after
+    # t = 0 (sample 0 is timed by its block's arrival: a few ticks at most at 200x on a
+    # busy machine), and a completed run records it up to the profile's end (the engine
+    # drains what is in flight, docs/reliability.md). The index being contiguous, that
+    # is every sample of the run.
+    t_end = rec.events[-2]["t"]
+    assert rec.events[-2]["event"] == "run_ended"
+    assert adc.t[0] < 3.0
+    assert adc.t[-1] + adc.period >= t_end - 1e-6
+    assert adc.index.size >= 100 * (t_end - 3.0)
     assert np.array_equal(adc.index, rate.index) and np.allclose(adc.t, rate.t)
     expect = AdcConfig().to_dps(adc.values.astype(np.float64)).astype(np.float32)
     assert np.array_equal(rate.values.astype(np.float32), expect)
@@ -178,9 +193,10 @@ def test_fault_run_completes_logs_every_fault_and_never_alters_a_sample(tmp_path
         ],
     )
     prof = _profile(tmp_path, [(25, 30), (35, 60), (30, 50)])
-    # 10x: the drivers' timeouts cannot go below ~0.5 s wall (scheduling jitter on a
-    # loaded machine), which is 5 simulated seconds here; faster, a burst of timeouts
-    # would add up past the 60 s communication timeout, as it would with a slow bench.
+    # 10x: the drivers' timeouts do not go below 0.25 s wall on the simulated bench
+    # (SIM_TIMEOUT_FLOOR_S: scheduling jitter on a loaded machine), 2.5 simulated seconds
+    # here; much faster, a burst of timeouts would add up towards the 60 s communication
+    # timeout, as it would with a slow bench.
     res, rec, bench = _run_in_process(tmp_path, prof, speed=10.0, faults=faults)
     assert res.outcome == "completed", res.reason
     fired = {k for _, k, _ in bench.log}

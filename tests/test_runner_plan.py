@@ -37,7 +37,7 @@ def test_time_only_profile_walks_every_step_in_order() -> None:
     prof = load_profile("short")
     plan = ProfilePlan(prof)
     first = plan.start(0.0)
-    assert first[0] == Event("run_started", detail="profile short")
+    assert first[0] == Event("run_started", detail="profile short", t=0.0)
     assert SetSetpoint(25.0) in first
     acts = []
     t = 0.0
@@ -53,6 +53,51 @@ def test_time_only_profile_walks_every_step_in_order() -> None:
     names = [a.event for _, a in acts if isinstance(a, Event)]
     assert names[-1] == "run_ended"
     assert names.count("soaked") == names.count("step_ended") == len(prof.steps)
+
+
+def test_steps_start_on_the_run_clock_however_late_the_engine_looks() -> None:
+    """A late ``update`` (a busy engine) ends a step at its due time, not when noticed:
+    the events carry the boundary's time, the next step is timed from it, and the
+    lateness never accumulates over the profile."""
+    prof = load_profile("short")
+    plan = ProfilePlan(prof)
+    plan.start(0.0)
+    rng = np.random.default_rng(1)
+    acts = []
+    t = 0.0
+    while plan.state == "step":
+        t += float(rng.uniform(0.5, 9.0))  # the engine looks every 0.5-9 s
+        acts += [(t, a) for a in plan.update(t)]
+    events = [(tt, a) for tt, a in acts if isinstance(a, Event)]
+    starts = [a.t for _, a in events if a.event == "step_started"]
+    assert starts == pytest.approx(list(prof.step_starts()[1:]), abs=1e-9)
+    ended = [a.t for _, a in events if a.event == "step_ended"]
+    assert ended == pytest.approx(list(prof.step_starts()[1:]) + [prof.duration_s], abs=1e-9)
+    assert plan.ended_at == pytest.approx(prof.duration_s)
+    # Each was noticed late (by up to 9 s), and is stamped no later than it was noticed.
+    assert all(a.t <= tt for tt, a in events) and any(tt - a.t > 1.0 for tt, a in events)
+    # The transition log (written when the engine acts) names the step's start time.
+    logs = [a for _, a in acts if isinstance(a, Log) and a.kind == "transition"]
+    assert [m.data["step_start_t"] for m in logs[:-1]] == pytest.approx(starts)
+
+
+def test_stability_rule_ends_a_step_at_the_reading_that_showed_it_stable() -> None:
+    step = Step(40.0, 100.0, stable_slope_c_per_min=0.05, stable_window_s=50.0)
+    plan = ProfilePlan(Profile("s", (step, Step(25.0, 100.0))))
+    plan.start(0.0)
+    for k in range(1, 12):  # steady readings at 9, 19, ..., 109 s
+        plan.update(10.0 * k - 1.0, 40.0)
+    # Stable before the minimum duration was over: the first reading after 100 s (at
+    # 109 s) is the first look, and ends it there.
+    assert plan.step_index == 1 and plan.step_started_at == pytest.approx(109.0)
+    plan2 = ProfilePlan(Profile("s", (step, Step(25.0, 100.0))))
+    plan2.start(0.0)
+    for k in range(1, 11):
+        plan2.update(10.0 * k - 1.0, 40.0)  # readings up to 99 s: duration not yet over
+    acts = plan2.update(130.0)  # the engine looks late, with no new reading
+    (ev,) = [a for a in acts if isinstance(a, Event) and a.event == "step_ended"]
+    assert ev.t == pytest.approx(100.0)  # stable already when the 100 s ran out
+    assert plan2.step_started_at == pytest.approx(100.0)
 
 
 def test_stability_rule_holds_until_the_pt100_settles() -> None:

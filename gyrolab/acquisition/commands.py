@@ -106,6 +106,19 @@ class GyroDevice:
 
 # --------------------------------------------------------------------- instruments
 
+# Driver timeouts never go below this many wall seconds. On the lab path (time_scale 1)
+# it only raises the oven's 0.3 s (bench-config default) to 0.5 s, as it always has.
+LAB_TIMEOUT_FLOOR_S = 0.5
+
+# The simulated bench answers in milliseconds (measured on a 2-core machine with both
+# cores busy with other work, at 200x: Modbus transactions max 35 ms, 34401A readings max
+# 74 ms wall), so its drivers' timeouts may go lower than on the lab path. The floor is
+# still wall time, and at speed X it costs X times as many simulated seconds per timeout:
+# 2.5 s at 10x, where the 0.5 s floor cost 5 s, and an exception reply (shorter than the
+# reply minimalmodbus waits for) costs a full timeout too. A burst of Modbus errors thus
+# stays well inside the 60 s communication timeout.
+SIM_TIMEOUT_FLOOR_S = 0.25
+
 
 class Instruments:
     """The three connected drivers, their runner adapters and identities."""
@@ -131,6 +144,7 @@ def connect_instruments(
     oven_port: str,
     adc_port: str,
     time_scale: float = 1.0,
+    timeout_floor_s: float = LAB_TIMEOUT_FLOOR_S,
     visa_library: str = "@py",
     clock: Callable[[], float] = time.monotonic,
 ) -> Instruments:
@@ -138,8 +152,10 @@ def connect_instruments(
 
     ``time_scale`` divides the drivers' wall-clock timeouts (a simulated bench running
     X× faster than real time answers X× sooner, and a silent one must be noticed X×
-    sooner too); it never takes them below a floor that protects against scheduling
-    jitter on a loaded machine.
+    sooner too); it never takes them below ``timeout_floor_s`` wall seconds, which
+    protects against scheduling jitter (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
+    The oven driver's ``silence_s`` (the quiet wait after a failed transaction) is its
+    timeout, scaled the same way.
     """
     from gyrolab.acquisition.gyro_adc import GyroAdcReader
     from gyrolab.acquisition.multimeter import Agilent34401A
@@ -148,15 +164,15 @@ def connect_instruments(
     inst = Instruments()
     src = cfg.source
 
-    def scaled(t: float, floor: float) -> float:
-        return max(floor, t / time_scale)
+    def scaled(t: float) -> float:
+        return max(timeout_floor_s, t / time_scale)
 
     try:
         try:
             dmm = Agilent34401A(
                 dmm_resource,
                 visa_library=visa_library,
-                timeout_s=scaled(cfg.multimeter.timeout_s, 0.5),
+                timeout_s=scaled(cfg.multimeter.timeout_s),
                 range_ohm=cfg.multimeter.range_ohm,
                 nplc=cfg.multimeter.nplc,
                 r0_ohm=cfg.multimeter.r0_ohm,
@@ -178,11 +194,15 @@ def connect_instruments(
             "r0_ohm": cfg.multimeter.r0_ohm,
         }
         try:
+            oven_timeout_s = scaled(cfg.oven.timeout_s)
             oven = WatlowF4(
                 oven_port,
                 address=cfg.oven.slave_address,
                 baudrate=cfg.oven.baud_rate,
-                timeout_s=scaled(cfg.oven.timeout_s, 0.5),
+                timeout_s=oven_timeout_s,
+                # A reply later than timeout + silence cannot be told from the next one's
+                # (oven.py); the simulated slave is late by scheduling jitter at most.
+                silence_s=oven_timeout_s,
                 setpoint_limits_c=(cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c),
             )
             inst.closers.append(oven.close)
@@ -248,6 +268,7 @@ class SimHandle:
         clock: Any,
         stop: Callable[[], None],
         time_scale: float,
+        timeout_floor_s: float = LAB_TIMEOUT_FLOOR_S,
         speed: float | None = None,
         bench: Any = None,
         provenance: dict[str, Any] | None = None,
@@ -258,6 +279,7 @@ class SimHandle:
         self.clock = clock
         self.stop = stop
         self.time_scale = time_scale
+        self.timeout_floor_s = timeout_floor_s
         self.speed = speed
         self.bench = bench
         self.provenance = provenance or {}
@@ -333,6 +355,7 @@ def start_sim_bench(
         clock=bench.clock,
         stop=bench.stop,
         time_scale=speed if speed is not None else _SIM_FAST_SCALE,
+        timeout_floor_s=SIM_TIMEOUT_FLOOR_S,
         speed=speed,
         bench=bench,
         provenance=provenance(bench.physics.model, seed),
@@ -462,6 +485,7 @@ def run_acquisition(
             oven_port=sim.oven_port,
             adc_port=sim.adc_port,
             time_scale=sim.time_scale,
+            timeout_floor_s=sim.timeout_floor_s,
         )
     else:
         clock = WallClock()

@@ -7,7 +7,10 @@ Three parts, Bluesky/ophyd style — the plan never touches a port:
   step starts by commanding its setpoint, is held at least ``duration_s`` and then, when
   the step has a stability rule, until the PT100 slope over ``stable_window_s`` stays
   below ``stable_slope_c_per_min`` (at most ``max_extra_s`` more, then it moves on with a
-  warning). The first step is the power-on soak.
+  warning). The first step is the power-on soak. Steps run on the run clock: a step ends
+  at the time its rule was met (its start + ``duration_s``, or the reading that showed
+  it stable), not at the moment the engine got round to looking, and the next step
+  starts at that time, so the engine's reaction time never accumulates over a profile.
 * Devices (:class:`Thermometer`, :class:`Oven`, :class:`GyroStream`) are the hardware
   abstraction: small protocols that the lab drivers and the simulated bench's drivers
   both satisfy through thin adapters (``gyrolab.acquisition.commands``).
@@ -138,6 +141,8 @@ class Event:
     step: int = -1
     setpoint_c: float | None = None
     detail: str = ""
+    # Run time the event happened at, on the run clock (None: when the engine records it).
+    t: float | None = None
 
 
 @dataclass(frozen=True)
@@ -182,6 +187,7 @@ class ProfilePlan:
         self.state = "idle"
         self.step_index = -1
         self.step_started_at = math.nan
+        self.ended_at = math.nan  # run time the profile was complete
         self.soaked = False
         self._hist: deque[tuple[float, float]] = deque()
 
@@ -194,7 +200,7 @@ class ProfilePlan:
     def start(self, t: float) -> list[Action]:
         if self.state != "idle":
             raise RuntimeError("plan already started")
-        acts: list[Action] = [Event("run_started", detail=f"profile {self.profile.name}")]
+        acts: list[Action] = [Event("run_started", detail=f"profile {self.profile.name}", t=t)]
         acts += self._begin(0, t)
         return acts
 
@@ -208,16 +214,21 @@ class ProfilePlan:
         label = s.label or ("power-on" if i == 0 else f"{s.setpoint_c:g} C")
         return [
             SetSetpoint(s.setpoint_c),
-            Event("step_started", i, s.setpoint_c, label),
+            Event("step_started", i, s.setpoint_c, label, t=t),
             Log(
                 "info",
                 f"step {i + 1}/{len(self.profile.steps)} ({label}): setpoint {s.setpoint_c:g} °C",
                 "transition",
+                {"step_start_t": round(t, 6)},
             ),
         ]
 
     def update(self, t: float, pt100_c: float | None = None) -> list[Action]:
-        """Advance to time ``t``, optionally with a new PT100 reading (°C)."""
+        """Advance to time ``t``, optionally with a new PT100 reading (°C).
+
+        A step that ends is ended at the run time its rule was met (``t_end`` below), which
+        may be earlier than ``t`` when ``update`` is called late; its events carry that time
+        and the next step starts then."""
         if self.state != "step":
             return []
         s = self.profile.steps[self.step_index]
@@ -231,14 +242,22 @@ class ProfilePlan:
         if elapsed < s.duration_s:
             return []
         acts: list[Action] = []
+        due = self.step_started_at + s.duration_s
         if s.stable_slope_c_per_min is not None:
             stable, slope = self._stable(t, s)
             if not stable and elapsed < s.duration_s + s.max_extra_s:
                 return []
             if stable:
-                detail = f"held {elapsed:.0f} s; PT100 slope {slope:+.4f} °C/min"
+                # Met when the last reading of the window was taken (or when the minimum
+                # duration ran out, if it was stable before that).
+                t_end = min(t, max(due, self._hist[-1][0]))
             else:
-                detail = f"held {elapsed:.0f} s; NOT stable (slope {slope:+.4f} °C/min)"
+                t_end = min(t, due + s.max_extra_s)
+            held = t_end - self.step_started_at
+            if stable:
+                detail = f"held {held:.0f} s; PT100 slope {slope:+.4f} °C/min"
+            else:
+                detail = f"held {held:.0f} s; NOT stable (slope {slope:+.4f} °C/min)"
                 acts.append(
                     Log(
                         "warning",
@@ -249,14 +268,16 @@ class ProfilePlan:
                     )
                 )
         else:
-            detail = f"held {elapsed:.0f} s"
-        acts.append(Event("soaked", self.step_index, s.setpoint_c, detail))
-        acts.append(Event("step_ended", self.step_index, s.setpoint_c))
+            t_end = due
+            detail = f"held {s.duration_s:.0f} s"
+        acts.append(Event("soaked", self.step_index, s.setpoint_c, detail, t=t_end))
+        acts.append(Event("step_ended", self.step_index, s.setpoint_c, t=t_end))
         if self.step_index + 1 < len(self.profile.steps):
-            acts += self._begin(self.step_index + 1, t)
+            acts += self._begin(self.step_index + 1, t_end)
         else:
             self.state = "done"
-            acts.append(Event("run_ended", detail="profile complete"))
+            self.ended_at = t_end
+            acts.append(Event("run_ended", detail="profile complete", t=t_end))
             acts.append(Log("info", "profile complete", "transition"))
         return acts
 
@@ -484,6 +505,7 @@ class Acquisition:
         self._block_len = max(1, int(round(adc.block_s * adc.sample_rate_hz)))
         self._period = 1.0 / adc.sample_rate_hz
         self._samples = 0
+        self._received_to = -math.inf  # run time up to which ADC samples have arrived
         self._gaps = 0
         self._missing = 0
         self._dups = 0
@@ -597,6 +619,7 @@ class Acquisition:
                     outcome, reason = "fault", self._fault
                     break
                 if self.plan.state == "done":
+                    self._drain_adc_to(self.plan.ended_at)
                     break
                 if self.on_status and time.monotonic() - last_status >= self.status_every_s:
                     last_status = time.monotonic()
@@ -620,6 +643,24 @@ class Acquisition:
             first_device_index=self._idx0,
         )
 
+    def _drain_adc_to(self, t_end: float, wall_s: float = 1.0) -> None:
+        """A completed run records the gyro up to the profile's end: keep handling what
+        the device threads deliver until the ADC samples reach ``t_end`` (the stream lags
+        the clock by the frames in flight), for at most ``wall_s`` wall seconds (an ADC
+        that went quiet at the very end must not hold the oven; its gap stays visible)."""
+        deadline = time.monotonic() + wall_s
+        while (
+            self._idx0 is not None
+            and self._received_to < t_end - 0.5 * self._period
+            and time.monotonic() < deadline
+            and not self._interrupt
+        ):
+            try:
+                self._handle(self.q.get(timeout=0.02))
+            except queue.Empty:
+                continue
+            self.w.maybe_flush(self.t())
+
     def _update_status(self, t: float) -> None:
         st = self.status
         st.t = t
@@ -638,7 +679,11 @@ class Acquisition:
             if isinstance(a, SetSetpoint):
                 self._command_setpoint(a.setpoint_c)
             elif isinstance(a, Event):
-                self.w.write_event(t, a.event, a.step, a.setpoint_c, a.detail)
+                # Stamped with the plan's time (the step boundary on the run clock), not
+                # with when the engine got to it; the setpoint command's own log says when
+                # the oven took it.
+                te = t if a.t is None else a.t
+                self.w.write_event(te, a.event, a.step, a.setpoint_c, a.detail)
             elif isinstance(a, Log):
                 self.log(a.level, "runner", a.message, a.kind, a.data, t)
 
@@ -856,9 +901,10 @@ class Acquisition:
         self._blk.append(counts)
         self._blk_n += n
         self._next_idx = idx + n
+        self._received_to = t0_dev - self._adc_offset + n * self._period
         if self.on_samples is not None:
             # Received, not yet necessarily on disk: what a crash-loss measurement needs.
-            self.on_samples(t0_dev - self._adc_offset + n * self._period)
+            self.on_samples(self._received_to)
         if self._blk_n >= self._block_len:
             self._emit_block()
 

@@ -83,7 +83,11 @@ class SimBench:
         if physics.index % self.samples_per_frame:
             raise ValueError("physics must start on a frame boundary")
         self.frames_per_tick = max(1, round(tick_s * self.rate_hz / self.samples_per_frame))
-        self.clock = SimClock(speed, start_s=physics.t)
+        # A starved tick thread may catch up at most two ticks in a burst; beyond that the
+        # clock slips (clock.py): the runner must never find the world seconds ahead of
+        # where it last looked just because the process did not get the CPU.
+        tick_sim_s = self.frames_per_tick * self.samples_per_frame / self.rate_hz
+        self.clock = SimClock(speed, start_s=physics.t, max_catch_up_s=2.0 * tick_sim_s)
         self.faults = faults or FaultPlan()
         self.lock = threading.RLock()  # guards the physics (tick thread vs. responders)
         self._own_dir = workdir is None
