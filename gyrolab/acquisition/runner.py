@@ -380,11 +380,12 @@ class _Poller(threading.Thread):
                     break
             if pending is not None and self._call(pending, "command"):
                 pending = None
-            self._call(self.op, "reading")
-            nxt += self.period
-            now = self.clock.now()
-            if nxt < now:  # fell behind (slow instrument): skip, don't burst
-                nxt = now
+            if self.clock.now() >= nxt:  # not when woken early by a new command
+                self._call(self.op, "reading")
+                nxt += self.period
+                now = self.clock.now()
+                if nxt < now:  # fell behind (slow instrument): skip, don't burst
+                    nxt = now
             self._wait(nxt)
 
     def _call(self, fn: Callable[[], Any], what: str) -> bool:
@@ -401,8 +402,12 @@ class _Poller(threading.Thread):
         return True
 
     def _wait(self, until: float) -> None:
-        # Sleep in slices so that a stop request is honoured promptly.
+        # Sleep in slices so that a stop request is honoured promptly, and so that a new
+        # command (the next step's setpoint) goes out at once, not at the next poll, up to
+        # a period later.
         while not self.stop_ev.is_set():
+            if self.commands is not None and not self.commands.empty():
+                return
             dt = until - self.clock.now()
             if dt <= 0:
                 return
