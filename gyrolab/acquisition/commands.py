@@ -152,8 +152,9 @@ def connect_instruments(
 
     ``time_scale`` divides the drivers' wall-clock timeouts (a simulated bench running
     X× faster than real time answers X× sooner, and a silent one must be noticed X×
-    sooner too); it never takes them below ``timeout_floor_s`` wall seconds, which
-    protects against scheduling jitter (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
+    sooner too); when sped up it never takes them below ``timeout_floor_s`` wall
+    seconds, which protects against scheduling jitter; in real time the configured
+    timeouts are used as they are (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
     The oven driver's ``silence_s`` (the quiet wait after a failed transaction) is its
     timeout, scaled the same way.
     """
@@ -165,6 +166,10 @@ def connect_instruments(
     src = cfg.source
 
     def scaled(t: float) -> float:
+        # Real time: the configured timeout is the engineer's choice (docs/bench-config.md);
+        # the floor only guards a sped-up simulated bench against scheduling jitter.
+        if time_scale <= 1.0:
+            return t
         return max(timeout_floor_s, t / time_scale)
 
     try:
