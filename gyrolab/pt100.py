@@ -14,6 +14,8 @@ Newton steps below (the C term is small), accurate to well under 1 µ°C.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 R0_OHM = 100.0
@@ -21,9 +23,15 @@ A = 3.9083e-3
 B = -5.775e-7
 C = -4.183e-12
 
+_NEWTON_STEPS = 8  # converges in 2-3; the rest costs nothing and covers -200 °C
+
 
 def cvd_resistance(t_c: float | np.ndarray, r0_ohm: float = R0_OHM) -> float | np.ndarray:
     """Resistance (Ω) of a platinum RTD at ``t_c`` (°C); ``r0_ohm`` is R at 0 °C."""
+    if isinstance(t_c, (float, int)):  # scalar fast path: the simulator reads once a second
+        x = float(t_c)
+        r = 1.0 + A * x + B * x * x
+        return r0_ohm * (r + C * (x - 100.0) * x**3 if x < 0.0 else r)
     t = np.asarray(t_c, dtype=float)
     r = 1.0 + A * t + B * t * t
     r = np.where(t < 0.0, r + C * (t - 100.0) * t**3, r)
@@ -31,9 +39,28 @@ def cvd_resistance(t_c: float | np.ndarray, r0_ohm: float = R0_OHM) -> float | n
     return float(out) if out.ndim == 0 else out
 
 
+def _temperature_scalar(r: float) -> float:
+    """Inverse CVD of a resistance ratio ``r = R/R0`` (scalar)."""
+    if not r > 0.0:
+        return math.nan
+    t = (-A + math.sqrt(max(A * A - 4.0 * B * (1.0 - r), 0.0))) / (2.0 * B)
+    if r < 1.0:
+        for _ in range(_NEWTON_STEPS):
+            f = 1.0 + A * t + B * t * t + C * (t - 100.0) * t**3 - r
+            df = A + 2.0 * B * t + C * (4.0 * t**3 - 300.0 * t * t)
+            t -= f / df
+    return t
+
+
 def cvd_temperature(r_ohm: float | np.ndarray, r0_ohm: float = R0_OHM) -> float | np.ndarray:
     """Temperature (°C) of a platinum RTD reading ``r_ohm`` (Ω): the inverse of
-    :func:`cvd_resistance`. Resistances at or below zero give NaN."""
+    :func:`cvd_resistance`. Resistances at or below zero give NaN.
+
+    Closed form ``T = (−A + √(A² − 4B(1 − R/R0))) / 2B`` for R ≥ R0; below, Newton's method
+    on the full equation starting from that root.
+    """
+    if isinstance(r_ohm, (float, int)):
+        return _temperature_scalar(float(r_ohm) / r0_ohm)
     r = np.asarray(r_ohm, dtype=float) / r0_ohm
     with np.errstate(invalid="ignore"):
         # Quadratic branch: exact for t >= 0, the starting point below 0 °C.
@@ -42,7 +69,7 @@ def cvd_temperature(r_ohm: float | np.ndarray, r0_ohm: float = R0_OHM) -> float 
         if np.any(neg):
             tn = t[neg] if t.ndim else t
             rn = r[neg] if r.ndim else r
-            for _ in range(4):  # Newton on the full CVD; converges in 2-3 steps
+            for _ in range(_NEWTON_STEPS):
                 f = 1.0 + A * tn + B * tn * tn + C * (tn - 100.0) * tn**3 - rn
                 df = A + 2.0 * B * tn + C * (4.0 * tn**3 - 300.0 * tn * tn)
                 tn = tn - f / df

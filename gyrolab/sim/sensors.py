@@ -17,65 +17,16 @@ analogue output ``v = offset_v + gain_v_per_dps · Ω``::
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
-CVD_A = 3.9083e-3
-CVD_B = -5.775e-7
-CVD_C = -4.183e-12
-PT100_R0 = 100.0
+from gyrolab.pt100 import R0_OHM, A, B, C, cvd_resistance, cvd_temperature
 
-
-def cvd_resistance(t_c: np.ndarray | float, r0: float = PT100_R0) -> np.ndarray | float:
-    """PT100 resistance (Ω) at temperature ``t_c`` (°C), IEC 60751 Callendar–Van Dusen."""
-    if isinstance(t_c, (float, int)):  # scalar fast path: one reading per second
-        x = float(t_c)
-        r = 1.0 + CVD_A * x + CVD_B * x * x
-        return r0 * (r + CVD_C * (x - 100.0) * x**3 if x < 0.0 else r)
-    t = np.asarray(t_c, dtype=float)
-    r = 1.0 + CVD_A * t + CVD_B * t * t
-    r = np.where(t < 0.0, r + CVD_C * (t - 100.0) * t**3, r)
-    out = r0 * r
-    return float(out) if out.ndim == 0 else out
-
-
-def cvd_temperature(r_ohm: np.ndarray | float, r0: float = PT100_R0) -> np.ndarray | float:
-    """Temperature (°C) of a PT100 reading ``r_ohm`` (Ω): inverse of :func:`cvd_resistance`.
-
-    Closed form ``T = (−A + √(A² − 4B(1 − R/R0))) / 2B`` for R ≥ R0; below, Newton's method
-    on the full equation starting from that root (converges to < 1e-9 °C in a few steps).
-    """
-    if isinstance(r_ohm, (float, int)):
-        return _cvd_temperature_scalar(float(r_ohm) / r0)
-    r = np.asarray(r_ohm, dtype=float) / r0
-    t = (-CVD_A + np.sqrt(np.maximum(CVD_A * CVD_A - 4.0 * CVD_B * (1.0 - r), 0.0))) / (2.0 * CVD_B)
-    neg = r < 1.0
-    if np.any(neg):
-        tn = t[neg] if t.ndim else t
-        rn = r[neg] if r.ndim else r
-        for _ in range(8):
-            f = 1.0 + CVD_A * tn + CVD_B * tn**2 + CVD_C * (tn - 100.0) * tn**3 - rn
-            df = CVD_A + 2.0 * CVD_B * tn + CVD_C * (4.0 * tn**3 - 300.0 * tn**2)
-            tn = tn - f / df
-        if t.ndim:
-            t = t.copy()
-            t[neg] = tn
-        else:
-            t = tn
-    return float(t) if np.ndim(t) == 0 else t
-
-
-def _cvd_temperature_scalar(r: float) -> float:
-    t = (-CVD_A + math.sqrt(max(CVD_A * CVD_A - 4.0 * CVD_B * (1.0 - r), 0.0))) / (2.0 * CVD_B)
-    if r < 1.0:
-        for _ in range(8):
-            f = 1.0 + CVD_A * t + CVD_B * t * t + CVD_C * (t - 100.0) * t**3 - r
-            df = CVD_A + 2.0 * CVD_B * t + CVD_C * (4.0 * t**3 - 300.0 * t * t)
-            t -= f / df
-    return t
+# One CVD implementation for the driver and the simulator (package level, see pt100.py).
+CVD_A, CVD_B, CVD_C, PT100_R0 = A, B, C, R0_OHM
+__all__ = ["AdcModel", "cvd_resistance", "cvd_temperature"]
 
 
 @dataclass(frozen=True)
