@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from contract import METRIC_KEYS
 from test_pipeline import SMALL, write_run
 
 from gyrolab.cli import main
@@ -26,13 +27,6 @@ from gyrolab.recording import (
 
 torch.set_num_threads(1)
 
-METRIC_KEYS = {
-    "arw_deg_per_sqrt_h",
-    "bias_instability_deg_per_h",
-    "bias_stability_deg_per_h",
-    "drift_pp_deg_per_s",
-    "rms_deg_per_s",
-}
 
 # the GPSO search runs (tiny swarm) so that the CLI path is the real one
 CLI_CONFIG = replace(SMALL, vmd_K=None, vmd_alpha=None, gpso_population=4, gpso_generations=1)

@@ -10,17 +10,11 @@ import json
 from pathlib import Path
 
 import pytest
+from contract import METRIC_KEYS
 
 from gyrolab.cli import main
 from gyrolab.report.demo import run_demo
 
-METRIC_KEYS = {
-    "arw_deg_per_sqrt_h",
-    "bias_instability_deg_per_h",
-    "bias_stability_deg_per_h",
-    "drift_pp_deg_per_s",
-    "rms_deg_per_s",
-}
 MODEL_FIGURES = ("gpso", "vmd-modes", "mpe", "drift-fit", "compensated")
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from contract import METRIC_KEYS
 
 from gyrolab.cli import main
 from gyrolab.recording import RecordingWriter
@@ -16,14 +17,6 @@ from gyrolab.report.build import build_report, fmt, hms
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.html import render
 from gyrolab.report.pdf import write_pdf
-
-METRIC_KEYS = {
-    "arw_deg_per_sqrt_h",
-    "bias_instability_deg_per_h",
-    "bias_stability_deg_per_h",
-    "drift_pp_deg_per_s",
-    "rms_deg_per_s",
-}
 
 
 @pytest.fixture(scope="module")
