@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,11 +22,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.errors import InputError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from gyrolab.tomlfile import read_toml
 
 
 @dataclass(frozen=True)
@@ -169,10 +164,4 @@ def load_profile(spec: str | os.PathLike[str]) -> Profile:
     p = Path(s)
     if p.suffix.lower() != ".toml":
         raise InputError(s, f"unknown profile (built in: {', '.join(BUILTIN)}; or a .toml file)")
-    if not p.is_file():
-        raise InputError(s, "profile file not found")
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(s, f"not valid TOML: {e}") from None
-    return profile_from_dict(d, s)
+    return profile_from_dict(read_toml(s, "profile file"), s)

@@ -14,17 +14,12 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from gyrolab.errors import InputError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from gyrolab.tomlfile import read_toml
 
 
 @dataclass(frozen=True)
@@ -237,12 +232,7 @@ def validate(cfg: BenchConfig) -> None:
 def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     """Read and check a bench TOML file."""
     p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "bench file not found")
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(p, f"not valid TOML: {e}") from None
+    d = read_toml(p, "bench file")
     cfg = bench_from_dict(d, str(p))
     for name, val in (
         ("multimeter", cfg.multimeter.resource),

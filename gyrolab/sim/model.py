@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -36,11 +35,7 @@ from gyrolab.errors import InputError
 from gyrolab.sim.effects import EFFECTS
 from gyrolab.sim.sensors import AdcModel
 from gyrolab.sim.thermal import ThermalParams
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from gyrolab.tomlfile import read_toml
 
 FORMAT = "gyrolab-sim-model/1"
 
@@ -196,12 +191,7 @@ def nominal_model() -> SimModel:
 def load_model(path: str | os.PathLike[str]) -> SimModel:
     """Read a ``SIM_MODEL.toml``; InputError naming the file on any problem."""
     p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "model file not found")
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(p, f"not valid TOML: {e}") from None
+    d = read_toml(p, "model file")
     try:
         return SimModel.from_dict(d)
     except (ValueError, TypeError) as e:
