@@ -221,6 +221,28 @@ def _summary(rec: Recording, model: Any, held_out: bool | None) -> list[tuple[st
     return rows
 
 
+def _log_row(m: dict[str, Any]) -> list[str]:
+    """One /log message as a table row: time, level, source, kind, message."""
+    return [
+        hms(float(m.get("t", 0.0))),
+        str(m.get("level", "")),
+        str(m.get("source", "")),
+        str(m.get("kind", "")),
+        str(m.get("message", "")),
+    ]
+
+
+def _capped_table(
+    key: str, title: str, header: list[str], rows: list[list[str]], what: str, more: str = ""
+) -> TableBlock:
+    """A table of at most ``MAX_LOG_ROWS`` rows; the note says how many were left out."""
+    note = ""
+    if len(rows) > MAX_LOG_ROWS:
+        note = f"First {MAX_LOG_ROWS} of {len(rows)} {what} shown.{more}"
+        rows = rows[:MAX_LOG_ROWS]
+    return TableBlock(key, title, header, rows, note)
+
+
 def run_log_rows(rec: Recording) -> tuple[list[list[str]], dict[str, int]]:
     """Faults, recoveries, warnings and gaps, in time order; plus counts per kind."""
     rows: list[tuple[float, list[str]]] = []
@@ -229,10 +251,7 @@ def run_log_rows(rec: Recording) -> tuple[list[list[str]], dict[str, int]]:
         level = str(m.get("level", ""))
         kind = str(m.get("kind", ""))
         if level in ("warning", "error", "fault") or kind in LOG_KINDS:
-            t = float(m.get("t", 0.0))
-            rows.append(
-                (t, [hms(t), level, str(m.get("source", "")), kind, str(m.get("message", ""))])
-            )
+            rows.append((float(m.get("t", 0.0)), _log_row(m)))
             counts[kind or level] = counts.get(kind or level, 0) + 1
     logged_gaps = sum(1 for m in rec.logs if m.get("kind") == "gap")
     assert rec.rate is not None
@@ -574,55 +593,27 @@ def _log_section(rec: Recording) -> Section:
             + f"; log messages in all: {len(rec.logs)}; profile events: {len(rec.events)}."
         )
     )
-    note = ""
-    if len(rows) > MAX_LOG_ROWS:
-        note = f"First {MAX_LOG_ROWS} of {len(rows)} entries shown; all are in the recording."
-        rows = rows[:MAX_LOG_ROWS]
+    log_header = ["time", "level", "source", "kind", "message"]
     sec.blocks.append(
-        TableBlock(
+        _capped_table(
             "runlog",
             "Faults, recoveries, warnings and gaps",
-            ["time", "level", "source", "kind", "message"],
+            log_header,
             rows,
-            note,
+            "entries",
+            " All are in the recording.",
         )
     )
     # Every message, info included: the full story of the run (commands, transitions).
-    all_rows = [
-        [
-            hms(float(m.get("t", 0.0))),
-            str(m.get("level", "")),
-            str(m.get("source", "")),
-            str(m.get("kind", "")),
-            str(m.get("message", "")),
-        ]
-        for m in sorted(rec.logs, key=lambda m: float(m.get("t", 0.0)))
-    ]
-    all_note = ""
-    if len(all_rows) > MAX_LOG_ROWS:
-        all_note = f"First {MAX_LOG_ROWS} of {len(all_rows)} messages shown."
-        all_rows = all_rows[:MAX_LOG_ROWS]
+    all_rows = [_log_row(m) for m in sorted(rec.logs, key=lambda m: float(m.get("t", 0.0)))]
+    sec.blocks.append(_capped_table("alllog", "All log messages", log_header, all_rows, "messages"))
     sec.blocks.append(
-        TableBlock(
-            "alllog",
-            "All log messages",
-            ["time", "level", "source", "kind", "message"],
-            all_rows,
-            all_note,
-        )
-    )
-    ev = event_rows(rec)
-    evnote = ""
-    if len(ev) > MAX_LOG_ROWS:
-        evnote = f"First {MAX_LOG_ROWS} of {len(ev)} events shown."
-        ev = ev[:MAX_LOG_ROWS]
-    sec.blocks.append(
-        TableBlock(
+        _capped_table(
             "events",
             "Profile events",
             ["time", "event", "step", "setpoint (°C)", "detail"],
-            ev,
-            evnote,
+            event_rows(rec),
+            "events",
         )
     )
     return sec
