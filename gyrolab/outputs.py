@@ -1,26 +1,94 @@
 """Atomic outputs: write to a temporary sibling, then rename into place.
 
-A reader never sees a half-written file, an interrupted command leaves nothing behind,
-and an existing output is never replaced unless the caller passed ``force``.
+The one owner of output paths (docs/cli.md, "Outputs"). A reader never sees a
+half-written file, an interrupted command leaves nothing behind, and:
+
+* an output is never one of the command's inputs: not the same file (same inode, or the
+  same resolved path through links), and a directory output never contains an input;
+* an existing output is replaced only with ``force``; an existing *directory* is replaced
+  only if gyrolab wrote it (it holds the marker file :data:`MARKER`, naming the command
+  that wrote it) — ``--force`` never deletes a directory of someone else's files;
+* files get mode ``0666 & ~umask`` and directories ``0777 & ~umask``, as if the user had
+  created them (``mkstemp``/``mkdtemp`` make them 0600/0700).
 """
 
 from __future__ import annotations
 
 import contextlib
+import datetime as _dt
+import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from gyrolab.errors import InputError
 
+# Written into every output directory; ``--force`` replaces only a directory holding it.
+MARKER = ".gyrolab-output"
 
-def check_output(path: str | os.PathLike[str], force: bool = False) -> Path:
-    """Check that ``path`` may be written: parent exists and is writable, no clobbering."""
+PathLike = str | os.PathLike[str]
+
+
+def umask() -> int:
+    """The process umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _is_input(out: Path, inputs: Iterable[PathLike | None]) -> str | None:
+    """The first input that ``out`` is (same inode or resolved path) or contains."""
+    out_r = out.resolve()
+    for inp in inputs:
+        if inp is None:
+            continue
+        ip = Path(inp)
+        if not ip.exists():
+            continue
+        ip_r = ip.resolve()
+        if out.exists() and os.path.samefile(out, ip):
+            return str(inp)
+        if ip_r == out_r or out_r in ip_r.parents:
+            return str(inp)
+    return None
+
+
+def check_output(
+    path: PathLike,
+    force: bool = False,
+    *,
+    inputs: Iterable[PathLike | None] = (),
+    kind: str | None = None,
+) -> Path:
+    """Check that ``path`` may be written; raise :class:`InputError` (exit 2) if not.
+
+    ``inputs``: the command's input files and directories; the output may be none of them
+    and, as a directory, contain none. ``kind``: ``"file"`` or ``"dir"`` when the caller
+    knows what it will write (``None``: either). Existing outputs need ``force``; an
+    existing directory is replaced only if it holds :data:`MARKER`.
+    """
     p = Path(path)
-    if p.exists() and not force:
-        raise InputError(p, "already exists (use --force to overwrite)")
+    inp = _is_input(p, list(inputs))
+    if inp is not None:
+        what = "is" if Path(inp).resolve() == p.resolve() or not p.is_dir() else "contains"
+        raise InputError(p, f"{what} one of this command's inputs ({inp}); choose another --out")
+    if p.exists() or p.is_symlink():
+        if not force:
+            raise InputError(p, "already exists (use --force to overwrite)")
+        if p.is_dir() and not p.is_symlink():
+            if kind == "file":
+                raise InputError(p, "is a directory; --force replaces files only with files")
+            if not (p / MARKER).is_file():
+                raise InputError(
+                    p,
+                    f"is a directory gyrolab did not write (no {MARKER}); --force replaces "
+                    "only gyrolab's own output directories: remove it yourself or choose "
+                    "another --out",
+                )
+        elif kind == "dir":
+            raise InputError(p, "is not a directory; --force replaces a directory only")
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(p, f"directory {parent} does not exist")
@@ -30,16 +98,16 @@ def check_output(path: str | os.PathLike[str], force: bool = False) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_file(path: str | os.PathLike[str], force: bool = False) -> Iterator[Path]:
+def atomic_file(
+    path: PathLike, force: bool = False, *, inputs: Iterable[PathLike | None] = ()
+) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success fsync and rename it into place."""
-    final = check_output(path, force)
+    final = check_output(path, force, inputs=inputs, kind="file")
     fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
     os.close(fd)
     tmp_path = Path(tmp)
-    # mkstemp makes the file 0600; a recording should get the usual umask-based mode
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp_path, 0o666 & ~umask)
+    # mkstemp makes the file 0600; an output gets the usual umask-based mode
+    os.chmod(tmp_path, 0o666 & ~umask())
     try:
         yield tmp_path
         with open(tmp_path, "rb+") as fh:
@@ -51,16 +119,42 @@ def atomic_file(path: str | os.PathLike[str], force: bool = False) -> Iterator[P
         raise
 
 
+def write_marker(directory: PathLike, command: str) -> None:
+    """Write :data:`MARKER` into ``directory``: who wrote it, when, with which command."""
+    from gyrolab import __version__
+
+    info = {
+        "written_by": f"gyrolab {__version__}",
+        "command": command,
+        "time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    (Path(directory) / MARKER).write_text(json.dumps(info) + "\n", encoding="utf-8")
+
+
 @contextlib.contextmanager
-def atomic_dir(path: str | os.PathLike[str], force: bool = False) -> Iterator[Path]:
-    """Yield a temporary directory beside ``path``; on success swap it into place."""
-    final = check_output(path, force)
+def atomic_dir(
+    path: PathLike,
+    force: bool = False,
+    *,
+    command: str = "gyrolab",
+    inputs: Iterable[PathLike | None] = (),
+) -> Iterator[Path]:
+    """Yield a temporary directory beside ``path``; on success swap it into place.
+
+    The directory gets :data:`MARKER` (naming ``command``) and mode ``0777 & ~umask``.
+    An existing ``path`` is replaced only under the rules of :func:`check_output`.
+    """
+    final = check_output(path, force, inputs=inputs, kind="dir")
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent))
+    os.chmod(tmp, 0o777 & ~umask())
     try:
         yield tmp
+        write_marker(tmp, command)
         if final.exists():
-            old = final.with_name(f".{final.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
+            # Checked again now (the work may have taken minutes): still ours to replace.
+            check_output(final, force, inputs=inputs, kind="dir")
+            # A fresh, unique name: never a path that might hold someone else's files.
+            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
             os.replace(final, old)
             os.replace(tmp, final)
             shutil.rmtree(old, ignore_errors=True)

@@ -6,9 +6,15 @@ A step may add a stability rule: after its minimum duration it is held until the
 slope stays below ``stable_slope_c_per_min`` for ``stable_window_s`` (at most
 ``max_extra_s`` more). The simulator and the acquisition runner read the same profile.
 
-The built-in ``paper`` profile (DESIGN.md; paper §4.1): 1 h power-on at room temperature
-(25 °C), heat to 60 °C and hold 1 h, then −10 °C per hour down to −40 °C, which is held
-one more hour — 13 h in all.
+The built-in ``paper`` profile (docs/profiles.md; paper §4.1): 1 h power-on at room
+temperature (25 °C), heat to 60 °C and hold 1 h, then −10 °C per hour down to −40 °C,
+which is held one more hour — 13 h in all.
+
+The TOML format is documented in docs/profiles.md. Keys are strict, as in BENCH.toml: an
+unknown top-level or step key is an error naming the file and the key (a typo such as
+``ambiant_c`` must not pass silently). There is no safe setpoint in a profile: the state
+a run ends in after a fault belongs to the bench (``[safe_state]`` in BENCH.toml,
+docs/bench-config.md), which knows its chamber and its limits.
 """
 
 from __future__ import annotations
@@ -54,7 +60,6 @@ class Profile:
     name: str
     steps: tuple[Step, ...]
     ambient_c: float = 25.0
-    safe_setpoint_c: float = 25.0
     description: str = ""
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -84,7 +89,6 @@ class Profile:
             name=name or f"{self.name}-reversed",
             steps=tuple(reversed(self.steps)),
             ambient_c=self.ambient_c,
-            safe_setpoint_c=self.safe_setpoint_c,
             description=f"{self.description} (reversed)".strip(),
         )
 
@@ -93,7 +97,6 @@ class Profile:
             "name": self.name,
             "description": self.description,
             "ambient_c": self.ambient_c,
-            "safe_setpoint_c": self.safe_setpoint_c,
             "step": [],
         }
         for s in self.steps:
@@ -111,41 +114,83 @@ def _paper() -> Profile:
         name="paper",
         steps=tuple(steps),
         ambient_c=25.0,
-        safe_setpoint_c=25.0,
         description="Wei et al. 2021 §4.1: 1 h at 25 °C, 60 °C for 1 h, -10 °C/h to -40 °C, "
         "-40 °C held 1 h more",
     )
 
 
 def _short() -> Profile:
-    """A 40-minute smoke-test profile for tests and quick looks (same shape, 4 min steps)."""
+    """A 48-minute smoke test of the software: the paper's schedule with 4 min steps.
+
+    Not a temperature test: no chamber follows 4 min steps (the simulator's nominal oven
+    air has τ = 240 s and heats at most 3 °C/min, cools at most 1.5 °C/min; the gyro case
+    follows the air with τ = 580 J/K · 4 K/W ≈ 39 min). Measured
+    with ``gyrolab simulate --profile short`` (docs/profiles.md): chamber air 4.9…45.2 °C,
+    gyro case (PT100) 25.0…32.0 °C, for setpoints −40…60 °C.
+    """
     steps = [Step(25.0, 240.0, "power-on"), Step(60.0, 240.0, "heat")]
     for sp in range(50, -50, -10):
         steps.append(Step(float(sp), 240.0, f"{sp} C"))
-    return Profile(name="short", steps=tuple(steps), description="paper shape, 4 min steps")
+    return Profile(
+        name="short",
+        steps=tuple(steps),
+        description="software smoke test: paper shape, 4 min steps; the chamber cannot follow "
+        "(simulated: chamber 5-45 °C, gyro case 25-32 °C for setpoints -40..60 °C)",
+    )
 
 
 BUILTIN: dict[str, Profile] = {"paper": _paper(), "short": _short()}
 
 
+# Top-level keys of a profile TOML (docs/profiles.md); ``step`` is the [[step]] list.
+PROFILE_KEYS = ("name", "description", "ambient_c", "step")
+_REMOVED = {
+    "safe_setpoint_c": "the safe state belongs to the bench: set [safe_state] setpoint_c "
+    "in BENCH.toml (docs/bench-config.md)",
+}
+
+
+def _number(v: Any, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{what} = {v!r}: expected a number")
+    if not math.isfinite(v):
+        raise ValueError(f"{what} = {v!r}: expected a finite number")
+    return float(v)
+
+
 def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
-    """Build a profile from the TOML layout (see docs/profiles.md)."""
+    """Build a profile from the TOML layout (docs/profiles.md); unknown keys are errors."""
+    for k in d:
+        if k in _REMOVED:
+            raise InputError(source, f"{k} is not a profile key: {_REMOVED[k]}")
+    unknown = sorted(set(d) - set(PROFILE_KEYS))
+    if unknown:
+        raise InputError(
+            source, f"unknown key(s) {unknown} (a profile has {', '.join(PROFILE_KEYS)})"
+        )
     try:
         raw_steps = d["step"]
         if not isinstance(raw_steps, list) or not raw_steps:
             raise InputError(source, "profile needs a non-empty [[step]] list")
-        known = {f for f in Step.__dataclass_fields__}
+        known = [f for f in Step.__dataclass_fields__]
         steps = []
         for i, sd in enumerate(raw_steps):
-            unknown = set(sd) - known
+            if not isinstance(sd, dict):
+                raise InputError(source, f"step {i + 1}: must be a [[step]] table")
+            unknown = sorted(set(sd) - set(known))
             if unknown:
-                raise InputError(source, f"step {i + 1}: unknown key(s) {sorted(unknown)}")
-            steps.append(Step(**{k: (float(v) if k != "label" else str(v)) for k, v in sd.items()}))
+                raise InputError(
+                    source, f"step {i + 1}: unknown key(s) {unknown} (a step has {', '.join(known)})"
+                )
+            kw = {
+                k: (str(v) if k == "label" else _number(v, f"step {i + 1}: {k}"))
+                for k, v in sd.items()
+            }
+            steps.append(Step(**kw))
         return Profile(
             name=str(d.get("name", Path(source).stem)),
             steps=tuple(steps),
-            ambient_c=float(d.get("ambient_c", 25.0)),
-            safe_setpoint_c=float(d.get("safe_setpoint_c", 25.0)),
+            ambient_c=_number(d.get("ambient_c", 25.0), "ambient_c"),
             description=str(d.get("description", "")),
         )
     except InputError:

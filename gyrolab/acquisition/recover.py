@@ -403,7 +403,7 @@ def recover_recording(
         # Killed before its first flush: the header and metadata are still a valid (empty)
         # recording of the run, and say what it was.
         rep.problems.append("no chunk was complete: the recovered file holds no messages")
-    with atomic_file(out, force) as tmp:
+    with atomic_file(out, force, inputs=(broken,)) as tmp:
         with open(tmp, "wb") as fh:
             write_salvaged(content, fh)
     rep.out = str(out)

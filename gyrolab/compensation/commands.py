@@ -96,7 +96,8 @@ def compensate(args: argparse.Namespace) -> int:
     from gyrolab.compensation.model_dir import write_json
 
     t_start = time.perf_counter()
-    check_output(args.out, args.force)
+    inputs = (args.run, args.validate)
+    check_output(args.out, args.force, inputs=inputs, kind="dir")
     cfg = pl.DEFAULT_CONFIG
     run = _load_run(args.run, cfg)
     val = _load_run(args.validate, cfg) if args.validate else None
@@ -115,7 +116,7 @@ def compensate(args: argparse.Namespace) -> int:
     metrics["timing_s"] = total
     metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
     model.timing_s = metrics["timing_breakdown_s"]
-    with atomic_dir(args.out, args.force) as tmp:
+    with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
         pl.save_model(model, str(tmp))
         write_json(Path(tmp) / "metrics.json", metrics)
     print(_summary(metrics))
@@ -130,8 +131,9 @@ def apply(args: argparse.Namespace) -> int:
     from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
     from gyrolab.compensation.pipeline import StreamingCompensator, compensate_offline, load_model
 
+    inputs = (args.model, args.run)
+    check_output(args.out, args.force, inputs=inputs, kind="file")
     model = load_model(args.model)
-    check_output(args.out, args.force)
     run = _load_run(args.run, model.config)
     with _named(args.run):
         offline = compensate_offline(model, run)
@@ -149,7 +151,7 @@ def apply(args: argparse.Namespace) -> int:
             f"{model.config.block_s} s averages",
         },
     }
-    with atomic_file(args.out, args.force) as tmp:
+    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
         _write_compensated(
             args.run,
             tmp,

@@ -72,7 +72,7 @@ def run_demo(
 ) -> dict[str, Any]:
     """Run the whole chain into ``out``; returns the report's metrics and stage timings."""
     out_p = Path(out)
-    check_output(out_p, force)
+    check_output(out_p, force, inputs=(profile,), kind="dir")
     # A bad --profile fails here, before minutes of work (load_profile raises InputError).
     prof_arg = str(Path(profile).resolve()) if Path(profile).is_file() else profile
     load_profile(prof_arg)
@@ -82,7 +82,7 @@ def run_demo(
     sim = ["--profile", prof_arg, "--rate", f"{rate_hz:g}"]
     held_source = "acquire --bench sim"
     try:
-        with atomic_dir(out_p, force) as tmp, _cwd(tmp):
+        with atomic_dir(out_p, force, command="demo", inputs=(profile,)) as tmp, _cwd(tmp):
             bar.set_postfix_str("simulate calibration run")
             t0 = time.perf_counter()
             _run(["simulate", "--out", "calibration.mcap", *sim, "--seed", str(seed)])

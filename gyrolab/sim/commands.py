@@ -20,7 +20,8 @@ def simulate(args: argparse.Namespace) -> int:
 
     Everything is validated before anything is written; the recording appears atomically.
     """
-    check_output(args.out, args.force)
+    inputs = (args.profile, args.model)
+    check_output(args.out, args.force, inputs=inputs, kind="file")
     if not (math.isfinite(args.rate) and 0 < args.rate <= MAX_RATE_HZ):
         raise InputError("--rate", f"must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
     profile = load_profile(args.profile)
@@ -29,7 +30,7 @@ def simulate(args: argparse.Namespace) -> int:
         model = apply_effect_args(model, list(args.effect or []))
     except (ValueError, TypeError) as e:
         raise InputError("--effect", str(e)) from None
-    with atomic_file(args.out, args.force) as tmp:
+    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
         summary = simulate_run(tmp, profile, model, rate_hz=args.rate, seed=args.seed)
     print(
         f"wrote {args.out}: profile {profile.name}, {summary.duration_s / 3600:.2f} h, "

@@ -21,7 +21,8 @@ from gyrolab.sim.model import load_model, nominal_model
 
 def discrepancy(args: argparse.Namespace) -> int:
     """CLI handler (see module docstring)."""
-    check_output(args.out, args.force)
+    inputs = (args.run, args.model)
+    check_output(args.out, args.force, inputs=inputs, kind="dir")
     model = load_model(args.model) if args.model else nominal_model()
     data = load_recording(args.run)
 
@@ -29,7 +30,7 @@ def discrepancy(args: argparse.Namespace) -> int:
         print(f"discrepancy: {msg}", file=sys.stderr)
 
     res = run_discrepancy(data, model, log=log)
-    with atomic_dir(args.out, args.force) as tmp:
+    with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
             json.dumps(res.to_json(), indent=1, default=_json_default), encoding="utf-8"
         )
