@@ -79,6 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulated-bench speed-up over real time (default: as fast as it goes)",
     )
     a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
+    a.add_argument(
+        "--faults",
+        metavar="FAULTS.toml",
+        help="--bench sim only: inject faults into the simulated bench (docs/instruments.md)",
+    )
     a.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     c = cmd("compensate", "fit the temperature-compensation model on a calibration run")

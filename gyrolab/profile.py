@@ -179,8 +179,9 @@ def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
                 raise InputError(source, f"step {i + 1}: must be a [[step]] table")
             unknown = sorted(set(sd) - set(known))
             if unknown:
+                has = ", ".join(known)
                 raise InputError(
-                    source, f"step {i + 1}: unknown key(s) {unknown} (a step has {', '.join(known)})"
+                    source, f"step {i + 1}: unknown key(s) {unknown} (a step has {has})"
                 )
             kw = {
                 k: (str(v) if k == "label" else _number(v, f"step {i + 1}: {k}"))

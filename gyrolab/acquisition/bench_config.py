@@ -196,10 +196,34 @@ def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     return cfg
 
 
+# Physical bounds a limit must lie within (docs/bench-config.md, "Limits"): beyond them a
+# value is a typo, not a bench. Setpoints: the widest range of the chambers MEMS tests use
+# (compressor chambers about -75...+180 °C, LN2-cooled ones down to about -100 °C).
+# PT100: the range of the Callendar-Van Dusen equations (IEC 60751), -200...+850 °C.
+SETPOINT_BOUNDS_C = (-100.0, 200.0)
+PT100_BOUNDS_C = (-200.0, 850.0)
+# How far inside the PT100 watchdog window every setpoint must lie: the case settles at
+# the setpoint +- control error and meter noise, and must not trip the watchdog there.
+PT100_MARGIN_C = 2.0
+
+
 def validate(cfg: BenchConfig) -> None:
     """Consistency checks; raises InputError naming the file and the key."""
     s = cfg.source
     lim = cfg.limits
+    for key, bounds in (
+        ("setpoint_min_c", SETPOINT_BOUNDS_C),
+        ("setpoint_max_c", SETPOINT_BOUNDS_C),
+        ("pt100_min_c", PT100_BOUNDS_C),
+        ("pt100_max_c", PT100_BOUNDS_C),
+    ):
+        v = getattr(lim, key)
+        if not bounds[0] <= v <= bounds[1]:
+            raise InputError(
+                s,
+                f"[limits] {key} = {v:g} °C is outside the physical bounds "
+                f"[{bounds[0]:g}, {bounds[1]:g}] °C (docs/bench-config.md)",
+            )
     if not lim.setpoint_min_c < lim.setpoint_max_c:
         raise InputError(s, "[limits] setpoint_min_c must be below setpoint_max_c")
     if not lim.pt100_min_c < lim.pt100_max_c:
@@ -211,6 +235,8 @@ def validate(cfg: BenchConfig) -> None:
         raise InputError(s, f"[safe_state] mode = {ss.mode!r}: only 'setpoint' is supported")
     if not lim.setpoint_min_c <= ss.setpoint_c <= lim.setpoint_max_c:
         raise InputError(s, "[safe_state] setpoint_c is outside the setpoint limits")
+    if not lim.pt100_min_c < ss.setpoint_c < lim.pt100_max_c:
+        raise InputError(s, "[safe_state] setpoint_c is outside [limits] pt100_min_c..pt100_max_c")
     a = cfg.adc
     if not (2 <= a.bits <= 32 and a.vref_v > 0 and a.gain_v_per_dps != 0):
         raise InputError(s, "[adc] needs 2 <= bits <= 32, vref_v > 0, gain_v_per_dps != 0")
@@ -227,6 +253,24 @@ def validate(cfg: BenchConfig) -> None:
         raise InputError(s, "[recorder] flush_every_s + [adc] block_s must not exceed 2 s")
     if not r.fsync_every_s > 0 or r.chunk_size < 1024:
         raise InputError(s, "[recorder] fsync_every_s must be > 0 and chunk_size >= 1024")
+
+
+def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str) -> None:
+    """Refuse (before any I/O) a profile the bench's PT100 watchdog would abort: every
+    setpoint must lie at least ``PT100_MARGIN_C`` inside ``[pt100_min_c, pt100_max_c]``.
+    (Setpoints against ``setpoint_min_c..setpoint_max_c``: ``runner.check_profile_limits``.)
+    """
+    lim = cfg.limits
+    lo, hi = lim.pt100_min_c + PT100_MARGIN_C, lim.pt100_max_c - PT100_MARGIN_C
+    for i, st in enumerate(profile.steps):
+        if not lo <= st.setpoint_c <= hi:
+            raise InputError(
+                cfg.source,
+                f"[limits] pt100_min_c..pt100_max_c = {lim.pt100_min_c:g}..{lim.pt100_max_c:g} "
+                f"°C would stop profile {profile_source} at step {i + 1} (setpoint "
+                f"{st.setpoint_c:g} °C): the watchdog window must contain every setpoint "
+                f"with {PT100_MARGIN_C:g} °C to spare",
+            )
 
 
 def load_bench(path: str | os.PathLike[str]) -> BenchConfig:

@@ -26,7 +26,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from gyrolab.acquisition.bench_config import BenchConfig, RunInfo, load_bench
+from gyrolab.acquisition.bench_config import (
+    BenchConfig,
+    RunInfo,
+    check_bench_for_profile,
+    load_bench,
+)
 from gyrolab.acquisition.runner import (
     Acquisition,
     InstrumentFault,
@@ -50,10 +55,21 @@ class MultimeterDevice:
 
     def __init__(self, drv: Any) -> None:
         self.drv = drv
+        self._reports: list[Any] = []
 
     def read(self) -> tuple[float, float]:
+        from gyrolab.acquisition.multimeter import scpi_reports
+
         r = self.drv.read()
+        # The error queue after every reading: an error the meter raises mid-run (e.g.
+        # -310 system error) is logged as a fault and, by its class, stops the run.
+        self._reports += scpi_reports(self.drv.errors, "after READ?")
         return float(r.resistance_ohm), float(r.temperature_c)
+
+    def reports(self) -> list[Any]:
+        """SCPI error-queue entries read since the last call (InstrumentReport)."""
+        out, self._reports = self._reports, []
+        return out
 
 
 class OvenDevice:
@@ -75,6 +91,10 @@ class OvenDevice:
             # The controller cannot see the chamber: nothing it does can be trusted.
             raise InstrumentFault(f"oven controller reports a sensor fault (status {st.raw:#x})")
         return float(sp), float(pv)
+
+    def reports(self) -> list[Any]:
+        """Modbus exception responses since the last call (InstrumentReport)."""
+        return list(self.drv.pop_reports())
 
 
 class GyroDevice:
@@ -579,11 +599,22 @@ def acquire(args: argparse.Namespace) -> int:
             raise GyrolabError(
                 "--speed applies to --bench sim only (real hardware runs in real time)"
             )
-    profile = load_profile(args.profile or cfg.profile_path())
+    faults_path = getattr(args, "faults", None)
+    faults = None
+    if faults_path is not None:
+        if args.bench != "sim":
+            raise GyrolabError("--faults applies to --bench sim only (it drives the simulator)")
+        from gyrolab.sim.bench.fault_file import load_faults
+
+        faults = load_faults(faults_path)
+    profile_spec = args.profile or cfg.profile_path()
+    profile = load_profile(profile_spec)
     if args.profile:
         cfg = replace(cfg, run=replace(cfg.run, profile=str(args.profile)))
     check_profile_limits(profile, cfg.limits, str(args.profile or cfg.run.profile))
-    check_output(out, args.force)
+    check_bench_for_profile(cfg, profile, str(profile_spec))
+    inputs = (None if args.bench == "sim" else args.bench, profile_spec, faults_path)
+    check_output(out, args.force, inputs=inputs, kind="file")
 
     sim: SimHandle | None = None
     import tempfile
@@ -598,8 +629,12 @@ def acquire(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="gyrolab-sim-") as work:
         if args.bench == "sim":
             sim, cfg = start_sim_bench(
-                cfg, profile, seed=args.seed, speed=args.speed, workdir=Path(work)
+                cfg, profile, seed=args.seed, speed=args.speed, workdir=Path(work), faults=faults
             )
+            if faults is not None:
+                from gyrolab.sim.bench.fault_file import plan_to_dict
+
+                sim.provenance["fault_injection"] = plan_to_dict(faults)
         speed_note = "" if sim is None else f" ×{args.speed or 'max'}"
         show, bar = _progress(profile, speed_note)
         t0 = time.monotonic()

@@ -23,10 +23,50 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.acquisition.instrument import (
+    InstrumentError,
+    InstrumentReport,
+    InstrumentTimeout,
+    LimitError,
+)
 from gyrolab.pt100 import R0_OHM, cvd_temperature
 
 NAME = "34401A"
+
+
+def scpi_error_class(code: int) -> tuple[str, bool]:
+    """``(class, fatal)`` of a SCPI error-queue code, by the SCPI-99 / IEEE 488.2 classes.
+
+    * −100…−199 command errors, −200…−299 execution errors, −400…−499 query errors: a
+      message the meter refused or could not answer; the meter itself is sound and each
+      reading is still checked on its own (``READ?`` parse, overload) → the run continues;
+    * −300…−399 device-specific errors (−310 system error, −311 memory error, −330
+      self-test failed, …): the meter reports its own malfunction, its readings can no
+      longer be trusted → the run stops (oven to the safe state). Except −350 "queue
+      overflow", which only says that later errors were dropped → continues;
+    * positive codes: instrument-specific (on the 34401A: interface, self-test and
+      calibration errors, User's Guide ch. 5), not classified here → logged, continues.
+    """
+    if -199 <= code <= -100:
+        return "command error", False
+    if -299 <= code <= -200:
+        return "execution error", False
+    if code == -350:
+        return "error queue overflow", False
+    if -399 <= code <= -300:
+        return "device-specific error", True
+    if -499 <= code <= -400:
+        return "query error", False
+    return "instrument-specific error", False
+
+
+def scpi_reports(errors: list[tuple[int, str]], context: str = "") -> list[InstrumentReport]:
+    """The error-queue entries ``errors`` (from :attr:`Agilent34401A.errors`) as reports."""
+    out = []
+    for code, text in errors:
+        cls, fatal = scpi_error_class(code)
+        out.append(InstrumentReport("SCPI", code, text, cls, fatal, context))
+    return out
 
 
 @dataclass(frozen=True)
@@ -79,6 +119,8 @@ class Agilent34401A:
         self.r0_ohm = r0_ohm
         self.timeout_s = timeout_s
         self._rm = None
+        self._out_of_step = False
+        self.late_replies = 0  # replies discarded after a timeout (see query)
         if isinstance(resource, str):
             import pyvisa
 
@@ -123,11 +165,31 @@ class Agilent34401A:
             raise self._wrap(e, command) from e
 
     def query(self, command: str) -> str:
-        """Send ``command`` and return the reply line, stripped."""
+        """Send ``command`` and return the reply line, stripped.
+
+        After a query that timed out (or got a reply of the wrong shape) the meter's late
+        reply may still be on its way and would be taken as the answer to the next query
+        (a stale ``READ?``, or a ``READ?`` value read as a ``SYST:ERR?`` entry, forever
+        out of step): the next query first waits that out (:meth:`_resync`)."""
+        if self._out_of_step:
+            self._resync()
         try:
             return str(self.inst.query(command)).strip()
         except Exception as e:
-            raise self._wrap(e, command) from e
+            err = self._wrap(e, command)
+            if isinstance(err, InstrumentTimeout):
+                self._out_of_step = True
+            raise err from e
+
+    def _resync(self) -> None:
+        """Read and discard until one read times out: the line is quiet, in step again."""
+        self._out_of_step = False
+        for _ in range(4):  # a late reply is one line; more means a noisy line
+            try:
+                self.inst.read()
+            except Exception:
+                return
+            self.late_replies += 1
 
     def _wrap(self, e: Exception, command: str) -> InstrumentError:
         text = f"{type(e).__name__}: {e}"
@@ -149,6 +211,7 @@ class Agilent34401A:
             reply = self.query("SYST:ERR?")
             m = self._ERR.match(reply)
             if not m:
+                self._out_of_step = True  # someone else's reply: wait for quiet first
                 raise InstrumentError(NAME, f"unparsable SYST:ERR? reply {reply!r}")
             code = int(m.group(1))
             if code == 0:
@@ -169,6 +232,7 @@ class Agilent34401A:
         try:
             value = float(reply)
         except ValueError:
+            self._out_of_step = True  # someone else's reply: wait for quiet first
             raise InstrumentError(NAME, f"READ? returned {reply!r}") from None
         if not math.isfinite(value) or abs(value) >= self.OVERLOAD:
             raise InstrumentError(

@@ -36,6 +36,7 @@ raise ``silence_s`` for such a slave.
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -43,7 +44,12 @@ from typing import Any
 import minimalmodbus
 import serial
 
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.acquisition.instrument import (
+    InstrumentError,
+    InstrumentReport,
+    InstrumentTimeout,
+    LimitError,
+)
 
 NAME = "WatlowF4"
 
@@ -53,6 +59,45 @@ REG_SETPOINT = 300
 REG_DECIMALS = 606
 REG_UNITS = 901
 UNITS_F, UNITS_C = 0, 1
+
+# Modbus exception codes (Modbus Application Protocol Specification V1.1b3, §7) and the
+# message minimalmodbus (2.x) raises for each, to recover the code from the exception.
+MODBUS_EXCEPTIONS = {
+    1: ("ILLEGAL FUNCTION", "illegal function"),
+    2: ("ILLEGAL DATA ADDRESS", "illegal data address"),
+    3: ("ILLEGAL DATA VALUE", "illegal data value"),
+    4: ("SERVER DEVICE FAILURE", "device failure"),
+    5: ("ACKNOWLEDGE", "acknowledge"),
+    6: ("SERVER DEVICE BUSY", "device busy"),
+    7: ("NEGATIVE ACKNOWLEDGE", "negative acknowledge"),
+    8: ("MEMORY PARITY ERROR", "memory parity error"),
+    10: ("GATEWAY PATH UNAVAILABLE", "gateway path unavailable"),
+    11: ("GATEWAY TARGET DEVICE FAILED TO RESPOND", "gateway target device failed"),
+}
+
+
+def modbus_exception_code(e: Exception) -> int | None:
+    """The exception code of a minimalmodbus ``SlaveReportedException`` (None: unknown)."""
+    msg = str(e).lower()
+    m = re.search(r"error code (\d+)", msg)
+    if m:
+        return int(m.group(1))
+    # Longest phrase first: "negative acknowledge" also contains "acknowledge".
+    for code, (_, phrase) in sorted(MODBUS_EXCEPTIONS.items(), key=lambda kv: -len(kv[1][1])):
+        if phrase in msg:
+            return code
+    return None
+
+
+def modbus_report(e: Exception, context: str) -> InstrumentReport:
+    """A Modbus exception response as an :class:`InstrumentReport`. Never fatal on its
+    own: the driver retries, and a controller that keeps refusing is caught by the
+    transaction failing and, if it lasts, by the runner's communication timeout."""
+    code = modbus_exception_code(e)
+    name = MODBUS_EXCEPTIONS.get(code, (str(e), ""))[0] if code is not None else str(e)
+    return InstrumentReport(
+        "Modbus", -1 if code is None else code, name, "exception response", False, context
+    )
 
 
 @dataclass(frozen=True)
@@ -139,6 +184,8 @@ class WatlowF4:
         self.setpoint_limits_c = (float(lo), float(hi))
         self.retries = retries
         self.stats = ModbusStats()
+        # Exception responses since the last pop_reports() (the runner logs them).
+        self.reports: list[InstrumentReport] = []
         # RTU frames are delimited by 3.5 character times of silence (11 bits a character;
         # fixed 1.75 ms above 19200 baud, Modbus over serial line spec §2.5.1.1).
         self.frame_gap_s = 3.5 * 11 / baudrate if baudrate <= 19200 else 0.00175
@@ -229,6 +276,7 @@ class WatlowF4:
             except minimalmodbus.SlaveReportedException as e:
                 # A complete, valid frame from the slave: the line is in step.
                 self.stats.exceptions += 1
+                self.reports.append(modbus_report(e, what))
                 last = e
             except (minimalmodbus.InvalidResponseError, minimalmodbus.ModbusException) as e:
                 # Bad CRC or content: if the reply was whole the slave is done and only
@@ -247,6 +295,11 @@ class WatlowF4:
         if isinstance(last, minimalmodbus.NoResponseError):
             raise InstrumentTimeout(NAME, msg)
         raise InstrumentError(NAME, msg)
+
+    def pop_reports(self) -> list[InstrumentReport]:
+        """The exception responses received since the last call (retried or not)."""
+        out, self.reports = self.reports, []
+        return out
 
     def read_register(self, register: int) -> int:
         """Raw signed 16-bit value of one holding register (function 03)."""

@@ -155,6 +155,11 @@ class Log:
 
 Action = SetSetpoint | Event | Log
 
+# A stopped ADC stream (Acquisition._record_tail_gap): a tail longer than this many times
+# the stream's median arrival lag, and than TAIL_MIN_S run seconds, is a gap.
+TAIL_LATENCY_FACTOR = 4.0
+TAIL_MIN_S = 2.0
+
 
 def check_profile_limits(profile: Profile, limits: Limits, source: str = "profile") -> None:
     """Refuse a profile whose setpoints are outside the bench's limits (before any I/O)."""
@@ -357,9 +362,11 @@ class _Poller(threading.Thread):
         post: Callable[[tuple[Any, ...]], None],
         stop: threading.Event,
         commands: queue.Queue[Callable[[], Any]] | None = None,
+        reports: Callable[[], list[Any]] | None = None,
     ) -> None:
         super().__init__(name=f"poll-{name}", daemon=True)
         self.source = name
+        self.reports = reports  # errors the instrument reported (InstrumentReport)
         self.op = op
         self.period = period
         self.clock = clock
@@ -398,8 +405,20 @@ class _Poller(threading.Thread):
         except Exception as e:  # a driver's I/O error of any kind is a (transient) fault
             self.post(("error", self.source, t, f"{what} failed: {type(e).__name__}: {e}"))
             return False
+        finally:
+            self._post_reports()
         self.post((what, self.source, self.clock.now(), res))
         return True
+
+    def _post_reports(self) -> None:
+        if self.reports is None:
+            return
+        try:
+            reps = self.reports()
+        except Exception:  # reporting must never break polling
+            return
+        for r in reps:
+            self.post(("report", self.source, self.clock.now(), r))
 
     def _wait(self, until: float) -> None:
         # Sleep in slices so that a stop request is honoured promptly, and so that a new
@@ -515,6 +534,9 @@ class Acquisition:
         self._missing = 0
         self._dups = 0
         self._counters_seen: dict[str, int] = {}
+        # Arrival lag (arrival run time - end of the samples that arrived) of recent ADC
+        # blocks: the stream's normal latency, against which a stopped stream is judged.
+        self._adc_lags: deque[float] = deque(maxlen=200)
 
     # -- helpers
     def t(self) -> float:
@@ -583,6 +605,7 @@ class Acquisition:
                 self.clock,
                 self.q.put,
                 self.stop_ev,
+                reports=getattr(self.thermo, "reports", None),
             ),
             _Poller(
                 self.oven.name,
@@ -592,6 +615,7 @@ class Acquisition:
                 self.q.put,
                 self.stop_ev,
                 self.oven_cmds,
+                reports=getattr(self.oven, "reports", None),
             ),
             _AdcThread(self.gyro, self.q.put, self.stop_ev, self.clock),
         ]
@@ -712,6 +736,9 @@ class Acquisition:
         if kind in ("error", "fatal"):
             self._on_error(source, t, payload, fatal=kind == "fatal")
             return
+        if kind == "report":
+            self._on_report(source, t, payload)
+            return
         if kind == "adc":
             self._on_adc_read(payload, t, t_clock)
             return
@@ -767,6 +794,15 @@ class Acquisition:
             self.log("warning", source, f"{source}: {message}", "fault", None, t)
         else:
             self._down_errors[source] += 1
+
+    def _on_report(self, source: str, t: float, rep: Any) -> None:
+        """An error the instrument reported itself (InstrumentReport): always a fault in
+        /log with its code and text; a fatal one ends the run."""
+        self._faults += 1
+        msg = rep.message(source)
+        self.log("fault", source, msg, "fault", rep.data(), t)
+        if rep.fatal and self._fault is None:
+            self._fault = msg  # names the instrument already
 
     def _fail(self, source: str, message: str, t: float | None = None) -> None:
         if self._fault is None:
@@ -907,6 +943,7 @@ class Acquisition:
         self._blk_n += n
         self._next_idx = idx + n
         self._received_to = t0_dev - self._adc_offset + n * self._period
+        self._adc_lags.append(t_arrival - self._received_to)
         if self.on_samples is not None:
             # Received, not yet necessarily on disk: what a crash-loss measurement needs.
             self.on_samples(self._received_to)
@@ -972,9 +1009,43 @@ class Acquisition:
             except queue.Empty:
                 break
         self._emit_block()
+        self._record_tail_gap(self.plan.ended_at if outcome == "completed" else t_end)
         self._record_safe_state(ok, attempts)
         self.w.flush()
         return ok
+
+    def _record_tail_gap(self, t_stop: float) -> None:
+        """A stream that stopped before the run ended: a gap from the sample after the
+        last one received up to ``t_stop`` (the gap count and samples missing say so).
+
+        A tail within the stream's normal latency (``TAIL_LATENCY_FACTOR`` × its median
+        arrival lag, at least ``TAIL_MIN_S``) is samples in flight when the run stopped,
+        not a stopped stream, and is not counted."""
+        start = 0.0 if self._idx0 is None else self._received_to
+        lag = float(np.median(self._adc_lags)) if self._adc_lags else 0.0
+        tail = t_stop - start
+        if not math.isfinite(tail) or tail <= max(TAIL_MIN_S, TAIL_LATENCY_FACTOR * lag):
+            return
+        missing = int(round(tail / self._period))
+        first = 0 if self._idx0 is None or self._next_idx is None else self._next_idx - self._idx0
+        self._gaps += 1
+        self._missing += missing
+        what = "never started" if self._idx0 is None else "stopped"
+        self.log(
+            "warning",
+            self.gyro.name,
+            f"ADC gap: stream {what}; {missing} sample(s) missing from index {first} "
+            f"to the end of the run ({tail:.1f} s)",
+            "gap",
+            {
+                "first_missing_index": first,
+                "n_missing": missing,
+                "t_first_missing": round(start, 6),
+                "t_end": round(t_stop, 6),
+                "cause": f"stream {what}",
+            },
+            t_stop,
+        )
 
     def _command_safe_state(self) -> tuple[bool, list[tuple[float, str, Any]]]:
         """Command the safe setpoint and verify it by reading it back (three attempts).

@@ -1,0 +1,132 @@
+"""Faults the instruments report, and a stream that stops, reach /log and the run result.
+
+`gyrolab acquire --bench sim --faults FAULTS.toml` (docs/instruments.md, "Fault
+injection"): SCPI error-queue entries and Modbus exception responses are logged as level
+``fault`` with their code and text, and end the run or not by their class; an ADC stream
+that stops for good is a gap up to the end of the run.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gyrolab.cli import main
+from gyrolab.recording import read_recording
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+PROFILE = """name = "faults"
+[[step]]
+setpoint_c = 25
+duration_s = 30
+[[step]]
+setpoint_c = 35
+duration_s = 200
+"""
+
+
+def _acquire(tmp_path: Path, faults: str, capsys) -> tuple[int, str, Path]:
+    prof = _write(tmp_path / "p.toml", PROFILE)
+    f = _write(tmp_path / "faults.toml", faults)
+    out = tmp_path / "run.mcap"
+    argv = ["acquire", "--bench", "sim", "--profile", str(prof), "--faults", str(f)]
+    rc = main([*argv, "--speed", "20", "--out", str(out)])
+    return rc, capsys.readouterr().err, out
+
+
+def test_scpi_and_modbus_errors_are_logged_as_faults_and_stop_the_run_by_class(
+    tmp_path: Path, capsys
+) -> None:
+    rc, err, out = _acquire(
+        tmp_path,
+        """
+[[event]]
+kind = "scpi_error"
+t_s = 10
+detail = '-222,"Data out of range"'
+[[event]]
+kind = "modbus_exception"
+t_s = 15
+count = 2
+[[event]]
+kind = "scpi_error"
+t_s = 40
+detail = '-310,"System error"'
+""",
+        capsys,
+    )
+    assert rc == 1, err
+    assert 'SCPI error -310 "System error"' in err and "safe state verified" in err
+    rec = read_recording(out)
+    faults = [m for m in rec.logs if m["level"] == "fault" and m.get("data")]
+    scpi = [m["data"] for m in faults if m["data"].get("protocol") == "SCPI"]
+    modbus = [m for m in faults if m["data"].get("protocol") == "Modbus"]
+    # The execution error (-222) is logged and the run goes on ...
+    (e222,) = [d for d in scpi if d["code"] == -222]
+    assert e222["text"] == "Data out of range" and e222["error_class"] == "execution error"
+    assert e222["fatal"] is False
+    # ... the device-specific one (-310) is logged and ends the run, safely.
+    (e310,) = [m for m in faults if m["data"].get("code") == -310]
+    assert e310["data"]["fatal"] is True and "System error" in e310["message"]
+    assert e310["source"] == "multimeter" and e310["t"] > 30.0
+    assert rec.pt100_t.max() > 30.0  # readings went on after the -222 at ~10 s
+    # The Modbus exception responses (06, busy): each one, with its code and name.
+    assert len(modbus) == 2 and all(m["source"] == "oven" for m in modbus)
+    assert {m["data"]["code"] for m in modbus} == {6}
+    assert all("SERVER DEVICE BUSY" in m["message"] for m in modbus)
+    ev = [e["event"] for e in rec.events]
+    assert ev[-2:] == ["aborted", "safe_state"] and "-310" in rec.events[-2]["detail"]
+    assert "verified" in rec.events[-1]["detail"]
+    # The injection itself is recorded as the simulator's provenance.
+    assert "fault_injection" in rec.metadata["sim_provenance"]
+
+
+def test_a_stream_that_stops_is_a_gap_up_to_the_end_of_the_run(tmp_path: Path, capsys) -> None:
+    rc, err, out = _acquire(
+        tmp_path, '[[event]]\nkind = "stall"\nt_s = 20\nduration_s = 1e6\n', capsys
+    )
+    assert rc == 1 and "lost communication with adc" in err, err
+    rec = read_recording(out)
+    (gap,) = [m for m in rec.logs if m.get("kind") == "gap"]
+    d = gap["data"]
+    assert d["cause"] == "stream stopped"
+    last = rec.adc.t[-1] + rec.adc.period  # end of the last sample received
+    assert d["t_first_missing"] == pytest.approx(last, abs=1e-6)
+    assert d["first_missing_index"] == rec.adc.index[-1] + 1
+    # From the last sample to the end of the run, the watchdog's 60 s and more.
+    assert d["t_end"] - last > 60.0
+    assert d["n_missing"] == round((d["t_end"] - last) / rec.adc.period)
+    assert f"1 gap(s) ({d['n_missing']} samples missing)" in err
+
+
+def test_faults_file_keys_are_strict_and_only_for_the_simulated_bench(
+    tmp_path: Path, capsys
+) -> None:
+    out = tmp_path / "run.mcap"
+    cases = {
+        '[adc]\ncorupt_prob = 0.1\n': "[adc]: unknown key(s) ['corupt_prob']",
+        'bogus = 1\n': "unknown key(s) ['bogus']",
+        '[[event]]\nkind = "stall"\nt_s = 1\nduration = 5\n': "unknown key(s) ['duration']",
+        '[[event]]\nkind = "meltdown"\n': "kind = 'meltdown'",
+        '[[event]]\nkind = "stall"\nt_s = 1\n': "stall needs duration_s > 0",
+        '[oven]\nexception_prob = 1.5\n': "exception_prob = 1.5",
+        '[[event]]\nkind = "scpi_error"\ndetail = "oops"\n': "expected an error-queue entry",
+    }
+    for i, (text, msg) in enumerate(cases.items()):
+        f = _write(tmp_path / f"f{i}.toml", text)
+        argv = ["acquire", "--bench", "sim", "--profile", "short", "--faults", str(f)]
+        assert main([*argv, "--out", str(out)]) == 2, text
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and f"f{i}.toml" in lines[0] and msg in lines[0], lines
+        assert not out.exists()
+    lab = Path(__file__).resolve().parents[1] / "examples" / "lab.toml"
+    f = _write(tmp_path / "ok.toml", "")
+    assert main(["acquire", "--bench", str(lab), "--faults", str(f), "--out", str(out)]) == 2
+    assert "--faults applies to --bench sim only" in capsys.readouterr().err
+    assert not out.exists()
