@@ -1,4 +1,4 @@
-"""The ``gyrolab`` command line (DESIGN.md "Command line" contract).
+"""The ``gyrolab`` command line (the contract in docs/cli.md).
 
 Thin: it parses arguments and hands the namespace to the layer that does the work. Each
 subcommand's handler is ``module:function(args) -> int``, imported only when that

@@ -1,4 +1,4 @@
-"""DESIGN.md contract values the tests pin independently of the code under test."""
+"""Contract values (docs/cli.md, docs/sim-model.md) the tests pin independently of the code."""
 
 # metrics.json: every output (raw, compensated, baselines.<name>) carries these keys.
 METRIC_KEYS = frozenset(

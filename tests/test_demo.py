@@ -55,7 +55,7 @@ def test_demo_writes_every_stage(demo_run: Path) -> None:
 
 def test_model_report_contract(demo_run: Path) -> None:
     m = json.loads((demo_run / "report" / "metrics.json").read_text())
-    # DESIGN.md keys, with held-out metrics (the model was fitted on the other seed)
+    # docs/cli.md metrics.json keys, with held-out metrics (the model was fitted on the other seed)
     assert m["held_out"] is True
     for key in ("raw", "compensated"):
         assert set(m[key]) >= METRIC_KEYS

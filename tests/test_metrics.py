@@ -47,7 +47,7 @@ def test_staircase_bias_stability_and_drift() -> None:
     assert m["drift_pp_deg_per_s"] == pytest.approx(0.0287, rel=1e-3)
     expected = np.sqrt(np.sum((levels - levels.mean()) ** 2) * 1000 / (11_000 - 1)) * 3600
     assert m["bias_stability_deg_per_h"] == pytest.approx(expected, rel=1e-3)
-    assert 31.0 < m["bias_stability_deg_per_h"] < 33.5  # DESIGN.md: ~31-33 deg/h
+    assert 31.0 < m["bias_stability_deg_per_h"] < 33.5  # docs/allan.md: ~31-33 deg/h
     # the IEEE floor of the same signal is a different, much smaller number
     assert m["bias_instability_deg_per_h"] < 1.0
 

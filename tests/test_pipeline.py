@@ -247,7 +247,7 @@ def test_constant_temperature_cannot_be_fitted(tmp_path: Path) -> None:
 
 def test_dtdt_input_learns_a_thermal_rate_term(tmp_path: Path) -> None:
     """With ``use_dtdt`` the drift model sees dT/dt and removes a rate-sensitive bias that a
-    temperature-only model cannot (the `thermal_rate` effect of DESIGN.md)."""
+    temperature-only model cannot (the `thermal_rate` effect, docs/sim-model.md)."""
     fs, n = 10.0, int(1.2 * 3600 * 10)
     t = np.arange(n) / fs
     temp = 15 + 30 * np.sin(2 * np.pi * t / 2400.0)  # heats and cools: dT/dt of both signs

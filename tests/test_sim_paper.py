@@ -1,4 +1,4 @@
-"""The default ``paper`` simulation reproduces the paper's bench (DESIGN.md tolerances).
+"""The default ``paper`` simulation reproduces the paper's bench (docs/sim-model.md tolerances).
 
 Wei et al. (2021) §4.2, evaluated on the recording averaged to 1000 points/h (3.6 s):
 case temperature −33.67..55.67 °C (±1.5 °C), output variation 0.0287 °/s (±15 %), raw ARW

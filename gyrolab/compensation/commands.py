@@ -1,4 +1,4 @@
-"""``gyrolab compensate`` and ``gyrolab apply`` (DESIGN.md "Command line" contract).
+"""``gyrolab compensate`` and ``gyrolab apply`` (the contract in docs/cli.md).
 
 ``gyrolab compensate RUN.mcap --out MODEL_DIR [--validate OTHER.mcap]`` fits the hybrid
 model of :mod:`gyrolab.compensation.pipeline` on RUN and writes MODEL_DIR (layout in

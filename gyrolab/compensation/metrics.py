@@ -1,4 +1,4 @@
-"""The DESIGN.md metric set of one gyro output signal (deg/s), as written to metrics.json.
+"""The metric set (docs/cli.md keys) of one gyro output signal (deg/s), as written to metrics.json.
 
 =============================  ==========================================================
 key                            definition
@@ -22,7 +22,7 @@ key                            definition
 
 Windows are rounded to whole samples (at least one); a trailing partial window is dropped.
 A 0.0287 deg/s staircase drift gives ~32 deg/h bias stability but well under 1 deg/h bias
-instability: the two names are different quantities (DESIGN.md).
+instability: the two names are different quantities (docs/allan.md).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def signal_metrics(
     drift_window_s: float = PAPER_WINDOW_S,
     allan: AllanResult | None = None,
 ) -> dict[str, float]:
-    """The five DESIGN.md metrics of a gyro output in deg/s sampled at ``fs_hz``.
+    """The five metrics (docs/cli.md) of a gyro output in deg/s sampled at ``fs_hz``.
 
     ``allan``: a precomputed overlapping octave :func:`allan_deviation` of the same signal
     (saves recomputing it); otherwise it is computed here without confidence intervals.

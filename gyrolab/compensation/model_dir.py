@@ -14,7 +14,7 @@ Layout (``MODEL_FORMAT_VERSION`` 1)::
       drift_gabp.pt      the GA-BP network as a ``torch.nn.Sequential`` state dict
       baseline_bp.pt     the plain-BP baseline, same form (both load with
                          ``torch.load(..., weights_only=True)``; the .npz is authoritative)
-      metrics.json       written by ``gyrolab compensate`` (DESIGN.md keys)
+      metrics.json       written by ``gyrolab compensate`` (docs/cli.md keys)
 
 Nothing is pickled: a model directory can be read by any numpy/JSON reader, and loading it
 never runs code from the file. A directory whose ``format`` or ``format_version`` this

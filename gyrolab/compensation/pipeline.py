@@ -774,7 +774,7 @@ def load_model(directory: str) -> CompensationModel:
 
 
 def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
-    """The five DESIGN.md metrics (:func:`gyrolab.compensation.metrics.signal_metrics`) of a
+    """The five metrics (docs/cli.md; :func:`gyrolab.compensation.metrics.signal_metrics`) of a
     series sampled every ``block_s`` seconds (°/s). Every series is compared at the paper's
     1000 points/h, so ``rms_deg_per_s`` is that of the 3.6 s averages, and bias stability
     and drift peak-to-peak are those of the series itself. The Allan curve behind ARW and
@@ -796,7 +796,7 @@ def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
 def evaluate(
     model: CompensationModel, app: Application, run: PreparedRun, held_out: bool
 ) -> dict[str, Any]:
-    """metrics.json content for one application (DESIGN.md keys plus diagnostics)."""
+    """metrics.json content for one application (docs/cli.md keys plus diagnostics)."""
     bs = model.config.block_s
     m: dict[str, Any] = {"run": run.path, "held_out": bool(held_out)}
     for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):

@@ -173,7 +173,7 @@ def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
 
 
 def raw_metrics(tb: np.ndarray, xb: np.ndarray, block_s: float) -> dict[str, Any]:
-    """The five DESIGN.md metrics of the averaged raw output (NaN when too short)."""
+    """The five metrics (docs/cli.md) of the averaged raw output (NaN when too short)."""
     from gyrolab.compensation.pipeline import series_metrics
 
     try:

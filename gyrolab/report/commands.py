@@ -1,9 +1,9 @@
-"""``gyrolab report RUN.mcap [--model MODEL_DIR] --out REPORT_DIR`` (DESIGN.md contract).
+"""``gyrolab report RUN.mcap [--model MODEL_DIR] --out REPORT_DIR`` (docs/cli.md contract).
 
 Writes, atomically (a temporary sibling directory renamed into place):
 
 * ``index.html`` — the self-contained report (figures embedded, opens offline);
-* ``metrics.json`` — DESIGN.md keys (``raw``; with a model also ``compensated``,
+* ``metrics.json`` — docs/cli.md keys (``raw``; with a model also ``compensated``,
   ``baselines.<name>``, ``vmd``, ``imf_classes``, ``held_out``) and ``timing_s``;
 * ``report.pdf`` — the same content as the HTML page.
 

@@ -1,4 +1,4 @@
-"""The gyro error model: named, parametric effects (DESIGN.md "Effects vocabulary").
+"""The gyro error model: named, parametric effects (the vocabulary of docs/sim-model.md).
 
 Each effect is a class with a ``name`` from the vocabulary, a parameter table ``PARAMS``
 (default, unit, meaning, constraint) and a ``target``:

@@ -177,7 +177,7 @@ class SimModel:
 
 
 def nominal_model() -> SimModel:
-    """The simulator's nominal model (DESIGN.md): first-order oven, ``bias_poly``, ``arw``,
+    """The simulator's nominal model (docs/sim-model.md): first-order oven, ``bias_poly``, ``arw``,
     ``bias_instability`` — with defaults tuned to the paper's bench."""
     return SimModel(
         effects=(

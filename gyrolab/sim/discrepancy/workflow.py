@@ -635,7 +635,7 @@ def select(significant: list[dict[str, Any]]) -> tuple[dict[str, Any], list[str]
 
 @dataclass
 class Result:
-    """Outcome of a discrepancy analysis (DESIGN.md ``discrepancy.json`` contract)."""
+    """Outcome of a discrepancy analysis (docs/cli.md ``discrepancy.json`` contract)."""
 
     effects_found: list[str]
     ambiguous: list[list[str]]
