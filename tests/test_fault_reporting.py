@@ -130,3 +130,56 @@ def test_faults_file_keys_are_strict_and_only_for_the_simulated_bench(
     assert main(["acquire", "--bench", str(lab), "--faults", str(f), "--out", str(out)]) == 2
     assert "--faults applies to --bench sim only" in capsys.readouterr().err
     assert not out.exists()
+
+
+class _LateMeter:
+    """A resource whose first READ? is answered after the driver gave up: the late reply
+    sits in the input buffer when the next query is sent."""
+
+    timeout = 250
+    resource_name = "GPIB0::22::INSTR"
+
+    def __init__(self) -> None:
+        self.buffer: list[str] = []
+        self.sent: list[str] = []
+        self.n_read = 0
+
+    def write(self, command: str) -> None:
+        self.sent.append(command)
+
+    def query(self, command: str) -> str:
+        self.sent.append(command)
+        if command == "READ?":
+            self.n_read += 1
+            reply = f"+1.0{self.n_read}000000E+02"
+            if self.n_read == 1:
+                self.buffer.append(reply)  # arrives late
+                raise TimeoutError("VI_ERROR_TMO: Timeout expired before operation completed")
+        else:
+            reply = '+0,"No error"'
+        self.buffer.append(reply)
+        return self.buffer.pop(0)
+
+    def read(self) -> str:
+        if not self.buffer:
+            raise TimeoutError("VI_ERROR_TMO: Timeout expired before operation completed")
+        return self.buffer.pop(0)
+
+    def close(self) -> None:
+        pass
+
+
+def test_multimeter_stays_in_step_after_a_late_reply() -> None:
+    """Without the resync every later answer is the previous query's: READ? gets the
+    late reading (stale) and SYST:ERR? gets a reading (unparsable), for good."""
+    from gyrolab.acquisition.instrument import InstrumentTimeout
+    from gyrolab.acquisition.multimeter import Agilent34401A
+
+    res = _LateMeter()
+    dmm = Agilent34401A(res, timeout_s=0.25)
+    with pytest.raises(InstrumentTimeout):
+        dmm.read()
+    assert dmm.read().resistance_ohm == pytest.approx(102.0)  # this READ?'s own reply
+    assert dmm.errors == []
+    assert dmm.read().resistance_ohm == pytest.approx(103.0)
+    assert dmm.late_replies == 1
