@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -135,6 +136,16 @@ def _handler(command: str):  # type: ignore[no-untyped-def]
     return getattr(mod, func)
 
 
+def _input_paths(args: argparse.Namespace) -> list[str]:
+    """Every argument but ``--out`` that names an existing file or directory: the
+    command's inputs, which no output may overwrite (gyrolab/outputs.py)."""
+    return [
+        v
+        for k, v in vars(args).items()
+        if k not in ("out", "command") and isinstance(v, str) and v and os.path.exists(v)
+    ]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -142,7 +153,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not args.command:
             parser.print_help()
             return 2
-        return int(_handler(args.command)(args) or 0)
+        from gyrolab.outputs import command_inputs
+
+        with command_inputs(_input_paths(args)):
+            return int(_handler(args.command)(args) or 0)
     except GyrolabError as e:
         print(f"gyrolab: error: {e}", file=sys.stderr)
         return e.exit_code

@@ -38,6 +38,23 @@ def umask() -> int:
     return mask
 
 
+# The inputs named on the command line of the running command (set by gyrolab.cli.main
+# through :func:`command_inputs`): a safety net under every command's own ``inputs``, so
+# that a command that forgets to pass them still cannot write over what it was given.
+_COMMAND_INPUTS: list[str] = []
+
+
+@contextlib.contextmanager
+def command_inputs(paths: Iterable[PathLike]) -> Iterator[None]:
+    """Within this context every output check also refuses ``paths`` (nestable)."""
+    saved = list(_COMMAND_INPUTS)
+    _COMMAND_INPUTS[:] = [str(x) for x in paths]
+    try:
+        yield
+    finally:
+        _COMMAND_INPUTS[:] = saved
+
+
 def _is_input(out: Path, inputs: Iterable[PathLike | None]) -> str | None:
     """The first input that ``out`` is (same inode or resolved path) or contains."""
     out_r = out.resolve()
@@ -70,7 +87,7 @@ def check_output(
     existing directory is replaced only if it holds :data:`MARKER`.
     """
     p = Path(path)
-    inp = _is_input(p, list(inputs))
+    inp = _is_input(p, [*inputs, *_COMMAND_INPUTS])
     if inp is not None:
         what = "is" if Path(inp).resolve() == p.resolve() or not p.is_dir() else "contains"
         raise InputError(p, f"{what} one of this command's inputs ({inp}); choose another --out")

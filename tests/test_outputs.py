@@ -173,3 +173,26 @@ def test_report_directory_has_the_marker_and_umask_modes(run_mcap: Path, tmp_pat
     assert all(_mode(p) == 0o640 for p in out.iterdir())
     assert json.loads((out / MARKER).read_text())["command"] == "report"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]  # no .old/.part left
+
+
+def test_command_line_inputs_are_a_safety_net_for_every_command(tmp_path: Path) -> None:
+    """Every existing path on the command line (but --out) is an input: a command that
+    forgets to name its inputs to gyrolab.outputs still cannot write over them."""
+    from gyrolab.cli import _input_paths, build_parser
+    from gyrolab.outputs import command_inputs
+
+    run = tmp_path / "run.mcap"
+    run.write_bytes(b"raw")
+    model = tmp_path / "M"
+    model.mkdir()
+    args = build_parser().parse_args(["apply", str(model), str(run), "--out", str(run)])
+    assert sorted(_input_paths(args)) == sorted([str(model), str(run)])
+    with command_inputs(_input_paths(args)):
+        with pytest.raises(InputError, match="inputs"), atomic_file(run, force=True):
+            pass
+        with pytest.raises(InputError, match="inputs"), atomic_dir(tmp_path, force=True):
+            pass
+    assert run.read_bytes() == b"raw"
+    with atomic_file(run, force=True) as t:  # outside the command: an ordinary --force
+        t.write_bytes(b"new")
+    assert run.read_bytes() == b"new"
