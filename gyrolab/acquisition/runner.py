@@ -992,6 +992,10 @@ class Acquisition:
         for th in threads:
             th.join(timeout=5.0)
         ok, attempts = self._command_safe_state()
+        reports = getattr(self.oven, "reports", None)
+        for rep in reports() if reports is not None else []:
+            # Exception responses to the safe-state commands: logged like any other.
+            self._on_report(self.oven.name, self.t(), rep)
         if outcome != "completed":
             self.w.write_event(
                 t_end,
