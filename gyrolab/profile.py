@@ -183,6 +183,9 @@ def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
                 raise InputError(
                     source, f"step {i + 1}: unknown key(s) {unknown} (a step has {has})"
                 )
+            missing = [k for k in ("setpoint_c", "duration_s") if k not in sd]
+            if missing:
+                raise InputError(source, f"step {i + 1}: {', '.join(missing)} required")
             kw = {
                 k: (str(v) if k == "label" else _number(v, f"step {i + 1}: {k}"))
                 for k, v in sd.items()

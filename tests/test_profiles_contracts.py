@@ -34,6 +34,7 @@ def _one_line_error(capsys) -> str:
         ('safe_setpoint_c = 150\n' + STEP, "safe_setpoint_c is not a profile key"),
         ('ambient_c = "warm"\n' + STEP, "ambient_c = 'warm': expected a number"),
         ('[[step]]\nsetpoint_c = "hot"\nduration_s = 60\n', "expected a number"),
+        ("[[step]]\nsetpoint_c = 20\n", "step 1: duration_s required"),
     ],
 )
 def test_profile_keys_are_strict(text: str, says: str, tmp_path: Path, capsys) -> None:
