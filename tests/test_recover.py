@@ -134,7 +134,7 @@ def test_truncated_chunk_header_tells_the_lost_time_span(tmp_path: Path) -> None
             a, b = rep.lost_spans_ns[0]
             assert START_NS <= a <= b <= START_NS + 10 * 10**9
             assert 0 < rep.lost_seconds() <= 1.5
-            assert "lost: messages from t=" in rep.summary()
+            assert "incomplete last record" in rep.summary() and "messages from t=" in rep.summary()
             break
     else:
         pytest.fail("no cut landed inside a chunk")
@@ -161,6 +161,37 @@ def test_damaged_chunk_is_skipped_and_reported_later_ones_kept(tmp_path: Path) -
     assert np.array_equal(orig.adc.values[keep], fixed.adc.values)
     assert fixed.adc.index.size >= orig.adc.index.size - 200
     assert len(fixed.adc.gaps()) <= 1
+
+
+def test_recover_gives_one_consistent_account_of_a_damaged_file(tmp_path: Path) -> None:
+    """A closed file with one damaged chunk: 'complete, but damaged', and the samples and
+    seconds lost per topic are exactly those missing from the recovered file."""
+    src = tmp_path / "d.mcap"
+    _write_run(src, 20.0)
+    data = bytearray(src.read_bytes())
+    ends = _chunk_ends(bytes(data))
+    data[ends[7] - 40] ^= 0xFF  # inside the 8th chunk's compressed data
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    rep = recover_recording(bad, tmp_path / "fixed.mcap")
+    assert rep.complete and rep.chunks_damaged == 1
+    text = rep.summary()
+    assert "the file was complete (it had its footer), but 1 chunk(s) in it were damaged" in text
+    assert "already complete" not in text
+    orig, fixed = read_recording(src), read_recording(tmp_path / "fixed.mcap")
+    for topic, series in (("/gyro/adc", "adc"), ("/gyro/rate", "rate")):
+        missing = getattr(orig, series).index.size - getattr(fixed, series).index.size
+        assert missing > 0 and rep.lost[topic]["samples"] == missing
+        assert rep.lost[topic]["seconds"] == pytest.approx(missing / RATE)
+    assert rep.lost_seconds() == pytest.approx(rep.lost["/gyro/rate"]["seconds"])
+    (a, b), = rep.lost["/gyro/rate"]["spans_s"]
+    assert b - a == pytest.approx(rep.lost["/gyro/rate"]["seconds"])
+    # What recover found is written into the recovered file for the report.
+    meta = fixed.metadata["recovery"]
+    assert meta["chunks_damaged"] == 1 and meta["complete"] is True
+    assert meta["lost_seconds"] == pytest.approx(rep.lost_seconds())
+    assert meta["safe_state"] == "not recorded" and meta["account"].startswith("recovered (")
+    assert "oven safe state: never confirmed" in text
 
 
 def test_recover_cli_reports_and_refuses_to_clobber(tmp_path: Path, capsys) -> None:

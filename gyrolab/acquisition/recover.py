@@ -67,40 +67,93 @@ class RecoveryReport:
     # its first 16 bytes survived, and every damaged chunk.
     lost_spans_ns: list[tuple[int, int]] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    # Per topic, from the kept messages' sequence numbers (the writer counts each topic's
+    # messages from 0): interior losses exactly, in messages and, for the gyro block
+    # streams, in samples and seconds (see :func:`account`).
+    lost: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # Seconds after the last kept gyro sample that the cut record is known to have held.
+    tail_lost_s: float = 0.0
+    end_event: str = ""  # "run_ended" | "aborted" | "" (no end recorded)
+    end_detail: str = ""
+    safe_state: str = "not recorded"  # "verified" | "failed" | "not recorded"
+    safe_state_detail: str = ""
+    cut_span_ns: tuple[int, int] | None = None  # the cut chunk's message time span
 
     @property
     def message_count(self) -> int:
         return sum(self.messages.values())
 
     def lost_seconds(self) -> float:
-        """Length of the known-lost spans, in seconds (0 when nothing is known lost)."""
-        return sum(max(0, b - a) for a, b in self.lost_spans_ns) / 1e9
+        """Seconds of gyro data known lost: the samples missing between kept blocks of
+        ``/gyro/rate`` (else ``/gyro/adc``) plus the cut record's span after the last kept
+        sample. Data the process held in memory at a crash never reached the file and is
+        not counted (docs/reliability.md bounds it: 1.5 s)."""
+        for topic in ("/gyro/rate", "/gyro/adc"):
+            if topic in self.lost:
+                return float(self.lost[topic].get("seconds", 0.0)) + self.tail_lost_s
+        if not self.messages and self.lost_spans_ns:
+            return sum(max(0, b - a) for a, b in self.lost_spans_ns) / 1e9
+        return self.tail_lost_s
+
+    def rel(self, t_ns: int) -> float:
+        """A log time as seconds since the first kept message."""
+        return (t_ns - (self.first_log_time_ns or t_ns)) / 1e9
+
+    def account(self) -> str:
+        """One line for a report header: ``recovered (1.2 s lost, safe state not confirmed)``."""
+        safe = {
+            "verified": "safe state confirmed",
+            "failed": "safe state FAILED",
+        }.get(self.safe_state, "safe state not confirmed")
+        return f"recovered ({self.lost_seconds():.1f} s lost, {safe})"
 
     def summary(self) -> str:
-        """A few human lines for the command line."""
+        """The command line's account: what the file was, what was kept, what was lost."""
+        if self.complete:
+            state = "the file was complete (it had its footer)"
+            if self.chunks_damaged:
+                state += f", but {self.chunks_damaged} chunk(s) in it were damaged"
+        else:
+            state = "the file was cut short (no footer: the writer never finished it)"
         lines = [
-            f"recovered {self.message_count} messages in {self.chunks_ok} chunks "
-            f"from {self.source} ({self.salvaged_bytes} of {self.size_bytes} bytes)"
-            + (" — the file was already complete" if self.complete else ""),
+            f"{self.account()}: {self.source}",
+            f"  {state}",
+            f"  kept {self.message_count} messages in {self.chunks_ok} chunks "
+            f"({self.salvaged_bytes} of {self.size_bytes} bytes)",
         ]
-        for topic in sorted(self.messages):
+        for topic in sorted(set(self.messages) | set(self.lost)):
             last = self.last_log_time_ns.get(topic)
-            rel = (
-                f", last at t={(last - self.first_log_time_ns) / 1e9:.3f} s"
-                if last is not None and self.first_log_time_ns is not None
-                else ""
-            )
-            lines.append(f"  {topic}: {self.messages[topic]} messages{rel}")
+            when = f", last at t={self.rel(last):.3f} s" if last is not None else ""
+            lines.append(f"  {topic}: kept {self.messages.get(topic, 0)} messages{when}")
+            lo = self.lost.get(topic)
+            if lo and lo.get("messages"):
+                what = f"{lo['messages']} messages"
+                if "samples" in lo:
+                    what += f" = {lo['samples']} samples ({lo['seconds']:.3f} s)"
+                spans = ", ".join(f"t={a:.3f}–{b:.3f} s" for a, b in lo.get("spans_s", []))
+                lines.append(f"    lost: {what}" + (f" at {spans}" if spans else ""))
         if self.truncated_tail_bytes:
-            lines.append(f"lost: an incomplete last record of {self.truncated_tail_bytes} bytes")
+            tail = f"lost: an incomplete last record of {self.truncated_tail_bytes} bytes"
+            if self.cut_span_ns is not None:
+                a, b = self.cut_span_ns
+                tail += (
+                    f": messages from t={self.rel(a):.3f} s to t={self.rel(b):.3f} s, "
+                    f"{self.tail_lost_s:.3f} s after the last kept gyro sample"
+                )
+            lines.append(tail)
         if self.chunks_damaged:
             lines.append(f"lost: {self.chunks_damaged} damaged chunk(s) (bad CRC or data)")
-        if self.lost_spans_ns and self.first_log_time_ns is not None:
-            for a, b in self.lost_spans_ns:
-                lines.append(
-                    f"lost: messages from t={(a - self.first_log_time_ns) / 1e9:.3f} s "
-                    f"to t={(b - self.first_log_time_ns) / 1e9:.3f} s"
-                )
+        lines.append(f"gyro data lost in the file: {self.lost_seconds():.3f} s")
+        if self.end_event:
+            lines.append(f"run end recorded: {self.end_event} ({self.end_detail})")
+        else:
+            lines.append("run end: NOT recorded (no run_ended or aborted event survived)")
+        if self.safe_state == "verified":
+            lines.append(f"oven safe state: confirmed ({self.safe_state_detail})")
+        elif self.safe_state == "failed":
+            lines.append(f"oven safe state: FAILED ({self.safe_state_detail})")
+        else:
+            lines.append("oven safe state: never confirmed in the recording — check the chamber")
         lines.extend(f"note: {p}" for p in self.problems)
         return "\n".join(lines)
 
@@ -117,8 +170,29 @@ class RecoveryReport:
             "messages": dict(self.messages),
             "metadata": list(self.metadata),
             "lost_seconds": self.lost_seconds(),
+            "lost": {k: dict(v) for k, v in self.lost.items()},
+            "tail_lost_s": self.tail_lost_s,
+            "end_event": self.end_event,
+            "end_detail": self.end_detail,
+            "safe_state": self.safe_state,
+            "safe_state_detail": self.safe_state_detail,
             "problems": list(self.problems),
         }
+
+    def metadata_record(self) -> dict[str, Any]:
+        """The ``recovery`` metadata record written into the recovered file
+        (docs/recording-format.md): what recover found, for the report's header."""
+        import datetime as _dt
+
+        from gyrolab import __version__
+
+        d = self.to_dict()
+        d.pop("out", None)
+        d["source"] = Path(self.source).name
+        d["recovered_at"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        d["software_version"] = __version__
+        d["account"] = self.account()
+        return d
 
 
 # ---------------------------------------------------------------- record parsing
@@ -282,6 +356,7 @@ def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
                 a, b = struct.unpack_from("<QQ", mv, i + 9)
                 if a <= b:
                     rep.lost_spans_ns.append((a, b))
+                    rep.cut_span_ns = (a, b)
             break
         body = mv[i + 9 : i + 9 + ln]
         try:
@@ -302,7 +377,91 @@ def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
             if data[i : i + len(MAGIC)] == MAGIC:
                 rep.salvaged_bytes += len(MAGIC)
             break
+    _account(content, rep)
     return rep, content
+
+
+_BLOCK_TOPICS = ("/gyro/rate", "/gyro/adc")
+
+
+def _account(content: dict[str, Any], rep: RecoveryReport) -> None:
+    """Fill ``rep.lost``, ``rep.tail_lost_s``, the run's end and its safe state.
+
+    Losses inside the file come from each topic's message ``sequence`` (the writer numbers
+    a topic's messages 0, 1, 2, …): a jump between kept messages is messages lost in a
+    damaged chunk, and for a gyro block stream the jump in sample index across it is the
+    samples lost (gaps that the acquisition itself logged, samples lost on the wire, are
+    not counted: their messages are all there). The cut record's span after the last kept
+    gyro sample is the tail. A file whose sequences are not a count (another writer) gets
+    the damaged chunks' time spans instead.
+    """
+    import json
+
+    from gyrolab.recording import decode_block
+
+    by_topic: dict[str, list[_Message]] = {}
+    for m in content["messages"]:
+        by_topic.setdefault(content["channels"][m.channel_id].topic, []).append(m)
+    gyro_end_ns: int | None = None
+    for topic, msgs in by_topic.items():
+        msgs.sort(key=lambda m: (m.sequence, m.log_time))
+        seqs = [m.sequence for m in msgs]
+        counted = all(b > a for a, b in zip(seqs, seqs[1:], strict=False))
+        entry: dict[str, Any] = {"messages": 0}
+        block = topic in _BLOCK_TOPICS
+        blocks = []
+        if block:
+            kind = "adc" if topic == "/gyro/adc" else "rate"
+            blocks = [decode_block(m.data, kind) for m in msgs]
+            entry.update(samples=0, seconds=0.0, spans_s=[])
+            t0, period, first, arr = blocks[-1]
+            end_ns = msgs[-1].log_time + int(round(arr.size * period * 1e9))
+            gyro_end_ns = end_ns if gyro_end_ns is None else max(gyro_end_ns, end_ns)
+        if counted:
+            prev_seq = -1
+            for k, m in enumerate(msgs):
+                jump = m.sequence - prev_seq - 1
+                if jump > 0:
+                    entry["messages"] += jump
+                    if block:
+                        t0, period, first, arr = blocks[k]
+                        if k:
+                            p0, pp, pf, parr = blocks[k - 1]
+                            n_lost, start = first - (pf + parr.size), p0 + parr.size * pp
+                        else:
+                            n_lost, start = first, t0 - first * period
+                        entry["samples"] += max(0, n_lost)
+                        entry["seconds"] += max(0, n_lost) * period
+                        entry["spans_s"].append((round(start, 6), round(t0, 6)))
+                prev_seq = m.sequence
+        elif block and rep.lost_spans_ns:
+            for k in range(1, len(blocks)):
+                p0, pp, pf, parr = blocks[k - 1]
+                t0, period, first, arr = blocks[k]
+                n_lost = first - (pf + parr.size)
+                a_ns, b_ns = msgs[k - 1].log_time, msgs[k].log_time
+                if n_lost > 0 and any(a <= b_ns and b >= a_ns for a, b in rep.lost_spans_ns):
+                    entry["messages"] += 1
+                    entry["samples"] += n_lost
+                    entry["seconds"] += n_lost * period
+                    entry["spans_s"].append((round(p0 + parr.size * pp, 6), round(t0, 6)))
+        if entry["messages"]:
+            rep.lost[topic] = entry
+    if rep.cut_span_ns is not None:
+        a, b = rep.cut_span_ns
+        rep.tail_lost_s = max(0, b - (gyro_end_ns if gyro_end_ns is not None else a)) / 1e9
+    for m in sorted(by_topic.get("/profile/event", []), key=lambda m: m.log_time):
+        try:
+            ev = json.loads(m.data)
+        except ValueError:
+            continue
+        name = str(ev.get("event", ""))
+        if name in ("run_ended", "aborted"):
+            rep.end_event, rep.end_detail = name, str(ev.get("detail", ""))
+        elif name == "safe_state":
+            detail = str(ev.get("detail", ""))
+            rep.safe_state = "failed" if detail.startswith("FAILED") else "verified"
+            rep.safe_state_detail = detail
 
 
 def _take_record(
@@ -390,6 +549,13 @@ def write_salvaged(content: dict[str, Any], fh: io.BufferedWriter | Any) -> None
     w.finish()
 
 
+def _as_strings(d: dict[str, Any]) -> dict[str, str]:
+    """MCAP metadata is a string map: non-strings as JSON text (as RecordingWriter does)."""
+    import json
+
+    return {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in d.items()}
+
+
 def recover_recording(
     broken: str | os.PathLike[str], out: str | os.PathLike[str], force: bool = False
 ) -> RecoveryReport:
@@ -403,6 +569,9 @@ def recover_recording(
         # Killed before its first flush: the header and metadata are still a valid (empty)
         # recording of the run, and say what it was.
         rep.problems.append("no chunk was complete: the recovered file holds no messages")
+    # What recover found travels with the data: the report's header reads it.
+    content["metadata"] = [(n, v) for n, v in content["metadata"] if n != "recovery"]
+    content["metadata"].append(("recovery", _as_strings(rep.metadata_record())))
     with atomic_file(out, force, inputs=(broken,)) as tmp:
         with open(tmp, "wb") as fh:
             write_salvaged(content, fh)
