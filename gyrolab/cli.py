@@ -103,6 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     r = cmd("report", "write the temperature-test report of a run")
     r.add_argument("run", metavar="RUN.mcap")
     r.add_argument("--model", metavar="MODEL_DIR", help="fitted model to show and apply")
+    r.add_argument("--spec", metavar="SPEC.toml", help="spec limits: per-line pass/fail, verdict")
+    r.add_argument("--operator", help="operator for the sign-off (default: the recording's)")
+    r.add_argument("--unit-serial", help="unit serial (default: the recording's)")
     r.add_argument("--out", required=True, help="output REPORT_DIR")
     r.add_argument("--force", action="store_true", help="overwrite an existing output")
 

@@ -98,8 +98,9 @@ def test_html_is_self_contained_and_pdf_has_every_page(tmp_path: Path) -> None:
     assert html.count('src="data:image/png;base64,') == 1
     assert 'id="fig-c"' in html and 'id="tab-t"' in html and "@media print" in html
     n = write_pdf(doc, tmp_path / "r.pdf")
-    # title + figure + note page + 90 rows over 38-row pages (3 pages)
-    assert n == 1 + 1 + 1 + 3
+    # title page (section A's heading goes with its figure), the figure's page, then the
+    # note, section B and its 90-row table flowing over two pages (tests/test_report_pdf.py)
+    assert n == 4
     data = (tmp_path / "r.pdf").read_bytes()
     assert data.startswith(b"%PDF")
     assert len(re.findall(rb"/Type\s*/Page(?!s)", data)) == n

@@ -617,7 +617,7 @@ def acquire(args: argparse.Namespace) -> int:
     check_output(out, args.force, inputs=inputs, kind="file")
 
     sim: SimHandle | None = None
-    import tempfile
+    from gyrolab.acquisition.simdir import sim_workdir
 
     old_switch = sys.getswitchinterval()
     if args.bench == "sim":
@@ -626,7 +626,7 @@ def acquire(args: argparse.Namespace) -> int:
         # switch by the busy ones (a Modbus transaction needs several switches).
         sys.setswitchinterval(0.0005)
 
-    with tempfile.TemporaryDirectory(prefix="gyrolab-sim-") as work:
+    with sim_workdir() as work:
         if args.bench == "sim":
             sim, cfg = start_sim_bench(
                 cfg, profile, seed=args.seed, speed=args.speed, workdir=Path(work), faults=faults

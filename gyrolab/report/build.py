@@ -34,6 +34,7 @@ from gyrolab.recording import (
 )
 from gyrolab.report import figures as F
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
+from gyrolab.report.outcome import Coverage, Outcome, run_coverage, run_outcome
 
 METRIC_ROWS: list[tuple[str, str]] = [
     ("arw_deg_per_sqrt_h", "angle random walk (°/√h)"),
@@ -185,23 +186,43 @@ def raw_metrics(tb: np.ndarray, xb: np.ndarray, block_s: float) -> dict[str, Any
 # ------------------------------------------------------------------------- sections
 
 
-def _summary(rec: Recording, model: Any, held_out: bool | None) -> list[tuple[str, str]]:
-    run, bench = rec.run, rec.bench
+def unit_serial(rec: Recording) -> str:
+    """The unit under test's serial number as the recording gives it ('—' if none)."""
+    return str(rec.run.get("unit_serial") or rec.bench.get("unit_serial") or "—")
+
+
+def run_id(rec: Recording) -> str:
+    """The run's identity for headers: the recording's name and its start time."""
+    start = rec.run.get("start_time")
+    return Path(rec.path).name + (f" · {start}" if start else "")
+
+
+def _summary(
+    rec: Recording,
+    model: Any,
+    held_out: bool | None,
+    outcome: Outcome | None = None,
+    coverage: Coverage | None = None,
+) -> list[tuple[str, str]]:
+    run = rec.run
     rate = rec.rate
     assert rate is not None
     prof = run.get("profile")
     prof_name = prof.get("name", "?") if isinstance(prof, dict) else str(prof or "?")
     dur = float(rate.t[-1] - rate.t[0] + rate.period)
-    unit = run.get("unit_serial") or bench.get("unit_serial") or "—"
+    outcome = outcome or run_outcome(rec)
+    coverage = coverage or run_coverage(rec)
     rows = [
+        ("run outcome", outcome.line),
         ("recording", Path(rec.path).name),
-        ("unit under test", str(unit)),
+        ("unit under test", unit_serial(rec)),
         ("operator", str(run.get("operator", "—"))),
         ("start time", str(run.get("start_time", "—"))),
         ("source", str(run.get("source", "—"))),
         ("profile", prof_name),
         ("duration", f"{dur / 3600:.2f} h ({hms(dur)})"),
-        ("gyro samples", f"{rate.t.size:,} at {rate.rate_hz:g} Hz"),
+        ("temperatures reached", coverage.temperature_line()),
+        ("gyro samples", coverage.samples_line()),
         ("recorded by", f"gyrolab {run.get('software_version', '?')}"),
         ("report by", f"gyrolab {__version__}"),
     ]
@@ -252,7 +273,8 @@ def run_log_rows(rec: Recording) -> tuple[list[list[str]], dict[str, int]]:
         kind = str(m.get("kind", ""))
         if level in ("warning", "error", "fault") or kind in LOG_KINDS:
             rows.append((float(m.get("t", 0.0)), _log_row(m)))
-            counts[kind or level] = counts.get(kind or level, 0) + 1
+            if kind != "safe_state":  # the normal end of a run: shown, not counted
+                counts[kind or level] = counts.get(kind or level, 0) + 1
     logged_gaps = sum(1 for m in rec.logs if m.get("kind") == "gap")
     assert rec.rate is not None
     gaps = rec.rate.gaps()
@@ -272,12 +294,23 @@ def run_log_rows(rec: Recording) -> tuple[list[list[str]], dict[str, int]]:
                     ],
                 )
             )
+    logged = {str(m.get("kind", "")) for m in rec.logs}
     for e in rec.events:
         ev = str(e.get("event", ""))
-        if ev in ("aborted", "safe_state"):
-            t = float(e.get("t", 0.0))
-            rows.append((t, [hms(t), "fault", "profile", ev, str(e.get("detail", ""))]))
-            counts[ev] = counts.get(ev, 0) + 1
+        # The runner logs its end on /log too (kinds abort / safe_state); the events are
+        # shown only for a recording without those messages. A verified safe state is the
+        # normal end of every run, not a fault.
+        if ev == "aborted" and "abort" not in logged:
+            t, detail = float(e.get("t", 0.0)), str(e.get("detail", ""))
+            level = "warning" if detail.startswith("interrupted") else "fault"
+            rows.append((t, [hms(t), level, "profile", "abort", detail]))
+            counts["abort"] = counts.get("abort", 0) + 1
+        elif ev == "safe_state" and "safe_state" not in logged:
+            t, detail = float(e.get("t", 0.0)), str(e.get("detail", ""))
+            failed = detail.startswith("FAILED")
+            kind = "fault" if failed else "safe_state"
+            rows.append((t, [hms(t), "fault" if failed else "info", "profile", kind, detail]))
+            counts[kind] = counts.get(kind, 0) + 1
     rows.sort(key=lambda r: r[0])
     return [r for _, r in rows], counts
 
@@ -317,15 +350,25 @@ def _metrics_table(metrics: dict[str, Any], columns: list[tuple[str, str]]) -> T
 
 
 def build_report(
-    run_path: str | Path, model_dir: str | Path | None = None, step: Step = _noop
+    run_path: str | Path,
+    model_dir: str | Path | None = None,
+    step: Step = _noop,
+    spec: str | Path | None = None,
+    operator: str | None = None,
+    serial: str | None = None,
 ) -> tuple[Document, dict[str, Any]]:
     """The report document and ``metrics.json`` content of ``run_path`` (and the model).
 
     ``step(name)`` is called as each stage starts (progress display). Bad input raises
-    :class:`InputError` before anything heavy runs: the model is loaded (and its format
-    version checked) first, then the recording is checked for a gyro topic.
+    :class:`InputError` before anything heavy runs: the spec file and the model are read
+    (and the model's format version checked) first, then the recording is checked for a
+    gyro topic. ``spec`` (a spec TOML, :mod:`gyrolab.report.spec`) adds the verdict;
+    ``operator``/``serial`` override the recording's for the sign-off block.
     """
+    from gyrolab.report.spec import load_spec
+
     t_start = time.perf_counter()
+    spec_obj = load_spec(spec) if spec is not None else None
     model = None
     if model_dir is not None:
         from gyrolab.compensation.pipeline import load_model
@@ -370,12 +413,52 @@ def build_report(
         }
 
     step("figures")
+    outcome, coverage = run_outcome(rec), run_coverage(rec)
+    serial = serial or unit_serial(rec)
+    verdict = None
+    if spec_obj is not None:
+        from gyrolab.report.spec import evaluate
+
+        verdict = evaluate(
+            spec_obj,
+            metrics,
+            has_model=model is not None,
+            coverage_fraction=coverage.fraction("case"),
+            gap_s=coverage.gap_s,
+            complete=outcome.status == "complete",
+            safe_state_ok=outcome.safe_state == "verified",
+        )
+    summary = _summary(rec, model, held_out, outcome, coverage)
+    summary.insert(1, ("verdict", verdict.summary() if verdict else "no spec given (no verdict)"))
+    if serial != unit_serial(rec):
+        summary = [("unit under test", serial) if k == "unit under test" else (k, v)
+                   for k, v in summary]
     doc = Document(
-        title=f"Temperature test report — {rec.run.get('unit_serial') or Path(rec.path).stem}",
+        title=f"Temperature test report — {serial if serial != '—' else Path(rec.path).stem}",
         subtitle="MEMS gyroscope temperature test"
         + (" with drift compensation" if model is not None else " (raw record)"),
-        summary=_summary(rec, model, held_out),
+        summary=summary,
+        status=outcome.status,
+        running_header=f"{serial} · {run_id(rec)}",
     )
+    metrics["outcome"] = {
+        "status": outcome.status,
+        "line": outcome.line,
+        "safe_state": outcome.safe_state,
+        "end_t": outcome.end_t,
+    }
+    metrics["coverage"] = {
+        "profile_c": coverage.profile_c,
+        "chamber_c": coverage.chamber_c,
+        "case_c": coverage.case_c,
+        "case_fraction": coverage.fraction("case"),
+        "samples": coverage.samples,
+        "gaps": coverage.gaps,
+        "samples_missing": coverage.samples_missing,
+        "gap_s": coverage.gap_s,
+    }
+    if verdict is not None:
+        metrics["verdict"] = verdict.to_dict()
 
     # 1. temperature and raw output
     sec = Section("run", "Run: temperature profile and raw output")
@@ -396,10 +479,22 @@ def build_report(
                 "temperature",
                 "Temperature profile",
                 F.temperature_profile(
-                    rec.oven_t, rec.oven_setpoint_c, rec.oven_pv_c, rec.pt100_t, rec.pt100_c
+                    rec.oven_t,
+                    rec.oven_setpoint_c,
+                    rec.oven_pv_c,
+                    rec.pt100_t,
+                    rec.pt100_c,
+                    safe=np.array([m == "safe" for m in rec.oven_mode], dtype=bool),
+                    profile_c=coverage.profile_c,
                 ),
                 "Oven setpoint (commanded), chamber air (oven process value) and the PT100 on "
-                "the gyro case.",
+                "the gyro case; the shaded band is the profile's setpoint range. "
+                + (
+                    "The red dashed step at the end is the end-of-run safe state (the oven "
+                    "commanded to its safe setpoint and read back), not part of the profile."
+                    if any(m == "safe" for m in rec.oven_mode)
+                    else "No safe-state command is recorded."
+                ),
             )
         )
     else:
@@ -426,11 +521,58 @@ def build_report(
     # 4. run log and bench identity
     doc.sections.append(_log_section(rec))
     doc.sections.append(_identity_section(rec, model))
+    # 5. verdict against the spec and the sign-off block
+    doc.sections.append(_signoff_section(rec, outcome, verdict, operator, serial))
 
     metrics["timing_s"] = time.perf_counter() - t_start
     if model is not None and "timing_s" not in metrics.get("model", {}):
         metrics["model_timing_s"] = model.timing_s
     return doc, _clean(metrics)
+
+
+def _signoff_section(
+    rec: Recording, outcome: Outcome, verdict: Any, operator: str | None, serial: str
+) -> Section:
+    """Per-limit pass/fail (with a spec), the overall verdict and the signature block."""
+    import datetime as _dt
+
+    sec = Section("signoff", "Verdict and sign-off")
+    if verdict is not None:
+        name = verdict.spec.name or Path(verdict.spec.path).name
+        sec.blocks.append(
+            TableBlock(
+                "verdict",
+                f"Spec limits: {name}",
+                ["quantity", "limit", "measured", "result"],
+                [[x.quantity, x.limit, x.measured, "PASS" if x.passed else "FAIL"]
+                 for x in verdict.lines],
+                note=f"Overall verdict: {verdict.word}. Metric limits apply to the "
+                f"{verdict.series} output; a limit that could not be measured fails.",
+            )
+        )
+    else:
+        sec.blocks.append(
+            TextBlock("No spec file was given (gyrolab report --spec SPEC.toml): no verdict.")
+        )
+    op = operator or str(rec.run.get("operator") or "")
+    sec.blocks.append(
+        TableBlock(
+            "signoff",
+            "Sign-off",
+            ["field", "value"],
+            [
+                ["unit serial", serial],
+                ["run", run_id(rec)],
+                ["run outcome", outcome.line],
+                ["verdict", verdict.word if verdict is not None else "none (no spec)"],
+                ["operator", op or "—"],
+                ["report date", _dt.date.today().isoformat()],
+                ["signature", "_" * 30],
+            ],
+            align_numbers=False,
+        )
+    )
+    return sec
 
 
 def _is_calibration_run(model: Any, run: Any) -> bool:
@@ -440,6 +582,27 @@ def _is_calibration_run(model: Any, run: Any) -> bool:
         return Path(str(model.calibration.get("path", ""))).resolve() == Path(run.path).resolve()
     cal = np.asarray(cal, dtype=float)
     return cal.shape == run.rate.shape and bool(np.allclose(cal, run.rate, rtol=0, atol=1e-12))
+
+
+def gpso_edge_note(model: Any) -> str:
+    """A warning when GPSO's optimum (K, α) lies on the edge of its search box, where a
+    wider box might hold a better optimum; '' when it is inside."""
+    cfg = model.config
+    (k_lo, k_hi), (a_lo, a_hi) = cfg.k_range, cfg.alpha_range
+    on: list[str] = []
+    if model.K in (k_lo, k_hi):
+        on.append(f"K = {model.K} is the {'lower' if model.K == k_lo else 'upper'} bound")
+    tol = 1e-3 * (a_hi - a_lo)
+    if abs(model.alpha - a_lo) <= tol or abs(model.alpha - a_hi) <= tol:
+        which = "lower" if abs(model.alpha - a_lo) <= tol else "upper"
+        on.append(f"α = {model.alpha:.0f} is the {which} bound")
+    if not on:
+        return ""
+    return (
+        f"GPSO's optimum lies on the edge of the search box (K {k_lo}…{k_hi}, "
+        f"α {a_lo:g}…{a_hi:g}): {' and '.join(on)}. The true optimum may lie outside "
+        "the box; the model is the best found within it."
+    )
 
 
 def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Section:
@@ -473,9 +636,12 @@ def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Sec
                 "GPSO search of the VMD parameters",
                 F.gpso(best_hist, pos[:, :, 0], pos[:, :, 1], model.K, model.alpha, mean_fit),
                 "Left: best and mean fitness per generation. Right: every evaluated particle in "
-                "(K, α), shaded by generation; the star is the optimum (paper Fig. 10).",
+                "(K, α), shaded by generation; the star is the optimum (paper Fig. 10)."
+                + (f" {edge}" if (edge := gpso_edge_note(model)) else ""),
             )
         )
+        if edge:
+            sec.blocks.append(TextBlock(edge, "note"))
     else:
         sec.blocks.append(
             TextBlock(
@@ -494,14 +660,24 @@ def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Sec
             "(paper Fig. 11).",
         )
     )
+    cfg = model.config
+    fallback = [i for i in dec.classes.get("drift", []) if dec.mpe[i] > cfg.mpe_drift_max]
+    mpe_caption = (
+        f"Mean multiscale permutation entropy (scales 1–{cfg.mpe_scale}) of each "
+        f"mode; noise ≥ {cfg.mpe_noise_min}, drift ≤ {cfg.mpe_drift_max} "
+    )
+    if fallback:
+        mpe_caption += (
+            "— no mode fell under the drift threshold, so the most regular one, "
+            + ", ".join(f"IMF{i + 1} (MPE {dec.mpe[i]:.3f})" for i in fallback)
+            + ", is taken as the drift (the pipeline's fallback, hatched) "
+        )
     sec.blocks.append(
         FigureBlock(
             "mpe",
             "MPE classification",
-            F.mpe_classes(list(dec.mpe), classes),
-            f"Mean multiscale permutation entropy (scales 1–{model.config.mpe_scale}) of each "
-            f"mode; noise ≥ {model.config.mpe_noise_min}, drift ≤ {model.config.mpe_drift_max} "
-            "(paper Fig. 12).",
+            F.mpe_classes(list(dec.mpe), classes, cfg.mpe_drift_max, cfg.mpe_noise_min),
+            mpe_caption + "(paper Fig. 12).",
         )
     )
     sec.blocks.append(

@@ -31,8 +31,15 @@ def write_report(
     model: str | Path | None = None,
     force: bool = False,
     show_progress: bool = True,
+    spec: str | Path | None = None,
+    operator: str | None = None,
+    serial: str | None = None,
 ) -> dict[str, Any]:
-    """Build and write the report of ``run`` into ``out``; returns the metrics."""
+    """Build and write the report of ``run`` into ``out``; returns the metrics.
+
+    ``spec`` (SPEC.toml, :mod:`gyrolab.report.spec`) adds per-limit pass/fail and the
+    verdict; ``operator``/``serial`` fill the sign-off block instead of the recording's.
+    """
     from gyrolab.report.build import build_report
     from gyrolab.report.html import render
     from gyrolab.report.pdf import write_pdf
@@ -49,7 +56,9 @@ def write_report(
             bar.update(1)
 
     try:
-        doc, metrics = build_report(run, model, step=step)
+        doc, metrics = build_report(
+            run, model, step=step, spec=spec, operator=operator, serial=serial
+        )
         step("write")
         with atomic_dir(out, force, command="report", inputs=(run, model)) as tmp:
             (tmp / "index.html").write_text(render(doc), encoding="utf-8")
@@ -63,6 +72,17 @@ def write_report(
 
 def report(args: argparse.Namespace) -> int:
     """The ``gyrolab report`` handler."""
-    write_report(args.run, args.out, args.model, args.force)
+    metrics = write_report(
+        args.run,
+        args.out,
+        args.model,
+        args.force,
+        spec=getattr(args, "spec", None),
+        operator=getattr(args, "operator", None),
+        serial=getattr(args, "unit_serial", None),
+    )
+    print(f"run outcome: {metrics['outcome']['line']}", file=sys.stderr)
+    if "verdict" in metrics:
+        print(f"verdict: {metrics['verdict']['verdict']}", file=sys.stderr)
     print(f"report written to {Path(args.out) / 'index.html'}", file=sys.stderr)
     return 0

@@ -59,6 +59,8 @@ class Document:
     subtitle: str = ""
     summary: list[tuple[str, str]] = field(default_factory=list)
     sections: list[Section] = field(default_factory=list)
+    status: str = ""  # run outcome (outcome.STATUSES): styles the header's outcome line
+    running_header: str = ""  # on every PDF page: unit serial and run id
 
     def figures(self) -> list[FigureBlock]:
         return [b for s in self.sections for b in s.blocks if isinstance(b, FigureBlock)]

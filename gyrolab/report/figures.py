@@ -67,13 +67,42 @@ def temperature_profile(
     pv_c: np.ndarray,
     pt100_t: np.ndarray,
     pt100_c: np.ndarray,
+    safe: np.ndarray | None = None,
+    profile_c: tuple[float, float] | None = None,
 ) -> Figure:
-    """Oven setpoint, chamber process value and the PT100 on the gyro case against time."""
+    """Oven setpoint, chamber process value and the PT100 on the gyro case against time.
+
+    ``safe`` marks the oven readings taken in the end-of-run safe state: the setpoint's
+    step to the safe setpoint is drawn apart (red, dashed, annotated) so it reads as the
+    safe state and not as a glitch of the profile. ``profile_c`` shades the profile's
+    setpoint range, against which the reached temperatures are read.
+    """
     fig = _figure(9.0, 3.6)
     ax = fig.add_subplot()
+    if profile_c is not None:
+        ax.axhspan(*profile_c, color="#1f4e79", alpha=0.06, lw=0, label="profile range")
     if np.size(oven_t):
-        ax.step(_hours(oven_t), setpoint_c, where="post", color="k", lw=1.2, label="oven setpoint")
-        ax.plot(_hours(oven_t), pv_c, color="#ff7f0e", lw=1.0, label="chamber air (PV)")
+        th = _hours(oven_t)
+        sp = np.asarray(setpoint_c, dtype=float)
+        s = np.zeros(th.size, bool) if safe is None or len(safe) != th.size else np.asarray(safe)
+        run = ~s
+        ax.step(th[run], sp[run], where="post", color="k", lw=1.2, label="oven setpoint")
+        if s.any():
+            k = int(np.flatnonzero(s)[0])
+            xs = th[max(0, k - 1) :] if k else th[s]
+            ys = np.concatenate([sp[max(0, k - 1) : k], sp[s]]) if k else sp[s]
+            ax.step(xs, ys, where="post", color="#d62728", lw=1.4, ls="--",
+                    label="safe state (end of run)")
+            ax.annotate(
+                f"safe state {sp[k]:g} °C",
+                (th[k], sp[k]),
+                xytext=(-6, 8),
+                textcoords="offset points",
+                ha="right",
+                fontsize=8,
+                color="#d62728",
+            )
+        ax.plot(th, pv_c, color="#ff7f0e", lw=1.0, label="chamber air (PV)")
     if np.size(pt100_t):
         ax.plot(_hours(pt100_t), pt100_c, color="#1f77b4", lw=1.2, label="gyro case (PT100)")
     ax.set_xlabel("time since power-on (h)")
@@ -145,14 +174,34 @@ def vmd_modes(
     return fig
 
 
-def mpe_classes(mpe: Sequence[float], classes: Sequence[str]) -> Figure:
-    """Mean multiscale permutation entropy of each IMF and its class (paper Fig. 12)."""
+def mpe_classes(
+    mpe: Sequence[float],
+    classes: Sequence[str],
+    drift_max: float | None = None,
+    noise_min: float | None = None,
+) -> Figure:
+    """Mean multiscale permutation entropy of each IMF and its class (paper Fig. 12).
+
+    With the thresholds given they are drawn; a mode labelled drift above ``drift_max``
+    (the pipeline's fallback: no mode under the threshold, the most regular one is the
+    drift) is hatched and marked "fallback".
+    """
     mpe = np.asarray(mpe, dtype=float)
     fig = _figure(7.0, 3.2)
     ax = fig.add_subplot()
     idx = np.arange(1, mpe.size + 1)
     colors = [CLASS_COLORS.get(c, "k") for c in classes]
-    ax.bar(idx, mpe, color=colors)
+    bars = ax.bar(idx, mpe, color=colors)
+    for i, (b, c) in enumerate(zip(bars, classes, strict=False)):
+        if c == "drift" and drift_max is not None and mpe[i] > drift_max:
+            b.set_hatch("//")
+            b.set_edgecolor("k")
+            ax.annotate("fallback", (idx[i], mpe[i]), xytext=(0, 3),
+                        textcoords="offset points", ha="center", fontsize=7)
+    for thr, name in ((drift_max, "drift ≤"), (noise_min, "noise ≥")):
+        if thr is not None:
+            ax.axhline(thr, color="k", lw=0.8, ls=":")
+            ax.text(idx[-1] + 0.45, thr, f"{name} {thr:g}", fontsize=7, va="bottom", ha="right")
     for cls, col in CLASS_COLORS.items():
         ax.bar([np.nan], [np.nan], color=col, label=cls)
     ax.set_xticks(idx, [f"IMF{i}" for i in idx], fontsize=8)

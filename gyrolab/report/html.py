@@ -32,6 +32,11 @@ dl.summary { display: grid; grid-template-columns: max-content 1fr; gap: 3px 16p
              margin: 0 0 14px; }
 dl.summary dt { color: var(--muted); }
 dl.summary dd { margin: 0; font-weight: 600; }
+dl.summary dd.st { padding: 1px 8px; border-left: 5px solid var(--line); }
+dd.st-complete, dd.st-PASS { border-color: #2e7d32 !important; background: #edf7ee; }
+dd.st-aborted, dd.st-interrupted { border-color: #e65100 !important; background: #fff3e0; }
+dd.st-recovered, dd.st-incomplete, dd.st-FAIL { border-color: #c62828 !important;
+                                                 background: #fdecea; }
 figure { margin: 14px 0 22px; }
 figure img { max-width: 100%; height: auto; display: block; border: 1px solid #eee; }
 figcaption { color: var(--muted); font-size: 13px; margin-top: 4px; }
@@ -101,11 +106,22 @@ def render_table(block: TableBlock) -> str:
     )
 
 
+def _dd(key: str, value: str, status: str) -> str:
+    """A summary value; the outcome and verdict lines are coloured by what they say."""
+    st = ""
+    if key == "run outcome" and status:
+        st = status
+    elif key == "verdict" and value.split(" ")[0] in ("PASS", "FAIL"):
+        st = value.split(" ")[0]
+    cls = f' class="st st-{_e(st)}"' if st else ""
+    return f"<dd{cls}>{_e(value)}</dd>"
+
+
 def render(doc: Document, dpi: int = 110) -> str:
     """The whole page as one string."""
     parts: list[str] = []
     toc = "".join(f'<li><a href="#sec-{_e(s.key)}">{_e(s.title)}</a></li>' for s in doc.sections)
-    summary = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in doc.summary)
+    summary = "".join(f"<dt>{_e(k)}</dt>{_dd(k, v, doc.status)}" for k, v in doc.summary)
     for sec in doc.sections:
         body: list[str] = []
         for b in sec.blocks:

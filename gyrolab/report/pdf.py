@@ -1,27 +1,47 @@
-"""Render a :class:`~gyrolab.report.document.Document` to PDF with matplotlib's PdfPages.
+"""Render a :class:`~gyrolab.report.document.Document` to an A4 PDF with matplotlib.
 
-Same content as the HTML page: a title page with the summary, then every section in order,
-tables drawn as pages of text tables (split across pages when long) and every figure as a
-vector page of its own. No browser is needed, so the PDF is written everywhere the HTML is.
+Same content as the HTML page, laid out as a document: every page is A4 portrait with a
+running header (``Document.running_header``: unit serial and run id, and the section) and
+a footer with "page N of M". Text and tables flow down the page; a table's caption is
+drawn above it and kept with its first rows (a table that does not fit starts a new page,
+one longer than a page continues on the next with its header repeated). Each figure gets
+a page of its own, scaled to the page's width (its aspect kept) with its number and title
+above and its caption below: the figure itself is laid out again in that part of an A4
+page (constrained layout's ``rect``), so it stays vector. No browser is needed.
 """
 
 from __future__ import annotations
 
 import os
 import textwrap
-from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
+from matplotlib.patches import Rectangle
 
 from gyrolab.report.document import Document, FigureBlock, TableBlock, TextBlock
 
-A4 = (8.27, 11.69)
-ROWS_PER_PAGE = 38
+A4 = (210 / 25.4, 297 / 25.4)  # inches, portrait (595.3 × 841.9 pt)
 ACCENT = "#1f4e79"
+MUTED = "#555555"
+LEFT, RIGHT = 0.07, 0.93  # text column, fractions of the page width
+TOP, BOTTOM = 0.93, 0.06  # flow area below the running header, above the footer
+ROW_H = 0.0150  # table row height (7.5 pt text)
+LINE_H = 0.0150  # body text line height (9 pt)
+CHAR_W = 0.0068  # mean width of a 7.5 pt character, fraction of the page width
+STATUS_COLORS = {
+    "complete": "#2e7d32",
+    "aborted": "#e65100",
+    "interrupted": "#e65100",
+    "recovered": "#c62828",
+    "incomplete": "#c62828",
+}
 
 
-def _page() -> Figure:
+def _new_page() -> Figure:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     fig = Figure(figsize=A4)
@@ -29,103 +49,247 @@ def _page() -> Figure:
     return fig
 
 
-def _clip(cell: str, width: int) -> str:
+@dataclass
+class _Flow:
+    """The page being filled and the vertical position (figure fraction) to draw at."""
+
+    pages: list[tuple[Figure, str]]
+    y: float = TOP
+    section: str = ""
+
+    @property
+    def page(self) -> Figure:
+        return self.pages[-1][0]
+
+    def new_page(self) -> Figure:
+        self.pages.append((_new_page(), self.section))
+        self.y = TOP
+        return self.page
+
+    def room(self) -> float:
+        return self.y - BOTTOM
+
+    def need(self, h: float) -> Figure:
+        """The current page if ``h`` still fits on it, else a fresh one."""
+        if not self.pages or self.room() < h:
+            self.new_page()
+        return self.page
+
+
+def _clip(cell: str, n: int) -> str:
     cell = str(cell).replace("\n", " ")
-    return cell if len(cell) <= width else cell[: width - 1] + "…"
+    return cell if len(cell) <= n else cell[: max(1, n - 1)] + "…"
 
 
-def _table_pages(block: TableBlock, heading: str) -> list[Figure]:
-    """One or more A4 pages holding ``block`` (the header repeats on every page)."""
-    rows: Sequence[Sequence[str]] = block.rows or [["(none)"] + [""] * (len(block.header) - 1)]
+def _is_num(cell: str) -> bool:
+    try:
+        float(str(cell).replace("−", "-"))
+    except ValueError:
+        return False
+    return True
+
+
+def _col_chars(block: TableBlock) -> list[int]:
+    """Characters per column: the longest cell, shrunk to fit the page width."""
     ncol = max(1, len(block.header))
-    # The first column holds labels (metric names, dotted keys): give it more room.
-    first = 48 if ncol > 1 else 120
-    rest = max(12, (150 - first) // max(1, ncol - 1))
-    widths = [first] + [rest] * (ncol - 1)
-    pages = []
-    for start in range(0, len(rows), ROWS_PER_PAGE):
-        chunk = rows[start : start + ROWS_PER_PAGE]
-        fig = _page()
-        fig.text(0.06, 0.96, heading, fontsize=13, color=ACCENT, weight="bold")
+    widest = [len(str(h)) for h in block.header] or [1]
+    for r in block.rows:
+        for i, c in enumerate(r[:ncol]):
+            widest[i] = max(widest[i], len(str(c)))
+    budget = int((RIGHT - LEFT) / CHAR_W) - 2 * ncol
+    chars = [max(3, min(w, 90)) for w in widest]
+    while sum(chars) > budget:
+        i = max(range(ncol), key=lambda k: chars[k])
+        chars[i] -= 1
+    return chars
+
+
+def _table(flow: _Flow, block: TableBlock, number: int) -> None:
+    """Caption above, header, rows; continues on the next page when it runs out of room."""
+    rows = block.rows or [["(none)"] + [""] * (len(block.header) - 1)]
+    chars = _col_chars(block)
+    xs = [LEFT]
+    for c in chars[:-1]:
+        xs.append(xs[-1] + (c + 2) * CHAR_W)
+    width = sum((c + 2) * CHAR_W for c in chars)
+    note = textwrap.wrap(block.note, 115) if block.note else []
+    start = 0
+    while start < len(rows):
+        # caption + header + at least 3 rows (or all) stay together
+        first = min(len(rows) - start, 3)
+        fig = flow.need(0.03 + ROW_H * (1 + first))
         cont = " (continued)" if start else ""
-        fig.text(0.06, 0.935, block.title + cont, fontsize=11, weight="bold")
-        h = min(0.86, 0.022 * (len(chunk) + 1))
-        ax = fig.add_axes((0.06, 0.92 - h, 0.88, h))
-        ax.axis("off")
-        tab = ax.table(
-            cellText=[[_clip(c, w) for c, w in zip(r, widths, strict=True)] for r in chunk],
-            colLabels=[_clip(c, w) for c, w in zip(block.header, widths, strict=True)],
-            loc="upper left",
-            cellLoc="left",
-        )
-        tab.auto_set_font_size(False)
-        tab.set_fontsize(7.5)
-        tab.auto_set_column_width(list(range(ncol)))
-        for (r, _c), cell in tab.get_celld().items():
-            cell.set_edgecolor("#bbbbbb")
-            if r == 0:
-                cell.set_facecolor("#e8eef5")
-        if block.note:
-            fig.text(
-                0.06,
-                0.03,
-                textwrap.fill(block.note, 110),
-                fontsize=8,
-                color="#555555",
-                va="bottom",
-            )
-        pages.append(fig)
-    return pages
+        fig.text(LEFT, flow.y, f"Table {number}. {block.title}{cont}", fontsize=9.5,
+                 weight="bold", va="top")
+        flow.y -= 0.022
+        fit = int((flow.room() - ROW_H) // ROW_H)
+        chunk = rows[start : start + max(1, fit)]
+        for r_i, row in enumerate([block.header, *chunk]):
+            y = flow.y - r_i * ROW_H
+            if r_i == 0:
+                fig.add_artist(Rectangle((LEFT - 0.004, y - ROW_H), width, ROW_H,
+                                         transform=fig.transFigure, color="#e8eef5", lw=0))
+            else:
+                fig.add_artist(_hline(fig, LEFT - 0.004, LEFT - 0.004 + width, y))
+            if not block.rows and r_i > 0:  # an empty table says so, across its width
+                fig.text(xs[0], y - ROW_H / 2, "(none)", fontsize=7.5, va="center")
+                continue
+            for c_i, cell in enumerate(list(row)[: len(chars)]):
+                text = _clip(cell, chars[c_i])
+                right = block.align_numbers and r_i > 0 and _is_num(text)
+                x = xs[c_i] + chars[c_i] * CHAR_W if right else xs[c_i]
+                fig.text(x, y - ROW_H / 2, text, fontsize=7.5, va="center",
+                         ha="right" if right else "left",
+                         weight="bold" if r_i == 0 else "normal")
+        flow.y -= ROW_H * (len(chunk) + 1)
+        start += len(chunk)
+        if start >= len(rows) and note:
+            if flow.room() < LINE_H * len(note) + 0.005:
+                flow.new_page()
+            fig = flow.page
+            fig.text(LEFT, flow.y - 0.004, "\n".join(note), fontsize=7.5, color=MUTED, va="top")
+            flow.y -= LINE_H * 0.85 * len(note) + 0.006
+        flow.y -= 0.018
 
 
-def _text_page(title: str, subtitle: str, summary: list[tuple[str, str]]) -> Figure:
-    fig = _page()
-    fig.text(0.06, 0.93, title, fontsize=18, color=ACCENT, weight="bold")
-    fig.text(0.06, 0.905, subtitle, fontsize=10, color="#555555")
-    y = 0.86
-    for k, v in summary:
-        fig.text(0.06, y, k, fontsize=10, color="#555555")
-        fig.text(0.40, y, textwrap.shorten(str(v), 70), fontsize=10, weight="bold")
-        y -= 0.025
-    return fig
+def _hline(fig: Figure, x0: float, x1: float, y: float) -> Any:
+    from matplotlib.lines import Line2D
+
+    return Line2D([x0, x1], [y, y], transform=fig.transFigure, color="#cccccc", lw=0.5)
+
+
+def _text(flow: _Flow, text: str, kind: str) -> None:
+    lines = textwrap.wrap(text, 105) or [""]
+    h = LINE_H * len(lines) + 0.008
+    fig = flow.need(h)
+    color = "#7a5a00" if kind == "note" else "k"
+    if kind == "note":
+        fig.add_artist(Rectangle((LEFT - 0.008, flow.y - h + 0.002), RIGHT - LEFT + 0.016,
+                                 h, transform=fig.transFigure, color="#fff8e1", lw=0))
+    fig.text(LEFT, flow.y, "\n".join(lines), fontsize=9, va="top", color=color,
+             linespacing=1.35)
+    flow.y -= h + 0.008
+
+
+def _heading(flow: _Flow, title: str) -> None:
+    # kept with what follows: at least a few lines of room below it
+    fig = flow.need(0.12)
+    fig.text(LEFT, flow.y, title, fontsize=13, color=ACCENT, weight="bold", va="top")
+    flow.y -= 0.032
+
+
+def _title(flow: _Flow, doc: Document) -> None:
+    fig = flow.new_page()
+    fig.text(LEFT, flow.y, doc.title, fontsize=17, color=ACCENT, weight="bold", va="top")
+    fig.text(LEFT, flow.y - 0.032, doc.subtitle, fontsize=10, color=MUTED, va="top")
+    flow.y -= 0.065
+    for k, v in doc.summary:
+        lines = textwrap.wrap(str(v), 68) or [""]
+        color = "k"
+        if k == "run outcome":
+            color = STATUS_COLORS.get(doc.status, "k")
+        elif k == "verdict" and str(v).startswith(("PASS", "FAIL")):
+            color = "#2e7d32" if str(v).startswith("PASS") else "#c62828"
+        fig.text(LEFT, flow.y, k, fontsize=9.5, color=MUTED, va="top")
+        fig.text(0.33, flow.y, "\n".join(lines), fontsize=9.5, weight="bold", va="top",
+                 color=color, linespacing=1.3)
+        flow.y -= 0.0175 * len(lines) + 0.004
+    flow.y -= 0.02
+
+
+def _figure_page(block: FigureBlock, number: int, heading: str) -> tuple[Figure, Any]:
+    """Lay ``block.figure`` out on an A4 page; returns the figure and a restore callback.
+
+    ``heading``: the section's title, drawn first when the section opens with this figure.
+    """
+    fig = block.figure
+    w0, h0 = fig.get_size_inches()
+    engine = fig.get_layout_engine()
+    cap = textwrap.wrap(block.caption, 110) if block.caption else []
+    cap_h = 0.0135 * len(cap) + 0.01
+    head_h = 0.032 if heading else 0.0
+    top = TOP - head_h - 0.035  # below the heading and the figure's number and title
+    width = RIGHT - LEFT + 0.02
+    height = width * A4[0] * h0 / w0 / A4[1]
+    max_h = top - BOTTOM - cap_h - 0.01
+    if height > max_h:  # a tall figure: fit the height, narrow it, keep its aspect
+        width *= max_h / height
+        height = max_h
+    x0 = LEFT - 0.01 + (RIGHT - LEFT + 0.02 - width) / 2
+    fig.set_size_inches(*A4)
+    fig.set_layout_engine(ConstrainedLayoutEngine(rect=(x0, top - height, width, height)))
+    added = [
+        fig.text(LEFT, TOP - head_h, f"Figure {number}. {block.title}", fontsize=9.5,
+                 weight="bold", va="top"),
+    ]
+    if heading:
+        added.append(fig.text(LEFT, TOP, heading, fontsize=13, color=ACCENT, weight="bold",
+                              va="top"))
+    if cap:
+        added.append(fig.text(LEFT, top - height - 0.01, "\n".join(cap), fontsize=7.5,
+                              color=MUTED, va="top", linespacing=1.3))
+
+    def restore() -> None:
+        for a in added:
+            a.remove()
+        fig.set_layout_engine(engine)
+        fig.set_size_inches(w0, h0)
+
+    return fig, restore
+
+
+def _furniture(fig: Figure, doc: Document, section: str, n: int, total: int) -> list[Any]:
+    """Running header (unit serial · run id, section) and footer (page N of M)."""
+    head = doc.running_header or doc.title
+    return [
+        fig.text(LEFT, 0.965, head, fontsize=7.5, color=MUTED, va="bottom"),
+        fig.text(RIGHT, 0.965, section, fontsize=7.5, color=MUTED, va="bottom", ha="right"),
+        fig.add_artist(_hline(fig, LEFT, RIGHT, 0.96)),
+        fig.text(LEFT, 0.035, f"gyrolab — {doc.title}", fontsize=7, color=MUTED),
+        fig.text(RIGHT, 0.035, f"page {n} of {total}", fontsize=7.5, color=MUTED, ha="right"),
+    ]
 
 
 def write_pdf(doc: Document, path: str | os.PathLike[str]) -> int:
-    """Write ``doc`` to ``path``; returns the number of pages."""
-    n = 0
+    """Write ``doc`` to ``path`` as A4 pages; returns the number of pages."""
+    flow = _Flow(pages=[])
+    _title(flow, doc)
+    # Each entry: a finished flow page, or a figure to lay out when it is saved.
+    order: list[tuple[str, Any, str]] = []
+    n_fig = n_tab = 0
+    for sec in doc.sections:
+        flow.section = sec.title
+        opens_with_figure = bool(sec.blocks) and isinstance(sec.blocks[0], FigureBlock)
+        if not opens_with_figure:  # else the heading goes on the figure's page
+            _heading(flow, sec.title)
+        for i, b in enumerate(sec.blocks):
+            if isinstance(b, FigureBlock):
+                n_fig += 1
+                order.extend(("flow", p, s) for p, s in flow.pages)
+                flow.pages = []
+                heading = sec.title if i == 0 else ""
+                order.append(("figure", (b, n_fig, heading), sec.title))
+                flow.y = BOTTOM  # whatever comes next starts a new page
+            elif isinstance(b, TableBlock):
+                n_tab += 1
+                _table(flow, b, n_tab)
+            elif isinstance(b, TextBlock):
+                _text(flow, b.text, b.kind)
+    order.extend(("flow", p, s) for p, s in flow.pages)
+    total = len(order)
     with PdfPages(path, metadata={"Title": doc.title, "Creator": "gyrolab"}) as pdf:
-        pdf.savefig(_text_page(doc.title, doc.subtitle, doc.summary))
-        n += 1
-        for sec in doc.sections:
-            texts = [b.text for b in sec.blocks if isinstance(b, TextBlock)]
-            if texts:
-                fig = _page()
-                fig.text(0.06, 0.96, sec.title, fontsize=13, color=ACCENT, weight="bold")
-                fig.text(
-                    0.06,
-                    0.93,
-                    "\n\n".join(textwrap.fill(t, 100) for t in texts),
-                    fontsize=9,
-                    va="top",
-                )
+        for n, (kind, item, section) in enumerate(order, start=1):
+            if kind == "flow":
+                _furniture(item, doc, section, n, total)
+                pdf.savefig(item)
+                continue
+            block, number, heading = item
+            fig, restore = _figure_page(block, number, heading)
+            extra = _furniture(fig, doc, section, n, total)
+            try:
                 pdf.savefig(fig)
-                n += 1
-            for b in sec.blocks:
-                if isinstance(b, TableBlock):
-                    for page in _table_pages(b, sec.title):
-                        pdf.savefig(page)
-                        n += 1
-                elif isinstance(b, FigureBlock):
-                    cap = None
-                    if b.caption:
-                        # The caption goes under the axes for this page only: the same
-                        # figure is also rendered to the HTML, which has its own caption.
-                        cap = b.figure.supxlabel(
-                            textwrap.fill(b.caption, 130), fontsize=7, color="#555555"
-                        )
-                    pdf.savefig(b.figure)
-                    if cap is not None:
-                        cap.set_text("")
-                        cap.set_visible(False)
-                    n += 1
-    return n
+            finally:
+                for a in extra:
+                    a.remove()
+                restore()
+    return total

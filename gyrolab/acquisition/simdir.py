@@ -1,0 +1,83 @@
+"""The simulated bench's scratch directory (``/tmp/gyrolab-sim-*``), removed on every exit.
+
+``gyrolab acquire --bench sim`` keeps the simulated instruments' pseudo-terminal links in a
+temporary directory. It is removed
+
+* on a normal end and on any exception (``finally``);
+* on SIGTERM and SIGHUP while the bench is being set up: they are turned into
+  ``KeyboardInterrupt`` so the ``finally`` runs (during the run itself the runner handles
+  SIGINT/SIGTERM: safe state, then the same ``finally``);
+* at interpreter exit (``atexit``), should anything bypass the above;
+* after a ``kill -9``, which runs no code at all: the directory holds an ``owner.pid``
+  marker, and the next ``acquire --bench sim`` removes every ``gyrolab-sim-*`` directory
+  whose marker names a process that no longer exists. Directories without the marker are
+  not gyrolab's and are never touched.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import shutil
+import signal
+import tempfile
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+PREFIX = "gyrolab-sim-"
+MARKER = "owner.pid"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+def sweep_stale(tmp: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove ``gyrolab-sim-*`` directories left by processes that died (kill -9)."""
+    removed = []
+    for d in Path(tmp or tempfile.gettempdir()).glob(PREFIX + "*"):
+        try:
+            pid = int((d / MARKER).read_text().strip())
+        except (OSError, ValueError):
+            continue  # not ours (no marker) or not readable: leave it
+        if pid != os.getpid() and not _alive(pid):
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+    return removed
+
+
+def _raise_interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"{signal.Signals(signum).name}")
+
+
+@contextlib.contextmanager
+def sim_workdir() -> Iterator[Path]:
+    """A fresh ``gyrolab-sim-*`` directory with its owner marker; removed on every exit."""
+    sweep_stale()
+    work = Path(tempfile.mkdtemp(prefix=PREFIX))
+    (work / MARKER).write_text(f"{os.getpid()}\n")
+
+    def remove() -> None:
+        shutil.rmtree(work, ignore_errors=True)
+
+    atexit.register(remove)
+    main = threading.current_thread() is threading.main_thread()
+    old = {}
+    if main:
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            old[sig] = signal.signal(sig, _raise_interrupt)
+    try:
+        yield work
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        remove()
+        atexit.unregister(remove)

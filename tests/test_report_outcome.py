@@ -1,0 +1,199 @@
+"""The report says how a run ended: complete, aborted, interrupted, recovered.
+
+Each run is a real ``acquire --bench sim`` (drivers over pseudo-terminals), kept short:
+a two-step profile at 50x. The watchdog run uses the in-process path of
+tests/test_acquire.py (a tight PT100 limit); SIGINT and kill -9 go to a subprocess.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+from test_acquire import _profile, _run_in_process
+
+from gyrolab.acquisition.simdir import MARKER, PREFIX, sweep_stale
+from gyrolab.cli import main
+from gyrolab.recording import read_recording
+from gyrolab.report.build import build_report, run_log_rows
+from gyrolab.report.outcome import run_outcome
+
+ENV = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
+
+
+def _acquire_cmd(prof: Path, out: Path) -> list[str]:
+    return [
+        sys.executable, "-m", "gyrolab", "acquire", "--bench", "sim", "--profile", str(prof),
+        "--speed", "50", "--out", str(out),
+    ]  # fmt: skip
+
+
+def _start_and_wait(prof: Path, out: Path) -> subprocess.Popen[str]:
+    """Start an acquisition; return once it has flushed data (the file grows by chunks)."""
+    p = subprocess.Popen(_acquire_cmd(prof, out), env=ENV, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not out.exists() or out.stat().st_size < 30_000):
+        assert p.poll() is None, p.stderr.read() if p.stderr else ""
+        time.sleep(0.05)
+    return p
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    tmp = tmp_path_factory.mktemp("outcomes")
+    out: dict[str, Path] = {}
+    # complete: 25 °C then 27 °C, 40 s of run time
+    prof = _profile(tmp, [(25, 20), (27, 20)])
+    out["complete"] = tmp / "complete.mcap"
+    assert main(_acquire_cmd(prof, out["complete"])[3:]) == 0
+    # aborted: the PT100 watchdog (limit 26 °C) while heating to 60 °C
+    from gyrolab.acquisition.bench_config import Limits
+    from gyrolab.sim.bench import FaultPlan
+
+    wd = tmp / "wd"
+    wd.mkdir()
+    res, _, _ = _run_in_process(
+        wd, _profile(wd, [(25, 30), (60, 900)]), speed=50.0, faults=FaultPlan(),
+        limits=Limits(pt100_max_c=26.0),
+    )  # fmt: skip
+    assert res.outcome == "fault"
+    out["aborted"] = wd / "run.mcap"
+    # interrupted (SIGINT) and killed (kill -9, then recovered): a long hot step
+    long = _profile(tmp, [(25, 30), (60, 3600)])
+    out["interrupted"] = tmp / "int.mcap"
+    p = _start_and_wait(long, out["interrupted"])
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    out["interrupted_pid"] = Path(str(p.pid))
+    killed = tmp / "killed.mcap"
+    p = _start_and_wait(long, killed)
+    os.kill(p.pid, signal.SIGKILL)
+    p.communicate(timeout=30)
+    out["killed"] = killed
+    out["killed_pid"] = Path(str(p.pid))
+    out["recovered"] = tmp / "recovered.mcap"
+    assert main(["recover", str(killed), "--out", str(out["recovered"])]) == 0
+    return out
+
+
+def _outcome_line(rec_path: Path, tmp_path: Path) -> tuple[str, dict, str]:
+    rep = tmp_path / f"rep-{rec_path.stem}"
+    assert main(["report", str(rec_path), "--out", str(rep)]) == 0
+    m = json.loads((rep / "metrics.json").read_text())
+    html = (rep / "index.html").read_text(encoding="utf-8")
+    return m["outcome"]["line"], m, html
+
+
+def test_complete_run(runs: dict[str, Path], tmp_path: Path) -> None:
+    line, m, html = _outcome_line(runs["complete"], tmp_path)
+    assert line.startswith("complete — profile complete; oven safe state verified (setpoint 25")
+    assert m["outcome"]["status"] == "complete" and 'class="st st-complete"' in html
+    # coverage: the profile 25…27 °C, the chamber and case ranges as recorded
+    rec = read_recording(runs["complete"])
+    cov = m["coverage"]
+    assert cov["profile_c"] == [25.0, 27.0]
+    assert cov["case_c"] == [pytest.approx(rec.pt100_c.min()), pytest.approx(rec.pt100_c.max())]
+    assert cov["samples"] == rec.rate.t.size and cov["gaps"] == 0
+    assert "temperatures reached" in html and "gyro case covered" in html
+    # a clean run's safe state is a row of the log, neither a fault nor counted as one
+    rows, counts = run_log_rows(rec)
+    safe = [r for r in rows if r[3] == "safe_state"]
+    assert len(safe) == 1 and safe[0][1] == "info" and "safe_state" not in counts
+    assert not any(r[1] == "fault" for r in rows) and "fault" not in counts
+
+
+def test_aborted_run(runs: dict[str, Path], tmp_path: Path) -> None:
+    line, m, _ = _outcome_line(runs["aborted"], tmp_path)
+    assert line.startswith("aborted — ") and "over-temperature" in line
+    assert line.endswith("oven safe state verified (setpoint 25 °C verified)")
+    rows, counts = run_log_rows(read_recording(runs["aborted"]))
+    assert counts.get("abort") == 1 and counts.get("fault", 0) >= 1
+
+
+def test_interrupted_run(runs: dict[str, Path], tmp_path: Path) -> None:
+    line, m, html = _outcome_line(runs["interrupted"], tmp_path)
+    assert line.startswith("interrupted — interrupted by SIGINT; oven safe state verified")
+    assert 'class="st st-interrupted"' in html
+
+
+def test_recovered_run(runs: dict[str, Path], tmp_path: Path) -> None:
+    line, m, html = _outcome_line(runs["recovered"], tmp_path)
+    assert line.startswith("recovered (") and "s lost, safe state not confirmed)" in line
+    assert "cut short" in line and m["outcome"]["status"] == "recovered"
+    rec = read_recording(runs["recovered"])
+    assert rec.metadata["recovery"]["source"] == "killed.mcap"
+    assert rec.metadata["recovery"]["end_event"] == ""
+    assert 'class="st st-recovered"' in html
+
+
+def _scratch_dirs(pid: int) -> list[Path]:
+    """The ``gyrolab-sim-*`` directories whose owner marker names ``pid``."""
+    out = []
+    for d in glob.glob(os.path.join(tempfile.gettempdir(), PREFIX + "*")):
+        try:
+            if int((Path(d) / MARKER).read_text()) == pid:
+                out.append(Path(d))
+        except (OSError, ValueError):
+            continue
+    return out
+
+
+def test_scratch_directories_are_removed_on_every_exit_path(runs: dict[str, Path]) -> None:
+    # normal end (in process) and SIGINT (subprocess): removed by the process itself
+    assert _scratch_dirs(os.getpid()) == []
+    assert _scratch_dirs(int(str(runs["interrupted_pid"]))) == []
+    # kill -9 runs no code: the directory stays until the next acquisition sweeps it
+    (left,) = _scratch_dirs(int(str(runs["killed_pid"])))
+    foreign = Path(tempfile.mkdtemp(prefix=PREFIX))  # no marker: not gyrolab's, kept
+    try:
+        assert left in sweep_stale() and not left.exists() and foreign.exists()
+    finally:
+        foreign.rmdir()
+
+
+def test_sigterm_while_the_bench_starts_still_removes_the_scratch_directory(
+    tmp_path: Path,
+) -> None:
+    prof = _profile(tmp_path, [(25, 30)])
+    p = subprocess.Popen(
+        _acquire_cmd(prof, tmp_path / "t.mcap"), env=ENV, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not _scratch_dirs(p.pid):
+        time.sleep(0.01)
+    assert _scratch_dirs(p.pid), "the acquisition never made its scratch directory"
+    p.send_signal(signal.SIGTERM)
+    p.communicate(timeout=60)
+    assert p.returncode == 130 and _scratch_dirs(p.pid) == []
+
+
+def test_report_outcome_from_events_without_a_log(tmp_path: Path) -> None:
+    """A recording with events but no /log end messages still gets its outcome."""
+    from gyrolab.recording import RecordingWriter
+
+    path = tmp_path / "x.mcap"
+    with RecordingWriter(path, start_time_ns=0, run={"source": "acquire"}) as w:
+        import numpy as np
+
+        w.write_rate_block(0.0, 0.1, 0, np.zeros(200))
+        w.write_event(10.0, "aborted", 1, 60.0, "lost communication with oven")
+        w.write_event(11.0, "safe_state", -1, None, "FAILED: TimeoutError")
+    rec = read_recording(path)
+    o = run_outcome(rec)
+    assert o.status == "aborted" and o.safe_state == "failed"
+    assert o.line == (
+        "aborted — lost communication with oven; oven safe state FAILED (FAILED: TimeoutError)"
+    )
+    rows, counts = run_log_rows(rec)
+    assert [r[3] for r in rows] == ["abort", "fault"] and counts["fault"] == 1
+    doc, _ = build_report(path)
+    assert dict(doc.summary)["run outcome"] == o.line
