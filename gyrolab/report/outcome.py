@@ -148,6 +148,8 @@ def _range(x: np.ndarray) -> tuple[float, float] | None:
 def profile_setpoints(rec: Recording) -> list[float]:
     """The setpoints of the profile stored in the ``run`` metadata (empty if none)."""
     prof = rec.run.get("profile")
+    if not isinstance(prof, dict):  # gyrolab simulate: the name, and the table beside it
+        prof = rec.run.get("profile_definition")
     if not isinstance(prof, dict):
         return []
     steps = prof.get("step", prof.get("steps", []))
