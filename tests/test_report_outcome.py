@@ -95,7 +95,7 @@ def _outcome_line(rec_path: Path, tmp_path: Path) -> tuple[str, dict, str]:
 
 def test_complete_run(runs: dict[str, Path], tmp_path: Path) -> None:
     line, m, html = _outcome_line(runs["complete"], tmp_path)
-    assert line.startswith("complete — profile complete; oven safe state verified (setpoint 25")
+    assert line == "complete — profile complete; oven in safe state (setpoint 25 °C verified)"
     assert m["outcome"]["status"] == "complete" and 'class="st st-complete"' in html
     # coverage: the profile 25…27 °C, the chamber and case ranges as recorded
     rec = read_recording(runs["complete"])
@@ -114,14 +114,15 @@ def test_complete_run(runs: dict[str, Path], tmp_path: Path) -> None:
 def test_aborted_run(runs: dict[str, Path], tmp_path: Path) -> None:
     line, m, _ = _outcome_line(runs["aborted"], tmp_path)
     assert line.startswith("aborted — ") and "over-temperature" in line
-    assert line.endswith("oven safe state verified (setpoint 25 °C verified)")
+    assert line.endswith("; oven in safe state (setpoint 25 °C verified)")
     rows, counts = run_log_rows(read_recording(runs["aborted"]))
     assert counts.get("abort") == 1 and counts.get("fault", 0) >= 1
 
 
 def test_interrupted_run(runs: dict[str, Path], tmp_path: Path) -> None:
     line, m, html = _outcome_line(runs["interrupted"], tmp_path)
-    assert line.startswith("interrupted — interrupted by SIGINT; oven safe state verified")
+    safe = "oven in safe state (setpoint 25 °C verified)"
+    assert line == f"interrupted — interrupted by SIGINT; {safe}"
     assert 'class="st st-interrupted"' in html
 
 
@@ -191,7 +192,7 @@ def test_report_outcome_from_events_without_a_log(tmp_path: Path) -> None:
     o = run_outcome(rec)
     assert o.status == "aborted" and o.safe_state == "failed"
     assert o.line == (
-        "aborted — lost communication with oven; oven safe state FAILED (FAILED: TimeoutError)"
+        "aborted — lost communication with oven; oven safe state FAILED (TimeoutError)"
     )
     rows, counts = run_log_rows(rec)
     assert [r[3] for r in rows] == ["abort", "fault"] and counts["fault"] == 1

@@ -36,9 +36,10 @@ class Outcome:
     @property
     def line(self) -> str:
         """The header's outcome line, e.g. ``aborted — over-temperature …; safe state verified``."""
+        failed = self.safe_state_detail.removeprefix("FAILED").lstrip(": ")
         safe = {
-            "verified": f"oven safe state verified ({self.safe_state_detail})",
-            "failed": f"oven safe state FAILED ({self.safe_state_detail})",
+            "verified": f"oven in safe state ({self.safe_state_detail})",
+            "failed": f"oven safe state FAILED ({failed})",
             "not recorded": "oven safe state not confirmed",
             "not applicable": "simulated run (no oven)",
         }[self.safe_state]
@@ -81,6 +82,12 @@ def run_outcome(rec: Recording) -> Outcome:
     if isinstance(recovery, dict):
         if end is None:
             reason = "the recording was cut short (crash or power loss) and salvaged"
+            rc = rec.bench.get("recorder")
+            if isinstance(rc, dict) and isinstance(rc.get("flush_every_s"), (int, float)):
+                reason += (
+                    f"; data not yet flushed at the crash (≤ {rc['flush_every_s']:g} s plus "
+                    "one ADC block) is not counted"
+                )
         else:
             reason = f"the run had ended ({status}: {reason}); the file was salvaged"
         status = "recovered"
