@@ -34,8 +34,13 @@ def _doc() -> Document:
                 [
                     TextBlock("a note", "note"),
                     TableBlock("s", "Small", ["k", "v"], [["x", "1"], ["y", "2"]], "small note"),
-                    TableBlock("t", "Long", ["key", "value"],
-                               [[f"row{i:03d}", f"{i * 0.5}"] for i in range(120)], "the end"),
+                    TableBlock(
+                        "t",
+                        "Long",
+                        ["key", "value"],
+                        [[f"row{i:03d}", f"{i * 0.5}"] for i in range(120)],
+                        "the end",
+                    ),
                 ],
             ),
         ],
@@ -99,9 +104,7 @@ def test_pages_render_to_png_with_the_figure_across_the_page(pdf, tmp_path: Path
     from PIL import Image
 
     path, n, _ = pdf
-    subprocess.run(
-        ["pdftoppm", "-r", "40", "-png", str(path), str(tmp_path / "pg")], check=True
-    )
+    subprocess.run(["pdftoppm", "-r", "40", "-png", str(path), str(tmp_path / "pg")], check=True)
     pngs = sorted(tmp_path.glob("pg-*.png"))
     assert len(pngs) == n
     for png in pngs:

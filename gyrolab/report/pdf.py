@@ -119,16 +119,30 @@ def _table(flow: _Flow, block: TableBlock, number: int) -> None:
         first = min(len(rows) - start, 3)
         fig = flow.need(0.03 + ROW_H * (1 + first))
         cont = " (continued)" if start else ""
-        fig.text(LEFT, flow.y, f"Table {number}. {block.title}{cont}", fontsize=9.5,
-                 weight="bold", va="top")
+        fig.text(
+            LEFT,
+            flow.y,
+            f"Table {number}. {block.title}{cont}",
+            fontsize=9.5,
+            weight="bold",
+            va="top",
+        )
         flow.y -= 0.022
         fit = int((flow.room() - ROW_H) // ROW_H)
         chunk = rows[start : start + max(1, fit)]
         for r_i, row in enumerate([block.header, *chunk]):
             y = flow.y - r_i * ROW_H
             if r_i == 0:
-                fig.add_artist(Rectangle((LEFT - 0.004, y - ROW_H), width, ROW_H,
-                                         transform=fig.transFigure, color="#e8eef5", lw=0))
+                fig.add_artist(
+                    Rectangle(
+                        (LEFT - 0.004, y - ROW_H),
+                        width,
+                        ROW_H,
+                        transform=fig.transFigure,
+                        color="#e8eef5",
+                        lw=0,
+                    )
+                )
             else:
                 fig.add_artist(_hline(fig, LEFT - 0.004, LEFT - 0.004 + width, y))
             if not block.rows and r_i > 0:  # an empty table says so, across its width
@@ -138,9 +152,15 @@ def _table(flow: _Flow, block: TableBlock, number: int) -> None:
                 text = _clip(cell, chars[c_i])
                 right = block.align_numbers and r_i > 0 and _is_num(text)
                 x = xs[c_i] + chars[c_i] * CHAR_W if right else xs[c_i]
-                fig.text(x, y - ROW_H / 2, text, fontsize=7.5, va="center",
-                         ha="right" if right else "left",
-                         weight="bold" if r_i == 0 else "normal")
+                fig.text(
+                    x,
+                    y - ROW_H / 2,
+                    text,
+                    fontsize=7.5,
+                    va="center",
+                    ha="right" if right else "left",
+                    weight="bold" if r_i == 0 else "normal",
+                )
         flow.y -= ROW_H * (len(chunk) + 1)
         start += len(chunk)
         if start >= len(rows) and note:
@@ -164,10 +184,17 @@ def _text(flow: _Flow, text: str, kind: str) -> None:
     fig = flow.need(h)
     color = "#7a5a00" if kind == "note" else "k"
     if kind == "note":
-        fig.add_artist(Rectangle((LEFT - 0.008, flow.y - h + 0.002), RIGHT - LEFT + 0.016,
-                                 h, transform=fig.transFigure, color="#fff8e1", lw=0))
-    fig.text(LEFT, flow.y, "\n".join(lines), fontsize=9, va="top", color=color,
-             linespacing=1.35)
+        fig.add_artist(
+            Rectangle(
+                (LEFT - 0.008, flow.y - h + 0.002),
+                RIGHT - LEFT + 0.016,
+                h,
+                transform=fig.transFigure,
+                color="#fff8e1",
+                lw=0,
+            )
+        )
+    fig.text(LEFT, flow.y, "\n".join(lines), fontsize=9, va="top", color=color, linespacing=1.35)
     flow.y -= h + 0.008
 
 
@@ -191,8 +218,16 @@ def _title(flow: _Flow, doc: Document) -> None:
         elif k == "verdict" and str(v).startswith(("PASS", "FAIL")):
             color = "#2e7d32" if str(v).startswith("PASS") else "#c62828"
         fig.text(LEFT, flow.y, k, fontsize=9.5, color=MUTED, va="top")
-        fig.text(0.33, flow.y, "\n".join(lines), fontsize=9.5, weight="bold", va="top",
-                 color=color, linespacing=1.3)
+        fig.text(
+            0.33,
+            flow.y,
+            "\n".join(lines),
+            fontsize=9.5,
+            weight="bold",
+            va="top",
+            color=color,
+            linespacing=1.3,
+        )
         flow.y -= 0.0175 * len(lines) + 0.004
     flow.y -= 0.02
 
@@ -219,15 +254,31 @@ def _figure_page(block: FigureBlock, number: int, heading: str) -> tuple[Figure,
     fig.set_size_inches(*A4)
     fig.set_layout_engine(ConstrainedLayoutEngine(rect=(x0, top - height, width, height)))
     added = [
-        fig.text(LEFT, TOP - head_h, f"Figure {number}. {block.title}", fontsize=9.5,
-                 weight="bold", va="top"),
+        fig.text(
+            LEFT,
+            TOP - head_h,
+            f"Figure {number}. {block.title}",
+            fontsize=9.5,
+            weight="bold",
+            va="top",
+        ),
     ]
     if heading:
-        added.append(fig.text(LEFT, TOP, heading, fontsize=13, color=ACCENT, weight="bold",
-                              va="top"))
+        added.append(
+            fig.text(LEFT, TOP, heading, fontsize=13, color=ACCENT, weight="bold", va="top")
+        )
     if cap:
-        added.append(fig.text(LEFT, top - height - 0.01, "\n".join(cap), fontsize=7.5,
-                              color=MUTED, va="top", linespacing=1.3))
+        added.append(
+            fig.text(
+                LEFT,
+                top - height - 0.01,
+                "\n".join(cap),
+                fontsize=7.5,
+                color=MUTED,
+                va="top",
+                linespacing=1.3,
+            )
+        )
 
     def restore() -> None:
         for a in added:
