@@ -622,6 +622,10 @@ def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Sec
             + ("this run is held out." if held_out else "this run is the calibration run.")
         )
     )
+    # only when GPSO ran (K and α may also be fixed in the configuration)
+    edge = gpso_edge_note(model) if d.get("gpso_positions") is not None else ""
+    if edge:  # said before the figure too, where a reader of the text sees it
+        sec.blocks.append(TextBlock(edge, "note"))
     pos = d.get("gpso_positions")
     best_hist = d.get("gpso_best_fitness", d.get("gpso_best_history"))
     if pos is not None and best_hist is not None and np.ndim(pos) == 3:
@@ -637,11 +641,9 @@ def _model_section(model: Any, app: Any, run: Any, held_out: bool | None) -> Sec
                 F.gpso(best_hist, pos[:, :, 0], pos[:, :, 1], model.K, model.alpha, mean_fit),
                 "Left: best and mean fitness per generation. Right: every evaluated particle in "
                 "(K, α), shaded by generation; the star is the optimum (paper Fig. 10)."
-                + (f" {edge}" if (edge := gpso_edge_note(model)) else ""),
+                + (f" {edge}" if edge else ""),
             )
         )
-        if edge:
-            sec.blocks.append(TextBlock(edge, "note"))
     else:
         sec.blocks.append(
             TextBlock(

@@ -135,7 +135,7 @@ class Coverage:
             line += f" for a profile of {rng(self.profile_c)}"
             f = self.fraction("case")
             if math.isfinite(f):
-                line += f" (gyro case covered {100 * f:.0f} % of it)"
+                line += f" (gyro case covered {100 * f:.1f} % of it)"
         return line
 
     def samples_line(self) -> str:

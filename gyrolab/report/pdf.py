@@ -31,7 +31,8 @@ LEFT, RIGHT = 0.07, 0.93  # text column, fractions of the page width
 TOP, BOTTOM = 0.93, 0.06  # flow area below the running header, above the footer
 ROW_H = 0.0150  # table row height (7.5 pt text)
 LINE_H = 0.0150  # body text line height (9 pt)
-CHAR_W = 0.0068  # mean width of a 7.5 pt character, fraction of the page width
+CHAR_W = 0.0070  # mean width of a 7.5 pt character, fraction of the page width
+PAD = 3  # characters between columns
 STATUS_COLORS = {
     "complete": "#2e7d32",
     "aborted": "#e65100",
@@ -92,11 +93,12 @@ def _is_num(cell: str) -> bool:
 def _col_chars(block: TableBlock) -> list[int]:
     """Characters per column: the longest cell, shrunk to fit the page width."""
     ncol = max(1, len(block.header))
-    widest = [len(str(h)) for h in block.header] or [1]
+    # bold header characters are ~15 % wider than the body's
+    widest = [int(len(str(h)) * 1.15) + 1 for h in block.header] or [1]
     for r in block.rows:
         for i, c in enumerate(r[:ncol]):
             widest[i] = max(widest[i], len(str(c)))
-    budget = int((RIGHT - LEFT) / CHAR_W) - 2 * ncol
+    budget = int((RIGHT - LEFT) / CHAR_W) - PAD * ncol
     chars = [max(3, min(w, 90)) for w in widest]
     while sum(chars) > budget:
         i = max(range(ncol), key=lambda k: chars[k])
@@ -110,8 +112,12 @@ def _table(flow: _Flow, block: TableBlock, number: int) -> None:
     chars = _col_chars(block)
     xs = [LEFT]
     for c in chars[:-1]:
-        xs.append(xs[-1] + (c + 2) * CHAR_W)
-    width = sum((c + 2) * CHAR_W for c in chars)
+        xs.append(xs[-1] + (c + PAD) * CHAR_W)
+    width = sum((c + PAD) * CHAR_W for c in chars)
+    numeric = [
+        block.align_numbers and any(_is_num(str(r[i])) for r in block.rows if i < len(r))
+        for i in range(len(chars))
+    ]
     note = textwrap.wrap(block.note, 115) if block.note else []
     start = 0
     while start < len(rows):
@@ -150,7 +156,7 @@ def _table(flow: _Flow, block: TableBlock, number: int) -> None:
                 continue
             for c_i, cell in enumerate(list(row)[: len(chars)]):
                 text = _clip(cell, chars[c_i])
-                right = block.align_numbers and r_i > 0 and _is_num(text)
+                right = numeric[c_i] and (r_i == 0 or _is_num(text))
                 x = xs[c_i] + chars[c_i] * CHAR_W if right else xs[c_i]
                 fig.text(
                     x,
