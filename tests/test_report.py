@@ -179,3 +179,39 @@ def test_model_of_another_version_exits_2(
     # a directory that is no model at all
     assert main(["report", str(short_run), "--model", str(tmp_path), "--out", str(out)]) == 2
     assert "model.json" in capsys.readouterr().err
+
+
+def test_gpso_optimum_on_the_box_edge_is_flagged() -> None:
+    from types import SimpleNamespace
+
+    from gyrolab.report.build import gpso_edge_note
+
+    cfg = SimpleNamespace(k_range=(3, 11), alpha_range=(50.0, 5000.0))
+    note = gpso_edge_note(SimpleNamespace(config=cfg, K=11, alpha=5000.0))
+    assert "K = 11 is the upper bound and α = 5000 is the upper bound" in note
+    assert "K = 3 is the lower bound" in gpso_edge_note(SimpleNamespace(config=cfg, K=3, alpha=900))
+    assert gpso_edge_note(SimpleNamespace(config=cfg, K=7, alpha=1200.0)) == ""
+
+
+def test_mpe_figure_marks_the_drift_fallback_and_draws_the_thresholds() -> None:
+    fig = F.mpe_classes([0.569, 0.8, 0.95], ["drift", "mixed", "noise"], 0.5, 0.9)
+    ax = fig.axes[0]
+    hatched = [p.get_hatch() for p in ax.patches if p.get_height() > 0]
+    assert hatched[0] == "//" and not any(hatched[1:])
+    texts = [t.get_text() for t in ax.texts]
+    assert "fallback" in texts and "drift ≤ 0.5" in texts and "noise ≥ 0.9" in texts
+    plain = F.mpe_classes([0.3, 0.95], ["drift", "noise"], 0.5, 0.9)
+    assert "fallback" not in [t.get_text() for t in plain.axes[0].texts]
+
+
+def test_temperature_figure_draws_the_safe_state_apart() -> None:
+    t = np.arange(0.0, 100.0, 10.0)
+    sp = np.r_[np.full(9, 60.0), 25.0]
+    safe = np.r_[np.zeros(9, bool), True]
+    fig = F.temperature_profile(t, sp, sp - 1, t, sp - 2, safe=safe, profile_c=(25.0, 60.0))
+    ax = fig.axes[0]
+    labels = [line.get_label() for line in ax.lines]
+    assert "safe state (end of run)" in labels
+    setpoint = ax.lines[labels.index("oven setpoint")]
+    assert np.all(setpoint.get_ydata() == 60.0)  # the profile's line never jumps to 25 °C
+    assert any(t.get_text() == "safe state 25 °C" for t in ax.texts)
