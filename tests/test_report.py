@@ -98,9 +98,9 @@ def test_html_is_self_contained_and_pdf_has_every_page(tmp_path: Path) -> None:
     assert html.count('src="data:image/png;base64,') == 1
     assert 'id="fig-c"' in html and 'id="tab-t"' in html and "@media print" in html
     n = write_pdf(doc, tmp_path / "r.pdf")
-    # title page (section A's heading goes with its figure), the figure's page, then the
-    # note, section B and its 90-row table flowing over two pages (tests/test_report_pdf.py)
-    assert n == 4
+    # everything flows on A4 pages: the title, section A's figure and note, then section
+    # B's 90-row table continued over two more pages (layout: tests/test_report_pdf.py)
+    assert n == 3
     data = (tmp_path / "r.pdf").read_bytes()
     assert data.startswith(b"%PDF")
     assert len(re.findall(rb"/Type\s*/Page(?!s)", data)) == n

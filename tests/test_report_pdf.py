@@ -9,13 +9,12 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pypdf
 import pytest
 
 from gyrolab.report import figures as F
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.pdf import write_pdf
-
-pypdf = pytest.importorskip("pypdf")  # a dev dependency (pyproject.toml)
 
 A4_PT = (595.276, 841.890)
 
@@ -89,11 +88,14 @@ def test_table_captions_sit_above_their_rows_and_continue(pdf) -> None:
     assert "a note" in small and "small note" in small
 
 
-def test_figure_page_has_its_number_title_and_caption(pdf) -> None:
+def test_figure_has_its_number_title_and_caption_and_stays_vector(pdf) -> None:
     path, n, _ = pdf
     texts = [p.extract_text() for p in pypdf.PdfReader(path).pages]
-    (fp,) = [t for t in texts if "Figure 1. Comp" in t]
-    assert "Alpha" in fp and "cap" in fp  # the section's heading travels with its figure
+    (k,) = [i for i, t in enumerate(texts) if "Figure 1. Comp" in t]
+    assert "Alpha" in texts[k] and "cap" in texts[k]  # the heading travels with its figure
+    # the figure is drawn as vector paths (its tick labels are text), not pasted as an image
+    page = pypdf.PdfReader(path).pages[k]
+    assert len(page.images) == 0 and "output (°/s)" in texts[k]
 
 
 @pytest.mark.skipif(

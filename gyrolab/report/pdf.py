@@ -4,10 +4,11 @@ Same content as the HTML page, laid out as a document: every page is A4 portrait
 running header (``Document.running_header``: unit serial and run id, and the section) and
 a footer with "page N of M". Text and tables flow down the page; a table's caption is
 drawn above it and kept with its first rows (a table that does not fit starts a new page,
-one longer than a page continues on the next with its header repeated). Each figure gets
-a page of its own, scaled to the page's width (its aspect kept) with its number and title
-above and its caption below: the figure itself is laid out again in that part of an A4
-page (constrained layout's ``rect``), so it stays vector. No browser is needed.
+one longer than a page continues on the next with its header repeated). Figures flow too,
+scaled to the text column's width (aspect kept, at most ``FIG_MAX_H`` of the page high),
+with their number and title above and caption below: each figure is saved as a vector PDF
+at its own size and drawn into its box on the page with pypdf, so it stays vector and its
+layout is the one the HTML shows. No browser is needed.
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ from typing import Any
 
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
-from matplotlib.layout_engine import ConstrainedLayoutEngine
 from matplotlib.patches import Rectangle
 
 from gyrolab.report.document import Document, FigureBlock, TableBlock, TextBlock
@@ -204,9 +204,9 @@ def _text(flow: _Flow, text: str, kind: str) -> None:
     flow.y -= h + 0.008
 
 
-def _heading(flow: _Flow, title: str) -> None:
-    # kept with what follows: at least a few lines of room below it
-    fig = flow.need(0.12)
+def _heading(flow: _Flow, title: str, then: float = 0.05) -> None:
+    """A section title, kept with the first ``then`` of what follows it."""
+    fig = flow.need(0.032 + then)
     fig.text(LEFT, flow.y, title, fontsize=13, color=ACCENT, weight="bold", va="top")
     flow.y -= 0.032
 
@@ -238,61 +238,70 @@ def _title(flow: _Flow, doc: Document) -> None:
     flow.y -= 0.02
 
 
-def _figure_page(block: FigureBlock, number: int, heading: str) -> tuple[Figure, Any]:
-    """Lay ``block.figure`` out on an A4 page; returns the figure and a restore callback.
+FIG_MAX_H = 0.62  # a figure takes at most this share of the page height
 
-    ``heading``: the section's title, drawn first when the section opens with this figure.
-    """
-    fig = block.figure
-    w0, h0 = fig.get_size_inches()
-    engine = fig.get_layout_engine()
-    cap = textwrap.wrap(block.caption, 110) if block.caption else []
-    cap_h = 0.0135 * len(cap) + 0.01
-    head_h = 0.032 if heading else 0.0
-    top = TOP - head_h - 0.035  # below the heading and the figure's number and title
-    width = RIGHT - LEFT + 0.02
+
+def _figure_box(block: FigureBlock) -> tuple[float, float, list[str]]:
+    """(width, height) in page fractions for ``block`` at the column's width (aspect kept,
+    narrowed when taller than ``FIG_MAX_H``) and its caption's lines."""
+    w0, h0 = block.figure.get_size_inches()
+    width = RIGHT - LEFT
     height = width * A4[0] * h0 / w0 / A4[1]
-    max_h = top - BOTTOM - cap_h - 0.01
-    if height > max_h:  # a tall figure: fit the height, narrow it, keep its aspect
-        width *= max_h / height
-        height = max_h
-    x0 = LEFT - 0.01 + (RIGHT - LEFT + 0.02 - width) / 2
-    fig.set_size_inches(*A4)
-    fig.set_layout_engine(ConstrainedLayoutEngine(rect=(x0, top - height, width, height)))
-    added = [
-        fig.text(
-            LEFT,
-            TOP - head_h,
-            f"Figure {number}. {block.title}",
-            fontsize=9.5,
-            weight="bold",
-            va="top",
-        ),
-    ]
-    if heading:
-        added.append(
-            fig.text(LEFT, TOP, heading, fontsize=13, color=ACCENT, weight="bold", va="top")
-        )
+    if height > FIG_MAX_H:
+        width *= FIG_MAX_H / height
+        height = FIG_MAX_H
+    cap = textwrap.wrap(block.caption, 115) if block.caption else []
+    return width, height, cap
+
+
+def _figure_height(block: FigureBlock) -> float:
+    _, height, cap = _figure_box(block)
+    return 0.024 + height + 0.008 + 0.0125 * len(cap)
+
+
+@dataclass
+class _Placement:
+    """Where a figure's own (vector) PDF page is drawn: page index, box in page fractions."""
+
+    page: int
+    block: FigureBlock
+    box: tuple[float, float, float, float]  # x0, y0, width, height
+
+
+def _figure(flow: _Flow, block: FigureBlock, number: int, placements: list[_Placement]) -> None:
+    """Number and title above, a box for the figure, the caption below; the figure itself
+    is merged into the box afterwards (:func:`_merge_figures`), so it stays vector."""
+    width, height, cap = _figure_box(block)
+    fig = flow.need(_figure_height(block))
+    fig.text(LEFT, flow.y, f"Figure {number}. {block.title}", fontsize=9.5, weight="bold", va="top")
+    top = flow.y - 0.024
+    x0 = LEFT + (RIGHT - LEFT - width) / 2
+    placements.append(_Placement(len(flow.pages) - 1, block, (x0, top - height, width, height)))
+    y = top - height - 0.008
     if cap:
-        added.append(
-            fig.text(
-                LEFT,
-                top - height - 0.01,
-                "\n".join(cap),
-                fontsize=7.5,
-                color=MUTED,
-                va="top",
-                linespacing=1.3,
-            )
-        )
+        fig.text(LEFT, y, "\n".join(cap), fontsize=7.5, color=MUTED, va="top", linespacing=1.3)
+    flow.y = y - 0.0125 * len(cap) - 0.02
 
-    def restore() -> None:
-        for a in added:
-            a.remove()
-        fig.set_layout_engine(engine)
-        fig.set_size_inches(w0, h0)
 
-    return fig, restore
+def _merge_figures(pdf_bytes: bytes, placements: list[_Placement], path: Any, title: str) -> None:
+    """Draw each figure (saved as a vector PDF at its own size) into its box."""
+    import io
+
+    from pypdf import PdfReader, PdfWriter, Transformation
+
+    writer = PdfWriter(clone_from=PdfReader(io.BytesIO(pdf_bytes)))
+    pw, ph = (72 * A4[0], 72 * A4[1])
+    for pl in placements:
+        buf = io.BytesIO()
+        pl.block.figure.savefig(buf, format="pdf", metadata={"Creator": None, "Producer": None})
+        src = PdfReader(io.BytesIO(buf.getvalue())).pages[0]
+        x0, y0, w, _h = pl.box
+        scale = w * pw / float(src.mediabox.width)
+        ctm = Transformation().scale(scale, scale).translate(x0 * pw, y0 * ph)
+        writer.pages[pl.page].merge_transformed_page(src, ctm)
+    writer.add_metadata({"/Title": title, "/Creator": "gyrolab"})
+    with open(path, "wb") as fh:
+        writer.write(fh)
 
 
 def _furniture(fig: Figure, doc: Document, section: str, n: int, total: int) -> list[Any]:
@@ -307,46 +316,42 @@ def _furniture(fig: Figure, doc: Document, section: str, n: int, total: int) -> 
     ]
 
 
+def _first_height(block: Any) -> float:
+    """Room the first block of a section needs, so that its heading is not left alone."""
+    if isinstance(block, FigureBlock):
+        return _figure_height(block)
+    if isinstance(block, TableBlock):
+        return 0.03 + ROW_H * (1 + min(3, max(1, len(block.rows))))
+    if isinstance(block, TextBlock):
+        return LINE_H * min(4, len(textwrap.wrap(block.text, 105)) or 1)
+    return 0.05
+
+
 def write_pdf(doc: Document, path: str | os.PathLike[str]) -> int:
     """Write ``doc`` to ``path`` as A4 pages; returns the number of pages."""
+    import io
+
     flow = _Flow(pages=[])
     _title(flow, doc)
-    # Each entry: a finished flow page, or a figure to lay out when it is saved.
-    order: list[tuple[str, Any, str]] = []
+    placements: list[_Placement] = []
     n_fig = n_tab = 0
     for sec in doc.sections:
         flow.section = sec.title
-        opens_with_figure = bool(sec.blocks) and isinstance(sec.blocks[0], FigureBlock)
-        if not opens_with_figure:  # else the heading goes on the figure's page
-            _heading(flow, sec.title)
-        for i, b in enumerate(sec.blocks):
+        _heading(flow, sec.title, _first_height(sec.blocks[0]) if sec.blocks else 0.05)
+        for b in sec.blocks:
             if isinstance(b, FigureBlock):
                 n_fig += 1
-                order.extend(("flow", p, s) for p, s in flow.pages)
-                flow.pages = []
-                heading = sec.title if i == 0 else ""
-                order.append(("figure", (b, n_fig, heading), sec.title))
-                flow.y = BOTTOM  # whatever comes next starts a new page
+                _figure(flow, b, n_fig, placements)
             elif isinstance(b, TableBlock):
                 n_tab += 1
                 _table(flow, b, n_tab)
             elif isinstance(b, TextBlock):
                 _text(flow, b.text, b.kind)
-    order.extend(("flow", p, s) for p, s in flow.pages)
-    total = len(order)
-    with PdfPages(path, metadata={"Title": doc.title, "Creator": "gyrolab"}) as pdf:
-        for n, (kind, item, section) in enumerate(order, start=1):
-            if kind == "flow":
-                _furniture(item, doc, section, n, total)
-                pdf.savefig(item)
-                continue
-            block, number, heading = item
-            fig, restore = _figure_page(block, number, heading)
-            extra = _furniture(fig, doc, section, n, total)
-            try:
-                pdf.savefig(fig)
-            finally:
-                for a in extra:
-                    a.remove()
-                restore()
+    total = len(flow.pages)
+    buf = io.BytesIO()
+    with PdfPages(buf) as pdf:
+        for n, (page, section) in enumerate(flow.pages, start=1):
+            _furniture(page, doc, section, n, total)
+            pdf.savefig(page)
+    _merge_figures(buf.getvalue(), placements, path, doc.title)
     return total
