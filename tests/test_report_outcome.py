@@ -198,3 +198,25 @@ def test_report_outcome_from_events_without_a_log(tmp_path: Path) -> None:
     assert [r[3] for r in rows] == ["abort", "fault"] and counts["fault"] == 1
     doc, _ = build_report(path)
     assert dict(doc.summary)["run outcome"] == o.line
+
+
+def test_a_stopped_stream_counts_as_a_gap_in_the_header(tmp_path: Path) -> None:
+    """The acquisition logs a stream that stopped as a gap to the end of the run (no jump
+    in the sample index shows it): the header's samples line counts it."""
+    import numpy as np
+
+    from gyrolab.recording import RecordingWriter
+    from gyrolab.report.outcome import run_coverage
+
+    path = tmp_path / "stopped.mcap"
+    with RecordingWriter(path, start_time_ns=0, run={"source": "acquire"}) as w:
+        w.write_rate_block(0.0, 0.1, 0, np.zeros(600))  # 60 s, then nothing until 120 s
+        w.write_log(
+            120.0, "warning", "adc", "ADC gap: stream stopped", "gap",
+            {"first_missing_index": 600, "n_missing": 600, "t_first_missing": 60.0,
+             "t_end": 120.0, "cause": "stream stopped"},
+        )  # fmt: skip
+        w.write_event(120.0, "aborted", 0, 25.0, "lost communication with adc")
+    cov = run_coverage(read_recording(path))
+    assert (cov.gaps, cov.samples_missing, cov.gap_s) == (1, 600, pytest.approx(60.0))
+    assert "1 gap(s), 600 samples missing (60.0 s)" in cov.samples_line()

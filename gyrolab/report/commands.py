@@ -44,7 +44,7 @@ def write_report(
     from gyrolab.report.html import render
     from gyrolab.report.pdf import write_pdf
 
-    check_output(out, force, inputs=(run, model), kind="dir")
+    check_output(out, force, inputs=(run, model, spec), kind="dir")
     stages = [s for s in STAGES if model is not None or s not in ("load model", "apply model")]
     bar = progress(total=len(stages), desc="report", unit="stage")
     if not show_progress:
@@ -60,7 +60,7 @@ def write_report(
             run, model, step=step, spec=spec, operator=operator, serial=serial
         )
         step("write")
-        with atomic_dir(out, force, command="report", inputs=(run, model)) as tmp:
+        with atomic_dir(out, force, command="report", inputs=(run, model, spec)) as tmp:
             (tmp / "index.html").write_text(render(doc), encoding="utf-8")
             (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
             write_pdf(doc, tmp / "report.pdf")

@@ -177,6 +177,14 @@ def run_coverage(rec: Recording) -> Coverage:
         in_run = np.ones(rec.oven_pv_c.size, dtype=bool)
     gaps = rate.gaps()
     missing = sum(n for _, n in gaps)
+    n_gaps = len(gaps)
+    # A stream that stopped (or never started) leaves no jump in the sample index: the
+    # acquisition logs it as a gap up to the end of the run (data.t_end); count those too.
+    for m in rec.logs:
+        d = m.get("data")
+        if m.get("kind") == "gap" and isinstance(d, dict) and "t_end" in d:
+            n_gaps += 1
+            missing += int(d.get("n_missing", 0))
     return Coverage(
         profile_c=(min(sps), max(sps)) if sps else None,
         chamber_c=_range(rec.oven_pv_c[in_run]),
@@ -184,7 +192,7 @@ def run_coverage(rec: Recording) -> Coverage:
         samples=int(rate.t.size),
         rate_hz=float(rate.rate_hz),
         duration_s=float(rate.t[-1] - rate.t[0] + rate.period),
-        gaps=len(gaps),
+        gaps=n_gaps,
         samples_missing=int(missing),
         gap_s=float(missing * rate.period),
     )
