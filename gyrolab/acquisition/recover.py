@@ -127,7 +127,7 @@ class RecoveryReport:
             lines.append(f"  {topic}: kept {self.messages.get(topic, 0)} messages{when}")
             lo = self.lost.get(topic)
             if lo and lo.get("messages"):
-                what = f"{lo['messages']} messages"
+                what = f"{lo['messages']} message(s)"
                 if "samples" in lo:
                     what += f" = {lo['samples']} samples ({lo['seconds']:.3f} s)"
                 spans = ", ".join(f"t={a:.3f}–{b:.3f} s" for a, b in lo.get("spans_s", []))
