@@ -272,17 +272,27 @@ _TABLE3 = ((6.0, 4.0), (15.23, 12.0), (47.8, 40.0))
 _JMAX = 100
 
 
-def edf_greenhall(alpha: int, m: int, n_phase: int, overlapping: bool = True, d: int = 2) -> float:
+def edf_greenhall(
+    alpha: int,
+    m: int,
+    n_phase: int,
+    overlapping: bool = True,
+    d: int = 2,
+    modified: bool = False,
+) -> float:
     """Equivalent degrees of freedom of an (overlapping) Allan-type variance estimate.
 
-    Greenhall & Riley (PTTI 2003) algorithm for unmodified variances (F = m), stride
-    S = m (overlapping) or 1, ``d = 2`` for the Allan variance. ``alpha`` is the power-law
-    exponent of the rate PSD (2 white phase ... -2 random-walk rate); ``n_phase`` is the
-    number of phase points. Requires alpha + 2 d > 1.
+    Greenhall & Riley (PTTI 2003) algorithm: unmodified variances (F = m) or, with
+    ``modified``, modified ones (F = 1: MVAR/TVAR; their table 1), stride S = m
+    (overlapping) or 1, ``d = 2`` for the Allan variance, 3 for the Hadamard variance.
+    ``alpha`` is the power-law exponent of the rate PSD (2 white phase ... -2 random-walk
+    rate); ``n_phase`` is the number of phase points. Requires alpha + 2 d > 1.
     """
     alpha = int(alpha)
     if alpha + 2 * d <= 1:
         raise ValueError(f"alpha={alpha} too low for d={d}: variance does not converge")
+    if modified:
+        return _edf_greenhall_modified(alpha, m, n_phase, overlapping, d)
     f = float(m)
     s = float(m) if overlapping else 1.0
     length = m / f + m * d
@@ -322,6 +332,38 @@ def edf_greenhall(alpha: int, m: int, n_phase: int, overlapping: bool = True, d:
         else:
             # very few terms: evaluate the exact basic sum (eq. 13) instead of the closed form
             inv = _basic_sum(j, mm, s, f, 2, d) / (_sz(0.0, f, 2, d) ** 2 * mm)
+    return 1.0 / inv
+
+
+# Greenhall & Riley 2003 table 1 (a0, a1) for modified variances (F = 1), alpha = 2..-4.
+_TABLE1: dict[int, tuple[tuple[float, float] | None, ...]] = {
+    2: ((2 / 3, 1 / 3), (7 / 9, 1 / 2), (22 / 25, 2 / 3)),
+    1: ((0.840, 0.345), (0.997, 0.616), (1.141, 0.843)),
+    0: ((1.079, 0.368), (1.033, 0.607), (1.184, 0.848)),
+    -1: (None, (1.048, 0.534), (1.180, 0.816)),
+    -2: (None, (1.302, 0.535), (1.175, 0.777)),
+    -3: (None, None, (1.194, 0.703)),
+    -4: (None, None, (1.489, 0.702)),
+}
+
+
+def _edf_greenhall_modified(alpha: int, m: int, n_phase: int, overlapping: bool, d: int) -> float:
+    # Greenhall & Riley 2003, case 1 (F = 1): the same basic sum with a one-point filter
+    s = float(m) if overlapping else 1.0
+    mm = 1.0 + math.floor(s * (n_phase - (m + m * d)) / m)  # filter length L = m/F + m d
+    if mm < 1:
+        return float("nan")
+    j = int(min(mm, (d + 1) * s))
+    r = mm / s
+    if j <= _JMAX:
+        inv = _basic_sum(j, mm, s, 1.0, alpha, d) / (_sz(0.0, 1.0, alpha, d) ** 2 * mm)
+    elif r > d + 1:
+        a0, a1 = _TABLE1[alpha][d - 1]  # type: ignore[misc]
+        inv = (a0 - a1 / r) / r
+    else:
+        inv = _basic_sum(_JMAX, _JMAX, _JMAX / r, 1.0, alpha, d) / (
+            _sz(0.0, 1.0, alpha, d) ** 2 * _JMAX
+        )
     return 1.0 / inv
 
 

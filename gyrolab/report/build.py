@@ -518,6 +518,10 @@ def build_report(
     step("allan")
     doc.sections.append(_performance_section(metrics, xb, block_s, app, model, rate))
 
+    # 3b. noise per temperature plateau (raw rate of each soaked step)
+    step("plateau noise")
+    doc.sections.append(plateau_noise_section(rec))
+
     # 4. run log and bench identity
     doc.sections.append(_log_section(rec))
     doc.sections.append(_identity_section(rec, model))
@@ -758,6 +762,71 @@ def _performance_section(
             "applied the same way (no noise removal): the like-for-like comparison."
         )
         sec.blocks.append(bt)
+    return sec
+
+
+def plateau_noise_section(rec: Recording) -> Section:
+    """ARW and bias instability at each soaked step, a table and a figure vs temperature."""
+    from matplotlib.figure import Figure
+
+    from gyrolab.compensation.plateau_noise import plateau_noise
+
+    sec = Section("plateau-noise", "Noise per temperature plateau")
+    rows = plateau_noise(rec)
+    if not rows:
+        sec.blocks.append(TextBlock("No soaked step with PT100 data in this recording.", "note"))
+        return sec
+    sec.blocks.append(
+        TextBlock(
+            "For each profile step (step_started … step_ended on /profile/event), the soaked "
+            "segment is the tail in which the PT100 stays within ±0.5 °C of its final value. "
+            "On its raw rate samples (gaps left out, never interpolated): overlapping Allan "
+            "deviation, ARW = 60 N read at τ = 1 s on the −½ slope, bias instability "
+            "B = σ_min/0.664 (IEEE 952), B's interval from the curve's one-sigma bounds at τ_B "
+            "(Greenhall–Riley EDF). docs/allan.md has the definitions."
+        )
+    )
+    sec.blocks.append(
+        TableBlock(
+            "plateau-noise",
+            "Noise terms per soaked step",
+            ["step", "setpoint (°C)", "PT100 mean (°C)", "PT100 span (°C)", "segment",
+             "samples", "missing", "ARW (°/√h)", "bias instability (°/h)", "B 68 % interval",
+             "τ_B (s)"],
+            [
+                [str(p.step + 1), fmt(p.setpoint_c), fmt(p.temperature_c),
+                 fmt(p.temperature_span_c, 2), f"{hms(p.t_start)}–{hms(p.t_end)}",
+                 str(p.n_samples), str(p.missing), fmt(p.arw_deg_per_sqrt_h),
+                 fmt(p.bias_instability_deg_per_h),
+                 f"{fmt(p.bi_lo_deg_per_h, 3)}–{fmt(p.bi_hi_deg_per_h, 3)}", fmt(p.tau_b_s)]
+                for p in rows
+            ],
+        )
+    )
+    fig = Figure(figsize=(8.0, 3.2), layout="constrained")
+    ax1, ax2 = fig.subplots(1, 2)
+    tc = np.array([p.temperature_c for p in rows])
+    ax1.plot(tc, [p.arw_deg_per_sqrt_h for p in rows], "o", color="#1f77b4")
+    ax1.set_xlabel("PT100 (°C)")
+    ax1.set_ylabel("ARW (°/√h)")
+    b = np.array([p.bias_instability_deg_per_h for p in rows])
+    err = np.array(
+        [b - [p.bi_lo_deg_per_h for p in rows], [p.bi_hi_deg_per_h for p in rows] - b]
+    )
+    ax2.errorbar(tc, b, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", color="#d62728")
+    ax2.set_xlabel("PT100 (°C)")
+    ax2.set_ylabel("bias instability (°/h)")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+    sec.blocks.append(
+        FigureBlock(
+            "plateau-noise",
+            "Noise against temperature",
+            fig,
+            "One point per soaked step, at the step's mean PT100 temperature; bars: B's 68 % "
+            "interval.",
+        )
+    )
     return sec
 
 
