@@ -35,7 +35,23 @@ TOPIC_PT100 = "/temperature/pt100"
 TOPIC_OVEN = "/oven/state"
 TOPIC_EVENT = "/profile/event"
 TOPIC_LOG = "/log"
-ALL_TOPICS = (TOPIC_ADC, TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN, TOPIC_EVENT, TOPIC_LOG)
+# Viewer-friendly mirrors (Foxglove/Lichtblick panels): block statistics with a header stamp,
+# and /log as foxglove.Log for the Log panel. Additive: readers of the topics above ignore them.
+TOPIC_RATE_SUMMARY = "/gyro/rate_summary"
+TOPIC_LOG_FOXGLOVE = "/log/foxglove"
+ALL_TOPICS = (
+    TOPIC_ADC,
+    TOPIC_RATE,
+    TOPIC_PT100,
+    TOPIC_OVEN,
+    TOPIC_EVENT,
+    TOPIC_LOG,
+    TOPIC_RATE_SUMMARY,
+    TOPIC_LOG_FOXGLOVE,
+)
+#: gyrolab /log level -> foxglove.LogLevel (UNKNOWN 0, DEBUG 1, INFO 2, WARNING 3, ERROR 4,
+#: FATAL 5; @foxglove/schemas 2.1 jsonschema Log)
+FOXGLOVE_LOG_LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fault": 5}
 
 FORMAT_VERSION = "1"
 PROFILE = "gyrolab"  # MCAP header profile
@@ -98,6 +114,73 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
             "data": {"type": "object"},
         },
         "required": ["t", "level", "source", "message"],
+    },
+    TOPIC_RATE_SUMMARY: {
+        "title": "gyrolab.RateSummary",
+        "type": "object",
+        "properties": {
+            "header": {
+                "type": "object",
+                "description": "stamp: Unix time of the block's middle sample (sec, nsec)",
+                "properties": {
+                    "stamp": {
+                        "type": "object",
+                        "properties": {
+                            "sec": {"type": "integer", "minimum": 0},
+                            "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+                        },
+                    },
+                    "frame_id": {"type": "string"},
+                },
+            },
+            "t": {"type": "number", "description": "s since run start, the block's middle"},
+            "t0": {"type": "number", "description": "s since run start, first sample"},
+            "first_index": {"type": "integer", "description": "index of the first sample"},
+            "n": {"type": "integer", "description": "samples in the block"},
+            "mean_dps": {"type": "number", "description": "mean angular rate, °/s"},
+            "min_dps": {"type": "number", "description": "°/s"},
+            "max_dps": {"type": "number", "description": "°/s"},
+        },
+        "required": ["header", "t", "t0", "first_index", "n", "mean_dps", "min_dps", "max_dps"],
+    },
+    # foxglove.Log exactly as @foxglove/schemas 2.1.0 (jsonschema) defines it
+    TOPIC_LOG_FOXGLOVE: {
+        "title": "foxglove.Log",
+        "description": "A log message",
+        "type": "object",
+        "properties": {
+            "timestamp": {
+                "type": "object",
+                "title": "time",
+                "properties": {
+                    "sec": {"type": "integer", "minimum": 0},
+                    "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+                },
+                "description": "Timestamp of log message",
+            },
+            "level": {
+                "title": "foxglove.LogLevel",
+                "description": "Log level",
+                "oneOf": [
+                    {"title": name, "const": i, "description": f"{desc} log level"}
+                    for i, (name, desc) in enumerate(
+                        (
+                            ("UNKNOWN", "Unknown"),
+                            ("DEBUG", "Debug"),
+                            ("INFO", "Info"),
+                            ("WARNING", "Warning"),
+                            ("ERROR", "Error"),
+                            ("FATAL", "Fatal"),
+                        )
+                    )
+                ],
+            },
+            "message": {"type": "string", "description": "Log message"},
+            "name": {"type": "string", "description": "Process or node name"},
+            "file": {"type": "string", "description": "Filename"},
+            "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
+        },
+        "required": ["timestamp", "level", "message", "name", "file", "line"],
     },
 }
 
@@ -342,8 +425,14 @@ class RecordingWriter:
             return True
         return False
 
-    def _json(self, topic: str, msg: Mapping[str, Any]) -> None:
-        self._put(topic, float(msg["t"]), json.dumps(msg, separators=(",", ":")).encode())
+    def _json(self, topic: str, msg: Mapping[str, Any], t: float | None = None) -> None:
+        t = float(msg["t"]) if t is None else t
+        self._put(topic, t, json.dumps(msg, separators=(",", ":")).encode())
+
+    def stamp(self, t: float) -> dict[str, int]:
+        """``{sec, nsec}`` Unix time of run time ``t`` (the viewers' time type)."""
+        ns = self.start_time_ns + int(round(t * 1e9))
+        return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
     def flush(self) -> None:
         """Close the open chunk and push it to the OS (and to disk when ``fsync``)."""
@@ -375,6 +464,20 @@ class RecordingWriter:
         self, t0: float, period: float, first_index: int, rate_dps: np.ndarray
     ) -> None:
         self._put(TOPIC_RATE, t0, encode_block(t0, period, first_index, rate_dps, "rate"))
+        r = np.asarray(rate_dps, dtype=np.float32).astype(np.float64)  # what the block holds
+        if r.size:
+            tm = t0 + 0.5 * (r.size - 1) * period
+            summary = {
+                "header": {"stamp": self.stamp(tm), "frame_id": "gyro"},
+                "t": tm,
+                "t0": t0,
+                "first_index": int(first_index),
+                "n": int(r.size),
+                "mean_dps": float(r.mean()),
+                "min_dps": float(r.min()),
+                "max_dps": float(r.max()),
+            }
+            self._json(TOPIC_RATE_SUMMARY, summary, t0)  # log time = the block's, like /gyro/rate
 
     def write_pt100(self, t: float, resistance_ohm: float, temperature_c: float) -> None:
         self._json(
@@ -425,6 +528,15 @@ class RecordingWriter:
         if data:
             msg["data"] = dict(data)
         self._json(TOPIC_LOG, msg)
+        fox = {
+            "timestamp": self.stamp(t),
+            "level": FOXGLOVE_LOG_LEVEL.get(level, 0),
+            "message": f"[{kind}] {message}" if kind else message,
+            "name": source,
+            "file": "",
+            "line": 0,
+        }
+        self._json(TOPIC_LOG_FOXGLOVE, fox, t)
 
     def close(self) -> None:
         if self._closed:

@@ -146,8 +146,13 @@ def test_damaged_chunk_is_skipped_and_reported_later_ones_kept(tmp_path: Path) -
     _write_run(src, 20.0)
     data = bytearray(src.read_bytes())
     full_rep, _ = scan(src)
-    # Flip a byte in the middle of the file (inside some chunk's compressed data).
-    mid = len(data) // 2
+    # Flip a byte inside the compressed data of the middle chunk (from the chunk index).
+    from mcap.reader import make_reader
+
+    with open(src, "rb") as fh:
+        chunks = make_reader(fh).get_summary().chunk_indexes
+    ci = chunks[len(chunks) // 2]
+    mid = ci.chunk_start_offset + ci.chunk_length // 2
     data[mid] ^= 0xFF
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(bytes(data))
