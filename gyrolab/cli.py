@@ -86,6 +86,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="--bench sim only: inject faults into the simulated bench (docs/instruments.md)",
     )
     a.add_argument("--force", action="store_true", help="overwrite an existing output")
+    a.add_argument(
+        "--live",
+        type=int,
+        nargs="?",
+        const=8765,
+        default=None,
+        metavar="PORT",
+        help="serve the run to Foxglove over WebSocket (default port 8765; 0: any free port)",
+    )
+    a.add_argument(
+        "--live-host",
+        default="127.0.0.1",
+        metavar="ADDR",
+        help="interface for --live (default 127.0.0.1; 0.0.0.0 exposes it to the network)",
+    )
 
     c = cmd("compensate", "fit the temperature-compensation model on a calibration run")
     c.add_argument("run", metavar="RUN.mcap")

@@ -20,7 +20,7 @@ import json
 import os
 import struct
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -386,6 +386,10 @@ class RecordingWriter:
         self._seq: dict[str, int] = {}
         self._chan: dict[str, int] = {}
         self._closed = False
+        #: ``tap(topic, log_time_ns, data)`` sees every message after it is recorded (the
+        #: live view, gyrolab/acquisition/live.py); must not block. Its errors are ignored:
+        #: a viewer never endangers the recording.
+        self.tap: Callable[[str, int, bytes], None] | None = None
         fds = _file_descriptor_set()
         adc_schema = self._w.register_schema(ADC_MESSAGE, "protobuf", fds)
         rate_schema = self._w.register_schema(RATE_MESSAGE, "protobuf", fds)
@@ -411,6 +415,11 @@ class RecordingWriter:
         self._w.add_message(
             self._chan[topic], log_time=ts, data=data, publish_time=ts, sequence=seq
         )
+        if self.tap is not None:
+            try:
+                self.tap(topic, ts, data)
+            except Exception:  # noqa: BLE001 - the recording comes first
+                pass
         if self.flush_every_s is not None and t - self._last_flush_t >= self.flush_every_s:
             self.flush()
             self._last_flush_t = t

@@ -498,8 +498,11 @@ def run_acquisition(
     on_status: Callable[[Status], None] | None = None,
     on_samples: Callable[[float], None] | None = None,
     acquisition_hook: Callable[[Acquisition], None] | None = None,
+    live: Any = None,
 ) -> RunResult:
-    """Connect, record one run to ``out`` and end cleanly; returns how it ended."""
+    """Connect, record one run to ``out`` and end cleanly; returns how it ended.
+
+    ``live``: a :class:`~gyrolab.acquisition.live.LiveServer` fed every recorded message."""
     check_profile_limits(profile, cfg.limits, str(cfg.run.profile))
     check_output(out, force)
     if sim is not None:
@@ -552,6 +555,8 @@ def run_acquisition(
                 flush_every_s=r.flush_every_s,
                 fsync_every_s=r.fsync_every_s,
             )
+            if live is not None:
+                live.attach(writer)
             try:
                 if sim is not None and sim.provenance:
                     writer.write_metadata("sim_provenance", sim.provenance)
@@ -637,6 +642,13 @@ def acquire(args: argparse.Namespace) -> int:
                 sim.provenance["fault_injection"] = plan_to_dict(faults)
         speed_note = "" if sim is None else f" ×{args.speed or 'max'}"
         show, bar = _progress(profile, speed_note)
+        live = None
+        if getattr(args, "live", None) is not None:
+            from gyrolab.acquisition.live import LiveServer
+
+            live = LiveServer(port=args.live, host=args.live_host)
+            print(f"live view: {live.url} (Foxglove: Open connection)", file=sys.stderr)
+            show = live.status_hook(show)
         t0 = time.monotonic()
         try:
             result = run_acquisition(
@@ -649,9 +661,16 @@ def acquire(args: argparse.Namespace) -> int:
                 speed=args.speed,
                 on_status=show,
                 on_samples=_trace_writer(),
+                live=live,
             )
         finally:
             bar.close()
+            if live is not None:
+                live.close()
+                print(
+                    f"live view: {live.published} messages published, {live.dropped} dropped",
+                    file=sys.stderr,
+                )
             if sim is not None:
                 sim.stop()
             sys.setswitchinterval(old_switch)
