@@ -225,3 +225,40 @@ def test_acquire_live_at_300x_with_a_client(tmp_path: Path) -> None:
     disk = {ts: d for tp, ts, d in iter_messages(out, [TOPIC_RATE_SUMMARY])}
     live_summ = [(ts, d) for tp, ts, d in c.received if tp == TOPIC_RATE_SUMMARY]
     assert live_summ and all(disk[ts] == d for ts, d in live_summ)
+
+
+def _leaf_panels(node: object) -> list[str]:
+    if isinstance(node, str):
+        return [node]
+    assert isinstance(node, dict)
+    return _leaf_panels(node["first"]) + _leaf_panels(node["second"])
+
+
+def test_shipped_layout_names_topics_and_fields_that_exist() -> None:
+    """Every panel of docs/foxglove/gyrolab-layout.json reads a topic and field that the
+    recording or the live server publishes (schema properties), and every panel is placed."""
+    from gyrolab.acquisition.live import LIVE_STATUS_SCHEMA
+    from gyrolab.recording import JSON_SCHEMAS
+
+    layout = json.loads(
+        (
+            Path(__file__).resolve().parents[1] / "docs" / "foxglove" / "gyrolab-layout.json"
+        ).read_text(encoding="utf-8")
+    )
+    schemas = {**JSON_SCHEMAS, TOPIC_LIVE_STATUS: LIVE_STATUS_SCHEMA}
+    cfg = layout["configById"]
+    assert sorted(_leaf_panels(layout["layout"])) == sorted(cfg)
+    seen = set()
+    for panel, c in cfg.items():
+        for p in c.get("paths", []):
+            topic, fld = p["value"].split(".", 1)
+            assert fld.split(".")[0] in schemas[topic]["properties"], p["value"]
+            if p["timestampMethod"] == "headerStamp":
+                assert "header" in schemas[topic]["properties"]
+            seen.add(topic)
+        for key in ("topicPath", "topicToRender"):
+            if key in c:
+                assert c[key] in schemas, (panel, c[key])
+                seen.add(c[key])
+    assert schemas[TOPIC_LOG_FOXGLOVE]["title"] == "foxglove.Log"  # what the RosOut panel takes
+    assert {TOPIC_RATE_SUMMARY, TOPIC_PT100, TOPIC_LOG_FOXGLOVE, TOPIC_LIVE_STATUS} <= seen
