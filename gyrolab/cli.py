@@ -28,6 +28,7 @@ HANDLERS: dict[str, str] = {
     "discrepancy": "gyrolab.sim.discrepancy.commands:discrepancy",
     "recover": "gyrolab.acquisition.commands:recover",
     "demo": "gyrolab.report.demo:demo",
+    "convert": "gyrolab.convert:convert",
 }
 
 
@@ -134,6 +135,12 @@ def build_parser() -> argparse.ArgumentParser:
     rc.add_argument("broken", metavar="BROKEN.mcap")
     rc.add_argument("--out", required=True, help="output FIXED.mcap")
     rc.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    cv = cmd("convert", "export a recording to CSV, HDF5, Parquet or NetCDF")
+    cv.add_argument("run", metavar="RUN.mcap")
+    cv.add_argument("--to", required=True, choices=["csv", "hdf5", "parquet", "netcdf"])
+    cv.add_argument("--out", required=True, help="output FILE")
+    cv.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
     dm.add_argument("--out", required=True, help="output DIR")

@@ -1,0 +1,447 @@
+"""``gyrolab convert RUN.mcap --to csv|hdf5|parquet|netcdf --out FILE``: export a recording.
+
+The sample table is the same in every format, one row per gyro sample (docs/convert.md):
+
+    index        sample index since the run's start (a jump is a gap; nothing is filled in)
+    t_s          s since the run's start
+    rate_dps     angular rate, °/s (float32, as recorded)
+    adc_counts   raw 24-bit ADC code (int32; only when the recording has /gyro/adc)
+    pt100_c      PT100 temperature, °C: the last reading at or before t_s (NaN before the
+                 first); held, never interpolated
+    setpoint_c   oven setpoint, °C: the last /oven/state at or before t_s (NaN before)
+
+HDF5 and NetCDF also hold the low-rate tables as they were recorded (``pt100``: t_s,
+resistance_ohm, temperature_c; ``oven``: t_s, setpoint_c, process_value_c, mode) and every
+format carries the run's metadata records, profile events and log (JSON text in
+attributes / key-value metadata / ``#`` header lines of the CSV), units on every column.
+
+Streaming: the recording is read message by message in log-time order and the table is
+written block by block (one block of samples is held until the next arrives, so that the
+readings taken during it are known): memory is bounded by a block, the low-rate readings
+and the row-group buffer (``ROWS_PER_WRITE``), not by the run's length. Outputs are
+atomic (temporary sibling, renamed at the end) and never the input file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrolab.errors import GyrolabError, InputError
+from gyrolab.outputs import atomic_file, check_output
+from gyrolab.progress import progress
+from gyrolab.recording import (
+    TOPIC_ADC,
+    TOPIC_EVENT,
+    TOPIC_LOG,
+    TOPIC_OVEN,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    decode_block,
+    iter_messages,
+    read_metadata,
+)
+
+FORMATS = ("csv", "hdf5", "parquet", "netcdf")
+#: rows buffered before one write (a Parquet row group, an HDF5/NetCDF append)
+ROWS_PER_WRITE = 1 << 16
+ADC_FILL = np.iinfo(np.int32).min  # adc_counts of a sample whose ADC block is missing
+
+COLUMNS: dict[str, tuple[str, str, str]] = {
+    # name: (dtype, unit, description)
+    "index": ("int64", "1", "sample index since run start; a jump is a gap"),
+    "t_s": ("float64", "s", "time since run start"),
+    "rate_dps": ("float32", "deg/s", "angular rate"),
+    "adc_counts": ("int32", "count", "raw 24-bit ADC code, sign-extended"),
+    "pt100_c": ("float64", "degC", "PT100 temperature, last reading at or before t_s"),
+    "setpoint_c": ("float64", "degC", "oven setpoint, last state at or before t_s"),
+}
+LOW_RATE: dict[str, dict[str, tuple[str, str]]] = {
+    "pt100": {
+        "t_s": ("s", "time since run start"),
+        "resistance_ohm": ("ohm", "4-wire resistance"),
+        "temperature_c": ("degC", "IEC 60751 temperature"),
+    },
+    "oven": {
+        "t_s": ("s", "time since run start"),
+        "setpoint_c": ("degC", "commanded setpoint"),
+        "process_value_c": ("degC", "chamber air"),
+    },
+}
+_LIBS = {"hdf5": "h5py", "parquet": "pyarrow", "netcdf": "netCDF4"}
+
+
+@dataclass
+class RunTables:
+    """What a conversion carries besides the sample table (all small)."""
+
+    metadata: dict[str, dict[str, Any]]
+    has_adc: bool
+    start_time_ns: int
+    pt100: list[tuple[float, float, float]] = field(default_factory=list)
+    oven: list[tuple[float, float, float, str]] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    logs: list[dict[str, Any]] = field(default_factory=list)
+    gaps: int = 0
+
+
+def _summary(path: Path) -> dict[str, int]:
+    """Message count per topic, from the summary section."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        try:
+            s = make_reader(fh).get_summary()
+        except Exception as e:
+            raise InputError(path, f"damaged MCAP ({e}); try `gyrolab recover`") from None
+    if s is None or s.statistics is None:
+        raise InputError(path, "MCAP without a summary section; try `gyrolab recover`")
+    topics = {c.id: c.topic for c in s.channels.values()}
+    counts = {topics[c]: int(n) for c, n in s.statistics.channel_message_counts.items()}
+    return counts
+
+
+def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.ndarray]]:
+    """The sample table, block by block (columns of :data:`COLUMNS`); fills ``tables``."""
+    pending: list[tuple[float, float, int, np.ndarray]] = []
+    adc: dict[int, np.ndarray] = {}
+    pt_t: list[float] = []
+    pt_c: list[float] = []
+    ov_t: list[float] = []
+    ov_sp: list[float] = []
+    last_pt = (np.nan, np.nan)  # (t, value) of the last reading before the pending blocks
+    last_ov = (np.nan, np.nan)
+    next_index: int | None = None
+
+    def held(t: np.ndarray, rt: list[float], rv: list[float], last: tuple[float, float]):
+        # last reading at or before each t: the readings since the last emitted block, with
+        # the one before them in front
+        first = [last] if np.isfinite(last[0]) else []
+        tt = np.asarray([r[0] for r in first] + rt, dtype=float)
+        vv = np.asarray([r[1] for r in first] + rv, dtype=float)
+        if tt.size == 0:
+            return np.full(t.size, np.nan)
+        k = np.searchsorted(tt, t, side="right") - 1
+        out = vv[np.maximum(k, 0)]
+        out[k < 0] = np.nan
+        return out
+
+    def emit() -> Iterator[dict[str, np.ndarray]]:
+        nonlocal last_pt, last_ov, next_index
+        for t0, period, first, rate in pending:
+            n = rate.size
+            t = t0 + np.arange(n) * period
+            cols: dict[str, np.ndarray] = {
+                "index": first + np.arange(n, dtype=np.int64),
+                "t_s": t,
+                "rate_dps": rate.astype(np.float32),
+            }
+            if tables.has_adc:
+                a = adc.pop(first, None)
+                cols["adc_counts"] = (
+                    a.astype(np.int32)
+                    if a is not None and a.size == n
+                    else np.full(n, ADC_FILL, np.int32)
+                )
+            cols["pt100_c"] = held(t, pt_t, pt_c, last_pt)
+            cols["setpoint_c"] = held(t, ov_t, ov_sp, last_ov)
+            if next_index is not None and first != next_index:
+                tables.gaps += 1
+            next_index = first + n
+            yield cols
+        pending.clear()
+        # keep only the last reading at or before the end of what was emitted
+        if pt_t:
+            last_pt = (pt_t[-1], pt_c[-1])
+            pt_t.clear()
+            pt_c.clear()
+        if ov_t:
+            last_ov = (ov_t[-1], ov_sp[-1])
+            ov_t.clear()
+            ov_sp.clear()
+
+    topics = [TOPIC_RATE, TOPIC_ADC, TOPIC_PT100, TOPIC_OVEN, TOPIC_EVENT, TOPIC_LOG]
+    for topic, _ts, data in iter_messages(path, topics):
+        if topic == TOPIC_RATE:
+            blk = decode_block(data, "rate")
+            if pending and blk[0] > pending[-1][0]:
+                # every reading logged before this block's start is known: emit the rest,
+                # keeping readings that fall after the emitted blocks' start for later
+                yield from emit()
+            pending.append((blk[0], blk[1], blk[2], blk[3].copy()))
+        elif topic == TOPIC_ADC:
+            _t0, _p, first, counts = decode_block(data, "adc")
+            adc[first] = counts.copy()
+        else:
+            msg = json.loads(data)
+            if topic == TOPIC_PT100:
+                tables.pt100.append((msg["t"], msg["resistance_ohm"], msg["temperature_c"]))
+                pt_t.append(float(msg["t"]))
+                pt_c.append(float(msg["temperature_c"]))
+            elif topic == TOPIC_OVEN:
+                tables.oven.append(
+                    (msg["t"], msg["setpoint_c"], msg["process_value_c"], msg["mode"])
+                )
+                ov_t.append(float(msg["t"]))
+                ov_sp.append(float(msg["setpoint_c"]))
+            elif topic == TOPIC_EVENT:
+                tables.events.append(msg)
+            else:
+                tables.logs.append(msg)
+    yield from emit()
+
+
+def _batched(blocks: Iterator[dict[str, np.ndarray]], rows: int) -> Iterator[dict[str, np.ndarray]]:
+    buf: list[dict[str, np.ndarray]] = []
+    n = 0
+    for b in blocks:
+        buf.append(b)
+        n += b["t_s"].size
+        if n >= rows:
+            yield {k: np.concatenate([x[k] for x in buf]) for k in buf[0]}
+            buf, n = [], 0
+    if buf:
+        yield {k: np.concatenate([x[k] for x in buf]) for k in buf[0]}
+
+
+def _attrs(tables: RunTables, src: Path) -> dict[str, str]:
+    """File-level attributes: all JSON text (string maps are what every format stores)."""
+    return {
+        "gyrolab_source": str(src.name),
+        "gyrolab_start_time_ns": str(tables.start_time_ns),
+        "gyrolab_metadata": json.dumps(tables.metadata, sort_keys=True, default=str),
+        "gyrolab_columns": json.dumps(
+            {k: {"unit": u, "description": d} for k, (_t, u, d) in COLUMNS.items()}
+        ),
+    }
+
+
+def _tail_attrs(tables: RunTables) -> dict[str, str]:
+    """Attributes known only at the end: events, log and the gap count."""
+    return {
+        "gyrolab_events": json.dumps(tables.events, default=str),
+        "gyrolab_log": json.dumps(tables.logs, default=str),
+        "gyrolab_gaps": str(tables.gaps),
+    }
+
+
+# ---------------------------------------------------------------------------- writers
+
+
+def _write_csv(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) -> int:
+    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    n = 0
+    with open(tmp, "w", encoding="utf-8", newline="") as fh:
+        for k, v in _attrs(tables, src).items():
+            fh.write(f"# {k}: {v}\n")
+        for k in names:
+            _t, u, d = COLUMNS[k]
+            fh.write(f"# column {k}: {u}; {d}\n")
+        fh.write(",".join(names) + "\n")
+        out = csv.writer(fh, lineterminator="\n")
+        for b in _batched(blocks, ROWS_PER_WRITE):
+            # Python's float repr is the shortest string that reads back to the same float64
+            # (float32 rates widened to float64 read back exactly too); an ADC code of a
+            # block whose ADC message is missing is an empty field
+            cols = [b[k].astype(np.float64 if k == "rate_dps" else b[k].dtype).tolist()
+                    for k in names]  # fmt: skip
+            if tables.has_adc:
+                j = names.index("adc_counts")
+                if np.any(b["adc_counts"] == ADC_FILL):
+                    cols[j] = ["" if v == ADC_FILL else v for v in cols[j]]
+            out.writerows(zip(*cols, strict=True))
+            n += b["t_s"].size
+        # events and log are only known at the end: trailing comment lines
+        for k, v in _tail_attrs(tables).items():
+            fh.write(f"# {k}: {v}\n")
+    return n
+
+
+def _write_parquet(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) -> int:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    fields = [
+        pa.field(
+            k,
+            pa.from_numpy_dtype(np.dtype(COLUMNS[k][0])),
+            nullable=k == "adc_counts",
+            metadata={"unit": COLUMNS[k][1], "description": COLUMNS[k][2]},
+        )
+        for k in names
+    ]
+    schema = pa.schema(fields, metadata=_attrs(tables, src))
+    n = 0
+    with pq.ParquetWriter(tmp, schema, compression="zstd") as w:
+        for b in _batched(blocks, ROWS_PER_WRITE):
+            arrays = []
+            for k in names:
+                v = b[k]
+                mask = v == ADC_FILL if k == "adc_counts" else None
+                arrays.append(pa.array(v, type=schema.field(k).type, mask=mask))
+            w.write_table(pa.Table.from_arrays(arrays, schema=schema))
+            n += b["t_s"].size
+        # the footer's key-value metadata gets events and log too (known at the end)
+        w.add_key_value_metadata(_tail_attrs(tables))
+    return n
+
+
+def _write_hdf5(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) -> int:
+    import h5py
+
+    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    n = 0
+    with h5py.File(tmp, "w") as f:
+        for k, v in _attrs(tables, src).items():
+            f.attrs[k] = v
+        g = f.create_group("samples")
+        ds = {}
+        for k in names:
+            dt, u, d = COLUMNS[k]
+            ds[k] = g.create_dataset(
+                k, shape=(0,), maxshape=(None,), dtype=dt, chunks=(min(ROWS_PER_WRITE, 65536),),
+                compression="gzip", compression_opts=4,
+                **({"fillvalue": ADC_FILL} if k == "adc_counts" else {}),
+            )  # fmt: skip
+            ds[k].attrs["units"] = u
+            ds[k].attrs["description"] = d
+        if tables.has_adc:
+            ds["adc_counts"].attrs["_FillValue"] = np.int32(ADC_FILL)
+        for b in _batched(blocks, ROWS_PER_WRITE):
+            m = b["t_s"].size
+            for k in names:
+                ds[k].resize((n + m,))
+                ds[k][n : n + m] = b[k]
+            n += m
+        _low_rate_hdf5(f, tables)
+        for k, v in _tail_attrs(tables).items():
+            f.attrs[k] = v
+    return n
+
+
+def _low_rate_hdf5(f: Any, tables: RunTables) -> None:
+    for name, rows in (("pt100", tables.pt100), ("oven", tables.oven)):
+        g = f.create_group(name)
+        a = np.asarray([r[:3] for r in rows], dtype=float).reshape(-1, 3)
+        for j, (col, (u, d)) in enumerate(LOW_RATE[name].items()):
+            ds = g.create_dataset(col, data=a[:, j])
+            ds.attrs["units"] = u
+            ds.attrs["description"] = d
+        if name == "oven":
+            g.create_dataset("mode", data=np.array([r[3] for r in rows], dtype="S8"))
+
+
+def _write_netcdf(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) -> int:
+    import datetime as _dt
+
+    import netCDF4
+
+    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    start = _dt.datetime.fromtimestamp(tables.start_time_ns / 1e9, tz=_dt.timezone.utc)
+    n = 0
+    with netCDF4.Dataset(tmp, "w", format="NETCDF4") as nc:
+        nc.Conventions = "CF-1.8"
+        nc.title = f"gyrolab recording {src.name}"
+        for k, v in _attrs(tables, src).items():
+            setattr(nc, k, v)
+        nc.createDimension("sample", None)
+        var = {}
+        for k in names:
+            dt, u, d = COLUMNS[k]
+            var[k] = nc.createVariable(
+                k, np.dtype(dt), ("sample",), zlib=True, complevel=4,
+                fill_value=ADC_FILL if k == "adc_counts" else None,
+            )  # fmt: skip
+            var[k].units = u
+            var[k].long_name = d
+        # CF time coordinate: seconds since the run's start (UTC)
+        var["t_s"].units = f"seconds since {start.isoformat().replace('+00:00', 'Z')}"
+        var["t_s"].standard_name = "time"
+        for k in names:
+            var[k].set_auto_mask(False)
+        for b in _batched(blocks, ROWS_PER_WRITE):
+            m = b["t_s"].size
+            for k in names:
+                var[k][n : n + m] = b[k]
+            n += m
+        for name, rows in (("pt100", tables.pt100), ("oven", tables.oven)):
+            g = nc.createGroup(name)
+            g.createDimension("reading", len(rows))
+            a = np.asarray([r[:3] for r in rows], dtype=float).reshape(-1, 3)
+            for j, (col, (u, d)) in enumerate(LOW_RATE[name].items()):
+                v = g.createVariable(col, "f8", ("reading",))
+                v.units = u
+                v.long_name = d
+                v[:] = a[:, j]
+            if name == "oven":
+                v = g.createVariable("mode", str, ("reading",))
+                for i, r in enumerate(rows):
+                    v[i] = r[3]
+        for k, v in _tail_attrs(tables).items():
+            setattr(nc, k, v)
+    return n
+
+
+_WRITERS = {
+    "csv": _write_csv,
+    "parquet": _write_parquet,
+    "hdf5": _write_hdf5,
+    "netcdf": _write_netcdf,
+}
+
+
+def convert_recording(
+    src: str | os.PathLike[str], to: str, out: str | os.PathLike[str], force: bool = False
+) -> dict[str, Any]:
+    """Convert ``src`` to ``out`` in format ``to``; returns ``{"rows", "gaps", "format"}``."""
+    src_p, out_p = Path(src), Path(out)
+    if to not in FORMATS:
+        raise GyrolabError(f"convert: unknown format {to!r} (one of {', '.join(FORMATS)})")
+    if to in _LIBS:
+        import importlib.util
+
+        if importlib.util.find_spec(_LIBS[to]) is None:
+            raise GyrolabError(
+                f"convert --to {to} needs the {_LIBS[to]} package: "
+                f"pip install 'gyrolab[export]' (or pip install {_LIBS[to]})"
+            )
+    if out_p.exists() and src_p.exists() and out_p.resolve() == src_p.resolve():
+        raise InputError(out_p, "is the input recording; convert never overwrites its input")
+    check_output(out_p, force)
+    meta = read_metadata(src_p)  # also rejects a missing, foreign or damaged file
+    counts = _summary(src_p)
+    if counts.get(TOPIC_RATE, 0) == 0:
+        raise InputError(src_p, f"recording has no {TOPIC_RATE} data")
+    # log_time = start + t (docs/recording-format.md): the start from the first rate block
+    _topic, ts, data = next(iter_messages(src_p, [TOPIC_RATE]))
+    start_ns = ts - int(round(decode_block(data, "rate")[0] * 1e9))
+    tables = RunTables(metadata=meta, has_adc=counts.get(TOPIC_ADC, 0) > 0, start_time_ns=start_ns)
+    bar = progress(total=counts[TOPIC_RATE], desc=f"convert → {to}", unit="block")
+
+    def counted() -> Iterator[dict[str, np.ndarray]]:
+        for b in iter_sample_blocks(src_p, tables):
+            bar.update(1)
+            yield b
+
+    try:
+        with atomic_file(out_p, force) as tmp:
+            rows = _WRITERS[to](tmp, counted(), tables, src_p)
+    finally:
+        bar.close()
+    return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out_p)}
+
+
+def convert(args: argparse.Namespace) -> int:
+    """CLI handler of ``gyrolab convert``."""
+    res = convert_recording(args.run, args.to, args.out, force=args.force)
+    print(f"wrote {res['out']}: {res['rows']} samples ({res['gaps']} gap(s)) as {res['format']}")
+    return 0
