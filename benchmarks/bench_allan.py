@@ -1,4 +1,9 @@
-"""Allan deviation: gyrolab vs allantools.oadev, side by side (time and peak memory).
+"""Allan-family deviations: gyrolab vs allantools, side by side (time and peak memory).
+
+``--kind oadev`` (default) times ``allan_deviation`` against ``allantools.oadev``;
+``mdev``, ``tdev``, ``hdev``, ``totdev`` time ``deviations.deviation(kind=...)`` against
+``allantools.mdev``, ``tdev``, ``ohdev``, ``totdev`` (ours includes the noise
+identification and EDF of its confidence intervals; allantools' error bars are 1/sqrt(n)).
 
 Each measurement runs in a fresh subprocess so that peak RSS belongs to that call alone:
 the subprocess makes the data (seeded white + random-walk rate noise, float64), records its
@@ -8,6 +13,7 @@ the call's own array memory) and reads the peak RSS again: ``rss_delta`` is the 
 the process peak caused by the call.
 
     python benchmarks/bench_allan.py [--n 40000000] [--rate 1000] [--taus octave] [--repeat 1]
+        [--kind oadev|mdev|tdev|hdev|totdev]
 """
 
 from __future__ import annotations
@@ -51,18 +57,28 @@ def _peak_rss_bytes() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: kB
 
 
-def _one(which: str, n: int, rate: float, taus: str) -> dict:
+PEER = {"oadev": "oadev", "mdev": "mdev", "tdev": "tdev", "hdev": "ohdev", "totdev": "totdev"}
+
+
+def _one(which: str, n: int, rate: float, taus: str, kind: str = "oadev") -> dict:
     y = _data(n)
-    if which == "gyrolab":
+    if which == "gyrolab" and kind == "oadev":
         from gyrolab.compensation.allan import allan_deviation
 
         def call(v: np.ndarray) -> np.ndarray:
             return allan_deviation(v, rate, taus=taus).adev
+    elif which == "gyrolab":
+        from gyrolab.compensation.deviations import deviation
+
+        def call(v: np.ndarray) -> np.ndarray:
+            return deviation(v, rate, kind, taus=taus).dev  # type: ignore[union-attr]
     else:
         import allantools
 
+        peer = getattr(allantools, PEER[kind])
+
         def call(v: np.ndarray) -> np.ndarray:
-            return allantools.oadev(v, rate=rate, data_type="freq", taus=taus)[1]
+            return peer(v, rate=rate, data_type="freq", taus=taus)[1]
 
     call(y[:10_000])  # warm-up: imports, numba compilation (cached on disk)
     rss0 = _peak_rss_bytes()
@@ -90,10 +106,11 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--taus", default="octave")
     ap.add_argument("--repeat", type=int, default=1, help="alternate runs per implementation")
+    ap.add_argument("--kind", default="oadev", choices=sorted(PEER))
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        print(json.dumps(_one(args.child, args.n, args.rate, args.taus)))
+        print(json.dumps(_one(args.child, args.n, args.rate, args.taus, args.kind)))
         return
 
     env = dict(os.environ, GYROLAB_NO_PROGRESS="1")
@@ -101,7 +118,7 @@ def main() -> None:
     for _ in range(args.repeat):
         for which in ("allantools", "gyrolab"):  # alternate so background load hits both
             cmd = [sys.executable, __file__, "--child", which, "--n", str(args.n)]
-            cmd += ["--rate", str(args.rate), "--taus", args.taus]
+            cmd += ["--rate", str(args.rate), "--taus", args.taus, "--kind", args.kind]
             out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
             runs[which].append(json.loads(out.stdout.strip().splitlines()[-1]))
 
@@ -109,7 +126,7 @@ def main() -> None:
     g, a = best["gyrolab"], best["allantools"]
     m = min(len(g["adev"]), len(a["adev"]))
     rel = float(np.max(np.abs(np.array(g["adev"][:m]) / np.array(a["adev"][:m]) - 1.0)))
-    print(f"# Allan deviation, {args.n:,} samples at {args.rate:g} Hz, taus={args.taus}")
+    print(f"# {args.kind}, {args.n:,} samples at {args.rate:g} Hz, taus={args.taus}")
     print(
         f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs visible, "
         f"python {platform.python_version()}, numpy {np.__version__}, "
@@ -126,7 +143,7 @@ def main() -> None:
         f"time ratio gyrolab/allantools: {g['seconds'] / a['seconds']:.3f}; "
         f"traced-memory ratio: {g['traced_peak_MB'] / a['traced_peak_MB']:.3f}; "
         f"RSS-growth ratio: {g['rss_delta_MB'] / max(a['rss_delta_MB'], 1e-9):.3f}; "
-        f"max relative difference of adev over {m} common taus: {rel:.2e}"
+        f"max relative difference over {m} common taus: {rel:.2e}"
     )
     print(f"(input data itself: {a['data_MB']:.0f} MB, not counted)")
 

@@ -69,16 +69,24 @@ _TOT_EDF = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
 # --------------------------------------------------------------------------------------------
 # numba kernels: sums of squared terms over the terms whose span has no missing sample.
 # ``cb[k]`` = number of missing units before phase point k; span [a, b] is whole iff
-# cb[b] == cb[a].
+# cb[b] == cb[a]. Without gaps (``gaps`` False) cb is not read.
 # --------------------------------------------------------------------------------------------
 
 
 @numba.njit(cache=True)
-def _sum_d2(x: np.ndarray, cb: np.ndarray, m: int) -> tuple[float, int]:
+def _all_finite_or_nan(y: np.ndarray) -> bool:
+    for i in range(y.size):
+        if math.isinf(y[i]):
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _sum_d2(x: np.ndarray, cb: np.ndarray, m: int, gaps: bool) -> tuple[float, int]:
     s = 0.0
     c = 0
     for i in range(x.size - 2 * m):
-        if cb[i + 2 * m] == cb[i]:
+        if not gaps or cb[i + 2 * m] == cb[i]:
             d = x[i + 2 * m] - 2.0 * x[i + m] + x[i]
             s += d * d
             c += 1
@@ -86,11 +94,11 @@ def _sum_d2(x: np.ndarray, cb: np.ndarray, m: int) -> tuple[float, int]:
 
 
 @numba.njit(cache=True)
-def _sum_d3(x: np.ndarray, cb: np.ndarray, m: int) -> tuple[float, int]:
+def _sum_d3(x: np.ndarray, cb: np.ndarray, m: int, gaps: bool) -> tuple[float, int]:
     s = 0.0
     c = 0
     for i in range(x.size - 3 * m):
-        if cb[i + 3 * m] == cb[i]:
+        if not gaps or cb[i + 3 * m] == cb[i]:
             d = x[i + 3 * m] - 3.0 * x[i + 2 * m] + 3.0 * x[i + m] - x[i]
             s += d * d
             c += 1
@@ -98,7 +106,7 @@ def _sum_d3(x: np.ndarray, cb: np.ndarray, m: int) -> tuple[float, int]:
 
 
 @numba.njit(cache=True)
-def _sum_mod(x: np.ndarray, cb: np.ndarray, m: int) -> tuple[float, int]:
+def _sum_mod(x: np.ndarray, cb: np.ndarray, m: int, gaps: bool) -> tuple[float, int]:
     # inner_j = sum_{i=j}^{j+m-1} d2_i, updated by one term in, one out (gaps hold finite
     # filler values, so the running sum stays exact; only whole spans are accumulated)
     n_terms = x.size - 3 * m + 1
@@ -110,7 +118,7 @@ def _sum_mod(x: np.ndarray, cb: np.ndarray, m: int) -> tuple[float, int]:
     s = 0.0
     c = 0
     for j in range(n_terms):
-        if cb[j + 3 * m - 1] == cb[j]:
+        if not gaps or cb[j + 3 * m - 1] == cb[j]:
             s += inner * inner
             c += 1
         if j + 1 < n_terms:
@@ -206,8 +214,8 @@ def _phase_and_mask(
     arr: np.ndarray, data_type: str, tau0: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Phase (finite everywhere), cumulative missing-unit count over phase points, #missing."""
-    bad_pts = ~np.isfinite(arr)
-    missing = int(bad_pts.sum())
+    bad_pts = np.isnan(arr)
+    missing = int(np.count_nonzero(bad_pts))
     filled = np.where(bad_pts, 0.0, arr) if missing else arr
     if data_type in ("rate", "freq"):
         if missing and missing < arr.size:
@@ -223,6 +231,8 @@ def _phase_and_mask(
         bad_units = bad_pts[:-1] | bad_pts[1:]
     else:
         raise InputError(None, f"unknown data_type {data_type!r} (rate or angle)")
+    if not missing:
+        return phase, np.zeros(1, dtype=np.int64), 0  # no gaps: no count array (8 B/sample)
     cb = np.zeros(phase.size, dtype=np.int64)
     np.cumsum(bad_units, out=cb[1:])
     return phase, cb, missing
@@ -293,9 +303,9 @@ def deviation(
         raise InputError(None, f"deviation needs a 1-D or 2-D array, got shape {arr.shape}")
     if not (np.isfinite(rate) and rate > 0):
         raise InputError(None, f"sample rate must be positive and finite, got {rate!r}")
-    if np.isinf(arr).any():
+    if not _all_finite_or_nan(arr):
         raise InputError(None, "series contains infinite values (NaN marks a gap; inf is an error)")
-    if np.isfinite(arr).sum() < 3:
+    if arr.size - np.count_nonzero(np.isnan(arr)) < 3:
         raise InputError(None, f"series too short for a deviation ({arr.size} samples)")
     tau0 = 1.0 / float(rate)
     # phase in rate-units x samples; scaled by tau0 where the variance is normalised
@@ -307,19 +317,23 @@ def deviation(
         raise InputError(
             None, f"series too short for the requested taus ({arr.size} samples at {rate} Hz)"
         )
-    seg_a, seg_b = _segments(cb) if kind == "totdev" else (None, None)
+    gaps = missing > 0
+    if kind == "totdev":
+        seg_a, seg_b = (
+            _segments(cb) if gaps else (np.array([0], np.int64), np.array([n_phase], np.int64))
+        )
     var = np.full(ms.size, np.nan)
     nterms = np.zeros(ms.size, dtype=np.int64)
     for k, m in enumerate(ms):
         m = int(m)
         if kind == "oadev":
-            s, c = _sum_d2(phase, cb, m)
+            s, c = _sum_d2(phase, cb, m, gaps)
             v = s / (2.0 * m * m * c) if c else math.nan
         elif kind in ("mdev", "tdev"):
-            s, c = _sum_mod(phase, cb, m)
+            s, c = _sum_mod(phase, cb, m, gaps)
             v = s / (2.0 * m**4 * c) if c else math.nan
         elif kind == "hdev":
-            s, c = _sum_d3(phase, cb, m)
+            s, c = _sum_d3(phase, cb, m, gaps)
             v = s / (6.0 * m * m * c) if c else math.nan
         else:
             s, c = _sum_tot(phase, seg_a, seg_b, m)
@@ -344,10 +358,12 @@ def deviation(
         for k, m in enumerate(ms):
             m = int(m)
             if alpha is None:
-                nb = (n_phase - 1) // m
-                idx = np.arange(nb + 1) * m
-                whole = cb[idx[1:]] == cb[idx[:-1]]
-                ybar = np.diff(phase[idx])[whole][:NOISE_ID_MAX_POINTS]
+                # tau-averaged rate from strided views of the phase: no n-sized temporaries
+                nb = min((n_phase - 1) // m, (4 if gaps else 1) * NOISE_ID_MAX_POINTS)
+                ybar = np.diff(phase[: nb * m + 1 : m])
+                if gaps:
+                    cbs = cb[: nb * m + 1 : m]
+                    ybar = ybar[cbs[1:] == cbs[:-1]][:NOISE_ID_MAX_POINTS]
                 if ybar.size >= 30:
                     last, _ = noise_id_lag1(ybar)
             alphas[k] = last
