@@ -124,3 +124,19 @@ def test_report_of_an_applied_recording_says_it_is_compensated(
     # the applied output (causal, full rate: drift model only, no noise removal) has clearly
     # less drift than the raw held-out run (≈ 0.67x on this 48 min run, 0.14x on the paper's)
     assert m["raw"]["drift_pp_deg_per_s"] < 0.8 * held["raw"]["drift_pp_deg_per_s"]
+
+
+def test_demo_report_has_noise_per_temperature_plateau(demo_run: Path) -> None:
+    """The held-out (acquired) run's report tabulates ARW and bias instability per soaked
+    step, with the figure against temperature."""
+    from gyrolab.compensation.plateau_noise import plateau_noise
+    from gyrolab.recording import read_recording
+    from gyrolab.report.build import fmt
+
+    html = (demo_run / "report" / "index.html").read_text(encoding="utf-8")
+    assert 'id="tab-plateau-noise"' in html and 'id="fig-plateau-noise"' in html
+    rows = plateau_noise(read_recording(demo_run / "heldout.mcap"))
+    assert len(rows) >= 10  # the short profile has 12 steps
+    for p in rows:
+        assert f'<td class="num">{fmt(p.arw_deg_per_sqrt_h)}</td>' in html
+        assert 0.02 < p.arw_deg_per_sqrt_h < 0.1  # the simulated unit: 0.0523 deg/sqrt(h)
