@@ -262,3 +262,21 @@ def test_shipped_layout_names_topics_and_fields_that_exist() -> None:
                 seen.add(c[key])
     assert schemas[TOPIC_LOG_FOXGLOVE]["title"] == "foxglove.Log"  # what the RosOut panel takes
     assert {TOPIC_RATE_SUMMARY, TOPIC_PT100, TOPIC_LOG_FOXGLOVE, TOPIC_LIVE_STATUS} <= seen
+
+
+def test_port_in_use_is_one_line_exit_2_and_nothing_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gyrolab.cli import main
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        out = tmp_path / "x.mcap"
+        rc = main(["acquire", "--bench", "sim", "--out", str(out), "--profile", "short",
+                   "--speed", "300", "--live", str(port)])  # fmt: skip
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert f"cannot serve on 127.0.0.1:{port}" in err
+    assert not out.exists()

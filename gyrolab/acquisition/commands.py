@@ -591,6 +591,21 @@ def run_acquisition(
         inst.close()
 
 
+def _start_live(port: int, host: str) -> Any:
+    """The live view's server (docs/live-view.md); a port in use is one line, exit 2."""
+    from gyrolab.acquisition.live import LiveServer
+
+    live = LiveServer(port=port, host=host)
+    print(f"live view: {live.url} (Foxglove: Open connection)", file=sys.stderr)
+    if host not in ("127.0.0.1", "localhost", "::1"):
+        print(
+            f"live view: listening on {host}, reachable from the network without "
+            "authentication; an SSH tunnel to 127.0.0.1 is the safer way",
+            file=sys.stderr,
+        )
+    return live
+
+
 def acquire(args: argparse.Namespace) -> int:
     """``gyrolab acquire --bench sim|BENCH.toml --out RUN.mcap [--profile] [--speed]``."""
     out = Path(args.out)
@@ -642,15 +657,12 @@ def acquire(args: argparse.Namespace) -> int:
                 sim.provenance["fault_injection"] = plan_to_dict(faults)
         speed_note = "" if sim is None else f" ×{args.speed or 'max'}"
         show, bar = _progress(profile, speed_note)
-        live = None
-        if getattr(args, "live", None) is not None:
-            from gyrolab.acquisition.live import LiveServer
-
-            live = LiveServer(port=args.live, host=args.live_host)
-            print(f"live view: {live.url} (Foxglove: Open connection)", file=sys.stderr)
-            show = live.status_hook(show)
         t0 = time.monotonic()
+        live = None
         try:
+            if getattr(args, "live", None) is not None:
+                live = _start_live(args.live, args.live_host)
+                show = live.status_hook(show)
             result = run_acquisition(
                 cfg=cfg,
                 profile=profile,
