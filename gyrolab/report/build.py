@@ -790,15 +790,33 @@ def plateau_noise_section(rec: Recording) -> Section:
         TableBlock(
             "plateau-noise",
             "Noise terms per soaked step",
-            ["step", "setpoint (°C)", "PT100 mean (°C)", "PT100 span (°C)", "segment",
-             "samples", "missing", "ARW (°/√h)", "bias instability (°/h)", "B 68 % interval",
-             "τ_B (s)"],
             [
-                [str(p.step + 1), fmt(p.setpoint_c), fmt(p.temperature_c),
-                 fmt(p.temperature_span_c, 2), f"{hms(p.t_start)}–{hms(p.t_end)}",
-                 str(p.n_samples), str(p.missing), fmt(p.arw_deg_per_sqrt_h),
-                 fmt(p.bias_instability_deg_per_h),
-                 f"{fmt(p.bi_lo_deg_per_h, 3)}–{fmt(p.bi_hi_deg_per_h, 3)}", fmt(p.tau_b_s)]
+                "step",
+                "setpoint (°C)",
+                "PT100 mean (°C)",
+                "PT100 span (°C)",
+                "segment",
+                "samples",
+                "missing",
+                "ARW (°/√h)",
+                "bias instability (°/h)",
+                "B 68 % interval",
+                "τ_B (s)",
+            ],
+            [
+                [
+                    str(p.step + 1),
+                    fmt(p.setpoint_c),
+                    fmt(p.temperature_c),
+                    fmt(p.temperature_span_c, 2),
+                    f"{hms(p.t_start)}–{hms(p.t_end)}",
+                    str(p.n_samples),
+                    str(p.missing),
+                    fmt(p.arw_deg_per_sqrt_h),
+                    fmt(p.bias_instability_deg_per_h),
+                    f"{fmt(p.bi_lo_deg_per_h, 3)}–{fmt(p.bi_hi_deg_per_h, 3)}",
+                    fmt(p.tau_b_s),
+                ]
                 for p in rows
             ],
         )
@@ -810,9 +828,7 @@ def plateau_noise_section(rec: Recording) -> Section:
     ax1.set_xlabel("PT100 (°C)")
     ax1.set_ylabel("ARW (°/√h)")
     b = np.array([p.bias_instability_deg_per_h for p in rows])
-    err = np.array(
-        [b - [p.bi_lo_deg_per_h for p in rows], [p.bi_hi_deg_per_h for p in rows] - b]
-    )
+    err = np.array([b - [p.bi_lo_deg_per_h for p in rows], [p.bi_hi_deg_per_h for p in rows] - b])
     ax2.errorbar(tc, b, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", color="#d62728")
     ax2.set_xlabel("PT100 (°C)")
     ax2.set_ylabel("bias instability (°/h)")
