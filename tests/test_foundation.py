@@ -28,6 +28,7 @@ def test_cli_lists_every_design_subcommand() -> None:
         "discrepancy",
         "recover",
         "demo",
+        "convert",  # issue 16
     }
 
 
