@@ -783,7 +783,9 @@ def plateau_noise_section(rec: Recording) -> Section:
             "On its raw rate samples (gaps left out, never interpolated): overlapping Allan "
             "deviation, ARW = 60 N read at τ = 1 s on the −½ slope, bias instability "
             "B = σ_min/0.664 (IEEE 952), B's interval from the curve's one-sigma bounds at τ_B "
-            "(Greenhall–Riley EDF). docs/allan.md has the definitions."
+            "(Greenhall–Riley EDF). B is read at τ ≤ a tenth of the segment: on a short "
+            "plateau the curve may still fall there (white noise), and B is then an upper "
+            "bound — compare τ_B with the segment. docs/allan.md has the definitions."
         )
     )
     sec.blocks.append(
@@ -827,6 +829,7 @@ def plateau_noise_section(rec: Recording) -> Section:
     ax1.plot(tc, [p.arw_deg_per_sqrt_h for p in rows], "o", color="#1f77b4")
     ax1.set_xlabel("PT100 (°C)")
     ax1.set_ylabel("ARW (°/√h)")
+    ax1.set_ylim(bottom=0.0)  # the spread read against the level, not magnified
     b = np.array([p.bias_instability_deg_per_h for p in rows])
     err = np.array([b - [p.bi_lo_deg_per_h for p in rows], [p.bi_hi_deg_per_h for p in rows] - b])
     ax2.errorbar(tc, b, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", color="#d62728")
