@@ -414,9 +414,7 @@ def convert_recording(
                 f"convert --to {to} needs the {_LIBS[to]} package: "
                 f"pip install 'gyrolab[export]' (or pip install {_LIBS[to]})"
             )
-    if out_p.exists() and src_p.exists() and out_p.resolve() == src_p.resolve():
-        raise InputError(out_p, "is the input recording; convert never overwrites its input")
-    check_output(out_p, force)
+    check_output(out_p, force, inputs=(src_p,), kind="file")  # never the input (outputs.py)
     meta = read_metadata(src_p)  # also rejects a missing, foreign or damaged file
     counts = _summary(src_p)
     if counts.get(TOPIC_RATE, 0) == 0:
@@ -433,7 +431,7 @@ def convert_recording(
             yield b
 
     try:
-        with atomic_file(out_p, force) as tmp:
+        with atomic_file(out_p, force, inputs=(src_p,)) as tmp:
             rows = _WRITERS[to](tmp, counted(), tables, src_p)
     finally:
         bar.close()
