@@ -177,7 +177,7 @@ def test_plateau_noise_on_a_simulated_run(tmp_path: Path) -> None:
     rows = plateau_noise(rec)
     assert len(rows) == 12  # every step of the short profile ends soaked
     arw = np.array([p.arw_deg_per_sqrt_h for p in rows])
-    # the simulator's ARW term (sim model default, DESIGN.md: 0.0523 deg/sqrt(h)) within 20 %
+    # the simulator's ARW term (its default, docs/sim-model.md: 0.0523 deg/sqrt(h)) within 20 %
     np.testing.assert_allclose(arw, 0.0523, rtol=0.2)
     for p in rows:
         assert p.bi_lo_deg_per_h < p.bias_instability_deg_per_h < p.bi_hi_deg_per_h

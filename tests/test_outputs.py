@@ -93,6 +93,7 @@ def test_apply_refuses_to_write_over_the_raw_recording(run_mcap: Path, tmp_path,
         ["discrepancy", "{run}", "--out", "{run}"],
         ["recover", "{run}", "--out", "{run}"],
         ["demo", "--profile", "{prof}", "--out", "{prof}"],
+        ["convert", "{run}", "--to", "csv", "--out", "{run}"],
     ],
     ids=lambda a: a[0],
 )
