@@ -22,7 +22,16 @@ from typing import Any
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.progress import progress
 
-STAGES = ["load model", "read recording", "apply model", "metrics", "figures", "allan", "write"]
+STAGES = [
+    "load model",
+    "read recording",
+    "apply model",
+    "metrics",
+    "figures",
+    "allan",
+    "plateau noise",
+    "write",
+]
 
 
 def write_report(
