@@ -58,6 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output RUN.mcap")
     s.add_argument("--profile", default="paper", help="paper | short | FILE.toml (default paper)")
     s.add_argument("--model", help="SIM_MODEL.toml (default: the nominal model)")
+    s.add_argument(
+        "--axis-model",
+        action="append",
+        default=[],
+        metavar="SIM_MODEL.toml",
+        help="model of the next axis (y, then z): makes a 2- or 3-axis unit (repeatable)",
+    )
     s.add_argument("--rate", type=float, default=100.0, help="ADC sample rate, Hz (default 100)")
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument(
@@ -108,6 +115,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="output MODEL_DIR")
     c.add_argument("--validate", metavar="OTHER.mcap", help="held-out run for metrics")
     c.add_argument("--seed", type=int, default=0)
+    c.add_argument(
+        "--temperature-topic",
+        metavar="TOPIC",
+        help="ROS 2 MCAP input: the sensor_msgs/msg/Temperature topic of the IMU",
+    )
     c.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     ap = cmd("apply", "apply a fitted model to a run and write the compensated recording")

@@ -8,13 +8,16 @@ Frame layout (all multi-byte fields little-endian except the CRC)::
 
     offset  size  field
     0       2     sync word, bytes A5 5A
-    2       2     length L = 12 + 3·n: bytes from ``seq`` to the last sample
+    2       2     length L = 12 + 3·n·a: bytes from ``seq`` to the last sample
     4       4     seq, uint32 frame counter (+1 per frame, wraps at 2**32)
     8       8     timestamp, uint64 µs of the ADC's clock at the frame's first sample
-    16      3·n   n samples, 24-bit two's complement, little-endian
-    16+3n   2     CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF) over bytes 2..15+3n, big-endian
+    16      3·n·a n samples of a axes, 24-bit two's complement, little-endian, interleaved
+                  sample by sample (x0 y0 z0 x1 y1 z1 …)
+    16+3na  2     CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF) over bytes 2..15+3na, big-endian
 
-A frame of n samples is 18 + 3·n bytes (48 bytes for the default n = 10).
+``a`` is the ADC's axis count (1–3, part of its configuration like n; a single-axis ADC,
+a = 1, sends exactly the frames it always did). A frame of n samples is 18 + 3·n·a bytes
+(48 bytes for the default n = 10, a = 1).
 
 The decoder accepts a frame only if the sync word, the length (it must be the configured
 n), the CRC, the sequence number (strictly newer than the last accepted frame) and the
@@ -50,14 +53,15 @@ def crc16_ccitt(data: bytes | bytearray | memoryview, init: int = 0xFFFF) -> int
     return crc_hqx(data, init)
 
 
-def frame_size(samples_per_frame: int) -> int:
-    """Bytes on the wire of one frame of ``samples_per_frame`` samples."""
-    return HEADER_SIZE + 3 * samples_per_frame + CRC_SIZE
+def frame_size(samples_per_frame: int, axes: int = 1) -> int:
+    """Bytes on the wire of one frame of ``samples_per_frame`` samples of ``axes`` axes."""
+    return HEADER_SIZE + 3 * samples_per_frame * axes + CRC_SIZE
 
 
 def encode_frame(seq: int, timestamp_us: int, counts: np.ndarray) -> bytes:
-    """One frame; ``counts`` are signed 24-bit values (−8388608 … 8388607)."""
-    c = np.asarray(counts, dtype=np.int64)
+    """One frame; ``counts`` are signed 24-bit values (−8388608 … 8388607), ``(n,)`` for one
+    axis or ``(n, axes)`` for several (sent interleaved, sample by sample)."""
+    c = np.asarray(counts, dtype=np.int64).ravel()
     n = c.size
     if not 1 <= n <= MAX_SAMPLES:
         raise ValueError(f"a frame holds 1..{MAX_SAMPLES} samples, not {n}")
@@ -134,8 +138,9 @@ class FrameBatch:
 class FrameDecoder:
     """Streaming decoder: feed it bytes in any chunking, get intact frames out.
 
-    ``samples_per_frame`` is the ADC's configured n (frames of another length are
-    rejected). ``rate_hz`` (samples/s), when given, makes the decoder also check that
+    ``samples_per_frame`` is the ADC's configured n and ``axes`` its axis count (frames
+    of another length are rejected; ``counts`` come back as (frames × n·axes), each row
+    interleaved x0 y0 z0 x1 …). ``rate_hz`` (samples/s), when given, makes the decoder also check that
     a frame's timestamp advanced by ``Δseq · n / rate_hz`` (± 1 frame + 1 %), which
     catches the rare random byte run that passes a 16-bit CRC.
     """
@@ -146,12 +151,16 @@ class FrameDecoder:
         rate_hz: float | None = None,
         *,
         restart_after: int = 4,
+        axes: int = 1,
     ) -> None:
         if not 1 <= samples_per_frame <= MAX_SAMPLES:
             raise ValueError(f"samples_per_frame must be 1..{MAX_SAMPLES}")
+        if not 1 <= axes <= 3 or samples_per_frame * axes > MAX_SAMPLES:
+            raise ValueError(f"axes must be 1..3 with n·axes <= {MAX_SAMPLES}")
         self.n = samples_per_frame
-        self.length = 12 + 3 * samples_per_frame
-        self.size = frame_size(samples_per_frame)
+        self.axes = axes
+        self.length = 12 + 3 * samples_per_frame * axes
+        self.size = frame_size(samples_per_frame, axes)
         self.frame_us = None if rate_hz is None else samples_per_frame / rate_hz * 1e6
         self.restart_after = restart_after
         self.stats = DecoderStats()
@@ -193,7 +202,7 @@ class FrameDecoder:
         buf += data
         st = self.stats
         st.bytes_in += len(data)
-        length, size, n = self.length, self.size, self.n
+        length, size, n = self.length, self.size, self.n * self.axes
         seqs: list[int] = []
         tss: list[int] = []
         raw = bytearray()

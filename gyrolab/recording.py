@@ -56,6 +56,9 @@ FOXGLOVE_LOG_LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fault": 
 FORMAT_VERSION = "1"
 PROFILE = "gyrolab"  # MCAP header profile
 
+MAX_AXES = 3  # a unit's rate stream carries 1–3 axes (x, y, z)
+AXIS_NAMES = ("x", "y", "z")
+
 ADC_MESSAGE = "gyrolab.GyroAdcBlock"
 RATE_MESSAGE = "gyrolab.GyroRateBlock"
 
@@ -193,6 +196,7 @@ message GyroAdcBlock {
   double period = 2;       // s between samples
   uint64 first_index = 3;  // index of the first sample since run start
   repeated sfixed32 counts = 4;
+  uint32 axes = 5;         // values per sample, interleaved; absent/0 = 1 (single axis)
 }
 // One block of angular rate, deg/s.
 message GyroRateBlock {
@@ -200,6 +204,7 @@ message GyroRateBlock {
   double period = 2;
   uint64 first_index = 3;
   repeated float rate_dps = 4;
+  uint32 axes = 5;         // values per sample, interleaved (x, y, z); absent/0 = 1
 }
 """
 
@@ -226,6 +231,7 @@ def _file_descriptor_set() -> bytes:
                 ("period", F.TYPE_DOUBLE, F.LABEL_OPTIONAL),
                 ("first_index", F.TYPE_UINT64, F.LABEL_OPTIONAL),
                 (arr_name, arr_type, F.LABEL_REPEATED),
+                ("axes", F.TYPE_UINT32, F.LABEL_OPTIONAL),
             ),
             start=1,
         ):
@@ -255,9 +261,18 @@ def _varint(n: int) -> bytes:
 def encode_block(
     t0: float, period: float, first_index: int, values: np.ndarray, kind: str
 ) -> bytes:
-    """Protobuf wire bytes of a block; ``kind`` is ``"adc"`` (int32) or ``"rate"`` (float32)."""
+    """Protobuf wire bytes of a block; ``kind`` is ``"adc"`` (int32) or ``"rate"`` (float32).
+
+    ``values`` is ``(n,)`` for one axis or ``(n, axes)`` for 2–3 axes (stored interleaved,
+    sample-major, with ``axes`` in field 5). A single-axis block omits field 5, so its bytes
+    are those of the format before axis counts existed."""
     dtype = "<i4" if kind == "adc" else "<f4"
-    payload = np.ascontiguousarray(values, dtype=dtype).tobytes()
+    v = np.asarray(values)
+    axes = 1 if v.ndim == 1 else int(v.shape[1])
+    if v.ndim > 2 or not 1 <= axes <= MAX_AXES:
+        raise ValueError(f"a block holds (n,) or (n, 1..{MAX_AXES}) values, not {v.shape}")
+    payload = np.ascontiguousarray(v, dtype=dtype).tobytes()
+    tail = (b"\x28", _varint(axes)) if axes > 1 else ()
     return b"".join(
         (
             b"\x09",
@@ -269,14 +284,17 @@ def encode_block(
             b"\x22",
             _varint(len(payload)),
             payload,
+            *tail,
         )
     )
 
 
 def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]:
-    """Inverse of :func:`encode_block`; accepts any valid field order."""
+    """Inverse of :func:`encode_block`; accepts any valid field order. The values come back
+    ``(n,)`` for a single-axis block, ``(n, axes)`` for a multi-axis one."""
     t0 = period = 0.0
     first = 0
+    axes = 1
     arr: np.ndarray = np.empty(0, dtype="<i4" if kind == "adc" else "<f4")
     mv = memoryview(data)
     i, n = 0, len(data)
@@ -310,6 +328,8 @@ def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]
                     break
             if fno == 3:
                 first = v
+            elif fno == 5:
+                axes = max(1, v)
         elif wt == 2:
             ln = 0
             shift = 0
@@ -327,6 +347,10 @@ def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]
             i += 4
         else:
             raise ValueError(f"unsupported protobuf wire type {wt}")
+    if axes > 1:
+        if arr.size % axes:
+            raise ValueError(f"{arr.size} values do not split into {axes} axes")
+        arr = arr.reshape(-1, axes)
     return t0, period, first, arr
 
 
@@ -472,6 +496,7 @@ class RecordingWriter:
     def write_rate_block(
         self, t0: float, period: float, first_index: int, rate_dps: np.ndarray
     ) -> None:
+        """One ``/gyro/rate`` block: ``(n,)`` for a single axis, ``(n, axes)`` for 2–3."""
         self._put(TOPIC_RATE, t0, encode_block(t0, period, first_index, rate_dps, "rate"))
         r = np.asarray(rate_dps, dtype=np.float32).astype(np.float64)  # what the block holds
         if r.size:
@@ -587,6 +612,19 @@ class Series:
     def rate_hz(self) -> float:
         return 1.0 / self.period if self.period > 0 else float("nan")
 
+    @property
+    def axes(self) -> int:
+        """Values per sample: 1 (``values`` is ``(n,)``) or 2–3 (``values`` is ``(n, axes)``)."""
+        return 1 if self.values.ndim == 1 else int(self.values.shape[1])
+
+    def axis(self, k: int) -> Series:
+        """The single-axis series of axis ``k`` (the series itself when it has one axis)."""
+        if self.values.ndim == 1:
+            if k != 0:
+                raise IndexError(f"single-axis series has no axis {k}")
+            return self
+        return Series(self.t, np.ascontiguousarray(self.values[:, k]), self.index, self.period)
+
     def gaps(self) -> list[tuple[float, int]]:
         """``(t_before_gap, n_missing)`` for every jump in the sample index."""
         if self.index.size < 2:
@@ -626,6 +664,21 @@ class Recording:
         if self.pt100_t.size == 0:
             raise InputError(self.path, f"recording has no {TOPIC_PT100} data")
         return self.pt100_t, self.pt100_c
+
+    @property
+    def axes(self) -> int:
+        """Axes of the rate stream (1 when there is none)."""
+        return 1 if self.rate is None else self.rate.axes
+
+    def axis(self, k: int) -> Recording:
+        """A shallow copy whose ``rate`` is axis ``k`` only (the same object for one axis)."""
+        if self.axes == 1 and k == 0:
+            return self
+        from dataclasses import replace
+
+        rate = self.require_rate().axis(k)
+        adc = None if self.adc is None or self.adc.values.ndim == 1 else self.adc.axis(k)
+        return replace(self, rate=rate, adc=adc)
 
 
 def _parse_meta(values: Mapping[str, str]) -> dict[str, Any]:
@@ -694,13 +747,16 @@ def iter_blocks(
 def _series(blocks: list[tuple[float, float, int, np.ndarray]], dtype: type) -> Series:
     if not blocks:
         return Series(np.empty(0), np.empty(0, dtype=dtype), np.empty(0, dtype=np.int64), 0.0)
-    n = sum(b[3].size for b in blocks)
+    n = sum(b[3].shape[0] for b in blocks)
+    shapes = {b[3].shape[1:] for b in blocks}
+    if len(shapes) != 1:
+        raise ValueError(f"blocks with different axis counts {sorted(shapes)}")
     t = np.empty(n)
-    v = np.empty(n, dtype=dtype)
+    v = np.empty((n, *shapes.pop()), dtype=dtype)
     idx = np.empty(n, dtype=np.int64)
     pos = 0
     for t0, period, first, arr in blocks:
-        m = arr.size
+        m = arr.shape[0]
         k = np.arange(m)
         t[pos : pos + m] = t0 + k * period
         v[pos : pos + m] = arr
@@ -742,10 +798,13 @@ def read_recording(path: str | os.PathLike[str], topics: list[str] | None = None
             elif topic == TOPIC_LOG:
                 rec.logs.append(msg)
     rec.topic_counts = counts
-    if TOPIC_RATE in topics:
-        rec.rate = _series(rate_blocks, np.float64)
-    if TOPIC_ADC in topics:
-        rec.adc = _series(adc_blocks, np.int32)
+    try:
+        if TOPIC_RATE in topics:
+            rec.rate = _series(rate_blocks, np.float64)
+        if TOPIC_ADC in topics:
+            rec.adc = _series(adc_blocks, np.int32)
+    except ValueError as e:
+        raise InputError(path, str(e)) from None
     if pt:
         a = np.asarray(pt, dtype=float)
         rec.pt100_t, rec.pt100_ohm, rec.pt100_c = a[:, 0], a[:, 1], a[:, 2]

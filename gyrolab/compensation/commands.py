@@ -82,6 +82,12 @@ def _summary(m: dict[str, Any]) -> str:
         f"  ARW          {r['arw_deg_per_sqrt_h']:.4g} -> {c['arw_deg_per_sqrt_h']:.4g} deg/rt(h)"
         f" (without noise removal {m['compensated_drift_only']['arw_deg_per_sqrt_h']:.4g})",
     ]
+    fw = m.get("firmware_poly3")
+    if fw:
+        lines.append(
+            f"  firmware cubic (PX4/ArduPilot form) drift p-p {fw['drift_pp_deg_per_s']:.4g} "
+            f"deg/s, {fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the causal model's"
+        )
     for name, b in m["baselines"].items():
         lines.append(
             f"  baseline {name:<4} drift p-p {b['drift_pp_deg_per_s']:.4g} deg/s, "
@@ -91,39 +97,88 @@ def _summary(m: dict[str, Any]) -> str:
 
 
 def compensate(args: argparse.Namespace) -> int:
-    """Fit on ``args.run``, optionally evaluate on ``args.validate``, write ``args.out``."""
+    """Fit on ``args.run``, optionally evaluate on ``args.validate``, write ``args.out``.
+
+    A run with several axes (or a foreign log, :mod:`gyrolab.logs`) gets one model per axis
+    in one directory (:mod:`gyrolab.compensation.axes`)."""
     from gyrolab.compensation import pipeline as pl
-    from gyrolab.compensation.model_dir import write_json
+    from gyrolab.compensation.axes import axis_dir_name, load_runs, write_head
 
     t_start = time.perf_counter()
     inputs = (args.run, args.validate)
     check_output(args.out, args.force, inputs=inputs, kind="dir")
     cfg = pl.DEFAULT_CONFIG
-    run = _load_run(args.run, cfg)
-    val = _load_run(args.validate, cfg) if args.validate else None
+    topic = getattr(args, "temperature_topic", None)
+    runs = load_runs(args.run, cfg, topic)
+    vals = load_runs(args.validate, cfg, topic) if args.validate else None
+    if vals is not None and len(vals) != len(runs):
+        raise InputError(
+            args.validate, f"has {len(vals)} axes but the calibration run has {len(runs)}"
+        )
     t_read = time.perf_counter() - t_start
-    with _named(args.run):
+    fitted = []
+    for k, run in enumerate(runs):
+        t_axis = time.perf_counter()
+        fitted.append(_fit_axis(args, cfg, run, None if vals is None else vals[k]))
+        total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
+        model, metrics, _ = fitted[-1]
+        metrics["timing_s"] = total
+        metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
+        model.timing_s = metrics["timing_breakdown_s"]
+    with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
+        if len(runs) == 1:
+            _write_axis(Path(tmp), *fitted[0])
+        else:
+            for k, f in enumerate(fitted):
+                sub = Path(tmp) / axis_dir_name(k)
+                sub.mkdir()
+                _write_axis(sub, *f)
+            write_head(Path(tmp), len(runs), [f[1] for f in fitted])
+    for k, (_model, metrics, metrics_cal) in enumerate(fitted):
+        if len(runs) > 1:
+            print(f"axis {'xyz'[k]}:")
+        print(_summary(metrics))
+        if vals is not None:
+            print(_summary(metrics_cal))
+    total = time.perf_counter() - t_start
+    print(f"model written to {args.out} in {total:.1f} s", file=sys.stderr)
+    return 0
+
+
+def _fit_axis(args: argparse.Namespace, cfg: Any, run: Any, val: Any) -> tuple[Any, ...]:
+    """Fit one axis; its metrics (held-out when ``val``) with the firmware cubic's cost."""
+    from gyrolab.compensation import pipeline as pl
+    from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
+
+    with _named(run.path):
         model, dec = pl.fit(run, cfg, seed=int(getattr(args, "seed", 0) or 0))
         app = pl.compensate_offline(model, run, dec)
         metrics_cal = pl.evaluate(model, app, run, held_out=False)
+        p3 = fit_poly3(run)
+        metrics_cal["firmware_poly3"] = poly3_metrics(
+            p3, run, cfg.block_s, metrics_cal["compensated_streaming"]
+        )
     if val is not None:
-        with _named(args.validate):
+        with _named(val.path):
             metrics = pl.evaluate(model, pl.compensate_offline(model, val), val, held_out=True)
+            metrics["firmware_poly3"] = poly3_metrics(
+                p3, val, cfg.block_s, metrics["compensated_streaming"]
+            )
         metrics["calibration"] = metrics_cal
     else:
         metrics = metrics_cal
-    total = time.perf_counter() - t_start
-    metrics["timing_s"] = total
-    metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
-    model.timing_s = metrics["timing_breakdown_s"]
-    with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
-        pl.save_model(model, str(tmp))
-        write_json(Path(tmp) / "metrics.json", metrics)
-    print(_summary(metrics))
-    if val is not None:
-        print(_summary(metrics_cal))
-    print(f"model written to {args.out} in {total:.1f} s", file=sys.stderr)
-    return 0
+    model.firmware_poly3 = p3  # type: ignore[attr-defined]
+    return model, metrics, metrics_cal
+
+
+def _write_axis(directory: Path, model: Any, metrics: dict[str, Any], _cal: Any) -> None:
+    from gyrolab.compensation import pipeline as pl
+    from gyrolab.compensation.axes import FIRMWARE_JSON
+    from gyrolab.compensation.model_dir import write_json
+
+    pl.save_model(model, str(directory))
+    write_json(directory / "metrics.json", metrics)
+    write_json(directory / FIRMWARE_JSON, {"poly3": model.firmware_poly3.to_dict()})
 
 
 def apply(args: argparse.Namespace) -> int:

@@ -113,6 +113,12 @@ def load_model_dir(
         raise InputError(mj, f"damaged model file ({e.__class__.__name__})") from None
     if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
         raise InputError(d, f"not a gyrolab compensation model (format {meta.get('format')!r})")
+    if meta.get("axis_dirs"):
+        raise InputError(
+            d,
+            f"a {len(meta['axis_dirs'])}-axis model: give one axis's directory "
+            f"({', '.join(str(x) for x in meta['axis_dirs'])} inside it)",
+        )
     ver = meta.get("format_version")
     if ver != MODEL_FORMAT_VERSION:
         raise InputError(

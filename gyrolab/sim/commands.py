@@ -10,7 +10,7 @@ from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file, check_output
 from gyrolab.profile import load_profile
 from gyrolab.sim.model import apply_effect_args, load_model, nominal_model
-from gyrolab.sim.simulate import simulate_run
+from gyrolab.sim.simulate import axis_physics, simulate_run
 
 MAX_RATE_HZ = 100_000.0
 
@@ -30,12 +30,27 @@ def simulate(args: argparse.Namespace) -> int:
         model = apply_effect_args(model, list(args.effect or []))
     except (ValueError, TypeError) as e:
         raise InputError("--effect", str(e)) from None
+<<<<<<< HEAD
     with atomic_file(args.out, args.force, inputs=inputs) as tmp:
         summary = simulate_run(tmp, profile, model, rate_hz=args.rate, seed=args.seed)
+=======
+    axis_models = [load_model(m) for m in getattr(args, "axis_model", None) or []]
+    if len(axis_models) > 2:
+        raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
+    try:
+        axis_physics(model, axis_models, args.rate, args.seed, profile.ambient_c)
+    except ValueError as e:
+        raise InputError("--axis-model", str(e)) from None
+    with atomic_file(args.out, args.force) as tmp:
+        summary = simulate_run(
+            tmp, profile, model, rate_hz=args.rate, seed=args.seed, axis_models=axis_models
+        )
+>>>>>>> f6537f8 (Three axes: axis count in the ADC frame and the rate/ADC blocks (single-axis bytes unchanged), 3-axis simulated unit, per-axis compensate with the firmware cubic's cost in metrics.json; log readers (ROS 2 MCAP, ULog, DataFlash))
     print(
         f"wrote {args.out}: profile {profile.name}, {summary.duration_s / 3600:.2f} h, "
         f"{summary.samples} samples at {args.rate:g} Hz, seed {args.seed}, "
-        f"effects {', '.join(model.effect_names()) or 'none'}",
+        f"effects {', '.join(model.effect_names()) or 'none'}"
+        + (f", {1 + len(axis_models)} axes" if axis_models else ""),
         file=sys.stdout,
     )
     return 0

@@ -15,6 +15,7 @@ from __future__ import annotations
 import datetime as dt
 import os
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import IO, Any
 
@@ -114,25 +115,40 @@ def simulate_run(
     seed: int = 0,
     start_time: str = DEFAULT_START,
     show_progress: bool = True,
+    axis_models: Sequence[SimModel] = (),
 ) -> SimSummary:
     """Simulate ``profile`` with ``model`` and write the recording to ``out``.
 
     Steps with a stability rule are held past their minimum duration until the PT100 slope
     over ``stable_window_s`` is below ``stable_slope_c_per_min`` (checked once a second),
     or ``max_extra_s`` has passed.
+
+    ``axis_models`` makes a 2- or 3-axis unit: ``model`` is axis x, the others y (and z),
+    each with its own effects and parameters on the same case (:func:`axis_physics`).
     """
     phys = Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
+    extra = axis_physics(model, axis_models, rate_hz, seed, profile.ambient_c)
     bn = phys.block_n
     rate = phys.rate_hz
+    run_meta = run_metadata(profile, rate, seed, start_time)
+    bench_meta = bench_metadata(model, rate)
+    if extra:
+        run_meta["axes"] = 1 + len(extra)
+        bench_meta["adc"]["axes"] = 1 + len(extra)
     w = RecordingWriter(
         out,
         start_time_ns=_start_ns(start_time),
-        run=run_metadata(profile, rate, seed, start_time),
-        bench=bench_metadata(model, rate),
+        run=run_meta,
+        bench=bench_meta,
     )
     n_blocks = 0
     try:
         w.write_metadata("sim_provenance", provenance(model, seed))
+        if extra:
+            w.write_metadata(
+                "sim_provenance_axes",
+                {"axes": 1 + len(extra), "models_toml": [m.to_toml() for m in axis_models]},
+            )
         w.write_event(0.0, "run_started", -1, detail=f"profile {profile.name}")
         w.write_log(
             0.0,
@@ -143,7 +159,8 @@ def simulate_run(
         steps = profile.steps
         step = 0
         step_start = 0
-        phys.set_setpoint(steps[0].setpoint_c)
+        for p in (phys, *extra):
+            p.set_setpoint(steps[0].setpoint_c)
         w.write_event(0.0, "step_started", 0, steps[0].setpoint_c, steps[0].label)
         pt_hist: deque[tuple[float, float]] = deque()
         bar = progress(total=round(profile.duration_s), desc="simulate", unit="s")
@@ -169,7 +186,11 @@ def simulate_run(
                 min_end = step_start + max(1, int(round(s.duration_s * rate)))
                 cut = min(end_block, min_end) if pos < min_end else end_block
                 blk = phys.advance(cut - pos)
-                parts_counts.append(blk.counts)
+                if extra:
+                    cols = [blk.counts] + [p.advance(cut - pos).counts for p in extra]
+                    parts_counts.append(np.column_stack(cols))
+                else:
+                    parts_counts.append(blk.counts)
                 pos = cut
                 ended = pos == min_end and s.stable_slope_c_per_min is None
                 if s.stable_slope_c_per_min is not None and pos >= min_end and pos == end_block:
@@ -185,7 +206,8 @@ def simulate_run(
                         done = True
                         break
                     s = steps[step]
-                    phys.set_setpoint(s.setpoint_c)
+                    for p in (phys, *extra):
+                        p.set_setpoint(s.setpoint_c)
                     w.write_event(pos / rate, "step_started", step, s.setpoint_c, s.label)
             counts = parts_counts[0] if len(parts_counts) == 1 else np.concatenate(parts_counts)
             w.write_adc_block(idx / rate, phys.period, idx, counts)
@@ -200,6 +222,38 @@ def simulate_run(
     finally:
         w.close()
     return SimSummary(t_end, phys.index, n_blocks, len(steps))
+
+
+def axis_physics(
+    model: SimModel,
+    axis_models: Sequence[SimModel],
+    rate_hz: float,
+    seed: int,
+    ambient_c: float,
+) -> list[Physics]:
+    """The :class:`Physics` of axes y (and z) of a multi-axis unit.
+
+    One case, one oven, one ADC: every axis shares ``model``'s thermal and sensor parameters and
+    oven/PT100 effects (``oven_overshoot``, ``rtd_self_heating``), so all axes see the same
+    case temperature; gyro effects (bias polynomial, noise, die lag, ...) are per axis.
+    Axis k draws its noise from seed ``seed + 7919·k`` so axes are independent while axis x
+    is exactly the single-axis unit of ``seed``."""
+    if len(axis_models) > 2:
+        raise ValueError("a unit has at most 3 axes")
+    shared = ("oven_overshoot", "rtd_self_heating")
+    out = []
+    for k, m in enumerate(axis_models, start=1):
+        if (
+            m.thermal != model.thermal
+            or m.sensors != model.sensors
+            or any(m.get(n) != model.get(n) for n in shared)
+        ):
+            raise ValueError(
+                f"axis {k}: thermal, sensor ([sensors]) parameters and {', '.join(shared)} "
+                "must equal axis x's (one case, one oven, one ADC)"
+            )
+        out.append(Physics(m, rate_hz=rate_hz, seed=seed + 7919 * k, ambient_c=ambient_c))
+    return out
 
 
 def _stable(hist: deque[tuple[float, float]], s: Any) -> bool:
