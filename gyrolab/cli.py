@@ -29,6 +29,7 @@ HANDLERS: dict[str, str] = {
     "recover": "gyrolab.acquisition.commands:recover",
     "demo": "gyrolab.report.demo:demo",
     "convert": "gyrolab.convert:convert",
+    "export": "gyrolab.export.commands:export",
 }
 
 
@@ -153,6 +154,26 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("--to", required=True, choices=["csv", "hdf5", "parquet", "netcdf"])
     cv.add_argument("--out", required=True, help="output FILE")
     cv.add_argument("--force", action="store_true", help="overwrite an existing output")
+    ex = cmd("export", "write a fitted model in a firmware's or another tool's format")
+    ex.add_argument("model", metavar="MODEL_DIR")
+    ex.add_argument(
+        "--format", required=True, choices=["px4", "ardupilot", "c", "json", "kalibr"]
+    )
+    ex.add_argument("--out", required=True, help="output FILE (c: NAME.c, NAME.h beside it)")
+    ex.add_argument(
+        "--kind",
+        default="gabp",
+        choices=["gabp", "bp", "poly", "poly3"],
+        help="c/json: which fitted drift model (default gabp, the chosen one)",
+    )
+    ex.add_argument("--instance", type=int, default=0, help="px4/ardupilot gyro instance (0)")
+    ex.add_argument("--device-id", type=int, help="px4: the gyro's device id (TC_Gi_ID)")
+    ex.add_argument("--run", metavar="RUN", help="kalibr: the run to analyse")
+    ex.add_argument("--rostopic", default="/imu0", help="kalibr: IMU topic (default /imu0)")
+    ex.add_argument(
+        "--temperature-topic", metavar="TOPIC", help="kalibr --run from a ROS 2 MCAP"
+    )
+    ex.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
     dm.add_argument("--out", required=True, help="output DIR")

@@ -1,0 +1,273 @@
+"""Dependency-free C99 source of an exported model (:mod:`.spec`), float32.
+
+``gyrolab export MODEL_DIR --format c --out NAME.c`` writes ``NAME.c`` and ``NAME.h``.
+The code needs only ``<math.h>`` (``tanhf``) and implements, per axis, exactly the
+equations of the JSON schema (:mod:`.spec`): the GA-BP/BP network with its input/output
+standardisation and its linear continuation outside the calibrated range, the Legendre
+polynomial baseline, or the firmware cubic. Arithmetic is float32; times are double (a
+float32 second counter loses milliseconds after 4.6 h).
+
+Use (docs/export.md)::
+
+    gyrolab_comp_state st;
+    gyrolab_comp_init(&st);
+    /* for every temperature reading, in time order, before the samples at or after it: */
+    gyrolab_comp_temperature(&st, t_reading_s, temp_c);
+    /* for every gyro sample: */
+    float out[GYROLAB_COMP_AXES];
+    int ok = gyrolab_comp_apply(&st, t_sample_s, raw_dps, out);  /* out = raw − drift */
+
+The temperature input is the zero-order hold of the readings (the last reading at or
+before the sample's time), kept with dT/dt's history in a ring buffer of
+``GYROLAB_COMP_HISTORY`` readings (enough for the dT/dt window at the reading rate; when it
+overflows the oldest reading is dropped). Before the first reading the output is the raw
+rate and ``gyrolab_comp_apply`` returns 0.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+from gyrolab import __version__
+
+
+def _lit(v: float) -> str:
+    """A float32 C literal that reads back as ``float32(v)``."""
+    if not math.isfinite(v):
+        raise ValueError(f"non-finite model constant {v}")
+    s = "%.9g" % v
+    if not any(ch in s for ch in ".en"):
+        s += ".0"
+    return s + "f"
+
+
+def _arr(name: str, values: list[float]) -> str:
+    return f"static const float {name}[{len(values)}] = {{{', '.join(_lit(v) for v in values)}}};"
+
+
+def _axis_fn(k: int, m: dict[str, Any]) -> str:
+    """``static float drift_k(float T, float dTdt)`` for one axis's model."""
+    kind = m["kind"]
+    out = [f"/* axis {k}: {kind} */"]
+    if kind == "poly3":
+        c = m["coef"]
+        out += [
+            f"static float drift_{k}(float T, float dTdt)",
+            "{",
+            "    (void)dTdt;",
+            f"    const float d = clampf(T, {_lit(m['t_min'])}, {_lit(m['t_max'])}) - "
+            f"{_lit(m['t_ref'])};",
+            f"    return {_lit(c[0])} + d * ({_lit(c[1])} + d * ({_lit(c[2])} + d * "
+            f"{_lit(c[3])}));",
+            "}",
+        ]
+    elif kind == "legendre":
+        c = m["coef"]
+        lo, hi = m["t_lo"], m["t_hi"]
+        out += [
+            _arr(f"LEG{k}", c),
+            f"static float drift_{k}(float T, float dTdt)",
+            "{",
+            f"    const float u = (2.0f * T - {_lit(lo + hi)}) / {_lit(hi - lo)};",
+            f"    float p0 = 1.0f, p1 = u, y = LEG{k}[0] * p0;",
+            f"    if ({len(c)} > 1) y += LEG{k}[1] * p1;",
+            f"    for (int n = 1; n + 1 < {len(c)}; ++n) {{",
+            "        const float p2 = ((float)(2 * n + 1) * u * p1 - (float)n * p0) / "
+            "(float)(n + 1);",
+            f"        y += LEG{k}[n + 1] * p2;",
+            "        p0 = p1;",
+            "        p1 = p2;",
+            "    }",
+        ]
+        if m["rate_coef"] is not None:
+            out.append(f"    y += {_lit(m['rate_coef'])} * dTdt;")
+        else:
+            out.append("    (void)dTdt;")
+        out += ["    return y;", "}"]
+    elif kind == "mlp":
+        n, h = len(m["inputs"]), int(m["hidden"])
+        flatW = [v for row in m["W"] for v in row]
+        out += [
+            _arr(f"W{k}", flatW) + f"  /* [{n}][{h}] row-major */",
+            _arr(f"A{k}", m["a"]),
+            _arr(f"WO{k}", m["w"]),
+            _arr(f"XM{k}", m["x_mean"]),
+            _arr(f"XS{k}", m["x_std"]),
+            _arr(f"XLO{k}", m["x_min"]),
+            _arr(f"XHI{k}", m["x_max"]),
+            f"static float drift_{k}(float T, float dTdt)",
+            "{",
+            f"    const float x[{n}] = {{{', '.join(['T', 'dTdt'][:n])}}};",
+            *(["    (void)dTdt;"] if n == 1 else []),
+            f"    float z[{n}], dx[{n}], g[{n}];",
+            f"    for (int i = 0; i < {n}; ++i) {{",
+            f"        const float c = clampf(x[i], XLO{k}[i], XHI{k}[i]);",
+            f"        z[i] = (c - XM{k}[i]) / XS{k}[i];",
+            f"        dx[i] = (x[i] - c) / XS{k}[i];",
+            "        g[i] = 0.0f;",
+            "    }",
+            f"    float y = {_lit(m['b'])};",
+            f"    for (int j = 0; j < {h}; ++j) {{",
+            f"        float u = A{k}[j];",
+            f"        for (int i = 0; i < {n}; ++i) u += z[i] * W{k}[i * {h} + j];",
+            "        const float s = 0.5f * (1.0f + tanhf(0.5f * u));  /* logistic */",
+            f"        y += s * WO{k}[j];",
+            f"        const float d = s * (1.0f - s) * WO{k}[j];",
+            f"        for (int i = 0; i < {n}; ++i) g[i] += W{k}[i * {h} + j] * d;",
+            "    }",
+            "    /* linear continuation outside the calibrated range (0 inside it) */",
+            f"    for (int i = 0; i < {n}; ++i) y += g[i] * dx[i];",
+            f"    return y * {_lit(m['y_std'])} + {_lit(m['y_mean'])};",
+            "}",
+        ]
+    else:
+        raise ValueError(f"no C emitter for model kind {kind!r}")
+    return "\n".join(out)
+
+
+def _window(spec: dict[str, Any]) -> float | None:
+    ws = {a["model"].get("dtdt_window_s") for a in spec["axes"]} - {None}
+    if len(ws) > 1:
+        raise ValueError("axes with different dT/dt windows")
+    return ws.pop() if ws else None
+
+
+def generate(spec: dict[str, Any], header_name: str) -> tuple[str, str]:
+    """``(header text, source text)`` for the export ``spec``; the source includes
+    ``header_name``."""
+    axes = spec["axes"]
+    n_ax = len(axes)
+    w = _window(spec)
+    guard = re.sub(r"[^A-Za-z0-9]", "_", header_name).upper()
+    kinds = ", ".join(f"{a['axis']}: {a['model']['kind']}" for a in axes)
+    ranges = "; ".join(
+        f"{a['axis']}: {a['calibration_range_c'][0]:.3f} .. {a['calibration_range_c'][1]:.3f} °C"
+        for a in axes
+    )
+    clamp_rule = {
+        "mlp": "network inputs clipped to the calibrated range, first-order Taylor "
+        "continuation beyond it (linear extrapolation)",
+        "legendre": "no clamping (the polynomial is evaluated as fitted)",
+        "poly3": "temperature clamped to [t_min, t_max] (constant beyond)",
+    }
+    rules = "\n".join(
+        f" *   axis {a['axis']}: {clamp_rule[a['model']['kind']]}" for a in axes
+    )
+    hist = "1024" if w is not None else "4"
+    header = f"""/* {header_name}: gyro temperature-drift compensation, generated by gyrolab {__version__}
+ * from {spec['model_dir']} (model kind {spec['model_kind']}; {kinds}).
+ * Export schema {spec['format']} v{spec['format_version']}. C99, float32, needs <math.h> only.
+ *
+ * out = raw - drift(T(t){", dT/dt(t)" if w is not None else ""}), rates in deg/s, temperature in degC, times in s.
+ * T(t) is the last temperature reading at or before t (zero-order hold){"" if w is None else f"; dT/dt = (T(t) - T(t - {w:g})) / {w:g}"}.
+ * Calibrated range: {ranges}.
+ * Outside it:
+{rules}
+ */
+#ifndef {guard}
+#define {guard}
+
+#define GYROLAB_COMP_AXES {n_ax}
+#ifndef GYROLAB_COMP_HISTORY
+#define GYROLAB_COMP_HISTORY {hist}  /* temperature readings kept (dT/dt window) */
+#endif
+
+typedef struct {{
+    int n;                                  /* readings held */
+    int head;                               /* index of the oldest */
+    double t[GYROLAB_COMP_HISTORY];         /* reading times, s */
+    float temp[GYROLAB_COMP_HISTORY];       /* readings, degC */
+}} gyrolab_comp_state;
+
+void gyrolab_comp_init(gyrolab_comp_state *s);
+/* Add a temperature reading (times increasing). */
+void gyrolab_comp_temperature(gyrolab_comp_state *s, double t_s, float temp_c);
+/* Drift of every axis at time t_s (deg/s); returns 0 (drift 0) before the first reading. */
+int gyrolab_comp_drift(const gyrolab_comp_state *s, double t_s, float drift_dps[]);
+/* out[a] = raw_dps[a] - drift; returns 0 (out = raw) before the first reading. */
+int gyrolab_comp_apply(const gyrolab_comp_state *s, double t_s, const float raw_dps[],
+                       float out_dps[]);
+
+#endif /* {guard} */
+"""
+    body = "\n\n".join(_axis_fn(k, a["model"]) for k, a in enumerate(axes))
+    w_lit = "0.0" if w is None else repr(float(w))
+    calls = "\n".join(f"    drift_dps[{k}] = drift_{k}(T, dTdt);" for k in range(n_ax))
+    dtdt = (
+        "    const float dTdt = 0.0f;"
+        if w is None
+        else f"    const float Tp = zoh(s, t_s - DTDT_WINDOW_S);\n"
+        f"    const float dTdt = (T - Tp) / {_lit(w)};"
+    )
+    source = f"""/* Generated by gyrolab {__version__}; see {header_name} for what it computes. */
+#include "{header_name}"
+
+#include <math.h>
+
+#define DTDT_WINDOW_S {w_lit}
+
+static float clampf(float x, float lo, float hi)
+{{
+    return x < lo ? lo : (x > hi ? hi : x);
+}}
+
+void gyrolab_comp_init(gyrolab_comp_state *s)
+{{
+    s->n = 0;
+    s->head = 0;
+}}
+
+void gyrolab_comp_temperature(gyrolab_comp_state *s, double t_s, float temp_c)
+{{
+    /* forget readings no later query can need: the oldest goes once the next one is at
+       or before t_s - window (samples come at or after t_s) */
+    while (s->n >= 2 && s->t[(s->head + 1) % GYROLAB_COMP_HISTORY] <= t_s - DTDT_WINDOW_S) {{
+        s->head = (s->head + 1) % GYROLAB_COMP_HISTORY;
+        s->n--;
+    }}
+    if (s->n == GYROLAB_COMP_HISTORY) {{ /* overflow: drop the oldest */
+        s->head = (s->head + 1) % GYROLAB_COMP_HISTORY;
+        s->n--;
+    }}
+    const int i = (s->head + s->n) % GYROLAB_COMP_HISTORY;
+    s->t[i] = t_s;
+    s->temp[i] = temp_c;
+    s->n++;
+}}
+
+/* the last reading at or before tq (the oldest held when tq precedes them all) */
+static float zoh(const gyrolab_comp_state *s, double tq)
+{{
+    for (int k = s->n - 1; k >= 0; --k) {{
+        const int i = (s->head + k) % GYROLAB_COMP_HISTORY;
+        if (s->t[i] <= tq) return s->temp[i];
+    }}
+    return s->temp[s->head];
+}}
+
+{body}
+
+int gyrolab_comp_drift(const gyrolab_comp_state *s, double t_s, float drift_dps[])
+{{
+    if (s->n == 0) {{
+        for (int a = 0; a < GYROLAB_COMP_AXES; ++a) drift_dps[a] = 0.0f;
+        return 0;
+    }}
+    const float T = zoh(s, t_s);
+{dtdt}
+{calls}
+    return 1;
+}}
+
+int gyrolab_comp_apply(const gyrolab_comp_state *s, double t_s, const float raw_dps[],
+                       float out_dps[])
+{{
+    float d[GYROLAB_COMP_AXES];
+    const int ok = gyrolab_comp_drift(s, t_s, d);
+    for (int a = 0; a < GYROLAB_COMP_AXES; ++a) out_dps[a] = raw_dps[a] - d[a];
+    return ok;
+}}
+"""
+    return header, source
