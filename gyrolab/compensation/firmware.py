@@ -116,3 +116,36 @@ def poly3_metrics(
         "vs_chosen": {"chosen": "compensated_streaming", **ratio},
         "model": p3.to_dict(),
     }
+
+
+def firmware_metrics_for_dir(model_dir: Any, run: PreparedRun, metrics: dict[str, Any]) -> None:
+    """Add ``firmware_poly3`` to a report's ``metrics`` when the model directory has the
+    firmware cubic (models fitted before it existed have none: nothing is added)."""
+    import json
+    from pathlib import Path
+
+    p = Path(model_dir) / "firmware.json"
+    if not p.is_file():
+        return
+    p3 = Poly3.from_dict(json.loads(p.read_text())["poly3"])
+    metrics["firmware_poly3"] = poly3_metrics(
+        p3, run, float(metrics["sample_period_s"]), metrics["compensated_streaming"]
+    )
+
+
+def firmware_sentence(metrics: dict[str, Any]) -> str:
+    """One sentence for the report: what the firmware form (PX4/ArduPilot cubic) costs."""
+    fw = metrics["firmware_poly3"]
+    ch = metrics["compensated_streaming"]
+    r = fw["vs_chosen"]
+    return (
+        "Firmware form (3rd-order polynomial in T, clamped to the calibrated range — what "
+        "PX4 TC_G* and ArduPilot INS_TCAL* parameters hold; `gyrolab export --format "
+        f"px4|ardupilot`): drift p-p {fw['drift_pp_deg_per_s']:.4g} °/s against "
+        f"{ch['drift_pp_deg_per_s']:.4g} °/s for the causal GA-BP output "
+        f"({r['drift_pp_deg_per_s_ratio']:.3g}×), rms {fw['rms_deg_per_s']:.4g} against "
+        f"{ch['rms_deg_per_s']:.4g} °/s ({r['rms_deg_per_s_ratio']:.3g}×), bias stability "
+        f"{fw['bias_stability_deg_per_h']:.4g} against {ch['bias_stability_deg_per_h']:.4g} °/h "
+        f"({r['bias_stability_deg_per_h_ratio']:.3g}×); a ratio above 1 is what the firmware "
+        "form loses."
+    )

@@ -123,8 +123,13 @@ def read_run(path: str | Path) -> Recording:
     A recording without ``/gyro/rate`` samples is refused with an :class:`InputError` that
     names the missing topic and lists the topics the file does have.
     """
-    topics = [t for t in ALL_TOPICS if t != TOPIC_ADC]
-    rec = read_recording(path, topics=topics)
+    from gyrolab.logs import detect_format, read_log
+
+    if detect_format(path) == "gyrolab":
+        topics = [t for t in ALL_TOPICS if t != TOPIC_ADC]
+        rec = read_recording(path, topics=topics)
+    else:  # ROS 2 / ULog / DataFlash: the same in-memory recording (gyrolab.logs)
+        rec = read_log(path)
     if rec.rate is None or rec.rate.t.size == 0:
         present = sorted(rec.topic_counts) or ["none"]
         raise InputError(
@@ -356,6 +361,7 @@ def build_report(
     spec: str | Path | None = None,
     operator: str | None = None,
     serial: str | None = None,
+    axis: int | None = None,
 ) -> tuple[Document, dict[str, Any]]:
     """The report document and ``metrics.json`` content of ``run_path`` (and the model).
 
@@ -377,6 +383,8 @@ def build_report(
         model = load_model(str(model_dir))
     step("read recording")
     rec = read_run(run_path)
+    if axis is not None:  # one axis of a multi-axis unit (gyrolab.report.axes)
+        rec = rec.axis(axis)
     rate = rec.rate
     assert rate is not None
     from gyrolab.compensation.pipeline import PAPER_BLOCK_S, block_average
@@ -402,6 +410,9 @@ def build_report(
         step("metrics")
         metrics = evaluate(model, app, run, held_out=held_out)
         metrics["calibration_run"] = model.calibration.get("path")
+        from gyrolab.compensation.firmware import firmware_metrics_for_dir
+
+        firmware_metrics_for_dir(model_dir, run, metrics)
     else:
         step("metrics")
         metrics = {
@@ -517,6 +528,10 @@ def build_report(
     # 3. performance: Allan + metrics
     step("allan")
     doc.sections.append(_performance_section(metrics, xb, block_s, app, model, rate))
+    if "firmware_poly3" in metrics:
+        from gyrolab.compensation.firmware import firmware_sentence
+
+        doc.sections[-1].blocks.append(TextBlock(firmware_sentence(metrics), "note"))
 
     # 3b. noise per temperature plateau (raw rate of each soaked step)
     step("plateau noise")

@@ -65,9 +65,14 @@ def write_report(
             bar.update(1)
 
     try:
-        doc, metrics = build_report(
-            run, model, step=step, spec=spec, operator=operator, serial=serial
-        )
+        from gyrolab.report.axes import build_axes_report, n_axes
+
+        n = n_axes(run, model)
+        kw = {"spec": spec, "operator": operator, "serial": serial}
+        if n > 1:
+            doc, metrics = build_axes_report(run, model, n, step, **kw)
+        else:
+            doc, metrics = build_report(run, model, step=step, **kw)
         step("write")
         with atomic_dir(out, force, command="report", inputs=(run, model, spec)) as tmp:
             (tmp / "index.html").write_text(render(doc), encoding="utf-8")

@@ -1,0 +1,68 @@
+"""The report of a multi-axis unit: the single-axis report of every axis, one after the
+other in one document (the layout of :mod:`.build` is reused, not copied).
+
+Sections and blocks get the axis in their key and title (``x-run``, "Axis x — Run: …");
+``metrics.json`` is ``{"axes": {"x": {...}, "y": {...}, "z": {...}}, "timing_s"}`` with
+each axis's metrics as a single-axis report writes them.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from gyrolab.recording import AXIS_NAMES
+from gyrolab.report.document import Document
+
+
+def n_axes(run: str | Path, model: str | Path | None) -> int:
+    """Axes of the report: those of the model directory, else those of the run."""
+    if model is not None:
+        from gyrolab.compensation.axes import axis_dirs
+
+        return len(axis_dirs(model))
+    from gyrolab.report.build import read_run
+
+    return read_run(run).axes
+
+
+def build_axes_report(
+    run: str | Path, model: str | Path | None, n: int, step: Any, **kw: Any
+) -> tuple[Document, dict[str, Any]]:
+    """One document with every axis's report (module docstring); ``kw`` go to every
+    :func:`~gyrolab.report.build.build_report` (spec, operator, serial)."""
+    from gyrolab.compensation.axes import axis_dirs
+    from gyrolab.report.build import build_report, read_run
+
+    t0 = time.perf_counter()
+    have = read_run(run).axes
+    if have != n:
+        raise_mismatch(run, have, n)
+    dirs = [d for _a, d in axis_dirs(model)] if model is not None else [None] * n
+    doc: Document | None = None
+    metrics: dict[str, Any] = {"axes": {}}
+    for k in range(n):
+        name = AXIS_NAMES[k]
+        d, m = build_report(run, dirs[k], step, axis=k, **kw)
+        metrics["axes"][name] = m
+        for sec in d.sections:
+            sec.key = f"{name}-{sec.key}"
+            sec.title = f"Axis {name} — {sec.title}"
+            for b in sec.blocks:
+                if hasattr(b, "key"):
+                    b.key = f"{name}-{b.key}"
+        if doc is None:
+            doc = d
+            doc.subtitle += f" ({n} axes: {', '.join(AXIS_NAMES[:n])})"
+        else:
+            doc.sections.extend(d.sections)
+    assert doc is not None
+    metrics["timing_s"] = time.perf_counter() - t0
+    return doc, metrics
+
+
+def raise_mismatch(run: str | Path, have: int, want: int) -> None:
+    from gyrolab.errors import InputError
+
+    raise InputError(run, f"has {have} gyro axes, the model {want}")
