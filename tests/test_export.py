@@ -108,6 +108,19 @@ def test_three_axis_recording_and_model_dir(unit: dict[str, Path]) -> None:
     assert not (unit["dir"] / "x.mcap").exists()
 
 
+def test_apply_three_axes(unit: dict[str, Path]) -> None:
+    out = unit["dir"] / "applied.mcap"
+    assert main(["apply", str(unit["model"]), str(unit["val"]), "--out", str(out)]) == 0
+    got = read_recording(out)
+    rec = read_recording(unit["val"])
+    assert got.rate.values.shape == rec.rate.values.shape == (115200, 3)
+    assert got.metadata["compensation"]["axes"] == 3
+    for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
+        want = pl.streaming_compensate(pl.load_model(str(d)), rec.rate.t, rec.rate.values[:, a],
+                                       rec.pt100_t, rec.pt100_c)
+        np.testing.assert_array_equal(got.rate.values[:, a], want.astype(np.float32))
+
+
 def test_three_axis_report_shows_every_axis(unit: dict[str, Path]) -> None:
     from gyrolab.report.axes import build_axes_report
 

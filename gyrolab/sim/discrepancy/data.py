@@ -266,6 +266,11 @@ def load_recording(path: str | os.PathLike[str], bin_s: float | None = None) -> 
             oven.append((m["t"], m["setpoint_c"], m["process_value_c"]))
     if not blocks:
         raise InputError(path, f"recording has no {TOPIC_RATE} data")
+    if blocks[0][3].ndim > 1:
+        raise InputError(
+            path, f"a {blocks[0][3].shape[1]}-axis recording: the discrepancy analysis models "
+            "one gyro axis (simulate the axes one by one)"
+        )
     if not pt:
         raise InputError(path, f"recording has no {TOPIC_PT100} data")
     if not oven:
