@@ -140,8 +140,8 @@ class FrameDecoder:
 
     ``samples_per_frame`` is the ADC's configured n and ``axes`` its axis count (frames
     of another length are rejected; ``counts`` come back as (frames × n·axes), each row
-    interleaved x0 y0 z0 x1 …). ``rate_hz`` (samples/s), when given, makes the decoder also check that
-    a frame's timestamp advanced by ``Δseq · n / rate_hz`` (± 1 frame + 1 %), which
+    interleaved x0 y0 z0 x1 …). ``rate_hz`` (samples/s), when given, makes the decoder also
+    check that a frame's timestamp advanced by ``Δseq · n / rate_hz`` (± 1 frame + 1 %), which
     catches the rare random byte run that passes a 16-bit CRC.
     """
 

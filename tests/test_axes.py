@@ -86,11 +86,14 @@ def test_adc_frame_with_three_axes() -> None:
 
 def test_simulate_cli_three_axes(tmp_path) -> None:
     base = tmp_path / "x.toml"
-    base.write_text('format = "gyrolab-sim-model/1"\n[[effect]]\nname = "bias_poly"\n'
-                    '[[effect]]\nname = "arw"\n')
+    base.write_text(
+        'format = "gyrolab-sim-model/1"\n[[effect]]\nname = "bias_poly"\n[[effect]]\nname = "arw"\n'
+    )
     y = tmp_path / "y.toml"
-    y.write_text('format = "gyrolab-sim-model/1"\n[[effect]]\nname = "bias_poly"\nc1 = -2e-4\n'
-                 '[[effect]]\nname = "arw"\n')
+    y.write_text(
+        'format = "gyrolab-sim-model/1"\n[[effect]]\nname = "bias_poly"\nc1 = -2e-4\n'
+        '[[effect]]\nname = "arw"\n'
+    )
     prof = tmp_path / "p.toml"
     prof.write_text('name = "tiny"\n[[step]]\nsetpoint_c = 30.0\nduration_s = 20.0\n')
     one, three = tmp_path / "one.mcap", tmp_path / "three.mcap"

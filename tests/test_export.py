@@ -52,12 +52,27 @@ def unit(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     mx, others = axis_models()
     prof = load_profile("short")
     for name, seed in (("cal", 3), ("val", 4)):
-        simulate_run(d / f"{name}.mcap", prof, mx, rate_hz=RATE_HZ, seed=seed,
-                     axis_models=others, show_progress=False)
+        simulate_run(
+            d / f"{name}.mcap",
+            prof,
+            mx,
+            rate_hz=RATE_HZ,
+            seed=seed,
+            axis_models=others,
+            show_progress=False,
+        )
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(pl, "DEFAULT_CONFIG", SMALL)
-        rc = main(["compensate", str(d / "cal.mcap"), "--validate", str(d / "val.mcap"),
-                   "--out", str(d / "model")])
+        rc = main(
+            [
+                "compensate",
+                str(d / "cal.mcap"),
+                "--validate",
+                str(d / "val.mcap"),
+                "--out",
+                str(d / "model"),
+            ]
+        )
     assert rc == 0
     return {"dir": d, "cal": d / "cal.mcap", "val": d / "val.mcap", "model": d / "model"}
 
@@ -103,8 +118,10 @@ def test_three_axis_recording_and_model_dir(unit: dict[str, Path]) -> None:
                 fw[k] / am["compensated_streaming"][k]
             )
     # a multi-axis directory is refused by the single-axis loader with one clear line
-    assert main(["apply", str(unit["model"]), str(unit["val"]), "--out",
-                 str(unit["dir"] / "x.mcap")]) == 2
+    assert (
+        main(["apply", str(unit["model"]), str(unit["val"]), "--out", str(unit["dir"] / "x.mcap")])
+        == 2
+    )
     assert not (unit["dir"] / "x.mcap").exists()
 
 
@@ -116,8 +133,9 @@ def test_apply_three_axes(unit: dict[str, Path]) -> None:
     assert got.rate.values.shape == rec.rate.values.shape == (115200, 3)
     assert got.metadata["compensation"]["axes"] == 3
     for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
-        want = pl.streaming_compensate(pl.load_model(str(d)), rec.rate.t, rec.rate.values[:, a],
-                                       rec.pt100_t, rec.pt100_c)
+        want = pl.streaming_compensate(
+            pl.load_model(str(d)), rec.rate.t, rec.rate.values[:, a], rec.pt100_t, rec.pt100_c
+        )
         np.testing.assert_array_equal(got.rate.values[:, a], want.astype(np.float32))
 
 
@@ -138,8 +156,23 @@ def test_three_axis_report_shows_every_axis(unit: dict[str, Path]) -> None:
 
 def test_px4_params_golden_and_round_trip(unit: dict[str, Path]) -> None:
     out = unit["dir"] / "tc.params"
-    assert main(["export", str(unit["model"]), "--format", "px4", "--out", str(out),
-                 "--instance", "1", "--device-id", "2490378"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(unit["model"]),
+                "--format",
+                "px4",
+                "--out",
+                str(out),
+                "--instance",
+                "1",
+                "--device-id",
+                "2490378",
+            ]
+        )
+        == 0
+    )
     text = out.read_text()
     lines = text.splitlines()
     assert lines[0] == "# Sensor thermal compensation parameters"
@@ -177,8 +210,21 @@ def test_px4_params_golden_and_round_trip(unit: dict[str, Path]) -> None:
 
 def test_ardupilot_parm_golden_and_round_trip(unit: dict[str, Path]) -> None:
     out = unit["dir"] / "tcal.parm"
-    assert main(["export", str(unit["model"]), "--format", "ardupilot", "--out", str(out),
-                 "--instance", "0"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(unit["model"]),
+                "--format",
+                "ardupilot",
+                "--out",
+                str(out),
+                "--instance",
+                "0",
+            ]
+        )
+        == 0
+    )
     text = out.read_text()
     body = [ln for ln in text.splitlines() if not ln.startswith("#")]
     assert all(len(ln.split(" ")) == 2 for ln in body)
@@ -221,11 +267,13 @@ def test_json_schema_is_the_fitted_model(unit: dict[str, Path]) -> None:
         want = pl.load_model(str(d)).drift.predict(T)
         np.testing.assert_allclose(evaluate_spec(mdl, T), want, rtol=1e-12, atol=1e-15)
     for kind in ("poly", "poly3"):
-        for ax, (_a, d) in zip(export_spec(unit["model"], kind)["axes"], axis_dirs(unit["model"]),
-                               strict=True):
+        for ax, (_a, d) in zip(
+            export_spec(unit["model"], kind)["axes"], axis_dirs(unit["model"]), strict=True
+        ):
             m = pl.load_model(str(d))
-            want = (m.baselines["poly"].predict(T) if kind == "poly"
-                    else load_poly3(d).predict(T[:, 0]))
+            want = (
+                m.baselines["poly"].predict(T) if kind == "poly" else load_poly3(d).predict(T[:, 0])
+            )
             np.testing.assert_allclose(evaluate_spec(ax["model"], T), want, rtol=1e-12)
 
 
@@ -271,8 +319,23 @@ def run_c(tmp: Path, c_file: Path, rec, axes: int) -> tuple[np.ndarray, np.ndarr
     (tmp / "comp.c").write_text(c_file.read_text().replace(f'"{c_file.stem}.h"', '"comp.h"'))
     (tmp / "driver.c").write_text(DRIVER)
     exe = tmp / "comp"
-    subprocess.run([CC, "-std=c99", "-O2", "-Wall", "-Wextra", "-pedantic", "-Werror", "-o",
-                    str(exe), str(tmp / "driver.c"), str(tmp / "comp.c"), "-lm"], check=True)
+    subprocess.run(
+        [
+            CC,
+            "-std=c99",
+            "-O2",
+            "-Wall",
+            "-Wextra",
+            "-pedantic",
+            "-Werror",
+            "-o",
+            str(exe),
+            str(tmp / "driver.c"),
+            str(tmp / "comp.c"),
+            "-lm",
+        ],
+        check=True,
+    )
     s = rec.rate
     vals = s.values.reshape(s.t.size, -1)[:, :axes]
     rows = np.zeros(s.t.size, dtype=[("t", "<f8"), ("raw", "<f4", (axes,))])
@@ -308,8 +371,9 @@ def test_c_export_matches_python_over_a_whole_profile(unit: dict[str, Path]) -> 
         assert np.all(err[big] <= 1e-5 * np.abs(py[big]))
         # the C output averaged as the pipeline does: the causal metrics of metrics.json
         got = residual_metrics(rec, a, lambda T, a=a: 0.0)  # raw, for the raw check below
-        assert got["rms_deg_per_s"] == pytest.approx(m["axes"][name]["raw"]["rms_deg_per_s"],
-                                                      rel=1e-9)
+        assert got["rms_deg_per_s"] == pytest.approx(
+            m["axes"][name]["raw"]["rms_deg_per_s"], rel=1e-9
+        )
         s = rec.axis(a).rate
         acc = pl.BlockAverager(SMALL.block_s)
         acc.add(s.t, s.values.astype(np.float32) - drift_c[:, a], s.period)
@@ -322,8 +386,10 @@ def test_c_export_matches_python_over_a_whole_profile(unit: dict[str, Path]) -> 
 @pytest.mark.parametrize("kind", ["poly", "poly3"])
 def test_c_export_other_kinds(unit: dict[str, Path], kind: str) -> None:
     out = unit["dir"] / f"k_{kind}.c"
-    assert main(["export", str(unit["model"]), "--format", "c", "--kind", kind,
-                 "--out", str(out)]) == 0
+    assert (
+        main(["export", str(unit["model"]), "--format", "c", "--kind", kind, "--out", str(out)])
+        == 0
+    )
     rec = read_recording(unit["val"])
     tmp = unit["dir"] / f"cbuild_{kind}"
     tmp.mkdir()
@@ -342,18 +408,33 @@ def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
     from gyrolab.compensation.allan import allan_deviation, noise_terms
 
     out = unit["dir"] / "imu.yaml"
-    assert main(["export", str(unit["model"]), "--format", "kalibr", "--run", str(unit["val"]),
-                 "--out", str(out), "--rostopic", "/imu0"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(unit["model"]),
+                "--format",
+                "kalibr",
+                "--run",
+                str(unit["val"]),
+                "--out",
+                str(out),
+                "--rostopic",
+                "/imu0",
+            ]
+        )
+        == 0
+    )
     y = yaml.safe_load(out.read_text())
-    assert set(y) == {"gyroscope_noise_density", "gyroscope_random_walk", "update_rate",
-                      "rostopic"}
+    assert set(y) == {"gyroscope_noise_density", "gyroscope_random_walk", "update_rate", "rostopic"}
     assert y["update_rate"] == RATE_HZ and y["rostopic"] == "/imu0"
     rec = read_recording(unit["val"])
     nds = []
     for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
         s = rec.axis(a).rate
-        comp = pl.streaming_compensate(pl.load_model(str(d)), s.t, s.values,
-                                       rec.pt100_t, rec.pt100_c)
+        comp = pl.streaming_compensate(
+            pl.load_model(str(d)), s.t, s.values, rec.pt100_t, rec.pt100_c
+        )
         nds.append(noise_terms(allan_deviation(comp, RATE_HZ, confidence=None)).N)
     # continuous-time density = Allan N (deg/s * sqrt(s)) in rad/s/sqrt(Hz), largest axis
     assert y["gyroscope_noise_density"] == pytest.approx(max(nds) * math.pi / 180, rel=1e-6)

@@ -32,8 +32,15 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     d = tmp_path_factory.mktemp("logs")
     m = nominal_model()
     others = [m.with_effect("bias_poly", c0=-0.01, c1=-2e-4), m.with_effect("bias_poly", c0=0.0)]
-    simulate_run(d / "sim.mcap", load_profile("short"), m, rate_hz=10.0, seed=7,
-                 axis_models=others, show_progress=False)
+    simulate_run(
+        d / "sim.mcap",
+        load_profile("short"),
+        m,
+        rate_hz=10.0,
+        seed=7,
+        axis_models=others,
+        show_progress=False,
+    )
     rec = read_recording(d / "sim.mcap")
     keep = np.ones(rec.rate.t.size, bool)
     keep[DROP] = False
@@ -88,8 +95,19 @@ def test_reader_bad_input_is_one_line(logs: dict, tmp_path: Path) -> None:
 def test_compensate_a_ros2_bag_per_axis(logs: dict, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(pl, "DEFAULT_CONFIG", SMALL)
     out = logs["dir"] / "model_ros2"
-    assert main(["compensate", str(logs["ros2"]), "--temperature-topic", "/imu/temperature",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "compensate",
+                str(logs["ros2"]),
+                "--temperature-topic",
+                "/imu/temperature",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     m = json.loads((out / "metrics.json").read_text())
     assert set(m["axes"]) == {"x", "y", "z"}
     for a in "xyz":
@@ -97,8 +115,18 @@ def test_compensate_a_ros2_bag_per_axis(logs: dict, monkeypatch: pytest.MonkeyPa
         assert m["axes"][a]["compensated_streaming"]["rms_deg_per_s"] > 0
     # the same model scores the same samples read from the other two formats alike
     for fmt in ("ulog", "dataflash"):
-        k = main(["export", str(out), "--format", "kalibr", "--run", str(logs[fmt]),
-                  "--out", str(logs["dir"] / f"imu_{fmt}.yaml")])
+        k = main(
+            [
+                "export",
+                str(out),
+                "--format",
+                "kalibr",
+                "--run",
+                str(logs[fmt]),
+                "--out",
+                str(logs["dir"] / f"imu_{fmt}.yaml"),
+            ]
+        )
         assert k == 0
 
 

@@ -183,8 +183,8 @@ def _write_axis(directory: Path, model: Any, metrics: dict[str, Any], _cal: Any)
 
 def apply(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
-    from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
     from gyrolab.compensation.axes import axis_dirs
+    from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
     from gyrolab.compensation.pipeline import StreamingCompensator, compensate_offline, load_model
 
     inputs = (args.model, args.run)

@@ -71,8 +71,9 @@ class Poly3:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Poly3:
         c = [float(v) for v in d["coef_deg_per_s"]]
-        return cls((c[0], c[1], c[2], c[3]), float(d["t_ref_c"]), float(d["t_min_c"]),
-                   float(d["t_max_c"]))
+        return cls(
+            (c[0], c[1], c[2], c[3]), float(d["t_ref_c"]), float(d["t_min_c"]), float(d["t_max_c"])
+        )
 
 
 def fit_poly3(run: PreparedRun) -> Poly3:

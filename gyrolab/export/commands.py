@@ -74,8 +74,9 @@ def export(args: argparse.Namespace) -> int:
     if fmt == "px4":
         if args.device_id is None:
             raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")
-        texts = [px4_params(_polys(args.model), args.instance, args.device_id,
-                            header=_header(args))]
+        texts = [
+            px4_params(_polys(args.model), args.instance, args.device_id, header=_header(args))
+        ]
     elif fmt == "ardupilot":
         texts = [ardupilot_parm(_polys(args.model), args.instance, header=_header(args))]
     elif fmt in ("c", "json"):

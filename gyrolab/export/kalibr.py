@@ -57,7 +57,9 @@ def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
 def imu_yaml(axes: dict[str, dict[str, Any]], rate_hz: float, rostopic: str, source: str) -> str:
     """The ``imu.yaml`` text (the largest axis's values; every axis in comments)."""
     nd = max(a["gyroscope_noise_density"] for a in axes.values())
-    rws = [a["gyroscope_random_walk"] for a in axes.values() if np.isfinite(a["gyroscope_random_walk"])]
+    rws = [
+        a["gyroscope_random_walk"] for a in axes.values() if np.isfinite(a["gyroscope_random_walk"])
+    ]
     if not rws:
         from gyrolab.errors import InputError
 

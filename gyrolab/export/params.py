@@ -1,4 +1,5 @@
-"""PX4 ``.params`` and ArduPilot ``.parm`` files of the firmware cubic (:mod:`..compensation.firmware`).
+"""PX4 ``.params`` and ArduPilot ``.parm`` files of the firmware cubic
+(:mod:`gyrolab.compensation.firmware`).
 
 **PX4** (``src/modules/temperature_compensation``: ``temp_comp_params_gyro_*.c`` /
 ``TemperatureCompensation::calc_thermal_offsets_3D``; file layout of
@@ -59,8 +60,13 @@ def _range(polys: list[Poly3]) -> tuple[float, float]:
 
 
 def px4_params(
-    polys: list[Poly3], instance: int, device_id: int, *, vehicle_id: int = 1,
-    component_id: int = 1, header: str = "",
+    polys: list[Poly3],
+    instance: int,
+    device_id: int,
+    *,
+    vehicle_id: int = 1,
+    component_id: int = 1,
+    header: str = "",
 ) -> str:
     """The PX4 ``.params`` text for gyro ``instance`` (module docstring)."""
     if not 0 <= instance <= 3:
