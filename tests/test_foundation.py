@@ -29,6 +29,7 @@ def test_cli_lists_every_design_subcommand() -> None:
         "recover",
         "demo",
         "convert",  # issue 16
+        "export",  # issue 15: firmware and tool formats
     }
 
 

@@ -52,7 +52,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         return "ulog"
     if head[:2] == DATAFLASH_HEAD:
         return "dataflash"
-    raise InputError(p, "not a gyrolab/ROS 2 MCAP, PX4 ULog or ArduPilot DataFlash log")
+    raise InputError(p, "not an MCAP file (gyrolab or ROS 2), PX4 ULog or ArduPilot DataFlash log")
 
 
 def _mcap_profile(path: Path) -> str:
