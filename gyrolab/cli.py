@@ -162,9 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--out", required=True, help="output FILE (c: NAME.c, NAME.h beside it)")
     ex.add_argument(
         "--kind",
-        default="gabp",
-        choices=["gabp", "bp", "poly", "poly3"],
-        help="c/json: which fitted drift model (default gabp, the chosen one)",
+        default="chosen",
+        choices=["chosen", "causal", "gabp", "bp", "poly", "poly3"],
+        help="c/json: which fitted drift model (default chosen: causal if fitted, else gabp)",
     )
     ex.add_argument("--instance", type=int, default=0, help="px4/ardupilot gyro instance (0)")
     ex.add_argument("--device-id", type=int, help="px4: the gyro's device id (TC_Gi_ID)")

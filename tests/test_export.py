@@ -118,11 +118,10 @@ def test_three_axis_recording_and_model_dir(unit: dict[str, Path]) -> None:
                 fw[k] / am["compensated_streaming"][k]
             )
     # a multi-axis directory is refused by the single-axis loader with one clear line
-    assert (
-        main(["apply", str(unit["model"]), str(unit["val"]), "--out", str(unit["dir"] / "x.mcap")])
-        == 2
-    )
-    assert not (unit["dir"] / "x.mcap").exists()
+    from gyrolab.errors import InputError
+
+    with pytest.raises(InputError, match="3-axis model: give one axis's directory"):
+        pl.load_model(str(unit["model"]))
 
 
 def test_apply_three_axes(unit: dict[str, Path]) -> None:

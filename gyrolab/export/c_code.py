@@ -47,75 +47,83 @@ def _arr(name: str, values: list[float]) -> str:
     return f"static const float {name}[{len(values)}] = {{{', '.join(_lit(v) for v in values)}}};"
 
 
-def _axis_fn(k: int, m: dict[str, Any]) -> str:
-    """``static float drift_k(float T, float dTdt)`` for one axis's model."""
+def _inner_fn(name: str, m: dict[str, Any]) -> str:
+    """``static float name(const float *x)``: one model on its input vector ``x``."""
     kind = m["kind"]
-    out = [f"/* axis {k}: {kind} */"]
+    out = [f"/* {name}: {kind} */"]
     if kind == "poly3":
         c = m["coef"]
         out += [
-            f"static float drift_{k}(float T, float dTdt)",
+            f"static float {name}(const float *x)",
             "{",
-            "    (void)dTdt;",
-            f"    const float d = clampf(T, {_lit(m['t_min'])}, {_lit(m['t_max'])}) - "
+            f"    const float d = clampf(x[0], {_lit(m['t_min'])}, {_lit(m['t_max'])}) - "
             f"{_lit(m['t_ref'])};",
             f"    return {_lit(c[0])} + d * ({_lit(c[1])} + d * ({_lit(c[2])} + d * "
             f"{_lit(c[3])}));",
             "}",
         ]
-    elif kind == "legendre":
+    elif kind in ("legendre", "structured"):
         c = m["coef"]
-        lo, hi = m["t_lo"], m["t_hi"]
+        lo, hi = (m["t_lo"], m["t_hi"]) if kind == "legendre" else (m["lo"], m["hi"])
+        linear = kind == "structured"  # continued linearly beyond u = ±1
         out += [
-            _arr(f"LEG{k}", c),
-            f"static float drift_{k}(float T, float dTdt)",
+            _arr(f"{name}_C", c),
+            f"static float {name}(const float *x)",
             "{",
-            f"    const float u = (2.0f * T - {_lit(lo + hi)}) / {_lit(hi - lo)};",
-            f"    float p0 = 1.0f, p1 = u, y = LEG{k}[0] * p0;",
-            f"    if ({len(c)} > 1) y += LEG{k}[1] * p1;",
+            f"    const float u = (2.0f * x[0] - {_lit(lo + hi)}) / {_lit(hi - lo)};",
+            "    const float v = " + ("clampf(u, -1.0f, 1.0f);" if linear else "u;"),
+            "    /* Legendre P_n(v) and P_n'(v) by their three-term recurrences */",
+            "    float p0 = 1.0f, p1 = v, d0 = 0.0f, d1 = 1.0f;",
+            f"    float y = {name}_C[0], dy = 0.0f;",
+            f"    if ({len(c)} > 1) {{ y += {name}_C[1] * p1; dy += {name}_C[1] * d1; }}",
             f"    for (int n = 1; n + 1 < {len(c)}; ++n) {{",
-            "        const float p2 = ((float)(2 * n + 1) * u * p1 - (float)n * p0) / "
+            "        const float p2 = ((float)(2 * n + 1) * v * p1 - (float)n * p0) / "
             "(float)(n + 1);",
-            f"        y += LEG{k}[n + 1] * p2;",
-            "        p0 = p1;",
-            "        p1 = p2;",
+            "        const float d2 = d0 + (float)(2 * n + 1) * p1;",
+            f"        y += {name}_C[n + 1] * p2;",
+            f"        dy += {name}_C[n + 1] * d2;",
+            "        p0 = p1; p1 = p2; d0 = d1; d1 = d2;",
             "    }",
         ]
-        if m["rate_coef"] is not None:
-            out.append(f"    y += {_lit(m['rate_coef'])} * dTdt;")
+        if linear:
+            out.append("    y += dy * (u - v);")
         else:
-            out.append("    (void)dTdt;")
+            out.append("    (void)dy;")
+        if kind == "structured":
+            out.append(
+                f"    y += {_lit(m['k'])} * x[1] + {_lit(m['h'])} * x[2] + {_lit(m['A'])} * x[3];"
+            )
+        elif m["rate_coef"] is not None:
+            out.append(f"    y += {_lit(m['rate_coef'])} * x[1];")
         out += ["    return y;", "}"]
     elif kind == "mlp":
         n, h = len(m["inputs"]), int(m["hidden"])
-        flatW = [v for row in m["W"] for v in row]
+        flat_w = [v for row in m["W"] for v in row]
         out += [
-            _arr(f"W{k}", flatW) + f"  /* [{n}][{h}] row-major */",
-            _arr(f"A{k}", m["a"]),
-            _arr(f"WO{k}", m["w"]),
-            _arr(f"XM{k}", m["x_mean"]),
-            _arr(f"XS{k}", m["x_std"]),
-            _arr(f"XLO{k}", m["x_min"]),
-            _arr(f"XHI{k}", m["x_max"]),
-            f"static float drift_{k}(float T, float dTdt)",
+            _arr(f"{name}_W", flat_w) + f"  /* [{n}][{h}] row-major */",
+            _arr(f"{name}_A", m["a"]),
+            _arr(f"{name}_WO", m["w"]),
+            _arr(f"{name}_XM", m["x_mean"]),
+            _arr(f"{name}_XS", m["x_std"]),
+            _arr(f"{name}_XLO", m["x_min"]),
+            _arr(f"{name}_XHI", m["x_max"]),
+            f"static float {name}(const float *x)",
             "{",
-            f"    const float x[{n}] = {{{', '.join(['T', 'dTdt'][:n])}}};",
-            *(["    (void)dTdt;"] if n == 1 else []),
             f"    float z[{n}], dx[{n}], g[{n}];",
             f"    for (int i = 0; i < {n}; ++i) {{",
-            f"        const float c = clampf(x[i], XLO{k}[i], XHI{k}[i]);",
-            f"        z[i] = (c - XM{k}[i]) / XS{k}[i];",
-            f"        dx[i] = (x[i] - c) / XS{k}[i];",
+            f"        const float c = clampf(x[i], {name}_XLO[i], {name}_XHI[i]);",
+            f"        z[i] = (c - {name}_XM[i]) / {name}_XS[i];",
+            f"        dx[i] = (x[i] - c) / {name}_XS[i];",
             "        g[i] = 0.0f;",
             "    }",
             f"    float y = {_lit(m['b'])};",
             f"    for (int j = 0; j < {h}; ++j) {{",
-            f"        float u = A{k}[j];",
-            f"        for (int i = 0; i < {n}; ++i) u += z[i] * W{k}[i * {h} + j];",
+            f"        float u = {name}_A[j];",
+            f"        for (int i = 0; i < {n}; ++i) u += z[i] * {name}_W[i * {h} + j];",
             "        const float s = 0.5f * (1.0f + tanhf(0.5f * u));  /* logistic */",
-            f"        y += s * WO{k}[j];",
-            f"        const float d = s * (1.0f - s) * WO{k}[j];",
-            f"        for (int i = 0; i < {n}; ++i) g[i] += W{k}[i * {h} + j] * d;",
+            f"        y += s * {name}_WO[j];",
+            f"        const float d = s * (1.0f - s) * {name}_WO[j];",
+            f"        for (int i = 0; i < {n}; ++i) g[i] += {name}_W[i * {h} + j] * d;",
             "    }",
             "    /* linear continuation outside the calibrated range (0 inside it) */",
             f"    for (int i = 0; i < {n}; ++i) y += g[i] * dx[i];",
@@ -125,6 +133,35 @@ def _axis_fn(k: int, m: dict[str, Any]) -> str:
     else:
         raise ValueError(f"no C emitter for model kind {kind!r}")
     return "\n".join(out)
+
+
+def _axis_fn(k: int, m: dict[str, Any]) -> str:
+    """The drift function(s) of axis ``k``: ``model_k`` on its inputs, and for a causal
+    model ``features_k``, its state machine (:func:`.spec.causal_readings`), float32."""
+    if m["kind"] != "causal":
+        return _inner_fn(f"model_{k}", m)
+    f = m["features"]
+    tau, tau_r = f["tau_s"], max(f["tau_s"], f["rate_tau_min_s"])
+    half = 0.5 * f["width_c"]
+    a = f"-expm1f(-dt / {_lit(tau)})" if tau > 0 else "1.0f"
+    return "\n".join(
+        [
+            _inner_fn(f"model_{k}", m["model"]),
+            f"/* axis {k}: causal features (family {m['family']}); x = F, R, S, E */",
+            f"static void features_{k}(gyrolab_comp_state *s, float T, float dt, double t)",
+            "{",
+            f"    const float a = {a};",
+            f"    s->F[{k}] += a * (T - s->F[{k}]);",
+            f"    s->G[{k}] += -expm1f(-dt / {_lit(tau_r)}) * (T - s->G[{k}]);",
+            f"    s->p[{k}] = clampf(s->p[{k}], s->F[{k}] - {_lit(half)}, "
+            f"s->F[{k}] + {_lit(half)});",
+            f"    const float x[4] = {{s->F[{k}], (T - s->G[{k}]) / {_lit(tau_r)},",
+            f"                        (s->F[{k}] - s->p[{k}]) / {_lit(half)},",
+            f"                        expf(-(float)(t / {f['warmup_tau_s']!r}))}};",
+            f"    s->held[{k}] = model_{k}(x);",
+            "}",
+        ]
+    )
 
 
 def _window(spec: dict[str, Any]) -> float | None:
@@ -140,6 +177,7 @@ def generate(spec: dict[str, Any], header_name: str) -> tuple[str, str]:
     axes = spec["axes"]
     n_ax = len(axes)
     w = _window(spec)
+    causal = [a["model"]["kind"] == "causal" for a in axes]
     guard = re.sub(r"[^A-Za-z0-9]", "_", header_name).upper()
     kinds = ", ".join(f"{a['axis']}: {a['model']['kind']}" for a in axes)
     ranges = "; ".join(
@@ -151,11 +189,27 @@ def generate(spec: dict[str, Any], header_name: str) -> tuple[str, str]:
         "continuation beyond it (linear extrapolation)",
         "legendre": "no clamping (the polynomial is evaluated as fitted)",
         "poly3": "temperature clamped to [t_min, t_max] (constant beyond)",
+        "structured": "Legendre part in the die temperature F continued linearly beyond "
+        "the calibrated range of F",
     }
-    rules = "\n".join(f" *   axis {a['axis']}: {clamp_rule[a['model']['kind']]}" for a in axes)
+
+    def rule(m: dict[str, Any]) -> str:
+        if m["kind"] == "causal":
+            return f"causal {m['family']}: " + clamp_rule[m["model"]["kind"]]
+        return clamp_rule[m["kind"]]
+
+    rules = "\n".join(f" *   axis {a['axis']}: {rule(a['model'])}" for a in axes)
     hist = "1024" if w is not None else "4"
     inputs = "T(t)" if w is None else "T(t), dT/dt(t)"
     zoh = "" if w is None else f"; dT/dt = (T(t) - T(t - {w:g})) / {w:g}"
+    causal_note = (
+        " *\n * Causal axes: a state machine (die temperature F, rate R, hysteresis branch S,\n"
+        " * warm-up E) runs at every temperature reading; its drift is held until the next.\n"
+        " * t_s is the time since power-on (the warm-up term uses it). Push each reading\n"
+        " * before the samples at or after its time.\n"
+        if any(causal)
+        else ""
+    )
     header = f"""/* {header_name}: gyro temperature-drift compensation, generated by
  * gyrolab {__version__} from {spec["model_dir"]}
  * (model kind {spec["model_kind"]}; {kinds}).
@@ -166,7 +220,7 @@ def generate(spec: dict[str, Any], header_name: str) -> tuple[str, str]:
  * Calibrated range: {ranges}.
  * Outside it:
 {rules}
- */
+{causal_note} */
 #ifndef {guard}
 #define {guard}
 
@@ -180,6 +234,9 @@ typedef struct {{
     int head;                               /* index of the oldest */
     double t[GYROLAB_COMP_HISTORY];         /* reading times, s */
     float temp[GYROLAB_COMP_HISTORY];       /* readings, degC */
+    double t_last;                          /* causal axes: time of the last reading */
+    float F[GYROLAB_COMP_AXES], G[GYROLAB_COMP_AXES], p[GYROLAB_COMP_AXES];
+    float held[GYROLAB_COMP_AXES];          /* causal axes: drift held since the reading */
 }} gyrolab_comp_state;
 
 void gyrolab_comp_init(gyrolab_comp_state *s);
@@ -195,17 +252,65 @@ int gyrolab_comp_apply(const gyrolab_comp_state *s, double t_s, const float raw_
 """
     body = "\n\n".join(_axis_fn(k, a["model"]) for k, a in enumerate(axes))
     w_lit = "0.0" if w is None else repr(float(w))
-    calls = "\n".join(f"    drift_dps[{k}] = drift_{k}(T, dTdt);" for k in range(n_ax))
+    calls = "\n".join(
+        f"    drift_dps[{k}] = s->held[{k}];" if c else f"    drift_dps[{k}] = model_{k}(x);"
+        for k, c in enumerate(causal)
+    )
+    need_t = not all(causal)
     dtdt = (
-        "    const float dTdt = 0.0f;"
-        if w is None
-        else f"    const float Tp = zoh(s, t_s - DTDT_WINDOW_S);\n"
-        f"    const float dTdt = (T - Tp) / {_lit(w)};"
+        ""
+        if not need_t
+        else "    const float T = zoh(s, t_s);\n"
+        + (
+            "    const float x[2] = {T, 0.0f};"
+            if w is None
+            else "    const float Tp = zoh(s, t_s - DTDT_WINDOW_S);\n"
+            f"    const float x[2] = {{T, (T - Tp) / {_lit(w)}}};"
+        )
+    )
+    if not need_t:
+        dtdt = "    (void)t_s;"
+    updates = "\n".join(
+        f"    features_{k}(s, temp_c, first ? 0.0f : (float)(t_s - s->t_last), t_s);"
+        for k, c in enumerate(causal)
+        if c
+    )
+    init_causal = "\n".join(
+        f"        s->F[{k}] = s->G[{k}] = s->p[{k}] = temp_c;" for k, c in enumerate(causal) if c
+    )
+    causal_push = (
+        f"""    const int first = s->n == 0;
+    if (first) {{
+{init_causal}
+    }}
+{updates}
+    s->t_last = t_s;
+"""
+        if any(causal)
+        else ""
     )
     clampf = (
         "static float clampf(float x, float lo, float hi)\n{\n"
         "    return x < lo ? lo : (x > hi ? hi : x);\n}\n"
-        if any(a["model"]["kind"] != "legendre" for a in axes)
+        if any(
+            a["model"]["kind"] in ("mlp", "poly3", "causal")
+            or a["model"].get("model", {}).get("kind") == "structured"
+            for a in axes
+        )
+        else ""
+    )
+    zoh_fn = (
+        """/* the last reading at or before tq (the oldest held when tq precedes them all) */
+static float zoh(const gyrolab_comp_state *s, double tq)
+{
+    for (int k = s->n - 1; k >= 0; --k) {
+        const int i = (s->head + k) % GYROLAB_COMP_HISTORY;
+        if (s->t[i] <= tq) return s->temp[i];
+    }
+    return s->temp[s->head];
+}
+"""
+        if need_t
         else ""
     )
     source = f"""/* Generated by gyrolab {__version__}; see {header_name} for what it computes. */
@@ -216,15 +321,19 @@ int gyrolab_comp_apply(const gyrolab_comp_state *s, double t_s, const float raw_
 #define DTDT_WINDOW_S {w_lit}
 
 {clampf}
+{body}
+
 void gyrolab_comp_init(gyrolab_comp_state *s)
 {{
     s->n = 0;
     s->head = 0;
+    s->t_last = 0.0;
+    for (int a = 0; a < GYROLAB_COMP_AXES; ++a) s->F[a] = s->G[a] = s->p[a] = s->held[a] = 0.0f;
 }}
 
 void gyrolab_comp_temperature(gyrolab_comp_state *s, double t_s, float temp_c)
 {{
-    /* forget readings no later query can need: the oldest goes once the next one is at
+{causal_push}    /* forget readings no later query can need: the oldest goes once the next one is at
        or before t_s - window (samples come at or after t_s) */
     while (s->n >= 2 && s->t[(s->head + 1) % GYROLAB_COMP_HISTORY] <= t_s - DTDT_WINDOW_S) {{
         s->head = (s->head + 1) % GYROLAB_COMP_HISTORY;
@@ -240,25 +349,13 @@ void gyrolab_comp_temperature(gyrolab_comp_state *s, double t_s, float temp_c)
     s->n++;
 }}
 
-/* the last reading at or before tq (the oldest held when tq precedes them all) */
-static float zoh(const gyrolab_comp_state *s, double tq)
-{{
-    for (int k = s->n - 1; k >= 0; --k) {{
-        const int i = (s->head + k) % GYROLAB_COMP_HISTORY;
-        if (s->t[i] <= tq) return s->temp[i];
-    }}
-    return s->temp[s->head];
-}}
-
-{body}
-
+{zoh_fn}
 int gyrolab_comp_drift(const gyrolab_comp_state *s, double t_s, float drift_dps[])
 {{
     if (s->n == 0) {{
         for (int a = 0; a < GYROLAB_COMP_AXES; ++a) drift_dps[a] = 0.0f;
         return 0;
     }}
-    const float T = zoh(s, t_s);
 {dtdt}
 {calls}
     return 1;

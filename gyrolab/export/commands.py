@@ -2,8 +2,8 @@
 
 * ``px4`` / ``ardupilot``: the firmware cubic of every axis (:mod:`.params`);
   ``--instance`` picks the gyro/IMU instance, ``--device-id`` PX4's ``TC_Gi_ID``.
-* ``c``: ``FILE`` (``NAME.c``) and ``NAME.h`` implementing ``--kind`` (default ``gabp``,
-  the chosen model) for every axis (:mod:`.c_code`).
+* ``c``: ``FILE`` (``NAME.c``) and ``NAME.h`` implementing ``--kind`` for every axis
+  (default ``chosen``: the causal model when the model has one, else GA-BP; :mod:`.c_code`).
 * ``json``: the versioned model description (:mod:`.spec`).
 * ``kalibr``: ``imu.yaml`` from the Allan analysis of ``--run`` after compensation
   (:mod:`.kalibr`).

@@ -26,7 +26,15 @@ generated from it, so what the JSON says is what the C computes. Schema
   the polynomial baseline ``Σ c_k P_k(u)`` (+ ``rate_coef``·dT/dt), ``u = (2T − lo − hi)/
   (hi − lo)``, *not* clamped (as the Python model);
 * ``{"kind": "poly3", "coef" (c0..c3, deg/s), "t_ref", "t_min", "t_max"}`` — the firmware
-  cubic, ``Σ c_k Δ^k``, ``Δ = clamp(T, t_min, t_max) − t_ref``.
+  cubic, ``Σ c_k Δ^k``, ``Δ = clamp(T, t_min, t_max) − t_ref``;
+* ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s", "width_c",
+  "warmup_tau_s"}, "model": INNER}`` — the causal model of
+  :mod:`gyrolab.compensation.causal`: a state machine run at every temperature reading
+  (:func:`causal_readings` states its equations) gives the features F (die temperature),
+  R (its rate), S (hysteresis branch), E (warm-up); ``INNER`` maps them to the drift, held
+  until the next reading: ``{"kind": "structured", "coef", "lo", "hi", "k", "h", "A"}``
+  (``Σ c_i L_i(u) + k R + h S + A E``, ``u = (2F − lo − hi)/(hi − lo)``, the Legendre part
+  continued linearly beyond u = ±1) or an ``mlp`` with inputs ``["F", "R", "S", "E"]``.
 
 dT/dt, when a model uses it, is ``(T(t) − T(t − w)) / w`` with both temperatures taken by
 the same zero-order hold (the first reading when ``t − w`` precedes it).
@@ -45,7 +53,7 @@ from gyrolab.errors import InputError
 
 EXPORT_FORMAT = "gyrolab.export"
 EXPORT_FORMAT_VERSION = 1
-KINDS = ("gabp", "bp", "poly", "poly3")
+KINDS = ("chosen", "causal", "gabp", "bp", "poly", "poly3")
 
 
 def _mlp_spec(m: Any, cfg: Any) -> dict[str, Any]:
@@ -84,9 +92,43 @@ def _legendre_spec(m: Any, cfg: Any) -> dict[str, Any]:
     }
 
 
-def model_spec(model_dir: Path, kind: str = "gabp") -> dict[str, Any]:
-    """The ``MODEL`` entry of one axis: ``kind`` ``gabp`` (the chosen model), ``bp`` or
-    ``poly`` (the baselines) or ``poly3`` (the firmware cubic)."""
+def _causal_spec(c: Any, cfg: Any) -> dict[str, Any]:
+    """A :class:`gyrolab.compensation.causal.CausalDriftModel` (read by attribute, so this
+    module does not depend on the causal module's presence)."""
+    from gyrolab.compensation.gabp import MLPDriftModel
+
+    inner = c.model
+    if isinstance(inner, MLPDriftModel):
+        m = _mlp_spec(inner, cfg)
+        m["inputs"], m["dtdt_window_s"] = ["F", "R", "S", "E"][: inner.n_in], None
+    else:
+        m = {
+            "kind": "structured",
+            "coef": np.asarray(inner.coef, dtype=float).tolist(),
+            "lo": float(inner.lo),
+            "hi": float(inner.hi),
+            "k": float(inner.k),
+            "h": float(inner.h),
+            "A": float(inner.A),
+        }
+    p = c.params
+    return {
+        "kind": "causal",
+        "family": str(c.family),
+        "features": {
+            "tau_s": float(p.tau_s),
+            "rate_tau_min_s": float(p.rate_tau_min_s),
+            "width_c": float(p.width_c),
+            "warmup_tau_s": float(p.warmup_tau_s),
+        },
+        "model": m,
+    }
+
+
+def model_spec(model_dir: Path, kind: str = "chosen") -> dict[str, Any]:
+    """The ``MODEL`` entry of one axis: ``kind`` ``chosen`` (the causal model when the
+    directory has one, else GA-BP), ``causal``, ``gabp``, ``bp`` or ``poly`` (the
+    baselines) or ``poly3`` (the firmware cubic)."""
     from gyrolab.compensation.axes import load_poly3
     from gyrolab.compensation.baselines import PolyDriftModel
     from gyrolab.compensation.gabp import MLPDriftModel
@@ -102,6 +144,13 @@ def model_spec(model_dir: Path, kind: str = "gabp") -> dict[str, Any]:
             "t_max": p3.t_max,
         }
     model = load_model(str(model_dir))
+    causal = getattr(model, "causal", None)
+    if kind == "chosen":
+        kind = "causal" if causal is not None else "gabp"
+    if kind == "causal":
+        if causal is None:
+            raise InputError(model_dir, "model has no causal drift model (an older fit)")
+        return _causal_spec(causal, model.config)
     drift = model.drift if kind == "gabp" else model.baselines.get(kind)
     if drift is None:
         raise InputError(model_dir, f"model has no {kind!r} drift model")
@@ -114,7 +163,7 @@ def model_spec(model_dir: Path, kind: str = "gabp") -> dict[str, Any]:
     raise InputError(model_dir, f"export of a {type(drift).__name__} drift model is not supported")
 
 
-def export_spec(model_dir: str | Path, kind: str = "gabp") -> dict[str, Any]:
+def export_spec(model_dir: str | Path, kind: str = "chosen") -> dict[str, Any]:
     """The whole JSON document for every axis of ``model_dir``."""
     from gyrolab.compensation.axes import axis_dirs
     from gyrolab.compensation.pipeline import load_model
@@ -156,9 +205,8 @@ def evaluate_spec(model: dict[str, Any], X: np.ndarray) -> np.ndarray:
     """``f(inputs)`` of one axis's ``MODEL`` (float64), ``X`` = (N, n_inputs): the
     equations of the module docstring, independent of the fitting code (the test checks
     it against the fitted model)."""
-    X = np.atleast_2d(np.asarray(X, dtype=float))
-    if X.shape[0] == 1 and X.shape[1] != 1 and model["kind"] != "mlp":
-        X = X.T
+    X = np.asarray(X, dtype=float)
+    X = X[:, None] if X.ndim == 1 else X
     k = model["kind"]
     if k == "poly3":
         d = np.clip(X[:, 0], model["t_min"], model["t_max"]) - model["t_ref"]
@@ -179,4 +227,50 @@ def evaluate_spec(model: dict[str, Any], X: np.ndarray) -> np.ndarray:
         g = (s * (1.0 - s) * w) @ W.T
         y = y + np.sum(g * (X - c) / xs, axis=1)
         return y * model["y_std"] + model["y_mean"]
+    if k == "structured":
+        lo, hi = model["lo"], model["hi"]
+        u = (2.0 * X[:, 0] - (lo + hi)) / (hi - lo)
+        uc = np.clip(u, -1.0, 1.0)
+        c = np.asarray(model["coef"], dtype=float)
+        y = np.polynomial.legendre.legval(uc, c)
+        y = y + np.polynomial.legendre.legval(uc, np.polynomial.legendre.legder(c)) * (u - uc)
+        return y + model["k"] * X[:, 1] + model["h"] * X[:, 2] + model["A"] * X[:, 3]
     raise ValueError(f"unknown model kind {k!r}")
+
+
+def causal_readings(
+    features: dict[str, float], pt_t: np.ndarray, pt_c: np.ndarray, t_power_on: float = 0.0
+) -> np.ndarray:
+    """The causal features ``(F, R, S, E)`` at every reading (float64, one reading at a
+    time as firmware runs it). At rest at the first reading (``F = G = p = T_0``,
+    ``t = t_0 − t_power_on``); then, with ``Δt`` the time since the previous reading,
+    ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width::
+
+        F += a (T − F),  a = −expm1(−Δt/τ)  (1 when τ = 0)      die temperature
+        G += b (T − G),  b = −expm1(−Δt/τ_r);  R = (T − G)/τ_r   rate
+        p = min(max(p, F − w/2), F + w/2);     S = (F − p)/(w/2) hysteresis branch
+        t += Δt;                               E = exp(−t/τ_w)    warm-up
+    """
+    import math
+
+    tau, tmin = features["tau_s"], features["rate_tau_min_s"]
+    tau_r, half, tau_w = max(tau, tmin), 0.5 * features["width_c"], features["warmup_tau_s"]
+    out = np.empty((len(pt_c), 4))
+    F = G = p = float(pt_c[0])
+    t = float(pt_t[0]) - t_power_on
+    prev = float(pt_t[0])
+    for n, (tn, T) in enumerate(zip(pt_t, pt_c, strict=True)):
+        dt = float(tn) - prev
+        prev = float(tn)
+        a = -math.expm1(-dt / tau) if tau > 0 else 1.0
+        F += a * (T - F)
+        G += -math.expm1(-dt / tau_r) * (T - G)
+        p = min(max(p, F - half), F + half)
+        t += dt
+        out[n] = (F, (T - G) / tau_r, (F - p) / half, math.exp(-t / tau_w))
+    return out
+
+
+def evaluate_causal(model: dict[str, Any], pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
+    """Drift (°/s) at every reading of a ``causal`` ``MODEL`` (held until the next one)."""
+    return evaluate_spec(model["model"], causal_readings(model["features"], pt_t, pt_c))
