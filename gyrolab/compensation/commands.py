@@ -86,7 +86,8 @@ def _summary(m: dict[str, Any]) -> str:
     if fw:
         lines.append(
             f"  firmware cubic (PX4/ArduPilot form) drift p-p {fw['drift_pp_deg_per_s']:.4g} "
-            f"deg/s, {fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the causal model's"
+            f"deg/s, {fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the chosen causal "
+            "output's"
         )
     for name, b in m["baselines"].items():
         lines.append(
@@ -155,15 +156,11 @@ def _fit_axis(args: argparse.Namespace, cfg: Any, run: Any, val: Any) -> tuple[A
         app = pl.compensate_offline(model, run, dec)
         metrics_cal = pl.evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
-        metrics_cal["firmware_poly3"] = poly3_metrics(
-            p3, run, cfg.block_s, metrics_cal["compensated_streaming"]
-        )
+        metrics_cal["firmware_poly3"] = poly3_metrics(p3, run, cfg.block_s, metrics_cal)
     if val is not None:
         with _named(val.path):
             metrics = pl.evaluate(model, pl.compensate_offline(model, val), val, held_out=True)
-            metrics["firmware_poly3"] = poly3_metrics(
-                p3, val, cfg.block_s, metrics["compensated_streaming"]
-            )
+            metrics["firmware_poly3"] = poly3_metrics(p3, val, cfg.block_s, metrics)
         metrics["calibration"] = metrics_cal
     else:
         metrics = metrics_cal

@@ -101,12 +101,18 @@ def poly3_block_means(p3: Poly3, run: PreparedRun, block_s: float) -> np.ndarray
     return acc.result()[1]
 
 
-def poly3_metrics(
-    p3: Poly3, run: PreparedRun, block_s: float, chosen: dict[str, float]
-) -> dict[str, Any]:
+def chosen_key(metrics: dict[str, Any]) -> str:
+    """The metrics key of the chosen causal output: ``causal`` (the causal headline model)
+    when the pipeline fitted one, else ``compensated_streaming`` (GA-BP on T, causal)."""
+    return "causal" if "causal" in metrics else "compensated_streaming"
+
+
+def poly3_metrics(p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any]) -> dict:
     """metrics.json ``firmware_poly3``: the cubic's causal residual on ``run`` and how much
-    worse it is than the chosen model's causal output ``chosen`` (``compensated_streaming``):
-    ratios > 1 mean the firmware form leaves more."""
+    worse it is than the chosen causal output of ``metrics`` (:func:`chosen_key`): ratios
+    > 1 mean the firmware form leaves more."""
+    key = chosen_key(metrics)
+    chosen = metrics[key]
     m = series_metrics(poly3_block_means(p3, run, block_s), block_s)
     ratio = {
         f"{k}_ratio": (m[k] / chosen[k] if chosen.get(k) else float("nan"))
@@ -114,7 +120,7 @@ def poly3_metrics(
     }
     return {
         **m,
-        "vs_chosen": {"chosen": "compensated_streaming", **ratio},
+        "vs_chosen": {"chosen": key, **ratio},
         "model": p3.to_dict(),
     }
 
@@ -129,21 +135,20 @@ def firmware_metrics_for_dir(model_dir: Any, run: PreparedRun, metrics: dict[str
     if not p.is_file():
         return
     p3 = Poly3.from_dict(json.loads(p.read_text())["poly3"])
-    metrics["firmware_poly3"] = poly3_metrics(
-        p3, run, float(metrics["sample_period_s"]), metrics["compensated_streaming"]
-    )
+    metrics["firmware_poly3"] = poly3_metrics(p3, run, float(metrics["sample_period_s"]), metrics)
 
 
 def firmware_sentence(metrics: dict[str, Any]) -> str:
     """One sentence for the report: what the firmware form (PX4/ArduPilot cubic) costs."""
     fw = metrics["firmware_poly3"]
-    ch = metrics["compensated_streaming"]
     r = fw["vs_chosen"]
+    ch = metrics[r["chosen"]]
+    name = "causal model" if r["chosen"] == "causal" else "causal GA-BP output"
     return (
         "Firmware form (3rd-order polynomial in T, clamped to the calibrated range — what "
         "PX4 TC_G* and ArduPilot INS_TCAL* parameters hold; `gyrolab export --format "
         f"px4|ardupilot`): drift p-p {fw['drift_pp_deg_per_s']:.4g} °/s against "
-        f"{ch['drift_pp_deg_per_s']:.4g} °/s for the causal GA-BP output "
+        f"{ch['drift_pp_deg_per_s']:.4g} °/s for the {name} "
         f"({r['drift_pp_deg_per_s_ratio']:.3g}×), rms {fw['rms_deg_per_s']:.4g} against "
         f"{ch['rms_deg_per_s']:.4g} °/s ({r['rms_deg_per_s_ratio']:.3g}×), bias stability "
         f"{fw['bias_stability_deg_per_h']:.4g} against {ch['bias_stability_deg_per_h']:.4g} °/h "
