@@ -69,8 +69,9 @@ def export(args: argparse.Namespace) -> int:
     fmt = args.format
     out = Path(args.out)
     outs = [out] + ([out.with_suffix(".h")] if fmt == "c" else [])
+    inputs = (args.model, args.run)
     for o in outs:
-        check_output(o, args.force)
+        check_output(o, args.force, inputs=inputs, kind="file")
     if fmt == "px4":
         if args.device_id is None:
             raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")
@@ -100,7 +101,7 @@ def export(args: argparse.Namespace) -> int:
     else:  # argparse restricts the choices
         raise InputError("--format", f"unknown format {fmt!r}")
     for o, text in zip(outs, texts, strict=True):
-        with atomic_file(o, args.force) as tmp:
+        with atomic_file(o, args.force, inputs=inputs) as tmp:
             tmp.write_text(text, encoding="utf-8")
     print(f"wrote {', '.join(str(o) for o in outs)}", file=sys.stderr)
     return 0

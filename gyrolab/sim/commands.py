@@ -20,7 +20,7 @@ def simulate(args: argparse.Namespace) -> int:
 
     Everything is validated before anything is written; the recording appears atomically.
     """
-    inputs = (args.profile, args.model)
+    inputs = (args.profile, args.model, *(getattr(args, "axis_model", None) or []))
     check_output(args.out, args.force, inputs=inputs, kind="file")
     if not (math.isfinite(args.rate) and 0 < args.rate <= MAX_RATE_HZ):
         raise InputError("--rate", f"must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
@@ -30,10 +30,6 @@ def simulate(args: argparse.Namespace) -> int:
         model = apply_effect_args(model, list(args.effect or []))
     except (ValueError, TypeError) as e:
         raise InputError("--effect", str(e)) from None
-<<<<<<< HEAD
-    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
-        summary = simulate_run(tmp, profile, model, rate_hz=args.rate, seed=args.seed)
-=======
     axis_models = [load_model(m) for m in getattr(args, "axis_model", None) or []]
     if len(axis_models) > 2:
         raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
@@ -41,11 +37,10 @@ def simulate(args: argparse.Namespace) -> int:
         axis_physics(model, axis_models, args.rate, args.seed, profile.ambient_c)
     except ValueError as e:
         raise InputError("--axis-model", str(e)) from None
-    with atomic_file(args.out, args.force) as tmp:
+    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
         summary = simulate_run(
             tmp, profile, model, rate_hz=args.rate, seed=args.seed, axis_models=axis_models
         )
->>>>>>> f6537f8 (Three axes: axis count in the ADC frame and the rate/ADC blocks (single-axis bytes unchanged), 3-axis simulated unit, per-axis compensate with the firmware cubic's cost in metrics.json; log readers (ROS 2 MCAP, ULog, DataFlash))
     print(
         f"wrote {args.out}: profile {profile.name}, {summary.duration_s / 3600:.2f} h, "
         f"{summary.samples} samples at {args.rate:g} Hz, seed {args.seed}, "
