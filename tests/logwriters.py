@@ -51,16 +51,25 @@ uint32 nanosec
 """
 
 
-def _header(t: float) -> dict:
+def _header(t: float | None) -> dict:
+    if t is None:  # a driver that leaves the stamp at zero
+        return {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "imu"}
     sec = int(np.floor(t))
     return {"stamp": {"sec": sec, "nanosec": int(round((t - sec) * 1e9))}, "frame_id": "imu"}
 
 
 def write_ros2(
-    path: Path, t: np.ndarray, gyro: np.ndarray, tt: np.ndarray, tc: np.ndarray, t0: float
+    path: Path,
+    t: np.ndarray,
+    gyro: np.ndarray,
+    tt: np.ndarray,
+    tc: np.ndarray,
+    t0: float,
+    stamp: bool = True,
 ) -> Path:
     """``sensor_msgs/msg/Imu`` on /imu/data and ``sensor_msgs/msg/Temperature`` on
-    /imu/temperature; times ``t0 + t`` (s), gyro (n, 3) rad/s, temperature °C."""
+    /imu/temperature; times ``t0 + t`` (s) as header stamps (zero stamps when not
+    ``stamp``) and MCAP log times, gyro (n, 3) rad/s, temperature °C."""
     from mcap_ros2.writer import Writer
 
     with open(path, "wb") as fh:
@@ -76,7 +85,7 @@ def write_ros2(
             if kind == 0:
                 g = gyro[i]
                 msg = {
-                    "header": _header(t0 + time_s),
+                    "header": _header(t0 + time_s if stamp else None),
                     "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
                     "orientation_covariance": [-1.0] + z9[1:],
                     "angular_velocity": {"x": g[0], "y": g[1], "z": g[2]},
@@ -86,7 +95,11 @@ def write_ros2(
                 }
                 w.write_message("/imu/data", s_imu, msg, log_time=ns, publish_time=ns)
             else:
-                msg = {"header": _header(t0 + time_s), "temperature": tc[i], "variance": 0.0}
+                msg = {
+                    "header": _header(t0 + time_s if stamp else None),
+                    "temperature": tc[i],
+                    "variance": 0.0,
+                }
                 w.write_message("/imu/temperature", s_tmp, msg, log_time=ns, publish_time=ns)
         w.finish()
     return path

@@ -86,10 +86,27 @@ def test_reader_bad_input_is_one_line(logs: dict, tmp_path: Path) -> None:
         read_log(logs["ulog"], instance=1)
     with pytest.raises(InputError, match="no IMU messages of instance 2"):
         read_log(logs["dataflash"], instance=2)
+    nan = tmp_path / "nan.ulg"
+    t_us = np.arange(100, dtype=np.int64) * 10_000 + 1_000_000
+    write_ulog(nan, t_us, np.zeros((100, 3)), np.full(100, np.nan), 1)
+    with pytest.raises(InputError, match="no finite temperature readings"):
+        read_log(nan)
     junk = tmp_path / "junk.bin"
     junk.write_bytes(b"hello world")
     with pytest.raises(InputError, match="not an MCAP file"):
         read_log(junk)
+
+
+def test_unstamped_ros2_bag_uses_log_time(tmp_path: Path) -> None:
+    t = np.arange(200) / 50.0
+    g = np.zeros((200, 3))
+    g[:, 2] = 0.01
+    p = write_ros2(tmp_path / "u.mcap", t, g, t[::50], 20.0 + t[::50], 1.7e9, stamp=False)
+    rec = read_log(p)
+    assert rec.run["time"].startswith("MCAP log_time")
+    np.testing.assert_allclose(rec.rate.t, t, atol=1e-6)
+    np.testing.assert_allclose(rec.rate.values[:, 2], np.degrees(0.01))
+    assert rec.pt100_c.tolist() == pytest.approx((20.0 + t[::50]).tolist())
 
 
 def test_compensate_a_ros2_bag_per_axis(logs: dict, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -130,6 +130,8 @@ def build_recording(
     tc = np.asarray(temp_c, dtype=float)
     ok = np.isfinite(tt) & np.isfinite(tc)
     tt, tc = tt[ok], tc[ok]
+    if tt.size == 0:
+        raise InputError(path, "log has no finite temperature readings: nothing to model")
     o = np.argsort(tt, kind="stable")
     rec = Recording(path=str(path))
     rec.run = dict(run)

@@ -1,7 +1,8 @@
 """ROS 2 bags in MCAP: ``sensor_msgs/msg/Imu`` + ``sensor_msgs/msg/Temperature``.
 
 Decoded with ``mcap-ros2-support`` (CDR). The gyro is ``angular_velocity`` (rad/s, REP 103
-body axes x, y, z) at ``header.stamp``; the temperature is ``temperature`` (°C) of the
+body axes x, y, z) at ``header.stamp`` (the MCAP log time when a driver leaves every stamp
+at zero); the temperature is ``temperature`` (°C) of the
 ``sensor_msgs/msg/Temperature`` topic named on the command line (``--temperature-topic``;
 when the bag has exactly one Temperature topic it is taken). Message definitions:
 https://docs.ros2.org/latest/api/sensor_msgs/msg/Imu.html and .../Temperature.html.
@@ -65,17 +66,19 @@ def read_ros2(
     topics = _topics_of(path)
     imu = _pick(path, topics, IMU, imu_topic, "--imu-topic")
     temp = _pick(path, topics, TEMPERATURE, temperature_topic, "--temperature-topic")
-    t, g, tt, tc = [], [], [], []
+    t, g, tt, tc, lt, tlt = [], [], [], [], [], []
     try:
         with open(path, "rb") as fh:
             reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-            for _s, ch, _m, msg in reader.iter_decoded_messages(topics=[imu, temp]):
+            for _s, ch, m, msg in reader.iter_decoded_messages(topics=[imu, temp]):
                 if ch.topic == imu:
                     w = msg.angular_velocity
                     t.append(_stamp(msg))
+                    lt.append(m.log_time * 1e-9)
                     g.append((w.x, w.y, w.z))
                 else:
                     tt.append(_stamp(msg))
+                    tlt.append(m.log_time * 1e-9)
                     tc.append(msg.temperature)
     except InputError:
         raise
@@ -85,6 +88,9 @@ def read_ros2(
         raise InputError(path, f"topic {imu} has no messages")
     if not tt:
         raise InputError(path, f"topic {temp} has no messages")
+    stamped = any(t) and any(tt)
+    if not stamped:  # unstamped driver: the recorder's receive times are all there is
+        t, tt = lt, tlt
     t0 = min(t)
     return build_recording(
         path,
@@ -92,5 +98,11 @@ def read_ros2(
         np.asarray(g),
         np.asarray(tt) - t0,
         np.asarray(tc),
-        {"source": "ros2", "imu_topic": imu, "temperature_topic": temp, "start_stamp_s": t0},
+        {
+            "source": "ros2",
+            "imu_topic": imu,
+            "temperature_topic": temp,
+            "start_stamp_s": t0,
+            "time": "header.stamp" if stamped else "MCAP log_time (header stamps are zero)",
+        },
     )
