@@ -97,6 +97,46 @@ def test_reader_bad_input_is_one_line(logs: dict, tmp_path: Path) -> None:
         read_log(junk)
 
 
+def test_ros2_imu_fast_path_equals_the_library(tmp_path: Path) -> None:
+    """The fixed-offset Imu read (gyrolab.logs.ros2.imu_fast) against mcap-ros2-support's
+    decoder, message by message, with frame ids of every length mod 8 (CDR alignment)."""
+    from logwriters import IMU_MSGDEF
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from mcap_ros2.writer import Writer
+
+    from gyrolab.logs.ros2 import imu_fast
+
+    p = tmp_path / "ids.mcap"
+    rng = np.random.default_rng(1)
+    with open(p, "wb") as fh:
+        w = Writer(fh)
+        s = w.register_msgdef("sensor_msgs/msg/Imu", IMU_MSGDEF)
+        for k in range(24):
+            v = rng.normal(size=3)
+            msg = {
+                "header": {"stamp": {"sec": 1000 + k, "nanosec": 7 * k}, "frame_id": "f" * k},
+                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+                "orientation_covariance": [0.5] * 9,
+                "angular_velocity": {"x": v[0], "y": v[1], "z": v[2]},
+                "angular_velocity_covariance": [0.0] * 9,
+                "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81},
+                "linear_acceleration_covariance": [0.0] * 9,
+            }
+            w.write_message("/imu", s, msg, log_time=k, publish_time=k)
+        w.finish()
+    with open(p, "rb") as fh:
+        n = 0
+        for _s, _c, m, msg in make_reader(
+            fh, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
+            a = msg.angular_velocity
+            st = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            assert imu_fast(m.data) == (st, a.x, a.y, a.z)
+            n += 1
+    assert n == 24
+
+
 def test_unstamped_ros2_bag_uses_log_time(tmp_path: Path) -> None:
     t = np.arange(200) / 50.0
     g = np.zeros((200, 3))
@@ -157,3 +197,20 @@ def test_report_allan_of_a_dataflash_log(logs: dict) -> None:
         # the simulated ARW (0.0523 deg/sqrt(h)) read back through DataFlash
         assert raw["arw_deg_per_sqrt_h"] == pytest.approx(0.0523, rel=0.5)
     assert any(s.title.startswith("Axis z — Performance") for s in doc.sections)
+
+
+def test_dataflash_fast_path_equals_pymavlink(logs: dict) -> None:
+    """The numpy gather at pymavlink's index (gyrolab.logs.dataflash.imu_rows_fast) against
+    pymavlink's own message-by-message decoding of the same file."""
+    from pymavlink import DFReader
+
+    from gyrolab.logs.dataflash import imu_rows_fast
+
+    log = DFReader.DFReader_binary(str(logs["dataflash"]), zero_time_base=True)
+    fast = imu_rows_fast(log, 0)
+    slow = []
+    while (m := log.recv_match(type="IMU")) is not None:
+        slow.append((m.TimeUS * 1e-6, m.GyrX, m.GyrY, m.GyrZ, m.T))
+    assert fast is not None and fast.shape == (len(slow), 5)
+    np.testing.assert_array_equal(fast, np.asarray(slow))
+    assert imu_rows_fast(log, 1).shape == (0, 5)
