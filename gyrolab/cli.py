@@ -46,6 +46,18 @@ def _effect_spec(text: str) -> str:
     return text
 
 
+def _log_options(sp: argparse.ArgumentParser) -> None:
+    """Options for runs that are users' logs (gyrolab/logs, docs/export.md)."""
+    g = sp.add_argument_group("users' logs (ROS 2 MCAP, PX4 ULog, ArduPilot DataFlash)")
+    g.add_argument(
+        "--temperature-topic", metavar="TOPIC", help="ROS 2: the sensor_msgs/msg/Temperature topic"
+    )
+    g.add_argument("--imu-topic", metavar="TOPIC", help="ROS 2: the sensor_msgs/msg/Imu topic")
+    g.add_argument(
+        "--log-instance", type=int, default=0, help="ULog/DataFlash: gyro (IMU) instance (0)"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="gyrolab", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"gyrolab {__version__}")
@@ -116,11 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="output MODEL_DIR")
     c.add_argument("--validate", metavar="OTHER.mcap", help="held-out run for metrics")
     c.add_argument("--seed", type=int, default=0)
-    c.add_argument(
-        "--temperature-topic",
-        metavar="TOPIC",
-        help="ROS 2 MCAP input: the sensor_msgs/msg/Temperature topic of the IMU",
-    )
+    _log_options(c)
     c.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     ap = cmd("apply", "apply a fitted model to a run and write the compensated recording")
@@ -136,6 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--operator", help="operator for the sign-off (default: the recording's)")
     r.add_argument("--unit-serial", help="unit serial (default: the recording's)")
     r.add_argument("--out", required=True, help="output REPORT_DIR")
+    _log_options(r)
     r.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     d = cmd("discrepancy", "find where the simulator and a recording disagree, and fix the model")
@@ -170,9 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--device-id", type=int, help="px4: the gyro's device id (TC_Gi_ID)")
     ex.add_argument("--run", metavar="RUN", help="kalibr: the run to analyse")
     ex.add_argument("--rostopic", default="/imu0", help="kalibr: IMU topic (default /imu0)")
-    ex.add_argument(
-        "--temperature-topic", metavar="TOPIC", help="kalibr --run from a ROS 2 MCAP"
-    )
+    _log_options(ex)
     ex.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")

@@ -66,10 +66,12 @@ def write_ros2(
     tc: np.ndarray,
     t0: float,
     stamp: bool = True,
+    second_temperature: str | None = None,
 ) -> Path:
     """``sensor_msgs/msg/Imu`` on /imu/data and ``sensor_msgs/msg/Temperature`` on
     /imu/temperature; times ``t0 + t`` (s) as header stamps (zero stamps when not
-    ``stamp``) and MCAP log times, gyro (n, 3) rad/s, temperature °C."""
+    ``stamp``) and MCAP log times, gyro (n, 3) rad/s, temperature °C;
+    ``second_temperature``: another Temperature topic (the readings + 10 °C)."""
     from mcap_ros2.writer import Writer
 
     with open(path, "wb") as fh:
@@ -101,6 +103,9 @@ def write_ros2(
                     "variance": 0.0,
                 }
                 w.write_message("/imu/temperature", s_tmp, msg, log_time=ns, publish_time=ns)
+                if second_temperature:
+                    msg2 = {**msg, "temperature": tc[i] + 10.0}
+                    w.write_message(second_temperature, s_tmp, msg2, log_time=ns, publish_time=ns)
         w.finish()
     return path
 

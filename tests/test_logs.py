@@ -187,6 +187,31 @@ def test_compensate_a_ros2_bag_per_axis(logs: dict, monkeypatch: pytest.MonkeyPa
         assert k == 0
 
 
+def test_log_options_from_the_command_line(logs: dict, tmp_path: Path) -> None:
+    rec = read_recording(logs["dir"] / "sim.mcap")
+    t, n = rec.rate.t, 600
+    p = write_ros2(
+        tmp_path / "two.mcap",
+        t[:n],
+        np.zeros((n, 3)),
+        rec.pt100_t[:60],
+        rec.pt100_c[:60],
+        1.7e9,
+        second_temperature="/board/temperature",
+    )
+    # two Temperature topics: the bag does not say which one is the IMU's
+    with pytest.raises(InputError, match="several sensor_msgs/msg/Temperature topics"):
+        read_log(p)
+    r = read_log(p, temperature_topic="/board/temperature")
+    assert r.run["temperature_topic"] == "/board/temperature"
+    np.testing.assert_allclose(r.pt100_c, rec.pt100_c[:60] + 10.0)
+    out = tmp_path / "rep"
+    assert main(["report", str(p), "--out", str(out)]) == 2
+    assert main(["report", str(p), "--temperature-topic", "/nope", "--out", str(out)]) == 2
+    assert main(["report", str(logs["ulog"]), "--log-instance", "3", "--out", str(out)]) == 2
+    assert not out.exists()
+
+
 def test_report_allan_of_a_dataflash_log(logs: dict) -> None:
     from gyrolab.report.axes import build_axes_report
 

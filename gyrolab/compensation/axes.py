@@ -37,19 +37,20 @@ def axis_dir_name(k: int) -> str:
     return f"axis_{AXIS_NAMES[k]}"
 
 
-def load_runs(path: str, cfg: Any, temperature_topic: str | None = None) -> list[Any]:
+def load_runs(path: str, cfg: Any, **log_options: Any) -> list[Any]:
     """One :class:`~.pipeline.PreparedRun` per axis of the run at ``path``.
 
     A single-axis gyrolab MCAP is streamed from the file (:func:`.pipeline.prepare_file`,
     bounded memory, exactly as before); a multi-axis recording or a foreign log (ROS 2
-    MCAP, PX4 ULog, ArduPilot DataFlash: :func:`gyrolab.logs.read_log`) is read into memory
-    and prepared axis by axis (:func:`.pipeline.prepare_run`)."""
+    MCAP, PX4 ULog, ArduPilot DataFlash: :func:`gyrolab.logs.read_log` with
+    ``log_options``) is read into memory and prepared axis by axis
+    (:func:`.pipeline.prepare_run`)."""
     from gyrolab.compensation import pipeline as pl
     from gyrolab.logs import read_log, single_axis_gyrolab
 
     if single_axis_gyrolab(path):
         return [pl.prepare_file(path, cfg)]
-    rec = read_log(path, temperature_topic=temperature_topic)
+    rec = read_log(path, **log_options)
     return [pl.prepare_run(rec.axis(k), cfg) for k in range(rec.axes)]
 
 

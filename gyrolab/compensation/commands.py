@@ -109,9 +109,11 @@ def compensate(args: argparse.Namespace) -> int:
     inputs = (args.run, args.validate)
     check_output(args.out, args.force, inputs=inputs, kind="dir")
     cfg = pl.DEFAULT_CONFIG
-    topic = getattr(args, "temperature_topic", None)
-    runs = load_runs(args.run, cfg, topic)
-    vals = load_runs(args.validate, cfg, topic) if args.validate else None
+    from gyrolab.logs import log_options
+
+    opts = log_options(args)
+    runs = load_runs(args.run, cfg, **opts)
+    vals = load_runs(args.validate, cfg, **opts) if args.validate else None
     if vals is not None and len(vals) != len(runs):
         raise InputError(
             args.validate, f"has {len(vals)} axes but the calibration run has {len(runs)}"

@@ -45,11 +45,11 @@ def kalibr_text(args: argparse.Namespace) -> str:
     from gyrolab.compensation.axes import axis_dirs
     from gyrolab.compensation.pipeline import load_model, streaming_compensate
     from gyrolab.export.kalibr import axis_noise, imu_yaml
-    from gyrolab.logs import read_log
+    from gyrolab.logs import log_options, read_log
 
     if not args.run:
         raise InputError("--run", "the kalibr format needs a run to analyse (--run RUN)")
-    rec = read_log(args.run, temperature_topic=args.temperature_topic)
+    rec = read_log(args.run, **log_options(args))
     dirs = axis_dirs(args.model)
     if rec.axes != len(dirs):
         raise InputError(args.run, f"has {rec.axes} axes, the model {len(dirs)}")

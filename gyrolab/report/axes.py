@@ -2,8 +2,9 @@
 other in one document (the layout of :mod:`.build` is reused, not copied).
 
 Sections and blocks get the axis in their key and title (``x-run``, "Axis x — Run: …");
-``metrics.json`` is ``{"axes": {"x": {...}, "y": {...}, "z": {...}}, "timing_s"}`` with
-each axis's metrics as a single-axis report writes them.
+``metrics.json`` is ``{"axes": {"x": {...}, "y": {...}, "z": {...}}, "outcome", "timing_s"}``
+with each axis's metrics as a single-axis report writes them (a spec's verdict per axis)
+and the run's outcome, the same for every axis, once more at the top.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from gyrolab.recording import AXIS_NAMES
 from gyrolab.report.document import Document
 
 
-def n_axes(run: str | Path, model: str | Path | None) -> int:
+def n_axes(run: str | Path, model: str | Path | None, log_options: dict | None = None) -> int:
     """Axes of the report: those of the model directory, else those of the run."""
     if model is not None:
         from gyrolab.compensation.axes import axis_dirs
@@ -24,11 +25,16 @@ def n_axes(run: str | Path, model: str | Path | None) -> int:
         return len(axis_dirs(model))
     from gyrolab.report.build import read_run
 
-    return read_run(run).axes
+    return read_run(run, log_options).axes
 
 
 def build_axes_report(
-    run: str | Path, model: str | Path | None, n: int, step: Any, **kw: Any
+    run: str | Path,
+    model: str | Path | None,
+    n: int,
+    step: Any,
+    log_options: dict | None = None,
+    **kw: Any,
 ) -> tuple[Document, dict[str, Any]]:
     """One document with every axis's report (module docstring); ``kw`` go to every
     :func:`~gyrolab.report.build.build_report` (spec, operator, serial)."""
@@ -36,7 +42,7 @@ def build_axes_report(
     from gyrolab.report.build import build_report, read_run
 
     t0 = time.perf_counter()
-    have = read_run(run).axes
+    have = read_run(run, log_options).axes
     if have != n:
         raise_mismatch(run, have, n)
     dirs = [d for _a, d in axis_dirs(model)] if model is not None else [None] * n
@@ -44,7 +50,7 @@ def build_axes_report(
     metrics: dict[str, Any] = {"axes": {}}
     for k in range(n):
         name = AXIS_NAMES[k]
-        d, m = build_report(run, dirs[k], step, axis=k, **kw)
+        d, m = build_report(run, dirs[k], step, axis=k, log_options=log_options, **kw)
         metrics["axes"][name] = m
         for sec in d.sections:
             sec.key = f"{name}-{sec.key}"
@@ -58,6 +64,8 @@ def build_axes_report(
         else:
             doc.sections.extend(d.sections)
     assert doc is not None
+    # one recording: how the run ended is the same for every axis
+    metrics["outcome"] = metrics["axes"]["x"].get("outcome", {})
     metrics["timing_s"] = time.perf_counter() - t0
     return doc, metrics
 

@@ -117,7 +117,7 @@ def _clean(x: Any) -> Any:
 # --------------------------------------------------------------------------- reading
 
 
-def read_run(path: str | Path) -> Recording:
+def read_run(path: str | Path, log_options: dict | None = None) -> Recording:
     """Read every topic but the raw ADC counts (the report uses the rate); check the gyro.
 
     A recording without ``/gyro/rate`` samples is refused with an :class:`InputError` that
@@ -129,7 +129,7 @@ def read_run(path: str | Path) -> Recording:
         topics = [t for t in ALL_TOPICS if t != TOPIC_ADC]
         rec = read_recording(path, topics=topics)
     else:  # ROS 2 / ULog / DataFlash: the same in-memory recording (gyrolab.logs)
-        rec = read_log(path)
+        rec = read_log(path, **(log_options or {}))
     if rec.rate is None or rec.rate.t.size == 0:
         present = sorted(rec.topic_counts) or ["none"]
         raise InputError(
@@ -362,6 +362,7 @@ def build_report(
     operator: str | None = None,
     serial: str | None = None,
     axis: int | None = None,
+    log_options: dict | None = None,
 ) -> tuple[Document, dict[str, Any]]:
     """The report document and ``metrics.json`` content of ``run_path`` (and the model).
 
@@ -382,7 +383,7 @@ def build_report(
         step("load model")
         model = load_model(str(model_dir))
     step("read recording")
-    rec = read_run(run_path)
+    rec = read_run(run_path, log_options)
     if axis is not None:  # one axis of a multi-axis unit (gyrolab.report.axes)
         rec = rec.axis(axis)
     rate = rec.rate

@@ -43,6 +43,7 @@ def write_report(
     spec: str | Path | None = None,
     operator: str | None = None,
     serial: str | None = None,
+    log_options: dict | None = None,
 ) -> dict[str, Any]:
     """Build and write the report of ``run`` into ``out``; returns the metrics.
 
@@ -67,8 +68,8 @@ def write_report(
     try:
         from gyrolab.report.axes import build_axes_report, n_axes
 
-        n = n_axes(run, model)
-        kw = {"spec": spec, "operator": operator, "serial": serial}
+        n = n_axes(run, model, log_options)
+        kw = {"spec": spec, "operator": operator, "serial": serial, "log_options": log_options}
         if n > 1:
             doc, metrics = build_axes_report(run, model, n, step, **kw)
         else:
@@ -86,6 +87,8 @@ def write_report(
 
 def report(args: argparse.Namespace) -> int:
     """The ``gyrolab report`` handler."""
+    from gyrolab.logs import log_options
+
     metrics = write_report(
         args.run,
         args.out,
@@ -94,9 +97,12 @@ def report(args: argparse.Namespace) -> int:
         spec=getattr(args, "spec", None),
         operator=getattr(args, "operator", None),
         serial=getattr(args, "unit_serial", None),
+        log_options=log_options(args),
     )
     print(f"run outcome: {metrics['outcome']['line']}", file=sys.stderr)
-    if "verdict" in metrics:
-        print(f"verdict: {metrics['verdict']['verdict']}", file=sys.stderr)
+    for name, m in metrics.get("axes", {"": metrics}).items():
+        if "verdict" in m:
+            axis = f" (axis {name})" if name else ""
+            print(f"verdict{axis}: {m['verdict']['verdict']}", file=sys.stderr)
     print(f"report written to {Path(args.out) / 'index.html'}", file=sys.stderr)
     return 0
