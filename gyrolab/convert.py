@@ -172,6 +172,10 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
     for topic, _ts, data in iter_messages(path, topics):
         if topic == TOPIC_RATE:
             blk = decode_block(data, "rate")
+            if blk[3].ndim > 1:  # the table has one rate column (docs/convert.md)
+                raise InputError(
+                    path, f"a {blk[3].shape[1]}-axis recording: convert writes one rate column"
+                )
             if pending and blk[0] > pending[-1][0]:
                 # every reading logged before this block's start is known: emit the rest,
                 # keeping readings that fall after the emitted blocks' start for later

@@ -143,6 +143,14 @@ JSON_SCHEMAS: dict[str, dict[str, Any]] = {
             "mean_dps": {"type": "number", "description": "mean angular rate, °/s"},
             "min_dps": {"type": "number", "description": "°/s"},
             "max_dps": {"type": "number", "description": "°/s"},
+            "axes_mean_dps": {
+                "type": "array",
+                "items": {"type": "number"},
+                "description": "multi-axis units only: mean per axis (x, y, z), °/s; the "
+                "fields above are axis x's",
+            },
+            "axes_min_dps": {"type": "array", "items": {"type": "number"}},
+            "axes_max_dps": {"type": "array", "items": {"type": "number"}},
         },
         "required": ["header", "t", "t0", "first_index", "n", "mean_dps", "min_dps", "max_dps"],
     },
@@ -500,17 +508,23 @@ class RecordingWriter:
         self._put(TOPIC_RATE, t0, encode_block(t0, period, first_index, rate_dps, "rate"))
         r = np.asarray(rate_dps, dtype=np.float32).astype(np.float64)  # what the block holds
         if r.size:
-            tm = t0 + 0.5 * (r.size - 1) * period
+            n = r.shape[0]
+            tm = t0 + 0.5 * (n - 1) * period
+            x = r if r.ndim == 1 else r[:, 0]  # the summary's own fields: axis x
             summary = {
                 "header": {"stamp": self.stamp(tm), "frame_id": "gyro"},
                 "t": tm,
                 "t0": t0,
                 "first_index": int(first_index),
-                "n": int(r.size),
-                "mean_dps": float(r.mean()),
-                "min_dps": float(r.min()),
-                "max_dps": float(r.max()),
+                "n": int(n),
+                "mean_dps": float(x.mean()),
+                "min_dps": float(x.min()),
+                "max_dps": float(x.max()),
             }
+            if r.ndim > 1:  # several axes: every axis too, x first
+                summary["axes_mean_dps"] = [float(v) for v in r.mean(axis=0)]
+                summary["axes_min_dps"] = [float(v) for v in r.min(axis=0)]
+                summary["axes_max_dps"] = [float(v) for v in r.max(axis=0)]
             self._json(TOPIC_RATE_SUMMARY, summary, t0)  # log time = the block's, like /gyro/rate
 
     def write_pt100(self, t: float, resistance_ohm: float, temperature_c: float) -> None:

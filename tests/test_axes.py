@@ -68,6 +68,18 @@ def test_recording_reads_axes(tmp_path) -> None:
         w.write_rate_block(0.0, 0.1, 0, v[:10])
         w.write_rate_block(1.0, 0.1, 10, v[10:20, 0])
     assert main(["report", str(bad), "--out", str(tmp_path / "rep")]) == 2
+    # the viewer summary keeps axis x in its own fields and lists every axis
+    import json
+
+    from gyrolab.recording import TOPIC_RATE_SUMMARY, iter_messages
+
+    s = [json.loads(d) for _t, _ts, d in iter_messages(p, [TOPIC_RATE_SUMMARY])]
+    assert [m["n"] for m in s] == [10, 10]
+    assert s[0]["mean_dps"] == pytest.approx(float(v[:10, 0].astype(float).mean()))
+    assert s[1]["axes_max_dps"] == pytest.approx(v[20:].astype(float).max(axis=0).tolist())
+    # convert writes one rate column: a 3-axis recording is refused, nothing written
+    assert main(["convert", str(p), "--to", "csv", "--out", str(tmp_path / "r.csv")]) == 2
+    assert not (tmp_path / "r.csv").exists()
 
 
 def test_adc_frame_with_three_axes() -> None:
