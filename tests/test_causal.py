@@ -43,3 +43,56 @@ def test_features_follow_their_equations() -> None:
     assert X[i, 1] == pytest.approx(0.001, rel=3e-3)  # discrete step: Δt/2τ
     assert X[i, 2] == 1.0 and X[-1000, 2] == -1.0
     assert X[600, 3] == pytest.approx(np.exp(-1.0))
+
+
+# ------------------------------------------------------------------ family selection
+
+
+def _staircase_run(tau_die: float, hyst: float, seed: int, hours: float = 6.0):
+    """A synthetic calibration run: case temperature answering hourly setpoint steps
+    (first order, 1200 s), the bias a quadratic in a die temperature lagging the case by
+    ``tau_die`` plus a heating/cooling offset ±``hyst``/2, white noise; 3.6 s block means
+    and 1 Hz PT100 readings."""
+    from scipy.signal import lfilter
+
+    from gyrolab.compensation.causal import CausalCalibration
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, hours * 3600.0)  # 1 Hz
+    sp = np.array([25, 60, 50, 30, 10, -10, 20, 45])[np.minimum(t // 2700, 7).astype(int)]
+    a = 1.0 - np.exp(-1.0 / 1200.0)
+    case = lfilter([a], [1.0, a - 1.0], sp - 25.0, zi=[0.0])[0] + 25.0
+    die = case
+    if tau_die > 0:
+        b = 1.0 - np.exp(-1.0 / tau_die)
+        die = lfilter([b], [1.0, b - 1.0], case - 25.0, zi=[0.0])[0] + 25.0
+    branch = np.sign(np.gradient(die))
+    d = die - 25.0
+    bias = 1e-3 + 3.8e-4 * d + 3.4e-6 * d * d + 0.5 * hyst * branch
+    rate = bias + rng.normal(0.0, 4.6e-4 * np.sqrt(3.6), t.size)
+    nb = t.size // 4  # 4 s blocks are fine for a synthetic check
+    tb = t[: nb * 4].reshape(nb, 4).mean(axis=1)
+    yb = rate[: nb * 4].reshape(nb, 4).mean(axis=1)
+    pt = case + rng.normal(0.0, 0.005, t.size)
+    return CausalCalibration(t=tb, rate=yb, pt_t=t, pt_c=pt)
+
+
+def test_selection_prefers_the_structured_model_when_the_die_lags() -> None:
+    from gyrolab.compensation.causal import fit_causal
+
+    cal = _staircase_run(tau_die=600.0, hyst=1e-3, seed=1)
+    m = fit_causal(cal, families=("poly", "structured"))
+    assert m.family == "structured"
+    assert m.cv_rmse["structured"] < 0.7 * m.cv_rmse["poly"]
+    assert 300.0 < m.params.tau_s < 900.0
+    assert "hyst" in m.model.terms and m.model.h == pytest.approx(5e-4, rel=0.3)
+
+
+def test_selection_keeps_the_polynomial_when_nothing_lags() -> None:
+    from gyrolab.compensation.causal import fit_causal
+
+    cal = _staircase_run(tau_die=0.0, hyst=0.0, seed=2)
+    m = fit_causal(cal, families=("poly", "structured"))
+    # the structured model cannot beat T alone by 1 %: the simpler family wins
+    assert m.family == "poly" and m.params.tau_s == 0.0
+    assert m.describe()["selection"]["winner"] == "poly"

@@ -82,6 +82,13 @@ def test_compensate_writes_contract_metrics(model_dir: Path, runs: dict[str, Pat
     assert m["compensated"]["drift_pp_deg_per_s"] < 0.2 * m["raw"]["drift_pp_deg_per_s"]
     meta = json.loads((model_dir / "model.json").read_text())
     assert meta["vmd"]["K"] == K and "gpso_positions" in np.load(model_dir / "arrays.npz").files
+    # the causal headline (issue 11): its metrics, the model that made it, 100 s p-p for all
+    assert set(m["causal"]) == METRIC_KEYS
+    assert m["headline"]["output"] == "causal"
+    assert m["headline"]["family"] == m["causal_model"]["family"] == meta["causal_model"]["family"]
+    assert set(m["causal_model"]["cv_rmse_deg_per_s"]) == {"poly", "structured", "bp", "gabp"}
+    assert {"raw", "causal", "compensated"} <= set(m["drift_pp_100s_deg_per_s"])
+    assert m["causal"]["drift_pp_deg_per_s"] < 0.5 * m["raw"]["drift_pp_deg_per_s"]
 
 
 def test_apply_writes_compensated_recording(

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.compensation.baselines import PolyDriftModel, fit_plain_bp, fit_poly
+from gyrolab.compensation.causal import CausalCalibration, CausalDriftModel, fit_causal
 from gyrolab.compensation.gabp import BPConfig, GAConfig, MLPDriftModel, fit_gabp
 from gyrolab.errors import InputError
 from gyrolab.recording import Recording
@@ -86,6 +87,8 @@ class PipelineConfig:
     min_blocks: int = 256
     min_temp_span_c: float = 2.0
     baselines: tuple[str, ...] = ("poly", "bp")
+    # causal drift-model families compared by CV inside the calibration run (causal.py)
+    causal_families: tuple[str, ...] = ("poly", "structured", "bp", "gabp")
 
     def ga(self) -> GAConfig:
         return GAConfig(population=self.ga_population, generations=self.ga_generations)
@@ -99,7 +102,7 @@ class PipelineConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> PipelineConfig:
         known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}
-        for k in ("k_range", "alpha_range", "baselines"):
+        for k in ("k_range", "alpha_range", "baselines", "causal_families"):
             if k in known:
                 known[k] = tuple(known[k])
         return cls(**known)
@@ -324,6 +327,27 @@ def iter_rate_batches(
         yield flush()
 
 
+def prepare_arrays(
+    path: str,
+    t: np.ndarray,
+    rate: np.ndarray,
+    period: float,
+    pt_t: np.ndarray,
+    pt_c: np.ndarray,
+    cfg: PipelineConfig,
+) -> PreparedRun:
+    """Like :func:`prepare_run` for a run already in arrays (full-rate samples ``rate`` at
+    times ``t``, PT100 readings ``pt_c`` at ``pt_t``): simulations and tests."""
+    pt_t, pt_c = _check_temperature(path, np.asarray(pt_t, float), np.asarray(pt_c, float))
+    x = np.asarray(rate, dtype=float)
+    acc = BlockAverager(cfg.block_s)
+    acc.add(np.asarray(t, dtype=float), x, period)
+    tb, xb, temp, X, filled = _finish(path, acc, pt_t, pt_c, cfg)
+    return PreparedRun(
+        path, tb, xb, temp, X, np.asarray(t, float), x, float(period), pt_t, pt_c, filled
+    )
+
+
 def prepare_file(path: str, cfg: PipelineConfig) -> PreparedRun:
     """Like :func:`prepare_run`, streaming ``/gyro/rate`` from the file block by block:
     memory is that of the 1000 points/h series, not of the run (``raw_t``/``raw_rate`` are
@@ -477,6 +501,14 @@ class CompensationModel:
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
     decomposition_info: dict[str, Any] = field(default_factory=dict)
     timing_s: dict[str, float] = field(default_factory=dict)
+    causal: CausalDriftModel | None = None  # the causal headline model (causal.py)
+
+
+def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> CausalDriftModel:
+    """The causal drift model (:func:`gyrolab.compensation.causal.fit_causal`): every family
+    of ``cfg.causal_families`` on the causal features, the winner by CV inside ``run``."""
+    cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
+    return fit_causal(cal, families=cfg.causal_families, bp=cfg.bp(), ga=cfg.ga(), seed=seed)
 
 
 def fit(
@@ -510,6 +542,9 @@ def fit(
     if "bp" in cfg.baselines:
         baselines["bp"] = fit_plain_bp(run.X, run.rate, bp=cfg.bp(), seed=seed)
     timing["baselines"] = time.perf_counter() - t2
+    t3 = time.perf_counter()
+    causal = fit_causal_model(run, cfg, seed)
+    timing["causal"] = time.perf_counter() - t3
     mixed = dec.part("mixed")
     flp_mixed = _fit_flp(mixed, cfg) if dec.classes.get("mixed") else None
     flp_stream = _fit_flp(run.rate - gabp.predict(run.X), cfg)
@@ -546,6 +581,7 @@ def fit(
         diagnostics=diagnostics,
         decomposition_info={"classes": dec.classes, "mpe": dec.mpe.tolist()},
         timing_s=timing,
+        causal=causal,
     )
     return model, dec
 
@@ -622,9 +658,17 @@ class StreamingCompensator:
     def __init__(
         self, model: CompensationModel, pt_t: np.ndarray, pt_c: np.ndarray, which: str = "gabp"
     ) -> None:
-        self.model = model.drift if which == "gabp" else model.baselines[which]
         self.cfg = model.config
         self.pt_t, self.pt_c = pt_t, pt_c
+        if which == "causal":
+            # the causal model's state machine runs over the readings once; its drift is
+            # held between readings (causal_features.py)
+            if model.causal is None:
+                raise ValueError("model has no causal drift model")
+            self.model = model.causal
+            self._at_reading = model.causal.reading_drift(pt_t, pt_c)
+            return
+        self.model = model.drift if which == "gabp" else model.baselines[which]
         self._at_reading = None if self.cfg.use_dtdt else self.model.predict(pt_c[:, None])
 
     def drift(self, t: np.ndarray) -> np.ndarray:
@@ -653,10 +697,13 @@ def streaming_compensate(
     return StreamingCompensator(model, pt_t, pt_c, which)(t, np.asarray(rate, dtype=float))
 
 
-def streaming_block_means(model: CompensationModel, run: PreparedRun) -> np.ndarray:
+def streaming_block_means(
+    model: CompensationModel, run: PreparedRun, which: str = "gabp"
+) -> np.ndarray:
     """The causal full-rate output averaged to the run's 1000 points/h grid: from the
-    samples in memory, or by streaming the file again when the run was prepared from it."""
-    comp = StreamingCompensator(model, run.pt_t, run.pt_c)
+    samples in memory, or by streaming the file again when the run was prepared from it.
+    ``which``: ``gabp`` (the paper's drift model on T), a baseline name, or ``causal``."""
+    comp = StreamingCompensator(model, run.pt_t, run.pt_c, which)
     acc = BlockAverager(model.config.block_s)
     if run.raw_rate is not None and run.raw_t is not None:
         acc.add(run.raw_t, comp(run.raw_t, run.raw_rate), run.raw_period)
@@ -703,6 +750,10 @@ def save_model(model: CompensationModel, directory: str) -> None:
     from gyrolab.compensation.model_dir import save_model_dir
 
     arrays: dict[str, np.ndarray] = dict(model.diagnostics)
+    cmeta = None
+    if model.causal is not None:
+        cmeta, carr = model.causal.to_state("causal.")
+        arrays.update(carr)
     dmeta, darr = model.drift.to_state("drift.")
     arrays.update(darr)
     bmeta: dict[str, Any] = {}
@@ -722,6 +773,7 @@ def save_model(model: CompensationModel, directory: str) -> None:
             "stream": None if model.flp_stream is None else model.flp_stream.to_dict(),
         },
         "timing_s": model.timing_s,
+        "causal_model": cmeta,
         "streaming": {
             "temperature": "zero-order hold of the last PT100 reading",
             "dtdt": "backward difference over config.dtdt_window_s"
@@ -752,7 +804,11 @@ def load_model(directory: str) -> CompensationModel:
             name: _drift_from_state(bm, arrays, f"baseline.{name}.")
             for name, bm in meta.get("baselines", {}).items()
         }
-        diagnostics = {k: v for k, v in arrays.items() if not k.startswith(("drift.", "baseline."))}
+        diagnostics = {
+            k: v for k, v in arrays.items() if not k.startswith(("drift.", "baseline.", "causal."))
+        }
+        cmeta = meta.get("causal_model")
+        causal = None if cmeta is None else CausalDriftModel.from_state(cmeta, arrays, "causal.")
         return CompensationModel(
             config=cfg,
             drift=drift,
@@ -765,6 +821,7 @@ def load_model(directory: str) -> CompensationModel:
             diagnostics=diagnostics,
             decomposition_info=dict(meta.get("decomposition", {})),
             timing_s=dict(meta.get("timing_s", {})),
+            causal=causal,
         )
     except (KeyError, TypeError, ValueError) as e:
         raise InputError(directory, f"incomplete or damaged model ({e!r})") from None
@@ -802,6 +859,21 @@ def evaluate(
     for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):
         m[key] = series_metrics(app.series[key], bs)
     m["compensated_streaming"] = series_metrics(streaming_block_means(model, run), bs)
+    if model.causal is not None:
+        causal_series = streaming_block_means(model, run, "causal")
+        m["causal"] = series_metrics(causal_series, bs)
+        m["causal_model"] = model.causal.describe()
+        m["headline"] = headline_info(model, run)
+        m["drift_pp_100s_deg_per_s"] = drift_pp_table(
+            {
+                "raw": app.series["raw"],
+                "causal": causal_series,
+                "compensated": app.series["compensated"],
+                "compensated_drift_only": app.series["compensated_drift_only"],
+                **{f"baselines.{n}": app.series[f"baselines.{n}"] for n in model.baselines},
+            },
+            bs,
+        )
     m["baselines"] = {
         name: series_metrics(app.series[f"baselines.{name}"], bs) for name in model.baselines
     }
@@ -836,3 +908,36 @@ def evaluate(
     m["sample_period_s"] = bs
     m["n_points"] = int(run.t.size)
     return m
+
+
+DRIFT_PP_WINDOW_S = 100.0  # issue 11: p-p of 3.6 s averages is set by white noise
+
+
+def drift_pp_table(
+    series: dict[str, np.ndarray], block_s: float, window_s: float = DRIFT_PP_WINDOW_S
+) -> dict[str, float]:
+    """Peak-to-peak (°/s) of every series after averaging it over ``window_s`` windows
+    (whole 3.6 s blocks: 28 → 100.8 s) — the same low-pass for every method."""
+    from gyrolab.compensation.metrics import block_means
+
+    return {
+        k: float(np.ptp(block_means(np.asarray(v, float), 1.0 / block_s, window_s)))
+        for k, v in series.items()
+    }
+
+
+def headline_info(model: CompensationModel, run: PreparedRun) -> dict[str, Any]:
+    """What the headline is: the causal full-bandwidth output, and the paper's offline
+    method beside it with its bandwidth (metrics.json ``headline``)."""
+    c = model.causal
+    return {
+        "output": "causal",
+        "description": "raw(t) - d(t), d from PT100 readings at or before t (causal, "
+        "full bandwidth)",
+        "family": None if c is None else c.family,
+        "bandwidth_hz": 0.5 / run.raw_period,
+        "offline_method": "compensated (the paper's GPSO-VMD/MPE/FLP/GA-BP reconstruction, "
+        "offline, low-passed: see denoising.bandwidth)",
+        "metrics_window_s": model.config.block_s,
+        "drift_pp_window_s": DRIFT_PP_WINDOW_S,
+    }

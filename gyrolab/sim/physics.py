@@ -35,6 +35,7 @@ class PhysicsBlock:
     air_c: float
     case_c: float
     die_c: float
+    case_trace: np.ndarray | None = None  # case temperature at every sample, °C
 
     @property
     def n(self) -> int:
@@ -171,6 +172,7 @@ class Physics:
             air_c=self.chamber_c(),
             case_c=self.case_c(),
             die_c=self.die_c(),
+            case_trace=case,
         )
 
     # ------------------------------------------------------------ instruments
