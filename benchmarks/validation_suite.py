@@ -236,6 +236,7 @@ def run_unit(unit: int, rate_hz: float, quick: bool) -> dict[str, Any]:
     for name, r in runs.items():
         run = prep[name]
         app = pl.compensate_offline(cm, run, dec if name == CALIBRATION else None)
+
         def causal_means(c, r=r, run=run) -> np.ndarray:
             y = r["raw"] - c.drift_at(r["t"], run.pt_t, run.pt_c)
             return block_average(r["t"], y, bs, 1.0 / rate_hz)[1]
