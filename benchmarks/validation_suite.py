@@ -271,6 +271,78 @@ def run_unit(unit: int, rate_hz: float, quick: bool) -> dict[str, Any]:
     return out
 
 
+def rotation_check(rate_hz: float, quick: bool) -> dict[str, dict[str, float]]:
+    """Issue 11 point 5: unit 0 (nominal) calibrated on its paper run; known rotations
+    (:func:`gyrolab.compensation.rotation.rotation_events`, 2 h into the run) added to its
+    held-out ``soak`` run; the share of each event's angle every output keeps."""
+    import torch
+
+    from gyrolab.compensation import pipeline as pl
+    from gyrolab.compensation.rotation import angle_kept, rotation_events
+
+    torch.set_num_threads(1)
+    cfg = suite_config(quick)
+    model, _ = unit_model(0)
+    cal = simulate(model, trajectory(CALIBRATION, 0), rate_hz, seed=1)
+    static = simulate(model, trajectory("soak", 0), rate_hz, seed=6)
+    per = 1.0 / rate_hz
+    prep = pl.prepare_arrays("cal", cal["t"], cal["raw"], per, cal["pt_t"], cal["pt_c"], cfg)
+    cm, _ = pl.fit(prep, cfg, seed=0)
+    t, pt_t, pt_c = static["t"], static["pt_t"], static["pt_c"]
+    comp = pl.StreamingCompensator(cm, pt_t, pt_c, "causal")
+
+    def outputs(x: np.ndarray) -> dict[str, np.ndarray]:
+        run = pl.prepare_arrays("static", t, x, per, pt_t, pt_c, cfg)
+        app = pl.compensate_offline(cm, run)
+        return {
+            "causal": comp(t, x),
+            "offline": app.series["compensated"],
+            "stream_flp": app.series["compensated_streaming_flp"],
+        }
+
+    base = outputs(static["raw"])
+    dts = {"causal": per, "offline": cfg.block_s, "stream_flp": cfg.block_s}
+    out: dict[str, dict[str, float]] = {}
+    for name, omega in rotation_events(t, t0=7200.0, seed=1).items():
+        w = outputs(static["raw"] + omega)
+        out[name] = {
+            k: angle_kept(w[k], base[k], dts[k], omega, per)
+            for k in ("causal", "offline", "stream_flp")
+        }
+        out[name]["angle_deg"] = float(np.sum(omega) * per)
+    return out
+
+
+def rotation_table(rot: dict[str, dict[str, float]]) -> str:
+    L = [
+        "### Rotation survives (issue 11, point 5)",
+        "",
+        "Nominal unit calibrated on its paper run; known rotations added 2 h into its held-out "
+        "soak run (`gyrolab/compensation/rotation.py`). Share of the injected angle that each "
+        "output keeps, integrated over the whole run:",
+        "",
+        "| event | angle ° | causal headline | paper's method, offline | GA-BP + causal FLP "
+        "(3.6 s) |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
+    for name, r in rot.items():
+        L.append(
+            f"| {name} | {r['angle_deg']:.0f} | {100 * r['causal']:.4f} % | "
+            f"{100 * r['offline']:.1f} % | {100 * r['stream_flp']:.1f} % |"
+        )
+    worst = max(abs(r["causal"] - 1.0) for r in rot.values())
+    L.append("")
+    L.append(
+        f"Causal output: largest angle error {100 * worst:.2g} % (target ≤ 0.1 %: "
+        f"{'**pass**' if worst <= 1e-3 else '**FAIL**'}) — the causal model reads only the "
+        "PT100, so a rotation passes through untouched. The offline reconstruction drops the "
+        "VMD noise modes and re-decomposes the run: what it keeps of a rotation depends on the "
+        "event's spectrum; the FLP row predicts the output from its own past and removes "
+        "whatever is unpredictable."
+    )
+    return "\n".join(L)
+
+
 # -------------------------------------------------------------------------- tables
 
 METHODS = [
@@ -467,6 +539,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny GA/BP/VMD settings (smoke test)")
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")  # per-unit lines instead of bars
     load_before = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
     t0 = time.perf_counter()
     units = list(range(args.units))
@@ -474,10 +547,13 @@ def main(argv: list[str] | None = None) -> int:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(args.workers) as ex:
+            rot_f = ex.submit(rotation_check, args.rate, args.quick)
             results = list(
                 ex.map(run_unit, units, [args.rate] * len(units), [args.quick] * len(units))
             )
+            rot = rot_f.result()
     else:
+        rot = rotation_check(args.rate, args.quick)
         results = [run_unit(u, args.rate, args.quick) for u in units]
     wall = time.perf_counter() - t0
     meta = {
@@ -492,8 +568,10 @@ def main(argv: list[str] | None = None) -> int:
         "quick": args.quick,
     }
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"meta": meta, "units": results}, indent=1, default=str))
-    body = tables(results, meta)
+    args.json.write_text(
+        json.dumps({"meta": meta, "units": results, "rotation": rot}, indent=1, default=str)
+    )
+    body = tables(results, meta) + "\n\n" + rotation_table(rot)
     print(body)
     if args.out and not args.quick:
         write_section(args.out, body)

@@ -139,3 +139,43 @@ def test_causal_output_keeps_injected_rotation_angle() -> None:
     for name, omega in events.items():
         kept = angle_kept(comp(t, static + omega), y0, 1.0 / fs, omega, 1.0 / fs)
         assert abs(kept - 1.0) < 1e-3, name
+
+
+# ------------------------------------------------------------------------ the oracle
+
+
+def test_oracle_is_the_run_without_its_deterministic_drift(tmp_path) -> None:
+    """Replaying a gyrolab-simulate recording's setpoints with the model's deterministic
+    effects and subtracting gives exactly its noise (up to the ADC's step)."""
+    from gyrolab.compensation.oracle import oracle_rate
+    from gyrolab.profile import BUILTIN
+    from gyrolab.recording import read_recording
+    from gyrolab.sim.model import nominal_model
+    from gyrolab.sim.physics import Physics
+    from gyrolab.sim.simulate import simulate_run
+
+    model = (
+        nominal_model()
+        .with_effect("thermal_lag", tau_s=300.0)
+        .with_effect("hysteresis")
+        .with_effect("thermal_rate")
+        .with_effect("warmup")
+    )
+    path = tmp_path / "sim.mcap"
+    simulate_run(path, BUILTIN["short"], model, rate_hz=5.0, seed=9, show_progress=False)
+    rec = read_recording(path)
+    o = oracle_rate(rec)
+    noise_only = Physics(
+        model.without_effect("bias_poly")
+        .without_effect("hysteresis")
+        .without_effect("thermal_rate")
+        .without_effect("warmup"),
+        rate_hz=5.0,
+        seed=9,
+    ).advance(o.size)
+    adc = model.sensors.adc
+    lsb = adc.vref_v / 2 ** (adc.bits - 1) / adc.gain_v_per_dps
+    assert np.max(np.abs(o - noise_only.rate_dps)) <= lsb
+    # a recording that is not a gyrolab simulate output has no oracle
+    rec.run = {**rec.run, "source": "acquisition"}
+    assert oracle_rate(rec) is None
