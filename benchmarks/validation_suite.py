@@ -52,6 +52,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from docsections import write_section  # noqa: E402
 
 from gyrolab.profile import BUILTIN, Profile, Step  # noqa: E402
 
@@ -59,8 +62,6 @@ TRAJECTORIES = ("paper", "heating", "ramp0.5", "ramp2", "random", "soak")
 CALIBRATION = "paper"
 BLOCK_S = 3.6
 PP_BLOCKS = 28  # 100.8 s
-START = "<!-- validation_suite:begin -->"
-END = "<!-- validation_suite:end -->"
 
 
 # ----------------------------------------------------------------------- trajectories
@@ -514,21 +515,6 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     return "\n".join(L)
 
 
-def write_section(path: Path, body: str) -> None:
-    """Replace the suite's marked section of ``path`` (or put it at the top)."""
-    text = path.read_text() if path.exists() else ""
-    block = f"{START}\n{body}\n{END}"
-    if START in text and END in text:
-        a, rest = text.split(START, 1)
-        _, b = rest.split(END, 1)
-        text = a + block + b
-    else:
-        text = block + "\n\n" + text
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=12)
@@ -574,7 +560,7 @@ def main(argv: list[str] | None = None) -> int:
     body = tables(results, meta) + "\n\n" + rotation_table(rot)
     print(body)
     if args.out and not args.quick:
-        write_section(args.out, body)
+        write_section(args.out, "validation_suite", body)
     return 0
 
 

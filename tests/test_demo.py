@@ -74,6 +74,11 @@ def test_model_report_contract(demo_run: Path) -> None:
     for key in ("temperature", "raw-output", "allan", *MODEL_FIGURES):
         assert f'id="fig-{key}"' in html, key
     assert 'id="tab-baselines"' in html and "held out" in html
+    # the causal headline (issue 11) leads, the baselines and the paper's method beside it
+    assert set(m["causal"]) >= METRIC_KEYS and m["headline"]["output"] == "causal"
+    assert 'id="tab-causal-headline"' in html and 'id="fig-causal-headline"' in html
+    assert html.index('id="tab-causal-headline"') < html.index('id="tab-baselines"')
+    assert "oracle" not in m  # an acquired run: its true drift is not known
 
 
 def test_report_on_the_calibration_run_is_in_sample(demo_run: Path, tmp_path: Path) -> None:
@@ -96,6 +101,9 @@ def test_report_on_the_calibration_run_is_in_sample(demo_run: Path, tmp_path: Pa
     raw_only = json.loads((demo_run / "calibration-report" / "metrics.json").read_text())
     for key in METRIC_KEYS:  # same run, same raw metrics with or without the model
         assert m["raw"][key] == pytest.approx(raw_only["raw"][key], rel=1e-9)
+    # a gyrolab simulate run: the oracle (true drift removed) sits beside the headline
+    assert set(m["oracle"]) >= METRIC_KEYS
+    assert m["oracle"]["bias_stability_deg_per_h"] < m["raw"]["bias_stability_deg_per_h"]
 
 
 def test_demo_bad_input_exits_2(

@@ -522,6 +522,14 @@ def build_report(
     )
     doc.sections.append(sec)
 
+    # the causal headline (issue 11): its own self-contained section
+    if model is not None and app is not None and run is not None:
+        from gyrolab.report.causal_section import causal_headline_section
+
+        headline = causal_headline_section(metrics, model, app, run, rec)
+        if headline is not None:
+            doc.sections.append(headline)
+
     # 2. compensation model
     if model is not None and app is not None and run is not None:
         doc.sections.append(_model_section(model, app, run, held_out))
