@@ -16,16 +16,21 @@ Families (:data:`FAMILIES`):
       d = Σ_{i≤P} c_i L_i(u(F)) + k R + h S + A E
 
   a polynomial in the *lagged* temperature plus rate, hysteresis and warm-up terms. The
-  nonlinear parameters (τ, w, τ_w) and the order P are chosen on a grid, the linear ones
-  by least squares; a term is kept only if it lowers the cross-validated error by ≥ 1 %.
+  nonlinear parameters (τ, w, τ_w) and the order P are chosen on grids by CV
+  (:func:`select_structured`), the linear ones by least squares; a term is kept only if
+  it lowers the cross-validated error by ≥ 1 %.
 * ``gabp`` — the paper's GA-BP network (eqs 15–17, GA initial weights) on the inputs
   ``(F, R, S, E)`` with the structured model's (τ, w, τ_w);
 * ``bp`` — the same network from random initial weights (plain BP).
 
 **Selection** (:func:`fit_causal`): blocked 5-fold cross-validation in time *inside the
-calibration run* (20 contiguous segments, segment b in fold b mod 5: every fold holds
-out separate stretches of the trajectory — heating, soaks, cooling steps — that the fit
-never saw). Each family is scored by its held-out RMSE on the 3.6 s averages; the lowest
+calibration run* (10 contiguous segments, segment b in fold b mod 5: every fold holds
+out two separate stretches of the trajectory — heating, soaks, cooling steps — that the
+fit never saw). Segments of 1.3 h on a 13 h run, not shorter: the 1/f bias instability
+wanders on the scale of hours, and with short held-out stretches between training ones a
+model that bends to follow that wander (e.g. a too-long lag) is rewarded for predicting
+noise it saw next door — with 20 segments the lag was chosen 1.5–8× too long on 4 of
+12 suite units. Each family is scored by its held-out RMSE on the 3.6 s averages; the lowest
 wins, and a family within 1 % of a simpler one (order: poly, structured, bp, gabp) loses
 to it. The scores and the winner go into model.json.
 
@@ -51,9 +56,10 @@ FAMILIES = ("poly", "structured", "bp", "gabp")  # simplest first (ties go left)
 TERMS = ("rate", "hyst", "warmup")  # optional terms of the structured model
 TAU_GRID_S = (0.0, 60.0, 150.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 WIDTH_GRID_C = (0.25, 0.5, 1.0, 2.0, 4.0)
-WARMUP_GRID_S = (300.0, 600.0, 1200.0)
+WARMUP_GRID_S = (200.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 ORDERS = range(1, 7)
 TIE = 0.01  # a candidate must beat a simpler one by 1 % of CV RMSE
+CV_FOLDS, CV_SEGMENTS = 5, 10  # blocked CV: segment b in fold b mod 5 (docstring)
 
 
 @dataclass
@@ -259,54 +265,59 @@ def _block_features(cal: CausalCalibration, params: CausalParams) -> np.ndarray:
 def select_structured(
     cal: CausalCalibration, folds: list[np.ndarray]
 ) -> tuple[CausalParams, int, tuple[str, ...], float, dict[str, Any]]:
-    """Grid search of (τ, order) with every term on, then w and τ_w, then drop each term
-    that does not earn its keep (≥ 1 % lower CV RMSE). Returns the choice and a log."""
+    """Choose (τ, τ_w, order) on the joint grid with every term on, refine τ between its
+    grid neighbours (golden section), then w and τ_w again on their grids; finally drop
+    each term that does not earn its keep (its removal costs < 1 % CV RMSE). The lag and
+    the warm-up are searched together because both shape the first hours of a run.
+    Returns the choice and a log."""
     y = cal.rate
     base = CausalParams()
+    feats: dict[CausalParams, np.ndarray] = {}
+
+    def cv(p: CausalParams, order: int, terms: tuple[str, ...] = TERMS) -> float:
+        if p not in feats:
+            feats[p] = _block_features(cal, p)
+        return _cv_linear(feats[p], y, order, terms, folds)
+
     best: tuple[float, CausalParams, int] = (np.inf, base, 1)
     for tau in TAU_GRID_S:
-        p = replace(base, tau_s=tau)
-        X = _block_features(cal, p)
-        for order in ORDERS:
-            e = _cv_linear(X, y, order, TERMS, folds)
-            if e < best[0]:
-                best = (e, p, order)
+        for tw in WARMUP_GRID_S:
+            p = replace(base, tau_s=tau, warmup_tau_s=tw)
+            for order in ORDERS:
+                e = cv(p, order)
+                if e < best[0]:
+                    best = (e, p, order)
     err, p, order = best
     # refine τ between its grid neighbours (golden-section on the CV error, 8 steps)
     g = list(TAU_GRID_S)
     i = g.index(p.tau_s)
     a, b = g[max(i - 1, 0)], g[min(i + 1, len(g) - 1)]
     phi = 0.5 * (np.sqrt(5.0) - 1.0)
-
-    def cv_tau(tau: float) -> float:
-        return _cv_linear(_block_features(cal, replace(p, tau_s=tau)), y, order, TERMS, folds)
-
     c, d = b - phi * (b - a), a + phi * (b - a)
-    fc, fd = cv_tau(c), cv_tau(d)
+    fc, fd = cv(replace(p, tau_s=c), order), cv(replace(p, tau_s=d), order)
     for _ in range(8):
         if fc < fd:
             b, d, fd = d, c, fc
             c = b - phi * (b - a)
-            fc = cv_tau(c)
+            fc = cv(replace(p, tau_s=c), order)
         else:
             a, c, fc = c, d, fd
             d = a + phi * (b - a)
-            fd = cv_tau(d)
+            fd = cv(replace(p, tau_s=d), order)
     for tau, e in ((c, fc), (d, fd)):
         if e < err:
             err, p = e, replace(p, tau_s=float(tau))
     for name, grid in (("width_c", WIDTH_GRID_C), ("warmup_tau_s", WARMUP_GRID_S)):
         for v in grid:
             q = replace(p, **{name: v})
-            e = _cv_linear(_block_features(cal, q), y, order, TERMS, folds)
+            e = cv(q, order)
             if e < err:
                 err, p = e, q
-    X = _block_features(cal, p)
     terms = TERMS
     dropped: dict[str, float] = {}
     for t in TERMS:  # parsimony: drop a term whose removal costs < 1 %
         fewer = tuple(x for x in terms if x != t)
-        e = _cv_linear(X, y, order, fewer, folds)
+        e = cv(p, order, fewer)
         dropped[t] = e
         if e <= err * (1.0 + TIE):
             terms = fewer
@@ -329,10 +340,12 @@ def fit_causal(
     bp = bp or BPConfig()
     ga = ga or GAConfig()
     y = np.asarray(cal.rate, dtype=float)
-    folds = blocked_folds(y.size, 5, 20)
+    folds = blocked_folds(y.size, CV_FOLDS, CV_SEGMENTS)
     cv: dict[str, float] = {}
     fitted: dict[str, tuple[CausalParams, Any]] = {}
-    selection: dict[str, Any] = {"method": "blocked 5-fold CV in time (20 segments)"}
+    selection: dict[str, Any] = {
+        "method": f"blocked {CV_FOLDS}-fold CV in time ({CV_SEGMENTS} segments)"
+    }
 
     # poly: measured temperature only (τ = 0, no rate/hysteresis/warm-up terms)
     p0 = CausalParams(tau_s=0.0)
