@@ -8,8 +8,10 @@ metrics sit under ``"calibration"``; without it they are RUN's (``"held_out": fa
 
 ``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap`` writes a copy of RUN in which
 
-* ``/gyro/rate`` is the causal, full-rate compensated rate ``raw − f(T)`` (same blocks,
-  timestamps and sample indices as the input);
+* ``/gyro/rate`` is the causal, full-rate compensated rate ``raw − d`` of the causal
+  headline model (:mod:`gyrolab.compensation.causal`; ``raw − f(T)`` with the GA-BP drift
+  model for a model directory without one), same blocks, timestamps and sample indices
+  as the input;
 * ``/gyro/rate_raw`` is the input's ``/gyro/rate``, byte for byte (same schema);
 * ``/gyro/rate_offline`` is the paper's offline output (noise modes removed, mixed modes
   FLP-filtered, drift compensated) at 1000 points/h, as ``GyroRateBlock``s of period 3.6 s;
@@ -221,7 +223,15 @@ def apply(args: argparse.Namespace) -> int:
     run = _load_run(args.run, model.config)
     with _named(args.run):
         offline = compensate_offline(model, run)
-    comp = StreamingCompensator(model, run.pt_t, run.pt_c)
+    # /gyro/rate carries the headline: the causal model when the model has one
+    which = "causal" if model.causal is not None else "gabp"
+    comp = StreamingCompensator(model, run.pt_t, run.pt_c, which)
+    what = (
+        f"causal full-rate compensated rate, raw - d (causal {model.causal.family} model on "
+        "PT100 readings up to now)"
+        if model.causal is not None
+        else "causal full-rate compensated rate, raw - f(T)"
+    )
     info = {
         "model_dir": str(args.model),
         "model_format_version": MODEL_FORMAT_VERSION,
@@ -229,7 +239,7 @@ def apply(args: argparse.Namespace) -> int:
         "calibration_run": model.calibration.get("path", ""),
         "vmd": {"K": model.K, "alpha": model.alpha},
         "topics": {
-            TOPIC_RATE: "causal full-rate compensated rate, raw - f(T)",
+            TOPIC_RATE: what,
             TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
             TOPIC_RATE_OFFLINE: "offline GPSO-VMD/MPE/FLP/GA-BP output, "
             f"{model.config.block_s} s averages",
