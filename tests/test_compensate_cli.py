@@ -29,7 +29,14 @@ torch.set_num_threads(1)
 
 
 # the GPSO search runs (tiny swarm) so that the CLI path is the real one
-CLI_CONFIG = replace(SMALL, vmd_K=None, vmd_alpha=None, gpso_population=4, gpso_generations=1)
+CLI_CONFIG = replace(
+    SMALL,
+    vmd_K=None,
+    vmd_alpha=None,
+    gpso_population=4,
+    gpso_generations=1,
+    causal_families=("poly", "structured", "bp", "gabp"),
+)
 
 
 @pytest.fixture(autouse=True)

@@ -27,6 +27,8 @@ SMALL = pl.PipelineConfig(
     hidden=5,
     gpso_population=4,
     gpso_generations=1,
+    # the networks' CV costs ten fits; the CLI test runs all four families
+    causal_families=("poly", "structured"),
 )
 
 
