@@ -179,3 +179,21 @@ def test_oracle_is_the_run_without_its_deterministic_drift(tmp_path) -> None:
     # a recording that is not a gyrolab simulate output has no oracle
     rec.run = {**rec.run, "source": "acquisition"}
     assert oracle_rate(rec) is None
+
+
+def test_firmware_loop_equals_offline_model_output() -> None:
+    """A fitted structured model run reading by reading (state machine + model, as on the
+    device) gives the offline drift estimate sample for sample."""
+    from gyrolab.compensation.causal import fit_causal
+
+    cal = _staircase_run(tau_die=300.0, hyst=1e-3, seed=4, hours=3.0)
+    m = fit_causal(cal, families=("structured",))
+    offline = m.reading_drift(cal.pt_t, cal.pt_c)
+    s = initial_state(float(cal.pt_c[0]), float(cal.pt_t[0]))
+    prev = float(cal.pt_t[0])
+    loop = np.empty(cal.pt_c.size)
+    for i, (t, T) in enumerate(zip(cal.pt_t, cal.pt_c, strict=True)):
+        f = step(s, float(T), float(t) - prev, m.params)
+        prev = float(t)
+        loop[i] = m.model.predict(np.array([f]))[0]
+    assert np.array_equal(loop, offline)
