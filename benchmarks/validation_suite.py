@@ -354,7 +354,7 @@ METHODS = [
     ("causal.bp", "causal plain BP on (F, R, S, E)"),
     ("causal.poly", "causal polynomial in T (baseline)"),
     ("paper_gabp_T_causal", "paper's GA-BP on T, causal (the old headline)"),
-    ("paper_offline", "paper's method, offline (VMD low-pass, f3dB ≈ 3 mHz)"),
+    ("paper_offline", "paper's method, offline (VMD low-pass, f3dB {f3db})"),
     ("raw", "raw output"),
 ]
 
@@ -377,6 +377,8 @@ def collect(results: list[dict[str, Any]], held: list[str]):
 def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     held = [t for t in TRAJECTORIES if t != CALIBRATION]
     a = collect(results, held)
+    f3 = [r["runs"][tr]["_offline_f3db_hz"] for r in results for tr in held]
+    f3db = f"{1e3 * min(f3):.2f}–{1e3 * max(f3):.2f} mHz"
     bs, pp = "bias_stability_deg_per_h", "drift_pp_100s_deg_per_s"
     raw_bs, raw_pp = a["raw"][bs], a["raw"][pp]
     L: list[str] = []
@@ -439,7 +441,7 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         r_ = np.median(a[k][bs] / a["oracle"][bs])
         c_ = np.median(1.0 - a[k][pp] / raw_pp)
         L.append(
-            f"| {label} | {_ms(b)} | {r_:.3f} | {_ms(p)} | "
+            f"| {label.format(f3db=f3db)} | {_ms(b)} | {r_:.3f} | {_ms(p)} | "
             f"{'—' if k == 'raw' else f'{100 * c_:.1f} %'} | {_ms(p3)} |"
         )
     L.append("")
@@ -479,7 +481,8 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         db = (a["causal"][bs] - a[k][bs]).mean(axis=1)
         dp = (a["causal"][pp] - a[k][pp]).mean(axis=1)
         L.append(
-            f"| {label} | {_ms(db)} | {int(np.sum(db < 0))}/{db.size} | {_ms(dp)} | "
+            f"| {label.format(f3db=f3db)} | {_ms(db)} | {int(np.sum(db < 0))}/{db.size} | "
+            f"{_ms(dp)} | "
             f"{int(np.sum(dp < 0))}/{dp.size} |"
         )
     L.append("")
@@ -512,6 +515,53 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             f"{', '.join(s.get('terms', [])) or '—'} | {s.get('order', '—')} | {cvs} | "
             f"{r['winner']} |"
         )
+    # reading the numbers: derived from them, not written by hand
+    worst_i = np.unravel_index(np.argmax(ratio), ratio.shape)
+    worst_c = np.unravel_index(np.argmin(cut), cut.shape)
+    taus = [(r["params"].get("lag_tau_s", 0.0), r["features"]["tau_s"]) for r in results[1:]]
+    tau_err = np.median([abs(f - t) for t, f in taus])
+    st = a["causal.structured"][bs]
+    n_bp = int(np.sum((st - a["causal.bp"][bs]).mean(axis=1) < 0))
+    n_ga = int(np.sum((st - a["causal.gabp"][bs]).mean(axis=1) < 0))
+    ga_bp = (a["causal.gabp"][bs] - a["causal.bp"][bs]).mean(axis=1)
+    n_blow = sum(
+        int(r["cv_rmse"].get(f, 0.0) > 10 * r["cv_rmse"]["structured"])
+        for r in results
+        for f in ("bp", "gabp")
+    )
+    L += [
+        "",
+        "Reading these numbers:",
+        "",
+        f"- The causal headline is within {100 * (med_ratio - 1):.0f} % of the oracle's bias "
+        f"stability (median); the temperature-only models — the polynomial baseline and the "
+        f"paper's GA-BP — sit at {np.median(a['causal.poly'][bs] / a['oracle'][bs]):.2f}× and "
+        f"{np.median(a['paper_gabp_T_causal'][bs] / a['oracle'][bs]):.2f}×: a static function "
+        "of the case temperature cannot follow the die's lag, the rate term or the "
+        "hysteresis, and the paper's offline denoising does not change that "
+        f"({np.median(a['paper_offline'][bs] / a['oracle'][bs]):.2f}×).",
+        f"- Worst held-out run: unit {results[worst_i[0]]['unit']} on "
+        f"{held[worst_i[1]]}, {ratio.max():.2f}× the oracle; lowest 100 s p-p cut "
+        f"{100 * cut.min():.1f} % (unit {results[worst_c[0]]['unit']}, {held[worst_c[1]]}). "
+        f"The lag is identified from one cooling staircase (median |τ̂ − τ| {tau_err:.0f} s "
+        "over the lagged units): the rate term absorbs part of a lag error, the rest shows on "
+        "trajectories faster than the calibration one.",
+        f"- The networks on the same causal inputs lose to the structured model held out: "
+        f"plain BP on {n_bp}/{len(results)} units, GA-BP on {n_ga}/{len(results)} (paired, "
+        f"bias stability). GA-BP − plain BP: {_ms(ga_bp)} °/h (paired, per unit; GA-BP "
+        f"better on {int(np.sum(ga_bp < 0))}/{len(results)}). Their CV RMSE inside the "
+        f"calibration run exceeds 10× the structured model's on {n_blow} of "
+        f"{2 * len(results)} fits: a held-out segment whose inputs lie outside the training "
+        "range (the warm-up input is non-zero only in the first hour) is extrapolated along "
+        "the network's edge gradient.",
+        f"- On the nominal unit 0 (no lag, rate, hysteresis or warm-up) the selection chose "
+        f"`{results[0]['winner']}`"
+        + (
+            ": the structured model could not beat the polynomial by 1 %, as it should not."
+            if results[0]["winner"] == "poly"
+            else "."
+        ),
+    ]
     return "\n".join(L)
 
 
@@ -520,10 +570,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--units", type=int, default=12)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rate", type=float, default=10.0)
-    ap.add_argument("--out", type=Path, default=REPO / "docs" / "results.md")
+    ap.add_argument("--out", default=str(REPO / "docs" / "results.md"), help="'' to skip")
     ap.add_argument("--json", type=Path, default=REPO / "benchmarks/results/validation_suite.json")
     ap.add_argument("--quick", action="store_true", help="tiny GA/BP/VMD settings (smoke test)")
+    ap.add_argument(
+        "--tables-only", action="store_true", help="re-render the tables from --json (no runs)"
+    )
     args = ap.parse_args(argv)
+    if args.tables_only:
+        d = json.loads(args.json.read_text())
+        body = tables(d["units"], d["meta"]) + "\n\n" + rotation_table(d["rotation"])
+        print(body)
+        if args.out:
+            write_section(Path(args.out), "validation_suite", body)
+        return 0
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")  # per-unit lines instead of bars
     load_before = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
@@ -560,7 +620,7 @@ def main(argv: list[str] | None = None) -> int:
     body = tables(results, meta) + "\n\n" + rotation_table(rot)
     print(body)
     if args.out and not args.quick:
-        write_section(args.out, "validation_suite", body)
+        write_section(Path(args.out), "validation_suite", body)
     return 0
 
 
