@@ -15,7 +15,7 @@ from contract import METRIC_KEYS
 from gyrolab.cli import main
 from gyrolab.report.demo import run_demo
 
-MODEL_FIGURES = ("gpso", "vmd-modes", "mpe", "drift-fit", "compensated")
+MODEL_FIGURES = ("causal-headline", "gpso", "vmd-modes", "mpe", "drift-fit", "compensated")
 
 
 def make_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
