@@ -1,9 +1,4 @@
-"""Ready-to-enable test: rename to tests/test_export_causal.py once issue 11's causal model
-(gyrolab/compensation/causal.py, branch i11causal) is merged; until then the model it
-exports does not exist on this branch and the test cannot run. It passed on a temporary
-merge of i15 with i11causal (docs/export.md gives the figures).
-
-C and JSON export of the causal drift model (issue 11's feature state machine: die lag,
+"""C and JSON export of the causal drift model (issue 11's feature state machine: die lag,
 rate, hysteresis, warm-up) on a 3-axis unit with a die lag and hysteresis: the generated
 C, compiled with the system compiler and run reading by reading over a whole held-out
 profile (115 200 samples × 3 axes), matches the Python causal output; the JSON's own
