@@ -256,7 +256,9 @@ def test_ardupilot_parm_golden_and_round_trip(unit: dict[str, Path]) -> None:
 
 def test_json_schema_is_the_fitted_model(unit: dict[str, Path]) -> None:
     out = unit["dir"] / "model.export.json"
-    assert main(["export", str(unit["model"]), "--format", "json", "--out", str(out)]) == 0
+    # the GA-BP network (the chosen default is the causal model: test_export_causal.py)
+    argv = ["export", str(unit["model"]), "--format", "json", "--kind", "gabp", "--out", str(out)]
+    assert main(argv) == 0
     doc = json.loads(out.read_text())
     assert doc["format"] == "gyrolab.export" and doc["format_version"] == 1
     assert doc["units"] == {"rate": "deg/s", "temperature": "degC", "time": "s"}
@@ -355,7 +357,8 @@ def run_c(tmp: Path, c_file: Path, rec, axes: int) -> tuple[np.ndarray, np.ndarr
 @pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
 def test_c_export_matches_python_over_a_whole_profile(unit: dict[str, Path]) -> None:
     out = unit["dir"] / "gyro_comp.c"
-    assert main(["export", str(unit["model"]), "--format", "c", "--out", str(out)]) == 0
+    argv = ["export", str(unit["model"]), "--format", "c", "--kind", "gabp", "--out", str(out)]
+    assert main(argv) == 0
     header = out.with_suffix(".h").read_text()
     assert "#define GYROLAB_COMP_AXES 3" in header and "clipped to the calibrated range" in header
     rec, m = held_out(unit)
@@ -467,7 +470,8 @@ def test_c_export_with_dtdt_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     monkeypatch.setattr(pl, "DEFAULT_CONFIG", replace(SMALL, use_dtdt=True))
     assert main(["compensate", str(cal), "--out", str(tmp_path / "m")]) == 0
     out = tmp_path / "g.c"
-    assert main(["export", str(tmp_path / "m"), "--format", "c", "--out", str(out)]) == 0
+    argv = ["export", str(tmp_path / "m"), "--format", "c", "--kind", "gabp", "--out", str(out)]
+    assert main(argv) == 0
     assert "dT/dt = (T(t) - T(t - 300)) / 300" in out.with_suffix(".h").read_text()
     rec = read_recording(cal)
     (tmp_path / "b").mkdir()
