@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.acquisition.oven import WatlowF4
+from gyrolab.acquisition.testing import ExpectedSerial
 from gyrolab.sim.bench import FaultEvent, SimBench
 from gyrolab.sim.bench.oven_modbus import OvenHooks, WatlowF4Slave, crc16_modbus, with_crc
 from gyrolab.sim.bench.serial_pty import PtyPort
@@ -30,51 +31,6 @@ SP_M40 = H("01 03 02 fe 70 f9 c0")
 READ_PV = H("01 03 00 64 00 01 c5 d5")
 PV_25_3 = H("01 03 02 00 fd 79 c5")  # 25.3 °C = raw 253
 BUSY = H("01 86 06 c2 62")  # exception 06, slave device busy
-
-
-class ExpectedSerial:
-    """A pyserial stand-in that checks every request against the expected list and
-    plays the paired reply (None: stay silent)."""
-
-    def __init__(self, dialogue: list[tuple[bytes, bytes | None]]) -> None:
-        self.dialogue = list(dialogue)
-        self.written: list[bytes] = []
-        self._rx = b""
-        self.is_open = True
-        self.port = "expected"
-        self.baudrate = 19200
-        self.timeout = 0.05
-
-    def open(self) -> None:
-        self.is_open = True
-
-    def close(self) -> None:
-        self.is_open = False
-
-    def write(self, data: bytes) -> int:
-        self.written.append(bytes(data))
-        assert self.dialogue, f"unexpected request {data.hex(' ')}"
-        want, reply = self.dialogue.pop(0)
-        assert data == want, f"sent {data.hex(' ')}, expected {want.hex(' ')}"
-        self._rx += reply or b""
-        return len(data)
-
-    def read(self, n: int = 1) -> bytes:
-        out, self._rx = self._rx[:n], self._rx[n:]
-        return out
-
-    @property
-    def in_waiting(self) -> int:
-        return len(self._rx)
-
-    def reset_input_buffer(self) -> None:
-        self._rx = b""
-
-    def reset_output_buffer(self) -> None:
-        pass
-
-    def assert_done(self) -> None:
-        assert not self.dialogue, f"never sent: {[d[0].hex(' ') for d in self.dialogue]}"
 
 
 def test_crc_matches_minimalmodbus() -> None:

@@ -35,8 +35,9 @@ class RunInfo:
 
 @dataclass(frozen=True)
 class MultimeterConfig:
-    """Agilent/HP 34401A reading the PT100 (4-wire)."""
+    """Agilent/HP 34401A reading the PT100 (4-wire): the ``agilent34401a`` driver's config."""
 
+    driver: str = "agilent34401a"  # gyrolab.acquisition.registry
     resource: str = ""  # "ASRL/dev/ttyUSB0::INSTR" or "TCPIP::host::5025::SOCKET"
     timeout_s: float = 5.0
     nplc: float = 10.0
@@ -50,8 +51,9 @@ class MultimeterConfig:
 
 @dataclass(frozen=True)
 class OvenConfig:
-    """Watlow F4-style controller, Modbus RTU."""
+    """Watlow F4 controller, Modbus RTU: the ``watlowf4`` driver's config."""
 
+    driver: str = "watlowf4"  # gyrolab.acquisition.registry
     port: str = ""  # "/dev/ttyUSB1"
     slave_address: int = 1
     baud_rate: int = 19200
@@ -64,6 +66,7 @@ class OvenConfig:
 class AdcConfig:
     """The gyro's ADC stream and its conversion to °/s (``Ω = (V − offset)/gain``)."""
 
+    driver: str = "gyroadc"  # gyrolab.acquisition.registry
     port: str = ""  # "/dev/ttyUSB2"
     baud_rate: int = 921600
     sample_rate_hz: float = 100.0
@@ -120,8 +123,11 @@ class BenchConfig:
 
     name: str = "bench"
     run: RunInfo = field(default_factory=RunInfo)
-    multimeter: MultimeterConfig = field(default_factory=MultimeterConfig)
-    oven: OvenConfig = field(default_factory=OvenConfig)
+    # The three roles (``[thermometer]``, ``[chamber]``, ``[adc]``), each the config
+    # dataclass of the driver its table names (gyrolab.acquisition.registry). The field
+    # names are the tables' older names, which are still accepted.
+    multimeter: Any = field(default_factory=MultimeterConfig)
+    oven: Any = field(default_factory=OvenConfig)
     adc: AdcConfig = field(default_factory=AdcConfig)
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
@@ -144,9 +150,6 @@ class BenchConfig:
 
 _SECTIONS: dict[str, type] = {
     "run": RunInfo,
-    "multimeter": MultimeterConfig,
-    "oven": OvenConfig,
-    "adc": AdcConfig,
     "limits": Limits,
     "safe_state": SafeState,
     "recorder": RecorderConfig,
@@ -183,14 +186,46 @@ def _section(cls: type, raw: Any, where: str, source: str) -> Any:
     return cls(**kw)
 
 
+# Role tables: (BenchConfig field, role, table names: the current one first, then the
+# older name still accepted).
+_ROLE_TABLES = (
+    ("multimeter", "thermometer", ("thermometer", "multimeter")),
+    ("oven", "chamber", ("chamber", "oven")),
+    ("adc", "rate_stream", ("adc",)),
+)
+
+
+def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source: str) -> Any:
+    """The driver config of one role: ``driver`` (default: the bench's original driver)
+    picks the dataclass the rest of the table is checked against."""
+    from gyrolab.acquisition import registry
+
+    given = [t for t in tables if t in d]
+    if len(given) > 1:
+        raise InputError(source, f"[{given[0]}] and [{given[1]}] are the same role: keep one")
+    where = given[0] if given else tables[0]
+    raw = d.get(where, {})
+    if not isinstance(raw, dict):
+        raise InputError(source, f"[{where}] must be a table")
+    name = raw.get("driver", registry.DEFAULT_DRIVER[role])
+    try:
+        spec = registry.get(str(name), role)
+    except KeyError as e:
+        raise InputError(source, f"[{where}] driver = {name!r}: {e.args[0]}") from None
+    return _section(spec.config, raw, where, source)
+
+
 def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     """Build and check a :class:`BenchConfig` from the TOML layout."""
-    unknown = sorted(set(d) - set(_SECTIONS) - {"name"})
+    tables = {t for _, _, names in _ROLE_TABLES for t in names}
+    unknown = sorted(set(d) - set(_SECTIONS) - tables - {"name"})
     if unknown:
         raise InputError(source, f"unknown table(s) or key(s) {unknown}")
     kw: dict[str, Any] = {
         name: _section(cls, d.get(name, {}), name, source) for name, cls in _SECTIONS.items()
     }
+    for fname, role, names in _ROLE_TABLES:
+        kw[fname] = _role_section(d, role, names, source)
     cfg = BenchConfig(name=str(d.get("name", Path(source).stem)), source=source, **kw)
     validate(cfg)
     return cfg
@@ -275,15 +310,15 @@ def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str)
 
 def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     """Read and check a bench TOML file."""
+    from gyrolab.acquisition import registry
+
     p = Path(path)
     d = read_toml(p, "bench file")
     cfg = bench_from_dict(d, str(p))
-    for name, val in (
-        ("multimeter", cfg.multimeter.resource),
-        ("oven", cfg.oven.port),
-        ("adc", cfg.adc.port),
-    ):
-        if not val:
-            key = "resource" if name == "multimeter" else "port"
-            raise InputError(p, f"[{name}] {key} is required for a real bench")
+    for fname, role, names in _ROLE_TABLES:
+        sub = getattr(cfg, fname)
+        key = registry.get(sub.driver, role).address_key
+        if not getattr(sub, key):
+            where = next((t for t in names if t in d), names[0])
+            raise InputError(p, f"[{where}] {key} is required for a real bench")
     return cfg

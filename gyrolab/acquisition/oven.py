@@ -185,7 +185,7 @@ class WatlowF4:
         self.retries = retries
         self.stats = ModbusStats()
         # Exception responses since the last pop_reports() (the runner logs them).
-        self.reports: list[InstrumentReport] = []
+        self._reports: list[InstrumentReport] = []
         # RTU frames are delimited by 3.5 character times of silence (11 bits a character;
         # fixed 1.75 ms above 19200 baud, Modbus over serial line spec §2.5.1.1).
         self.frame_gap_s = 3.5 * 11 / baudrate if baudrate <= 19200 else 0.00175
@@ -276,7 +276,7 @@ class WatlowF4:
             except minimalmodbus.SlaveReportedException as e:
                 # A complete, valid frame from the slave: the line is in step.
                 self.stats.exceptions += 1
-                self.reports.append(modbus_report(e, what))
+                self._reports.append(modbus_report(e, what))
                 last = e
             except (minimalmodbus.InvalidResponseError, minimalmodbus.ModbusException) as e:
                 # Bad CRC or content: if the reply was whole the slave is done and only
@@ -298,7 +298,7 @@ class WatlowF4:
 
     def pop_reports(self) -> list[InstrumentReport]:
         """The exception responses received since the last call (retried or not)."""
-        out, self.reports = self.reports, []
+        out, self._reports = self._reports, []
         return out
 
     def read_register(self, register: int) -> int:

@@ -11,9 +11,9 @@ Three parts, Bluesky/ophyd style — the plan never touches a port:
   at the time its rule was met (its start + ``duration_s``, or the reading that showed
   it stable), not at the moment the engine got round to looking, and the next step
   starts at that time, so the engine's reaction time never accumulates over a profile.
-* Devices (:class:`Thermometer`, :class:`Oven`, :class:`GyroStream`) are the hardware
-  abstraction: small protocols that the lab drivers and the simulated bench's drivers
-  both satisfy through thin adapters (``gyrolab.acquisition.commands``).
+* Devices (:class:`Thermometer`, :class:`Chamber`, :class:`RateStream`, in
+  ``gyrolab.acquisition.roles``) are the hardware abstraction: the role protocols that
+  every registered driver implements itself (``gyrolab.acquisition.registry``).
 * :class:`Acquisition` is the run engine: one polling thread per instrument feeding a
   queue, and the main thread that owns the recorder, runs the plan, watches the safety
   limits, and ends the run cleanly on completion, fault or SIGINT.
@@ -41,6 +41,15 @@ from typing import Any, Protocol
 import numpy as np
 
 from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.roles import (  # noqa: F401 - re-exported for compatibility
+    Chamber,
+    ChamberReading,
+    InstrumentFault,
+    RateStream,
+    Thermometer,
+    ThermometerReading,
+    is_transient,
+)
 from gyrolab.errors import InputError
 from gyrolab.profile import Profile, Step
 from gyrolab.recording import RecordingWriter
@@ -69,32 +78,10 @@ class WallClock:
             time.sleep(dt)
 
 
-class InstrumentFault(Exception):
-    """An instrument reports a condition that must end the run (not a transient error)."""
-
-
-class Thermometer(Protocol):
-    """The PT100 reader (a multimeter)."""
-
-    name: str
-
-    def read(self) -> tuple[float, float]:
-        """``(resistance_ohm, temperature_c)``; raises on a failed reading."""
-        ...
-
-
-class Oven(Protocol):
-    """The temperature chamber's controller."""
-
-    name: str
-
-    def set_setpoint(self, setpoint_c: float) -> None:
-        """Command and verify a setpoint; raises on failure."""
-        ...
-
-    def read(self) -> tuple[float, float]:
-        """``(setpoint_c, process_value_c)``; raises on failure."""
-        ...
+# The role protocols and the error vocabulary live in roles.py; these names stay here for
+# code that imported them from the runner.
+Oven = Chamber
+GyroStream = RateStream
 
 
 class AdcBlockLike(Protocol):
@@ -111,20 +98,6 @@ class AdcReadLike(Protocol):
     blocks: list[Any]  # AdcBlockLike
     gaps: list[Any]  # with first_seq, frames, cause
     events: list[Any]  # with kind, message, data
-
-
-class GyroStream(Protocol):
-    """The gyro's ADC stream (gyrolab.acquisition.gyro_adc.GyroAdcReader's shape)."""
-
-    name: str
-
-    def read(self, timeout_s: float) -> AdcReadLike:
-        """Intact samples received so far (waits at most ``timeout_s`` wall seconds)."""
-        ...
-
-    def counters(self) -> dict[str, int]:
-        """Running totals: at least ``frames_ok``, ``frames_bad`` and ``frames_lost``."""
-        ...
 
 
 # ------------------------------------------------------------------------------ plan
@@ -399,11 +372,11 @@ class _Poller(threading.Thread):
         t = self.clock.now()
         try:
             res = fn()
-        except InstrumentFault as e:
-            self.post(("fatal", self.source, t, f"{type(e).__name__}: {e}"))
-            return False
-        except Exception as e:  # a driver's I/O error of any kind is a (transient) fault
-            self.post(("error", self.source, t, f"{what} failed: {type(e).__name__}: {e}"))
+        except Exception as e:
+            # roles.is_transient: a failed exchange is retried at the next poll; a refused
+            # setting (LimitError), a fault or a bug ends the run.
+            kind = "error" if is_transient(e) else "fatal"
+            self.post((kind, self.source, t, f"{what} failed: {type(e).__name__}: {e}"))
             return False
         finally:
             self._post_reports()
@@ -450,10 +423,11 @@ class _AdcThread(threading.Thread):
         while not self.stop_ev.is_set():
             try:
                 got = self.dev.read(0.05)
-            except InstrumentFault as e:
-                self.post(("fatal", self.dev.name, self.clock.now(), str(e)))
-                return
             except Exception as e:
+                if not is_transient(e):
+                    msg = f"{type(e).__name__}: {e}"
+                    self.post(("fatal", self.dev.name, self.clock.now(), msg))
+                    return
                 self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
                 time.sleep(0.05)
                 continue
