@@ -102,6 +102,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
     a.add_argument(
+        "--driver",
+        action="append",
+        metavar="NAME",
+        help="--bench sim only: use this driver for its role (repeatable; docs/instruments.md)",
+    )
+    a.add_argument(
         "--faults",
         metavar="FAULTS.toml",
         help="--bench sim only: inject faults into the simulated bench (docs/instruments.md)",

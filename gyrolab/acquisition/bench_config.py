@@ -180,6 +180,9 @@ def _section(cls: type, raw: Any, where: str, source: str) -> Any:
             elif typ in ("str", str):
                 if not isinstance(v, str):
                     raise TypeError
+            elif typ in ("bool", bool):
+                if not isinstance(v, bool):
+                    raise TypeError
         except (TypeError, ValueError):
             raise InputError(source, f"[{where}] {k} = {v!r}: expected {typ}") from None
         kw[k] = v

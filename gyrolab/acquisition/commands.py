@@ -183,6 +183,21 @@ def sim_bench_config(seed: int) -> BenchConfig:
     )
 
 
+def sim_drivers(cfg: BenchConfig, names: list[str]) -> BenchConfig:
+    """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
+    name picks its role; the driver's default settings)."""
+    from gyrolab.acquisition import registry
+
+    fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
+    for name in names:
+        spec = next((s for s in registry.drivers() if s.name == name), None)
+        if spec is None:
+            known = ", ".join(s.name for s in registry.drivers())
+            raise GyrolabError(f"--driver {name}: no such driver (registered: {known})")
+        cfg = replace(cfg, **{fields[spec.role]: spec.config()})
+    return cfg
+
+
 def start_sim_bench(
     cfg: BenchConfig,
     profile: Profile,
@@ -200,10 +215,20 @@ def start_sim_bench(
     unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
     the same path as ``examples/lab.toml``.
     """
+    from gyrolab.acquisition import registry
     from gyrolab.sim.bench import SimBench
     from gyrolab.sim.simulate import provenance
 
+    specs = {
+        "thermometer": registry.get(cfg.multimeter.driver, "thermometer"),
+        "chamber": registry.get(cfg.oven.driver, "chamber"),
+    }
+    for role, spec in specs.items():
+        if not spec.sim_backend:
+            raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
     bench = SimBench(
+        dmm_model=specs["thermometer"].sim_backend,
+        chamber_model=specs["chamber"].sim_backend,
         model=model,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,
@@ -212,7 +237,7 @@ def start_sim_bench(
         workdir=workdir,
         faults=faults,
         keep_truth=keep_truth,
-        tcp=False,
+        tcp=specs["thermometer"].sim_address == "dmm_tcp_resource",
         tick_s=sim_tick_s(speed),
         # Slow while the drivers connect (imports, port set-up: wall seconds that would be
         # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
@@ -231,9 +256,10 @@ def start_sim_bench(
         ),
     )
     bench.start()
+    where = bench.resources()
     handle = SimHandle(
-        dmm_resource=bench.dmm_serial_resource,
-        oven_port=bench.oven_port,
+        dmm_resource=where[specs["thermometer"].sim_address],
+        oven_port=where[specs["chamber"].sim_address],
         adc_port=bench.adc_port,
         clock=bench.clock,
         stop=bench.stop,
@@ -469,8 +495,11 @@ def acquire(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
         raise GyrolabError(f"--speed must be a positive number, not {args.speed}")
+    drivers = getattr(args, "driver", None) or []
+    if drivers and args.bench != "sim":
+        raise GyrolabError("--driver applies to --bench sim only (a bench file names its drivers)")
     if args.bench == "sim":
-        cfg = sim_bench_config(args.seed)
+        cfg = sim_drivers(sim_bench_config(args.seed), drivers)
     else:
         cfg = load_bench(args.bench)
         if args.speed is not None:

@@ -47,8 +47,10 @@ class DriverSpec:
     """A driver: its ``name`` in BENCH.toml, its ``role``, its ``config`` dataclass (every
     field a BENCH.toml key; it must have ``period_s``, ``timeout_s`` and ``serial``
     where the role polls), ``open(config, ctx)`` returning the connected role object, the
-    config field holding its address (``address_key``), and ``sim_backend``: the name of
-    the simulated back end in ``gyrolab.sim.bench`` that speaks its protocol ("" = none)."""
+    config field holding its address (``address_key``), ``sim_backend``: the simulated
+    instrument in ``gyrolab.sim.bench.SimBench`` that speaks its protocol (its model
+    name there; "" = none) and ``sim_address``: the key of ``SimBench.resources()`` the
+    driver connects to."""
 
     name: str
     role: str
@@ -56,6 +58,7 @@ class DriverSpec:
     open: Callable[[Any, OpenContext], Any]
     address_key: str
     sim_backend: str = ""
+    sim_address: str = ""
     description: str = ""
 
 

@@ -84,7 +84,8 @@ SPEC = register(
         config=MultimeterConfig,
         open=open_34401a,
         address_key="resource",
-        sim_backend="dmm_scpi.Scpi34401A",
+        sim_backend="34401A",
+        sim_address="dmm_serial_resource",
         description="HP/Agilent 34401A, SCPI over RS-232/LAN/GPIB, 4-wire PT100",
     )
 )

@@ -77,7 +77,8 @@ SPEC = register(
         config=AdcConfig,
         open=open_adc,
         address_key="port",
-        sim_backend="adc_source.AdcSource",
+        sim_backend="ADC",
+        sim_address="adc_port",
         description="framed 24-bit ADC stream over a serial port",
     )
 )

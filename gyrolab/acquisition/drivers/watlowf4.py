@@ -80,7 +80,8 @@ SPEC = register(
         config=OvenConfig,
         open=open_f4,
         address_key="port",
-        sim_backend="oven_modbus.WatlowF4Slave",
+        sim_backend="F4",
+        sim_address="oven_port",
         description="Watlow F4 controller, Modbus RTU on RS-232/RS-485",
     )
 )
