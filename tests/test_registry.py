@@ -21,8 +21,6 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_builtin_drivers_registered_per_role() -> None:
-    assert [s.name for s in registry.drivers("thermometer")] == ["agilent34401a"]
-    assert [s.name for s in registry.drivers("chamber")] == ["watlowf4"]
     assert [s.name for s in registry.drivers("rate_stream")] == ["gyroadc"]
     for role, name in registry.DEFAULT_DRIVER.items():
         spec = registry.get(name, role)
@@ -79,3 +77,23 @@ def test_one_error_vocabulary() -> None:
     assert not is_transient(LimitError("x", "setpoint 90 °C outside [-45, 70]"))
     assert not is_transient(InstrumentFault("sensor fault"))
     assert not is_transient(TypeError("bug"))
+
+
+def test_driver_option_errors_are_one_line(tmp_path: Path, capsys) -> None:
+    from gyrolab.cli import main
+
+    out = tmp_path / "x.mcap"
+    assert main(["acquire", "--bench", "sim", "--driver", "dmm9999", "--out", str(out)]) == 2
+    assert "--driver dmm9999: no such driver" in capsys.readouterr().err
+    lab = str(REPO / "examples" / "lab.toml")
+    assert main(["acquire", "--bench", lab, "--driver", "espec", "--out", str(out)]) == 2
+    assert "--driver applies to --bench sim only" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_new_drivers_registered_with_simulated_back_ends() -> None:
+    names = [s.name for s in registry.drivers("thermometer")]
+    assert names == ["agilent34401a", "keysight34465a"]
+    assert [s.name for s in registry.drivers("chamber")] == ["espec", "watlowf4"]
+    for s in registry.drivers():
+        assert s.sim_backend and s.sim_address, s.name
