@@ -60,6 +60,9 @@ class OvenConfig:
     timeout_s: float = 0.3
     period_s: float = 2.0  # /oven/state poll period
     serial: str = ""
+    # The F4 event output (1..8) that switches the chamber on (ESPEC wires one so); 0: none.
+    # Needed for [safe_state] mode = "off".
+    control_event: int = 0
 
 
 @dataclass(frozen=True)
@@ -102,8 +105,8 @@ class Limits:
 class SafeState:
     """What the oven is told when a run ends early (fault, limit, SIGINT)."""
 
-    # "setpoint": command and verify setpoint_c. (The F4 register map used here has no
-    # output-off register, so there is no "standby" mode.)
+    # "setpoint": command and verify setpoint_c. "off": that, then switch the chamber
+    # off and verify it (F4: its [chamber] control_event output; ESPEC: STANDBY).
     mode: str = "setpoint"
     setpoint_c: float = 25.0
 
@@ -269,8 +272,15 @@ def validate(cfg: BenchConfig) -> None:
     if lim.comm_timeout_s <= 0 or lim.watchdog_samples < 1:
         raise InputError(s, "[limits] comm_timeout_s must be > 0 and watchdog_samples >= 1")
     ss = cfg.safe_state
-    if ss.mode != "setpoint":
-        raise InputError(s, f"[safe_state] mode = {ss.mode!r}: only 'setpoint' is supported")
+    if ss.mode not in ("setpoint", "off"):
+        raise InputError(s, f"[safe_state] mode = {ss.mode!r}: 'setpoint' or 'off'")
+    if ss.mode == "off" and getattr(cfg.oven, "control_event", None) == 0:
+        raise InputError(
+            s, "[safe_state] mode = 'off' needs [chamber] control_event (the F4 event output "
+            "that switches the chamber)"
+        )
+    if not 0 <= getattr(cfg.oven, "control_event", 0) <= 8:
+        raise InputError(s, "[chamber] control_event must be an event output 1..8 (0: none)")
     if not lim.setpoint_min_c <= ss.setpoint_c <= lim.setpoint_max_c:
         raise InputError(s, "[safe_state] setpoint_c is outside the setpoint limits")
     if not lim.pt100_min_c < ss.setpoint_c < lim.pt100_max_c:

@@ -229,6 +229,7 @@ def start_sim_bench(
     bench = SimBench(
         dmm_model=specs["thermometer"].sim_backend,
         chamber_model=specs["chamber"].sim_backend,
+        oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
         model=model,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,

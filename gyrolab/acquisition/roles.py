@@ -6,7 +6,7 @@ A bench has three roles (docs/instruments.md, "Roles and drivers"):
   :class:`ThermometerReading`.
 * :class:`Chamber` — the temperature chamber's controller: ``set_setpoint()`` (limits
   checked before any byte is sent, verified by read-back), ``read()`` gives a
-  :class:`ChamberReading`, ``safe_state()`` commands and verifies the bench's safe state.
+  :class:`ChamberReading`, and where the driver can, ``switch_off()`` (verified).
 * :class:`RateStream` — the gyro's ADC stream.
 
 Every driver registered in :mod:`gyrolab.acquisition.registry` implements one role itself
@@ -100,6 +100,9 @@ class Chamber(Instrument, Protocol):
         """Setpoint and process value; raises on failure (:class:`InstrumentFault` when
         the controller reports it cannot control the chamber)."""
         ...
+
+    # Drivers that can switch the chamber off also have ``switch_off()`` (heater and
+    # refrigerator off, verified by read-back), used by ``[safe_state] mode = "off"``.
 
 
 class RateStream(Instrument, Protocol):

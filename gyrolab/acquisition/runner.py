@@ -1039,6 +1039,8 @@ class Acquisition:
                 sp, pv = self.oven.read()
                 if abs(sp - ss.setpoint_c) > 0.05:
                     raise RuntimeError(f"setpoint read back {sp:g} °C")
+                if ss.mode == "off":
+                    self.oven.switch_off()  # Chamber.switch_off verifies by read-back
             except Exception as e:
                 attempts.append((t, f"{type(e).__name__}: {e}", None))
                 self.clock.sleep(0.2)
@@ -1063,6 +1065,8 @@ class Acquisition:
         if ok:
             sp, pv = res
             detail = f"setpoint {ss.setpoint_c:g} °C verified"
+            if ss.mode == "off":
+                detail += ", chamber off verified"
             self.w.write_oven(t, sp, pv, "safe")
             self.w.write_event(t, "safe_state", -1, sp, detail)
             self.log(

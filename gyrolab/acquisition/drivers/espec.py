@@ -197,6 +197,10 @@ class EspecChamber:
             raise InstrumentError(NAME, f"mode read-back {m!r} after MODE, STANDBY")
         return m
 
+    def switch_off(self) -> None:
+        """The safe state ``mode = "off"``: STANDBY, verified."""
+        self.standby()
+
     # ------------------------------------------------------------------ role
     def connect(self) -> dict[str, Any]:
         self.identity = {"rom": self.query("ROM?"), "type": self.query("TYPE?")}

@@ -9,8 +9,8 @@ from __future__ import annotations
 from typing import Any
 
 from gyrolab.acquisition.bench_config import OvenConfig
-from gyrolab.acquisition.instrument import InstrumentReport
-from gyrolab.acquisition.oven import WatlowF4
+from gyrolab.acquisition.instrument import InstrumentError, InstrumentReport
+from gyrolab.acquisition.oven import NAME, PROFILE_PAUSED, PROFILE_RUNNING, WatlowF4
 from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
 from gyrolab.acquisition.roles import ChamberReading, InstrumentFault
 
@@ -27,16 +27,45 @@ class WatlowF4Chamber(WatlowF4):
 
     def connect(self) -> dict[str, Any]:
         self.registers = super().connect()
+        mode = self.profile_mode
+        self.registers["profile_mode"] = mode
+        if mode in (PROFILE_RUNNING, PROFILE_PAUSED):
+            # A profile drives the loop, not register 300: our setpoints would do nothing.
+            raise InstrumentError(
+                NAME, f"a profile is running on the controller (register 200 = {mode}): "
+                "end it at the controller first"
+            )
+        ev = self.config.control_event
+        if ev:
+            self.registers[f"event_{ev}"] = int(self.event(ev))
         return self.registers
 
     def read(self) -> ChamberReading:
         sp = self.setpoint_c
         pv = self.process_value_c
-        st = self.status
-        if st.sensor_fault:
-            # The controller cannot see the chamber: nothing it does can be trusted.
-            raise InstrumentFault(f"oven controller reports a sensor fault (status {st.raw:#x})")
+        mode = self.profile_mode
+        if mode in (PROFILE_RUNNING, PROFILE_PAUSED):
+            raise InstrumentFault(
+                f"a profile was started on the controller (register 200 = {mode}): "
+                "register 300 no longer controls the chamber"
+            )
         return ChamberReading(float(sp), float(pv))
+
+    def set_setpoint(self, value_c: float) -> float:
+        """Setpoint (limits first, read back), then the chamber on through its control
+        event output, if the bench wires one (read back)."""
+        sp = super().set_setpoint(value_c)
+        ev = self.config.control_event
+        if ev and not self.event(ev):
+            self.set_event(ev, True)
+        return sp
+
+    def switch_off(self) -> None:
+        """Chamber off: its control event output to 0, verified by read-back."""
+        ev = self.config.control_event
+        if not ev:
+            raise InstrumentError(NAME, "no control_event configured: cannot switch off")
+        self.set_event(ev, False)
 
     def reports(self) -> list[InstrumentReport]:
         return self.pop_reports()
@@ -48,6 +77,7 @@ class WatlowF4Chamber(WatlowF4):
             "port": self.port_name,
             "slave_address": self.config.slave_address,
             "serial": self.config.serial,
+            "control_event": self.config.control_event,
             "registers": self.registers,
         }
 

@@ -72,6 +72,7 @@ class SimBench:
         oven_units_c: bool = True,
         dmm_model: str = "34401A",
         chamber_model: str = "F4",
+        oven_control_event: int | None = None,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
@@ -116,7 +117,8 @@ class SimBench:
             write_timeout_s=0.5 if speed is None else 0.05,
         )
         self.oven = WatlowF4Slave(
-            OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint),
+            OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
+            control_event=oven_control_event,
             decimals=oven_decimals,
             units_c=oven_units_c,
             faults=self.faults.oven,
