@@ -441,7 +441,8 @@ def test_safe_state_off_leaves_the_chamber_switched_off(tmp_path, chamber) -> No
     prof_file.write_text('name = "t"\n[[step]]\nsetpoint_c = 30\nduration_s = 40\n')
     prof = load_profile(prof_file)
     table = {"driver": chamber, **({"control_event": 1} if chamber == "watlowf4" else {})}
-    cfg = bench_from_dict({"chamber": table, "safe_state": {"mode": "off", "setpoint_c": 20.0}}, "b.toml")
+    safe = {"mode": "off", "setpoint_c": 20.0}
+    cfg = bench_from_dict({"chamber": table, "safe_state": safe}, "b.toml")
     sim, cfg = start_sim_bench(cfg, prof, seed=0, speed=50.0)
     out = tmp_path / "run.mcap"
     try:
