@@ -346,27 +346,35 @@ class _Poller(threading.Thread):
         self.post = post
         self.stop_ev = stop
         self.commands = commands
+        self._nxt: float | None = None
+        self._pending: Callable[[], Any] | None = None
+
+    def step(self) -> float:
+        """One pass: the pending command, then the reading if it is due; returns the run
+        clock time of the next reading (the thread waits for it; the single-threaded
+        engine, ``Acquisition(threaded=False)``, calls this on every turn)."""
+        if self._nxt is None:
+            self._nxt = self.clock.now()
+        # Commands (setpoints) go first: they share the port with the polls. A newer
+        # setpoint supersedes an older one; a failed one is retried every period.
+        while self.commands is not None:
+            try:
+                self._pending = self.commands.get_nowait()
+            except queue.Empty:
+                break
+        if self._pending is not None and self._call(self._pending, "command"):
+            self._pending = None
+        if self.clock.now() >= self._nxt:  # not when woken early by a new command
+            self._call(self.op, "reading")
+            self._nxt += self.period
+            now = self.clock.now()
+            if self._nxt < now:  # fell behind (slow instrument): skip, don't burst
+                self._nxt = now
+        return self._nxt
 
     def run(self) -> None:
-        nxt = self.clock.now()
-        pending: Callable[[], Any] | None = None
         while not self.stop_ev.is_set():
-            # Commands (setpoints) go first: they share the port with the polls. A newer
-            # setpoint supersedes an older one; a failed one is retried every period.
-            while self.commands is not None:
-                try:
-                    pending = self.commands.get_nowait()
-                except queue.Empty:
-                    break
-            if pending is not None and self._call(pending, "command"):
-                pending = None
-            if self.clock.now() >= nxt:  # not when woken early by a new command
-                self._call(self.op, "reading")
-                nxt += self.period
-                now = self.clock.now()
-                if nxt < now:  # fell behind (slow instrument): skip, don't burst
-                    nxt = now
-            self._wait(nxt)
+            self._wait(self.step())
 
     def _call(self, fn: Callable[[], Any], what: str) -> bool:
         t = self.clock.now()
@@ -418,21 +426,28 @@ class _AdcThread(threading.Thread):
     ) -> None:
         super().__init__(name="adc", daemon=True)
         self.dev, self.post, self.stop_ev, self.clock = dev, post, stop, clock
+        self.failed = False
+
+    def step(self, timeout_s: float = 0.05) -> bool:
+        """One read; False after a failure (a fatal one sets ``failed``)."""
+        try:
+            got = self.dev.read(timeout_s)
+        except Exception as e:
+            if not is_transient(e):
+                msg = f"{type(e).__name__}: {e}"
+                self.post(("fatal", self.dev.name, self.clock.now(), msg))
+                self.failed = True
+                return False
+            self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
+            return False
+        if got.blocks or got.events or got.gaps:
+            self.post(("adc", self.dev.name, self.clock.now(), got))
+        return True
 
     def run(self) -> None:
-        while not self.stop_ev.is_set():
-            try:
-                got = self.dev.read(0.05)
-            except Exception as e:
-                if not is_transient(e):
-                    msg = f"{type(e).__name__}: {e}"
-                    self.post(("fatal", self.dev.name, self.clock.now(), msg))
-                    return
-                self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
+        while not self.stop_ev.is_set() and not self.failed:
+            if not self.step() and not self.failed:
                 time.sleep(0.05)
-                continue
-            if got.blocks or got.events or got.gaps:
-                self.post(("adc", self.dev.name, self.clock.now(), got))
 
 
 class Acquisition:
@@ -462,8 +477,14 @@ class Acquisition:
         status_every_s: float = 0.5,
         on_samples: Callable[[float], None] | None = None,
         comm_timeout_min_wall_s: float = 0.0,
+        threaded: bool = True,
+        turn_s: float = 0.1,
     ) -> None:
         check_profile_limits(profile, limits)
+        # threaded=False: no threads; every turn of the main loop polls the instruments
+        # itself and then sleeps ``turn_s`` on ``clock`` (a fake clock in tests advances).
+        self.threaded = threaded
+        self.turn_s = turn_s
         self.comm_timeout_min_wall_s = comm_timeout_min_wall_s
         self.profile = profile
         self.plan = ProfilePlan(profile)
@@ -593,14 +614,22 @@ class Acquisition:
             ),
             _AdcThread(self.gyro, self.q.put, self.stop_ev, self.clock),
         ]
-        for th in threads:
-            th.start()
+        if self.threaded:
+            for th in threads:
+                th.start()
+        stepped, threads = (threads, []) if not self.threaded else ([], threads)
         last_status = 0.0
         outcome, reason = "completed", "profile complete"
         try:
             while True:
+                for dev in stepped:  # single-threaded engine: the pollers' turns
+                    if isinstance(dev, _AdcThread):
+                        if not dev.failed:
+                            dev.step(0.0)
+                    else:
+                        dev.step()
                 try:
-                    item = self.q.get(timeout=0.02)
+                    item = self.q.get(timeout=0.02) if self.threaded else self.q.get_nowait()
                 except queue.Empty:
                     item = None
                 if item is not None:
@@ -628,6 +657,8 @@ class Acquisition:
                     last_status = time.monotonic()
                     self._update_status(t)
                     self.on_status(self.status)
+                if stepped:
+                    self.clock.sleep(self.turn_s)
         finally:
             safe_ok = self._shutdown(outcome, reason, threads)
         if self.on_status:
