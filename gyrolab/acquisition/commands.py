@@ -125,7 +125,8 @@ def connect_instruments(
             try:
                 dev = spec.open(sub, ctx)
             except Exception as e:
-                raise InputError(src, f"[{role}] {spec.name} at {address}: {e}") from None
+                table = "adc" if role == "rate_stream" else role
+                raise InputError(src, f"[{table}] {spec.name} at {address}: {e}") from None
             dev.name = source
             inst.closers.append(dev.close)
             setattr(inst, attr, dev)
