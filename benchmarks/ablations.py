@@ -49,6 +49,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gyrolab import __version__  # noqa: E402
 from gyrolab.compensation import pipeline as pl  # noqa: E402
@@ -343,19 +344,11 @@ def markdown(results: list[dict[str, Any]], wall: float, load: str) -> str:
     return "\n".join(lines)
 
 
-def write_section(path: Path, text: str) -> None:
-    """Replace (or append) the '## Ablations' section at the end of ``path``."""
-    old = path.read_text() if path.exists() else ""
-    i = old.find("\n## Ablations")
-    body = (old if i < 0 else old[:i]).rstrip("\n")
-    path.write_text(body + "\n\n" + text)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--work", default="/tmp/gyrolab-ablations")
-    ap.add_argument("--write", metavar="RESULTS.md", help="replace its '## Ablations' section")
+    ap.add_argument("--write", metavar="RESULTS.md", help="replace its marked 'ablations' section")
     a = ap.parse_args()
     os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
     work = Path(a.work)
@@ -373,7 +366,9 @@ def main() -> int:
     text = markdown(results, wall, load)
     print(text)
     if a.write:
-        write_section(Path(a.write), text)
+        from docsections import write_section  # benchmarks/: the marked-section writer
+
+        write_section(Path(a.write), "ablations", text)
     return 0
 
 

@@ -176,11 +176,11 @@ def warn_outside(path: str, t: dict[str, Any]) -> None:
 
 def check_finite(directory: str | Path, meta: dict[str, Any], arrays: dict[str, Any]) -> None:
     """Refuse a model whose parameters are not all finite: the network weights, scalers,
-    ranges and polynomial coefficients (``drift.*``, ``baseline.*`` in arrays.npz, the
+    ranges and polynomial coefficients (``drift.*``, ``baseline.*``, ``causal.*`` in arrays.npz, the
     scalers in model.json) and the FLP coefficients. One line naming the file."""
     npz = Path(directory) / "arrays.npz"
     for k, v in arrays.items():
-        if not k.startswith(("drift.", "baseline.")) or k.endswith("_history"):
+        if not k.startswith(("drift.", "baseline.", "causal.")) or k.endswith("_history"):
             continue
         a = np.asarray(v)
         if a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
