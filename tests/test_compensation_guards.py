@@ -264,3 +264,16 @@ def test_gradient_descent_bp_is_the_chain_rule_and_lowers_the_loss() -> None:
         assert m.config["optimizer"] == "gradient-descent"
     with pytest.raises(ValueError, match="diverged"):
         _gd_train(th0, Xs, ys, 5, BPConfig(optimizer="gd", learning_rate=1e6, epochs=50))
+
+
+def test_report_says_when_a_run_is_outside_the_calibrated_range(
+    model_dir: Path, runs: dict[str, Path]
+) -> None:
+    from gyrolab.report.build import build_report
+
+    doc, metrics = build_report(runs["hot"], model_dir)
+    assert metrics["temperature"]["outside_calibration_range"] is True
+    texts = [b.text for s in doc.sections for b in s.blocks if hasattr(b, "text")]
+    assert any(t.startswith("Outside the calibrated range — hot.mcap:") for t in texts)
+    allan = next(b for s in doc.sections for b in s.blocks if getattr(b, "key", "") == "allan")
+    assert "raw: ARW" in allan.caption and "τ =" in allan.caption
