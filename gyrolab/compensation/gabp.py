@@ -237,12 +237,16 @@ def _gd_train(
     for _ in range(int(cfg.epochs)):
         W = th[:i].reshape(n_in, hidden)
         a, w = th[i : i + hidden], th[i + hidden : i + 2 * hidden]
-        Y = 0.5 * (1.0 + np.tanh(0.5 * (Xs @ W + a)))
-        d = Y @ w + th[-1] - ys
-        losses.append(0.5 * float(d @ d) / n)
-        gh = (d[:, None] * (Y * (1.0 - Y))) * w  # (N, l): δ back-propagated to the hidden layer
-        grad = np.concatenate([(Xs.T @ gh).ravel() / n, gh.mean(axis=0), (Y.T @ d) / n, [d.mean()]])
-        th -= eta * grad
+        # a diverging descent overflows before the check below stops it: no warnings then
+        with np.errstate(over="ignore", invalid="ignore"):
+            Y = 0.5 * (1.0 + np.tanh(0.5 * (Xs @ W + a)))
+            d = Y @ w + th[-1] - ys
+            losses.append(0.5 * float(d @ d) / n)
+            gh = (d[:, None] * (Y * (1.0 - Y))) * w  # (N, l): δ back-propagated to the hidden
+            grad = np.concatenate(
+                [(Xs.T @ gh).ravel() / n, gh.mean(axis=0), (Y.T @ d) / n, [d.mean()]]
+            )
+            th -= eta * grad
         if not np.all(np.isfinite(th)):
             raise ValueError(f"gradient descent diverged (learning rate {eta} too large)")
     z = forward(th, Xs, n_in, hidden) - ys
