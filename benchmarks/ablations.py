@@ -28,8 +28,11 @@ Components, each against the reference = the project's pipeline defaults (GPSO o
 Sizes, to stay within ~10 min on 2 cores: 10 Hz recordings (the model works at 3.6 s
 averages, so the recording rate only changes the white noise per average, not the drift),
 a GPSO swarm of 20 particles × 12 generations for both fitnesses (the paper's 50 × 30 takes
-6.5x longer; on the seeds tried both chose the same corner of the box for the project's
-fitness), 8 seeds (about 25 s per seed on a quiet machine).
+6.5x longer; on seed 1 both chose the same corner of the box for the project's fitness),
+8 seeds. Measured: 29 min at load average ~10 on the shared 2-core machine (results are
+deterministic: two runs gave the same table); one seed without the long descent took 20 s
+at load ~1, so a quiet machine should need about 5 min (not measured). ``--render``
+re-renders the section from ``WORK/ablations.json`` without running anything.
 Paired differences are variant − reference per seed; "better" counts seeds where the
 variant is lower.
 """
