@@ -102,6 +102,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
     a.add_argument(
+        "--driver",
+        action="append",
+        metavar="NAME",
+        help="--bench sim only: use this driver for its role (repeatable; docs/instruments.md)",
+    )
+    a.add_argument(
         "--faults",
         metavar="FAULTS.toml",
         help="--bench sim only: inject faults into the simulated bench (docs/instruments.md)",
@@ -127,7 +133,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("run", metavar="RUN.mcap")
     c.add_argument("--out", required=True, help="output MODEL_DIR")
     c.add_argument("--validate", metavar="OTHER.mcap", help="held-out run for metrics")
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
+    c.add_argument(
+        "--config", metavar="FILE.toml", help="model settings (keys: docs/compensation.md)"
+    )
     _log_options(c)
     c.add_argument("--force", action="store_true", help="overwrite an existing output")
 

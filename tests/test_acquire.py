@@ -173,7 +173,7 @@ def test_refuses_bad_requests_before_touching_anything(tmp_path: Path, capsys) -
     # The example bench's ports do not exist here: one line naming the file and the port.
     assert main(["acquire", "--bench", str(lab), "--profile", "short", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "lab.toml" in err[0] and "[multimeter]" in err[0]
+    assert len(err) == 1 and "lab.toml" in err[0] and "[thermometer]" in err[0]
     assert not out.exists()
 
 

@@ -150,7 +150,10 @@ def test_bounds_bracket_and_alpha_identified() -> None:
 def test_noise_terms_white_and_rate_random_walk() -> None:
     rng = np.random.default_rng(3)
     fs, n = 100.0, 1 << 20
-    big_n, big_k = 1e-3, 1e-5  # deg/sqrt(s), deg/s/sqrt(s)
+    # K large enough that rate random walk dominates from ~20 s, five octaves below T/10
+    # (with 1e-5 it would take over only in the last octave pair before T/10, where the
+    # confidence intervals cannot tell +1/2 from a floor: not identifiable, by design)
+    big_n, big_k = 1e-3, 1e-4  # deg/sqrt(s), deg/s/sqrt(s)
     white = big_n * np.sqrt(fs) * rng.standard_normal(n)
     r = allan_deviation(white, fs)
     t = noise_terms(r)

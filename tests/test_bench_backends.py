@@ -154,8 +154,15 @@ def test_modbus_slave_registers_and_exceptions() -> None:
     assert slave.process(with_crc(bytes.fromhex("01 03 00 64 00 01"))) == with_crc(
         bytes.fromhex("01 03 02 00 c8")
     )  # PV 20.0 °C
-    # status: setpoint 25 > air 20 → heating bit
-    assert slave.process(with_crc(bytes.fromhex("01 03 00 c8 00 01")))[3:5] == b"\x00\x01"
+    # 200 is the profile mode (0: constant, no profile); 103 the heat power in 0.01 %:
+    # setpoint 25 > air 20 → full heat (10000), 107 cool power 0 (docs/instruments.md)
+    assert slave.process(with_crc(bytes.fromhex("01 03 00 c8 00 01")))[3:5] == b"\x00\x00"
+    assert slave.process(with_crc(bytes.fromhex("01 03 00 67 00 01")))[3:5] == b"\x27\x10"
+    assert slave.process(with_crc(bytes.fromhex("01 03 00 6b 00 01")))[3:5] == b"\x00\x00"
+    # event output 2 (register 2010 = 0x07da): written, read back; 2 is not a state
+    ev = with_crc(bytes.fromhex("01 06 07 da 00 01"))
+    assert slave.process(ev) == ev and slave.events[1] == 1
+    assert slave.process(with_crc(bytes.fromhex("01 06 07 da 00 02")))[1:3] == b"\x86\x03"
     # write 300 = -12.5 °C
     req = with_crc(bytes.fromhex("01 06 01 2c ff 83"))
     assert slave.process(req) == req and oven.sp == -12.5

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from gyrolab.acquisition.gyro_adc import AdcRead, GyroAdcReader
@@ -86,6 +86,7 @@ def test_any_chunking_gives_the_same_frames(cuts: list[int]) -> None:
     corrupt=st.floats(0.0, 0.05),
     drop=st.floats(0.0, 0.01),
 )
+@example(seed=399, corrupt=0.005859375, drop=0.0078125)
 def test_damaged_frames_never_pass_and_intact_ones_always_do(
     seed: int, corrupt: float, drop: float
 ) -> None:
@@ -99,9 +100,15 @@ def test_damaged_frames_never_pass_and_intact_ones_always_do(
     dec = FrameDecoder(N, 1000.0)
     b = dec.feed(b"".join(wire))
     intact = np.flatnonzero(~np.asarray(damaged))
-    # Every delivered frame is one of the intact ones, with its exact samples.
-    assert np.array_equal(b.seq, intact)
-    assert np.array_equal(b.counts, counts[intact])
+    stream = b"".join(wire)
+    # Every intact frame is delivered, and every delivered frame carries its exact samples.
+    assert set(intact.tolist()) <= set(b.seq.tolist())
+    assert np.array_equal(b.counts, counts[b.seq])
+    # A frame hit by the fault injector is delivered only when its bytes still reached the
+    # decoder verbatim: a dropped last byte can be restored by the next frame's equal first
+    # byte (seed=399, corrupt=0.005859375, drop=0.0078125: a CRC ending in 0xA5, the sync).
+    for s in sorted(set(b.seq.tolist()) - set(intact.tolist())):
+        assert frames[s] in stream
     # Every missing frame after the first delivered one is reported as a gap.
     if b.seq.size:
         gaps = b.gaps_before.values()

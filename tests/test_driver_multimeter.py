@@ -13,46 +13,13 @@ import pytest
 import gyrolab.sim.bench as bench_pkg
 from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.acquisition.multimeter import Agilent34401A
+from gyrolab.acquisition.testing import ExpectedVisa
 from gyrolab.pt100 import cvd_resistance, cvd_temperature
 from gyrolab.sim.bench import FaultEvent, SimBench
 
 IDN = "HEWLETT-PACKARD,34401A,0,11-5-2"
 OK = '+0,"No error"'
 YAML = Path(bench_pkg.__file__).with_name("agilent34401a.yaml")
-
-
-class ExpectedVisa:
-    """Stands in for a pyvisa resource and checks the exact dialogue, in order:
-    ``(command written, reply read back or None)``."""
-
-    def __init__(self, dialogue: list[tuple[str, str | None]], name: str = "GPIB0::22::INSTR"):
-        self.dialogue = list(dialogue)
-        self.resource_name = name
-        self.timeout = 0
-        self.write_termination = self.read_termination = ""
-        self._reply: str | None = None
-        self.closed = False
-
-    def write(self, command: str) -> None:
-        assert self.dialogue, f"unexpected command {command!r}"
-        want, reply = self.dialogue.pop(0)
-        assert command == want
-        self._reply = reply
-
-    def read(self) -> str:
-        assert self._reply is not None, "read with no reply pending"
-        r, self._reply = self._reply, None
-        return r + "\n"
-
-    def query(self, command: str) -> str:
-        self.write(command)
-        return self.read()
-
-    def close(self) -> None:
-        self.closed = True
-
-    def assert_done(self) -> None:
-        assert not self.dialogue, f"commands never sent: {self.dialogue}"
 
 
 CONNECT = [

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.acquisition.oven import WatlowF4
+from gyrolab.acquisition.testing import ExpectedSerial
 from gyrolab.sim.bench import FaultEvent, SimBench
 from gyrolab.sim.bench.oven_modbus import OvenHooks, WatlowF4Slave, crc16_modbus, with_crc
 from gyrolab.sim.bench.serial_pty import PtyPort
@@ -30,51 +31,6 @@ SP_M40 = H("01 03 02 fe 70 f9 c0")
 READ_PV = H("01 03 00 64 00 01 c5 d5")
 PV_25_3 = H("01 03 02 00 fd 79 c5")  # 25.3 °C = raw 253
 BUSY = H("01 86 06 c2 62")  # exception 06, slave device busy
-
-
-class ExpectedSerial:
-    """A pyserial stand-in that checks every request against the expected list and
-    plays the paired reply (None: stay silent)."""
-
-    def __init__(self, dialogue: list[tuple[bytes, bytes | None]]) -> None:
-        self.dialogue = list(dialogue)
-        self.written: list[bytes] = []
-        self._rx = b""
-        self.is_open = True
-        self.port = "expected"
-        self.baudrate = 19200
-        self.timeout = 0.05
-
-    def open(self) -> None:
-        self.is_open = True
-
-    def close(self) -> None:
-        self.is_open = False
-
-    def write(self, data: bytes) -> int:
-        self.written.append(bytes(data))
-        assert self.dialogue, f"unexpected request {data.hex(' ')}"
-        want, reply = self.dialogue.pop(0)
-        assert data == want, f"sent {data.hex(' ')}, expected {want.hex(' ')}"
-        self._rx += reply or b""
-        return len(data)
-
-    def read(self, n: int = 1) -> bytes:
-        out, self._rx = self._rx[:n], self._rx[n:]
-        return out
-
-    @property
-    def in_waiting(self) -> int:
-        return len(self._rx)
-
-    def reset_input_buffer(self) -> None:
-        self._rx = b""
-
-    def reset_output_buffer(self) -> None:
-        pass
-
-    def assert_done(self) -> None:
-        assert not self.dialogue, f"never sent: {[d[0].hex(' ') for d in self.dialogue]}"
 
 
 def test_crc_matches_minimalmodbus() -> None:
@@ -399,3 +355,114 @@ def test_silence_wait_is_bounded_on_a_line_that_never_goes_quiet() -> None:
         if th.is_alive():
             th.join(1.0)
         port.disconnect()
+
+
+# ----------------------------------------------------------- the F4's documented map
+# Register map of ESPEC's ChamberConnectLibrary watlowf4.py (docs/instruments.md): 200 is
+# the profile mode (0/1 constant, 2 running, 3 paused), 103/107 heat/cool power in 0.01 %,
+# event output N at 2000 + 10(N - 1).
+
+
+def _rd(reg: int) -> bytes:
+    return with_crc(bytes([1, 3]) + reg.to_bytes(2, "big") + (1).to_bytes(2, "big"))
+
+
+def _val(v: int) -> bytes:
+    return with_crc(bytes([1, 3, 2]) + v.to_bytes(2, "big", signed=True))
+
+
+def _wr(reg: int, v: int) -> bytes:
+    return with_crc(bytes([1, 6]) + reg.to_bytes(2, "big") + v.to_bytes(2, "big", signed=True))
+
+
+def test_status_reads_profile_mode_and_output_power() -> None:
+    fake = ExpectedSerial([(_rd(200), _val(0)), (_rd(103), _val(4250)), (_rd(107), _val(0))])
+    st = WatlowF4(fake).status
+    fake.assert_done()
+    assert (st.profile_mode, st.heat_pct, st.cool_pct) == (0, 42.5, 0.0)
+    assert st.heating and not st.cooling and st.mode == "heat" and not st.profile_active
+
+
+def test_event_output_written_and_read_back() -> None:
+    # Event 3 is register 2020: written 0, read back 0.
+    fake = ExpectedSerial([(_wr(2020, 0), _wr(2020, 0)), (_rd(2020), _val(0))])
+    WatlowF4(fake).set_event(3, False)
+    fake.assert_done()
+    fake = ExpectedSerial([(_wr(2000, 1), _wr(2000, 1)), (_rd(2000), _val(0))])
+    with pytest.raises(InstrumentError, match="event output 1 read back 0"):
+        WatlowF4(fake).set_event(1, True)
+
+
+def test_running_profile_refused_at_connect_and_a_fault_mid_run() -> None:
+    from gyrolab.acquisition.bench_config import OvenConfig
+    from gyrolab.acquisition.drivers.watlowf4 import WatlowF4Chamber
+    from gyrolab.acquisition.roles import InstrumentFault
+
+    connect = [(READ_DP, DP_1), (READ_UNITS, UNITS_C), (READ_SP, SP_M40), (READ_PV, PV_25_3)]
+    fake = ExpectedSerial([*connect, (_rd(200), _val(2))])
+    with pytest.raises(InstrumentError, match="profile is running"):
+        WatlowF4Chamber(fake, config=OvenConfig()).connect()
+    fake = ExpectedSerial(
+        [*connect, (_rd(200), _val(0)), (READ_SP, SP_M40), (READ_PV, PV_25_3), (_rd(200), _val(3))]
+    )
+    ch = WatlowF4Chamber(fake, config=OvenConfig())
+    ch.connect()
+    with pytest.raises(InstrumentFault, match="register 200 = 3"):
+        ch.read()
+
+
+def test_simulated_f4_control_event_switches_the_chamber() -> None:
+    from gyrolab.acquisition.bench_config import OvenConfig
+    from gyrolab.acquisition.drivers.watlowf4 import WatlowF4Chamber
+
+    with SimBench(speed=200.0, oven_control_event=2, ambient_c=22.0) as bench:
+        bench.inject(FaultEvent("disconnect", duration_s=1e9))
+        with WatlowF4Chamber(bench.oven_port, config=OvenConfig(control_event=2)) as oven:
+            assert oven.connect()["event_2"] == 0
+            assert oven.set_setpoint(50.0) == 50.0  # and event 2 on, read back
+            assert bench.oven.events[1] == 1 and bench.physics.setpoint_c == 50.0
+            assert oven.status.heating
+            oven.switch_off()
+            assert bench.oven.events[1] == 0 and bench.physics.setpoint_c == 22.0
+            assert oven.setpoint_c == 50.0  # register 300 keeps its value; the chamber is off
+            assert oven.status.heat_pct == 0.0
+
+
+@pytest.mark.parametrize("chamber", ["watlowf4", "espec"])
+def test_safe_state_off_leaves_the_chamber_switched_off(tmp_path, chamber) -> None:
+    """``[safe_state] mode = "off"``: at the end of a run the safe setpoint is verified and
+    the chamber switched off (F4: its control event output; ESPEC: STANDBY), verified."""
+    from gyrolab.acquisition.bench_config import bench_from_dict
+    from gyrolab.acquisition.commands import run_acquisition, start_sim_bench
+    from gyrolab.profile import load_profile
+    from gyrolab.recording import read_recording
+
+    prof_file = tmp_path / "p.toml"
+    prof_file.write_text('name = "t"\n[[step]]\nsetpoint_c = 30\nduration_s = 40\n')
+    prof = load_profile(prof_file)
+    table = {"driver": chamber, **({"control_event": 1} if chamber == "watlowf4" else {})}
+    safe = {"mode": "off", "setpoint_c": 20.0}
+    cfg = bench_from_dict({"chamber": table, "safe_state": safe}, "b.toml")
+    sim, cfg = start_sim_bench(cfg, prof, seed=0, speed=50.0)
+    out = tmp_path / "run.mcap"
+    try:
+        res = run_acquisition(cfg=cfg, profile=prof, out=out, force=False, sim=sim)
+        bench = sim.bench
+        off = bench.oven.events[0] == 0 if chamber == "watlowf4" else bench.espec.mode == "STANDBY"
+        # Off: the chamber drifts to ambient (25 °C), not to the 20 °C setpoint it holds.
+        assert off and bench.physics.setpoint_c == pytest.approx(25.0)
+    finally:
+        sim.stop()
+    assert res.safe_state_ok
+    (ev,) = [e for e in read_recording(out).events if e["event"] == "safe_state"]
+    assert ev["detail"] == "setpoint 20 °C verified, chamber off verified"
+
+
+def test_safe_state_off_needs_a_control_event() -> None:
+    from gyrolab.acquisition.bench_config import bench_from_dict
+    from gyrolab.errors import InputError
+
+    with pytest.raises(InputError, match="needs \\[chamber\\] control_event"):
+        bench_from_dict({"safe_state": {"mode": "off"}}, "b.toml")
+    with pytest.raises(InputError, match="control_event must be"):
+        bench_from_dict({"chamber": {"control_event": 9}}, "b.toml")

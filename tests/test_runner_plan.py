@@ -172,7 +172,7 @@ def test_example_bench_file_loads_and_round_trips() -> None:
         ("[safe_state]\nsetpoint_c = 200\n", "outside the setpoint limits"),
         ("[recorder]\nflush_every_s = 5\n", "flush_every_s"),
         ("[ovenz]\n", "unknown table"),
-        ("[adc]\nport = '/dev/x'\n", r"\[multimeter\] resource is required"),
+        ("[adc]\nport = '/dev/x'\n", r"\[thermometer\] resource is required"),
     ],
 )
 def test_bad_bench_files_name_the_file_and_key(tmp_path: Path, text: str, match: str) -> None:

@@ -35,8 +35,9 @@ class RunInfo:
 
 @dataclass(frozen=True)
 class MultimeterConfig:
-    """Agilent/HP 34401A reading the PT100 (4-wire)."""
+    """Agilent/HP 34401A reading the PT100 (4-wire): the ``agilent34401a`` driver's config."""
 
+    driver: str = "agilent34401a"  # gyrolab.acquisition.registry
     resource: str = ""  # "ASRL/dev/ttyUSB0::INSTR" or "TCPIP::host::5025::SOCKET"
     timeout_s: float = 5.0
     nplc: float = 10.0
@@ -50,20 +51,25 @@ class MultimeterConfig:
 
 @dataclass(frozen=True)
 class OvenConfig:
-    """Watlow F4-style controller, Modbus RTU."""
+    """Watlow F4 controller, Modbus RTU: the ``watlowf4`` driver's config."""
 
+    driver: str = "watlowf4"  # gyrolab.acquisition.registry
     port: str = ""  # "/dev/ttyUSB1"
     slave_address: int = 1
     baud_rate: int = 19200
     timeout_s: float = 0.3
     period_s: float = 2.0  # /oven/state poll period
     serial: str = ""
+    # The F4 event output (1..8) that switches the chamber on (ESPEC wires one so); 0: none.
+    # Needed for [safe_state] mode = "off".
+    control_event: int = 0
 
 
 @dataclass(frozen=True)
 class AdcConfig:
     """The gyro's ADC stream and its conversion to °/s (``Ω = (V − offset)/gain``)."""
 
+    driver: str = "gyroadc"  # gyrolab.acquisition.registry
     port: str = ""  # "/dev/ttyUSB2"
     baud_rate: int = 921600
     sample_rate_hz: float = 100.0
@@ -99,8 +105,8 @@ class Limits:
 class SafeState:
     """What the oven is told when a run ends early (fault, limit, SIGINT)."""
 
-    # "setpoint": command and verify setpoint_c. (The F4 register map used here has no
-    # output-off register, so there is no "standby" mode.)
+    # "setpoint": command and verify setpoint_c. "off": that, then switch the chamber
+    # off and verify it (F4: its [chamber] control_event output; ESPEC: STANDBY).
     mode: str = "setpoint"
     setpoint_c: float = 25.0
 
@@ -120,8 +126,11 @@ class BenchConfig:
 
     name: str = "bench"
     run: RunInfo = field(default_factory=RunInfo)
-    multimeter: MultimeterConfig = field(default_factory=MultimeterConfig)
-    oven: OvenConfig = field(default_factory=OvenConfig)
+    # The three roles (``[thermometer]``, ``[chamber]``, ``[adc]``), each the config
+    # dataclass of the driver its table names (gyrolab.acquisition.registry). The field
+    # names are the tables' older names, which are still accepted.
+    multimeter: Any = field(default_factory=MultimeterConfig)
+    oven: Any = field(default_factory=OvenConfig)
     adc: AdcConfig = field(default_factory=AdcConfig)
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
@@ -144,9 +153,6 @@ class BenchConfig:
 
 _SECTIONS: dict[str, type] = {
     "run": RunInfo,
-    "multimeter": MultimeterConfig,
-    "oven": OvenConfig,
-    "adc": AdcConfig,
     "limits": Limits,
     "safe_state": SafeState,
     "recorder": RecorderConfig,
@@ -177,20 +183,55 @@ def _section(cls: type, raw: Any, where: str, source: str) -> Any:
             elif typ in ("str", str):
                 if not isinstance(v, str):
                     raise TypeError
+            elif typ in ("bool", bool):
+                if not isinstance(v, bool):
+                    raise TypeError
         except (TypeError, ValueError):
             raise InputError(source, f"[{where}] {k} = {v!r}: expected {typ}") from None
         kw[k] = v
     return cls(**kw)
 
 
+# Role tables: (BenchConfig field, role, table names: the current one first, then the
+# older name still accepted).
+_ROLE_TABLES = (
+    ("multimeter", "thermometer", ("thermometer", "multimeter")),
+    ("oven", "chamber", ("chamber", "oven")),
+    ("adc", "rate_stream", ("adc",)),
+)
+
+
+def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source: str) -> Any:
+    """The driver config of one role: ``driver`` (default: the bench's original driver)
+    picks the dataclass the rest of the table is checked against."""
+    from gyrolab.acquisition import registry
+
+    given = [t for t in tables if t in d]
+    if len(given) > 1:
+        raise InputError(source, f"[{given[0]}] and [{given[1]}] are the same role: keep one")
+    where = given[0] if given else tables[0]
+    raw = d.get(where, {})
+    if not isinstance(raw, dict):
+        raise InputError(source, f"[{where}] must be a table")
+    name = raw.get("driver", registry.DEFAULT_DRIVER[role])
+    try:
+        spec = registry.get(str(name), role)
+    except KeyError as e:
+        raise InputError(source, f"[{where}] driver = {name!r}: {e.args[0]}") from None
+    return _section(spec.config, raw, where, source)
+
+
 def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     """Build and check a :class:`BenchConfig` from the TOML layout."""
-    unknown = sorted(set(d) - set(_SECTIONS) - {"name"})
+    tables = {t for _, _, names in _ROLE_TABLES for t in names}
+    unknown = sorted(set(d) - set(_SECTIONS) - tables - {"name"})
     if unknown:
         raise InputError(source, f"unknown table(s) or key(s) {unknown}")
     kw: dict[str, Any] = {
         name: _section(cls, d.get(name, {}), name, source) for name, cls in _SECTIONS.items()
     }
+    for fname, role, names in _ROLE_TABLES:
+        kw[fname] = _role_section(d, role, names, source)
     cfg = BenchConfig(name=str(d.get("name", Path(source).stem)), source=source, **kw)
     validate(cfg)
     return cfg
@@ -231,8 +272,15 @@ def validate(cfg: BenchConfig) -> None:
     if lim.comm_timeout_s <= 0 or lim.watchdog_samples < 1:
         raise InputError(s, "[limits] comm_timeout_s must be > 0 and watchdog_samples >= 1")
     ss = cfg.safe_state
-    if ss.mode != "setpoint":
-        raise InputError(s, f"[safe_state] mode = {ss.mode!r}: only 'setpoint' is supported")
+    if ss.mode not in ("setpoint", "off"):
+        raise InputError(s, f"[safe_state] mode = {ss.mode!r}: 'setpoint' or 'off'")
+    if ss.mode == "off" and getattr(cfg.oven, "control_event", None) == 0:
+        raise InputError(
+            s, "[safe_state] mode = 'off' needs [chamber] control_event (the F4 event output "
+            "that switches the chamber)"
+        )
+    if not 0 <= getattr(cfg.oven, "control_event", 0) <= 8:
+        raise InputError(s, "[chamber] control_event must be an event output 1..8 (0: none)")
     if not lim.setpoint_min_c <= ss.setpoint_c <= lim.setpoint_max_c:
         raise InputError(s, "[safe_state] setpoint_c is outside the setpoint limits")
     if not lim.pt100_min_c < ss.setpoint_c < lim.pt100_max_c:
@@ -275,15 +323,15 @@ def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str)
 
 def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     """Read and check a bench TOML file."""
+    from gyrolab.acquisition import registry
+
     p = Path(path)
     d = read_toml(p, "bench file")
     cfg = bench_from_dict(d, str(p))
-    for name, val in (
-        ("multimeter", cfg.multimeter.resource),
-        ("oven", cfg.oven.port),
-        ("adc", cfg.adc.port),
-    ):
-        if not val:
-            key = "resource" if name == "multimeter" else "port"
-            raise InputError(p, f"[{name}] {key} is required for a real bench")
+    for fname, role, names in _ROLE_TABLES:
+        sub = getattr(cfg, fname)
+        key = registry.get(sub.driver, role).address_key
+        if not getattr(sub, key):
+            where = next((t for t in names if t in d), names[0])
+            raise InputError(p, f"[{where}] {key} is required for a real bench")
     return cfg

@@ -32,9 +32,9 @@ from gyrolab.acquisition.bench_config import (
     check_bench_for_profile,
     load_bench,
 )
+from gyrolab.acquisition.roles import Chamber, RateStream, Thermometer
 from gyrolab.acquisition.runner import (
     Acquisition,
-    InstrumentFault,
     RunResult,
     Status,
     WallClock,
@@ -44,85 +44,6 @@ from gyrolab.errors import GyrolabError, InputError
 from gyrolab.outputs import check_output
 from gyrolab.profile import Profile, load_profile
 from gyrolab.recording import RecordingWriter
-
-# ---------------------------------------------------------------- device adapters
-
-
-class MultimeterDevice:
-    """The runner's :class:`~gyrolab.acquisition.runner.Thermometer` on a 34401A."""
-
-    name = "multimeter"
-
-    def __init__(self, drv: Any) -> None:
-        self.drv = drv
-        self._reports: list[Any] = []
-
-    def read(self) -> tuple[float, float]:
-        from gyrolab.acquisition.multimeter import scpi_reports
-
-        r = self.drv.read()
-        # The error queue after every reading: an error the meter raises mid-run (e.g.
-        # -310 system error) is logged as a fault and, by its class, stops the run.
-        self._reports += scpi_reports(self.drv.errors, "after READ?")
-        return float(r.resistance_ohm), float(r.temperature_c)
-
-    def reports(self) -> list[Any]:
-        """SCPI error-queue entries read since the last call (InstrumentReport)."""
-        out, self._reports = self._reports, []
-        return out
-
-
-class OvenDevice:
-    """The runner's :class:`~gyrolab.acquisition.runner.Oven` on a Watlow F4."""
-
-    name = "oven"
-
-    def __init__(self, drv: Any) -> None:
-        self.drv = drv
-
-    def set_setpoint(self, setpoint_c: float) -> None:
-        self.drv.set_setpoint(setpoint_c)
-
-    def read(self) -> tuple[float, float]:
-        sp = self.drv.setpoint_c
-        pv = self.drv.process_value_c
-        st = self.drv.status
-        if st.sensor_fault:
-            # The controller cannot see the chamber: nothing it does can be trusted.
-            raise InstrumentFault(f"oven controller reports a sensor fault (status {st.raw:#x})")
-        return float(sp), float(pv)
-
-    def reports(self) -> list[Any]:
-        """Modbus exception responses since the last call (InstrumentReport)."""
-        return list(self.drv.pop_reports())
-
-
-class GyroDevice:
-    """The runner's :class:`~gyrolab.acquisition.runner.GyroStream` on a GyroAdcReader."""
-
-    name = "adc"
-
-    def __init__(self, reader: Any) -> None:
-        self.reader = reader
-
-    def read(self, timeout_s: float) -> Any:
-        return self.reader.read(timeout_s)
-
-    def counters(self) -> dict[str, int]:
-        d = self.reader.decoder.stats
-        s = self.reader.stats
-        return {
-            "frames_ok": d.frames_ok,
-            # Damaged frames: CRC failures, and CRC-passing frames whose timestamp
-            # disagrees with their sequence number. (Length errors are mostly sync-word
-            # look-alikes inside payloads, not frames.)
-            "frames_bad": d.crc_errors + d.inconsistent_frames,
-            "frames_lost": d.frames_lost,
-            "frames_stale": d.stale_frames,
-            "gaps": d.gaps,
-            "disconnects": s.disconnects,
-        }
-
 
 # --------------------------------------------------------------------- instruments
 
@@ -141,14 +62,15 @@ SIM_TIMEOUT_FLOOR_S = 0.25
 
 
 class Instruments:
-    """The three connected drivers, their runner adapters and identities."""
+    """The three connected drivers (each implements its role, gyrolab.acquisition.roles)
+    and their identities."""
 
     def __init__(self) -> None:
         self.closers: list[Callable[[], None]] = []
         self.identity: dict[str, Any] = {}
-        self.thermometer: MultimeterDevice | None = None
-        self.oven: OvenDevice | None = None
-        self.gyro: GyroDevice | None = None
+        self.thermometer: Thermometer | None = None
+        self.oven: Chamber | None = None
+        self.gyro: RateStream | None = None
 
     def close(self) -> None:
         for c in reversed(self.closers):
@@ -168,19 +90,17 @@ def connect_instruments(
     visa_library: str = "@py",
     clock: Callable[[], float] = time.monotonic,
 ) -> Instruments:
-    """Open and identify the three instruments; raises InputError naming what failed.
+    """Open and identify the bench's three drivers (``driver`` of each role's table,
+    gyrolab.acquisition.registry) at the given addresses; raises InputError naming what
+    failed.
 
     ``time_scale`` divides the drivers' wall-clock timeouts (a simulated bench running
     X× faster than real time answers X× sooner, and a silent one must be noticed X×
     sooner too); when sped up it never takes them below ``timeout_floor_s`` wall
     seconds, which protects against scheduling jitter; in real time the configured
     timeouts are used as they are (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
-    The oven driver's ``silence_s`` (the quiet wait after a failed transaction) is its
-    timeout, scaled the same way.
     """
-    from gyrolab.acquisition.gyro_adc import GyroAdcReader
-    from gyrolab.acquisition.multimeter import Agilent34401A
-    from gyrolab.acquisition.oven import WatlowF4
+    from gyrolab.acquisition import registry
 
     inst = Instruments()
     src = cfg.source
@@ -192,90 +112,29 @@ def connect_instruments(
             return t
         return max(timeout_floor_s, t / time_scale)
 
+    limits = (cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c)
     try:
-        try:
-            dmm = Agilent34401A(
-                dmm_resource,
-                visa_library=visa_library,
-                timeout_s=scaled(cfg.multimeter.timeout_s),
-                range_ohm=cfg.multimeter.range_ohm,
-                nplc=cfg.multimeter.nplc,
-                r0_ohm=cfg.multimeter.r0_ohm,
-                baud_rate=cfg.multimeter.baud_rate,
-            )
-            inst.closers.append(dmm.close)
-            idn = dmm.connect()
-        except Exception as e:
-            raise InputError(src, f"[multimeter] {dmm_resource}: {e}") from None
-        inst.thermometer = MultimeterDevice(dmm)
-        inst.identity["multimeter"] = {
-            "model": "34401A",
-            "idn": idn,
-            "resource": dmm_resource,
-            "serial": cfg.multimeter.serial or _idn_field(idn, 2),
-            "calibration_due": cfg.multimeter.calibration_due,
-            "range_ohm": cfg.multimeter.range_ohm,
-            "nplc": cfg.multimeter.nplc,
-            "r0_ohm": cfg.multimeter.r0_ohm,
-        }
-        try:
-            oven_timeout_s = scaled(cfg.oven.timeout_s)
-            oven = WatlowF4(
-                oven_port,
-                address=cfg.oven.slave_address,
-                baudrate=cfg.oven.baud_rate,
-                timeout_s=oven_timeout_s,
-                # A reply later than timeout + silence cannot be told from the next one's
-                # (oven.py); the simulated slave is late by scheduling jitter at most.
-                silence_s=oven_timeout_s,
-                setpoint_limits_c=(cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c),
-            )
-            inst.closers.append(oven.close)
-            regs = oven.connect()
-        except Exception as e:
-            raise InputError(src, f"[oven] {oven_port}: {e}") from None
-        inst.oven = OvenDevice(oven)
-        inst.identity["oven"] = {
-            "model": "Watlow F4 (Modbus RTU)",
-            "port": oven_port,
-            "slave_address": cfg.oven.slave_address,
-            "serial": cfg.oven.serial,
-            "registers": regs,
-        }
-        try:
-            reader = GyroAdcReader(
-                adc_port,
-                samples_per_frame=cfg.adc.samples_per_frame,
-                rate_hz=cfg.adc.sample_rate_hz,
-                baudrate=cfg.adc.baud_rate,
-                clock=clock,
-            )
-            reader.open()
-            inst.closers.append(reader.close)
-        except Exception as e:
-            raise InputError(src, f"[adc] {adc_port}: {e}") from None
-        inst.gyro = GyroDevice(reader)
-        a = cfg.adc
-        inst.identity["adc"] = {
-            "port": adc_port,
-            "serial": a.serial,
-            "sample_rate_hz": a.sample_rate_hz,
-            "samples_per_frame": a.samples_per_frame,
-            "bits": a.bits,
-            "vref_v": a.vref_v,
-            "gain_v_per_dps": a.gain_v_per_dps,
-            "offset_v": a.offset_v,
-            "dps_per_count": a.dps_per_count(),
-        }
+        for attr, role, sub, address in (
+            ("thermometer", "thermometer", cfg.multimeter, dmm_resource),
+            ("oven", "chamber", cfg.oven, oven_port),
+            ("gyro", "rate_stream", cfg.adc, adc_port),
+        ):
+            spec = registry.get(sub.driver, role)
+            source = registry.SOURCE_NAME[role]
+            ctx = registry.OpenContext(address, scaled, limits, clock, visa_library)
+            try:
+                dev = spec.open(sub, ctx)
+            except Exception as e:
+                table = "adc" if role == "rate_stream" else role
+                raise InputError(src, f"[{table}] {spec.name} at {address}: {e}") from None
+            dev.name = source
+            inst.closers.append(dev.close)
+            setattr(inst, attr, dev)
+            inst.identity[source] = dev.describe()
     except BaseException:
         inst.close()
         raise
     return inst
-
-
-def _idn_field(idn: str, k: int) -> str:
-    parts = [p.strip() for p in idn.split(",")]
-    return parts[k] if len(parts) > k else ""
 
 
 # ------------------------------------------------------------------ simulated bench
@@ -325,6 +184,21 @@ def sim_bench_config(seed: int) -> BenchConfig:
     )
 
 
+def sim_drivers(cfg: BenchConfig, names: list[str]) -> BenchConfig:
+    """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
+    name picks its role; the driver's default settings)."""
+    from gyrolab.acquisition import registry
+
+    fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
+    for name in names:
+        spec = next((s for s in registry.drivers() if s.name == name), None)
+        if spec is None:
+            known = ", ".join(s.name for s in registry.drivers())
+            raise GyrolabError(f"--driver {name}: no such driver (registered: {known})")
+        cfg = replace(cfg, **{fields[spec.role]: spec.config()})
+    return cfg
+
+
 def start_sim_bench(
     cfg: BenchConfig,
     profile: Profile,
@@ -342,10 +216,21 @@ def start_sim_bench(
     unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
     the same path as ``examples/lab.toml``.
     """
+    from gyrolab.acquisition import registry
     from gyrolab.sim.bench import SimBench
     from gyrolab.sim.simulate import provenance
 
+    specs = {
+        "thermometer": registry.get(cfg.multimeter.driver, "thermometer"),
+        "chamber": registry.get(cfg.oven.driver, "chamber"),
+    }
+    for role, spec in specs.items():
+        if not spec.sim_backend:
+            raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
     bench = SimBench(
+        dmm_model=specs["thermometer"].sim_backend,
+        chamber_model=specs["chamber"].sim_backend,
+        oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
         model=model,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,
@@ -354,7 +239,7 @@ def start_sim_bench(
         workdir=workdir,
         faults=faults,
         keep_truth=keep_truth,
-        tcp=False,
+        tcp=specs["thermometer"].sim_address == "dmm_tcp_resource",
         tick_s=sim_tick_s(speed),
         # Slow while the drivers connect (imports, port set-up: wall seconds that would be
         # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
@@ -373,9 +258,10 @@ def start_sim_bench(
         ),
     )
     bench.start()
+    where = bench.resources()
     handle = SimHandle(
-        dmm_resource=bench.dmm_serial_resource,
-        oven_port=bench.oven_port,
+        dmm_resource=where[specs["thermometer"].sim_address],
+        oven_port=where[specs["chamber"].sim_address],
         adc_port=bench.adc_port,
         clock=bench.clock,
         stop=bench.stop,
@@ -611,8 +497,11 @@ def acquire(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
         raise GyrolabError(f"--speed must be a positive number, not {args.speed}")
+    drivers = getattr(args, "driver", None) or []
+    if drivers and args.bench != "sim":
+        raise GyrolabError("--driver applies to --bench sim only (a bench file names its drivers)")
     if args.bench == "sim":
-        cfg = sim_bench_config(args.seed)
+        cfg = sim_drivers(sim_bench_config(args.seed), drivers)
     else:
         cfg = load_bench(args.bench)
         if args.speed is not None:

@@ -94,6 +94,8 @@ class Agilent34401A:
     time (NPLC 10 at 50 Hz = 0.2 s, ×2 for 4-wire autozero).
     """
 
+    NAME = NAME  # in error messages (a subclass for another model names itself)
+    MODEL_MARK = "34401"  # what *IDN? must contain
     RANGES_OHM = (100.0, 1e3, 10e3, 100e3, 1e6, 10e6, 100e6)
     NPLC_VALUES = (0.02, 0.2, 1.0, 10.0, 100.0)
     OVERLOAD = 9.0e37  # the meter returns +9.90000000E+37 on overload
@@ -111,9 +113,9 @@ class Agilent34401A:
         baud_rate: int = 9600,
     ) -> None:
         if range_ohm not in self.RANGES_OHM:
-            raise LimitError(NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
+            raise LimitError(self.NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
         if nplc not in self.NPLC_VALUES:
-            raise LimitError(NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
+            raise LimitError(self.NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
         self.range_ohm = float(range_ohm)
         self.nplc = float(nplc)
         self.r0_ohm = r0_ohm
@@ -132,7 +134,7 @@ class Agilent34401A:
             try:
                 self.inst = rm.open_resource(resource)
             except Exception as e:  # pyvisa raises VisaIOError, OSError, ValueError …
-                raise InstrumentError(NAME, f"cannot open {resource}: {e}") from e
+                raise InstrumentError(self.NAME, f"cannot open {resource}: {e}") from e
         else:
             self.resource_name = str(getattr(resource, "resource_name", "<resource>"))
             self.inst = resource
@@ -194,8 +196,9 @@ class Agilent34401A:
     def _wrap(self, e: Exception, command: str) -> InstrumentError:
         text = f"{type(e).__name__}: {e}"
         if "TMO" in text or "imeout" in text:
-            return InstrumentTimeout(NAME, f"no reply to {command!r} within {self.timeout_s} s")
-        return InstrumentError(NAME, f"{command!r} failed: {text}")
+            msg = f"no reply to {command!r} within {self.timeout_s} s"
+            return InstrumentTimeout(self.NAME, msg)
+        return InstrumentError(self.NAME, f"{command!r} failed: {text}")
 
     # ------------------------------------------------------------------ readings
     @property
@@ -212,7 +215,7 @@ class Agilent34401A:
             m = self._ERR.match(reply)
             if not m:
                 self._out_of_step = True  # someone else's reply: wait for quiet first
-                raise InstrumentError(NAME, f"unparsable SYST:ERR? reply {reply!r}")
+                raise InstrumentError(self.NAME, f"unparsable SYST:ERR? reply {reply!r}")
             code = int(m.group(1))
             if code == 0:
                 break
@@ -223,7 +226,8 @@ class Agilent34401A:
         """Raise :class:`InstrumentError` listing the error queue if it is not empty."""
         errs = self.errors
         if errs:
-            raise InstrumentError(NAME, "error queue: " + "; ".join(f"{c},{m}" for c, m in errs))
+            listed = "; ".join(f"{c},{m}" for c, m in errs)
+            raise InstrumentError(self.NAME, f"error queue: {listed}")
 
     @property
     def resistance(self) -> float:
@@ -233,10 +237,10 @@ class Agilent34401A:
             value = float(reply)
         except ValueError:
             self._out_of_step = True  # someone else's reply: wait for quiet first
-            raise InstrumentError(NAME, f"READ? returned {reply!r}") from None
+            raise InstrumentError(self.NAME, f"READ? returned {reply!r}") from None
         if not math.isfinite(value) or abs(value) >= self.OVERLOAD:
             raise InstrumentError(
-                NAME, f"overload on the {self.range_ohm:g} Ω range (reading {reply})"
+                self.NAME, f"overload on the {self.range_ohm:g} Ω range (reading {reply})"
             )
         return value
 
@@ -255,11 +259,11 @@ class Agilent34401A:
         """``CONF:FRES <range>`` and ``FRES:NPLC <n>``, then check the error queue."""
         if range_ohm is not None:
             if range_ohm not in self.RANGES_OHM:
-                raise LimitError(NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
+                raise LimitError(self.NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
             self.range_ohm = float(range_ohm)
         if nplc is not None:
             if nplc not in self.NPLC_VALUES:
-                raise LimitError(NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
+                raise LimitError(self.NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
             self.nplc = float(nplc)
         self.write(f"CONF:FRES {self.range_ohm:g}")
         self.write(f"FRES:NPLC {self.nplc:g}")
@@ -272,8 +276,8 @@ class Agilent34401A:
             self.write("SYST:REM")
         self.reset()
         idn = self.identity
-        if "34401" not in idn:
-            raise InstrumentError(NAME, f"unexpected instrument {idn!r}")
+        if self.MODEL_MARK not in idn:
+            raise InstrumentError(self.NAME, f"unexpected instrument {idn!r}")
         self.configure()
         return idn
 

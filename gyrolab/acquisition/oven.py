@@ -1,4 +1,4 @@
-"""Watlow F4-style temperature chamber controller over Modbus RTU.
+"""Watlow F4 temperature chamber controller over Modbus RTU.
 
 minimalmodbus (on pyserial) is used rather than pymodbus: the oven is one slave on one
 RS-232/RS-485 line polled a few times a second, and minimalmodbus is small, synchronous
@@ -6,13 +6,18 @@ and blocking, which is exactly that; pymodbus's asyncio client/server machinery 
 nothing here and is more to audit (docs/instruments.md).
 
 Register map (holding registers, function 03 to read, 06 to write; 16-bit signed values
-with implied decimals: raw = round(value · 10**decimals)):
+with implied decimals: raw = round(value · 10**decimals)). The map of ESPEC's
+ChamberConnectLibrary ``watlowf4.py``, the code ESPEC drives its F4 chambers with
+(docs/instruments.md says what was and was not checked against Watlow's manual):
 
-    100  process value (chamber air)         read        °C or °F per 901
-    200  status (bit field, see OvenStatus)  read
-    300  static setpoint                     read/write  °C or °F per 901
-    606  decimal places (0, 1 or 2)          read
-    901  temperature units (0 = °F, 1 = °C)  read
+    100        process value, input 1 (chamber air)      read        °C or °F per 901
+    103, 107   output 1A (heat) / 1B (cool) power, 0.01 %  read
+    200        profile mode: 0/1 constant (no profile), 2 running, 3 paused   read
+    300        static setpoint, loop 1                    read/write  °C or °F per 901
+    606        decimal places, input 1                    read
+    901        temperature units (0 = °F, 1 = °C)         read
+    1209/1210/1217  profile resume / pause / terminate    write 1
+    2000 + 10(N-1)  event output N (1..8): 0 off, 1 on    read/write
 
 Safety: a setpoint outside ``setpoint_limits_c`` (or not finite, or beyond int16 after
 scaling) raises :class:`LimitError` before a single byte is written. Every setpoint write
@@ -54,8 +59,12 @@ from gyrolab.acquisition.instrument import (
 NAME = "WatlowF4"
 
 REG_PROCESS_VALUE = 100
-REG_STATUS = 200
+REG_HEAT_POWER = 103  # output 1A, 0.01 %
+REG_COOL_POWER = 107  # output 1B, 0.01 %
+REG_PROFILE_MODE = 200  # 0/1 constant, 2 profile running, 3 profile paused
 REG_SETPOINT = 300
+REG_PROFILE_RESUME, REG_PROFILE_PAUSE, REG_PROFILE_TERMINATE = 1209, 1210, 1217
+PROFILE_RUNNING, PROFILE_PAUSED = 2, 3
 REG_DECIMALS = 606
 REG_UNITS = 901
 UNITS_F, UNITS_C = 0, 1
@@ -100,33 +109,39 @@ def modbus_report(e: Exception, context: str) -> InstrumentReport:
     )
 
 
+def event_register(n: int) -> int:
+    """Holding register of event output ``n`` (1..8): 2000 + 10(n − 1)."""
+    if not 1 <= n <= 8:
+        raise ValueError(f"event output {n} is not one of 1..8")
+    return 2000 + 10 * (n - 1)
+
+
 @dataclass(frozen=True)
 class OvenStatus:
-    """Register 200, bit by bit."""
+    """Registers 200 (profile mode), 103 and 107 (heat and cool power, %)."""
 
-    raw: int
-
-    @property
-    def heating(self) -> bool:  # bit 0: heat output on
-        return bool(self.raw & 0x01)
+    profile_mode: int
+    heat_pct: float
+    cool_pct: float
 
     @property
-    def cooling(self) -> bool:  # bit 1: cool output (compressor/LN2 valve) on
-        return bool(self.raw & 0x02)
+    def profile_active(self) -> bool:
+        """A profile runs or is paused: it, not register 300, drives the loop."""
+        return self.profile_mode in (PROFILE_RUNNING, PROFILE_PAUSED)
 
     @property
-    def alarm(self) -> bool:  # bit 2: process alarm (deviation/over-temperature)
-        return bool(self.raw & 0x04)
+    def heating(self) -> bool:
+        return self.heat_pct > 0.0
 
     @property
-    def sensor_fault(self) -> bool:  # bit 3: chamber sensor open/shorted
-        return bool(self.raw & 0x08)
+    def cooling(self) -> bool:
+        return self.cool_pct > 0.0
 
     @property
     def mode(self) -> str:
-        """``fault`` | ``heat`` | ``cool`` | ``hold`` (the recorder's /oven/state mode)."""
-        if self.alarm or self.sensor_fault:
-            return "fault"
+        """``profile`` | ``heat`` | ``cool`` | ``hold``."""
+        if self.profile_active:
+            return "profile"
         if self.heating:
             return "heat"
         if self.cooling:
@@ -157,7 +172,8 @@ class WatlowF4:
     Readings
         ``process_value_c``   reg 100, chamber air temperature, °C
         ``setpoint_c``        reg 300, °C
-        ``status``            reg 200, :class:`OvenStatus`
+        ``status``            regs 200, 103, 107: :class:`OvenStatus`
+        ``event(n)``          reg 2000 + 10(n − 1), event output n (``set_event``)
         ``decimals``          reg 606, implied decimal places
         ``units``             reg 901, 0 = °F, 1 = °C
 
@@ -185,7 +201,7 @@ class WatlowF4:
         self.retries = retries
         self.stats = ModbusStats()
         # Exception responses since the last pop_reports() (the runner logs them).
-        self.reports: list[InstrumentReport] = []
+        self._reports: list[InstrumentReport] = []
         # RTU frames are delimited by 3.5 character times of silence (11 bits a character;
         # fixed 1.75 ms above 19200 baud, Modbus over serial line spec §2.5.1.1).
         self.frame_gap_s = 3.5 * 11 / baudrate if baudrate <= 19200 else 0.00175
@@ -276,7 +292,7 @@ class WatlowF4:
             except minimalmodbus.SlaveReportedException as e:
                 # A complete, valid frame from the slave: the line is in step.
                 self.stats.exceptions += 1
-                self.reports.append(modbus_report(e, what))
+                self._reports.append(modbus_report(e, what))
                 last = e
             except (minimalmodbus.InvalidResponseError, minimalmodbus.ModbusException) as e:
                 # Bad CRC or content: if the reply was whole the slave is done and only
@@ -298,7 +314,7 @@ class WatlowF4:
 
     def pop_reports(self) -> list[InstrumentReport]:
         """The exception responses received since the last call (retried or not)."""
-        out, self.reports = self.reports, []
+        out, self._reports = self._reports, []
         return out
 
     def read_register(self, register: int) -> int:
@@ -365,9 +381,30 @@ class WatlowF4:
         self.set_setpoint(value_c)
 
     @property
+    def profile_mode(self) -> int:
+        """Reg 200: 0/1 constant, 2 profile running, 3 profile paused."""
+        return self.read_register(REG_PROFILE_MODE)
+
+    @property
     def status(self) -> OvenStatus:
-        """Status bits (reg 200)."""
-        return OvenStatus(self.read_register(REG_STATUS) & 0xFFFF)
+        """Profile mode (reg 200), heat and cool power (regs 103, 107; 0.01 %)."""
+        mode = self.profile_mode
+        heat = self.read_register(REG_HEAT_POWER) / 100.0
+        cool = self.read_register(REG_COOL_POWER) / 100.0
+        return OvenStatus(mode, heat, cool)
+
+    def event(self, n: int) -> bool:
+        """Event output ``n`` (1..8) on?"""
+        return bool(self.read_register(event_register(n)))
+
+    def set_event(self, n: int, on: bool) -> None:
+        """Switch event output ``n`` and verify it by reading it back."""
+        reg = event_register(n)
+        self.write_register(reg, 1 if on else 0)
+        back = self.read_register(reg)
+        if back != (1 if on else 0):
+            msg = f"event output {n} read back {back} after writing {int(on)}"
+            raise InstrumentError(NAME, msg)
 
     # ------------------------------------------------------------------ settings
     def check_setpoint(self, value_c: float) -> None:

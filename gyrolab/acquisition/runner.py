@@ -11,9 +11,9 @@ Three parts, Bluesky/ophyd style — the plan never touches a port:
   at the time its rule was met (its start + ``duration_s``, or the reading that showed
   it stable), not at the moment the engine got round to looking, and the next step
   starts at that time, so the engine's reaction time never accumulates over a profile.
-* Devices (:class:`Thermometer`, :class:`Oven`, :class:`GyroStream`) are the hardware
-  abstraction: small protocols that the lab drivers and the simulated bench's drivers
-  both satisfy through thin adapters (``gyrolab.acquisition.commands``).
+* Devices (:class:`Thermometer`, :class:`Chamber`, :class:`RateStream`, in
+  ``gyrolab.acquisition.roles``) are the hardware abstraction: the role protocols that
+  every registered driver implements itself (``gyrolab.acquisition.registry``).
 * :class:`Acquisition` is the run engine: one polling thread per instrument feeding a
   queue, and the main thread that owns the recorder, runs the plan, watches the safety
   limits, and ends the run cleanly on completion, fault or SIGINT.
@@ -41,6 +41,15 @@ from typing import Any, Protocol
 import numpy as np
 
 from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.roles import (  # noqa: F401 - re-exported for compatibility
+    Chamber,
+    ChamberReading,
+    InstrumentFault,
+    RateStream,
+    Thermometer,
+    ThermometerReading,
+    is_transient,
+)
 from gyrolab.errors import InputError
 from gyrolab.profile import Profile, Step
 from gyrolab.recording import RecordingWriter
@@ -69,32 +78,10 @@ class WallClock:
             time.sleep(dt)
 
 
-class InstrumentFault(Exception):
-    """An instrument reports a condition that must end the run (not a transient error)."""
-
-
-class Thermometer(Protocol):
-    """The PT100 reader (a multimeter)."""
-
-    name: str
-
-    def read(self) -> tuple[float, float]:
-        """``(resistance_ohm, temperature_c)``; raises on a failed reading."""
-        ...
-
-
-class Oven(Protocol):
-    """The temperature chamber's controller."""
-
-    name: str
-
-    def set_setpoint(self, setpoint_c: float) -> None:
-        """Command and verify a setpoint; raises on failure."""
-        ...
-
-    def read(self) -> tuple[float, float]:
-        """``(setpoint_c, process_value_c)``; raises on failure."""
-        ...
+# The role protocols and the error vocabulary live in roles.py; these names stay here for
+# code that imported them from the runner.
+Oven = Chamber
+GyroStream = RateStream
 
 
 class AdcBlockLike(Protocol):
@@ -111,20 +98,6 @@ class AdcReadLike(Protocol):
     blocks: list[Any]  # AdcBlockLike
     gaps: list[Any]  # with first_seq, frames, cause
     events: list[Any]  # with kind, message, data
-
-
-class GyroStream(Protocol):
-    """The gyro's ADC stream (gyrolab.acquisition.gyro_adc.GyroAdcReader's shape)."""
-
-    name: str
-
-    def read(self, timeout_s: float) -> AdcReadLike:
-        """Intact samples received so far (waits at most ``timeout_s`` wall seconds)."""
-        ...
-
-    def counters(self) -> dict[str, int]:
-        """Running totals: at least ``frames_ok``, ``frames_bad`` and ``frames_lost``."""
-        ...
 
 
 # ------------------------------------------------------------------------------ plan
@@ -373,37 +346,45 @@ class _Poller(threading.Thread):
         self.post = post
         self.stop_ev = stop
         self.commands = commands
+        self._nxt: float | None = None
+        self._pending: Callable[[], Any] | None = None
+
+    def step(self) -> float:
+        """One pass: the pending command, then the reading if it is due; returns the run
+        clock time of the next reading (the thread waits for it; the single-threaded
+        engine, ``Acquisition(threaded=False)``, calls this on every turn)."""
+        if self._nxt is None:
+            self._nxt = self.clock.now()
+        # Commands (setpoints) go first: they share the port with the polls. A newer
+        # setpoint supersedes an older one; a failed one is retried every period.
+        while self.commands is not None:
+            try:
+                self._pending = self.commands.get_nowait()
+            except queue.Empty:
+                break
+        if self._pending is not None and self._call(self._pending, "command"):
+            self._pending = None
+        if self.clock.now() >= self._nxt:  # not when woken early by a new command
+            self._call(self.op, "reading")
+            self._nxt += self.period
+            now = self.clock.now()
+            if self._nxt < now:  # fell behind (slow instrument): skip, don't burst
+                self._nxt = now
+        return self._nxt
 
     def run(self) -> None:
-        nxt = self.clock.now()
-        pending: Callable[[], Any] | None = None
         while not self.stop_ev.is_set():
-            # Commands (setpoints) go first: they share the port with the polls. A newer
-            # setpoint supersedes an older one; a failed one is retried every period.
-            while self.commands is not None:
-                try:
-                    pending = self.commands.get_nowait()
-                except queue.Empty:
-                    break
-            if pending is not None and self._call(pending, "command"):
-                pending = None
-            if self.clock.now() >= nxt:  # not when woken early by a new command
-                self._call(self.op, "reading")
-                nxt += self.period
-                now = self.clock.now()
-                if nxt < now:  # fell behind (slow instrument): skip, don't burst
-                    nxt = now
-            self._wait(nxt)
+            self._wait(self.step())
 
     def _call(self, fn: Callable[[], Any], what: str) -> bool:
         t = self.clock.now()
         try:
             res = fn()
-        except InstrumentFault as e:
-            self.post(("fatal", self.source, t, f"{type(e).__name__}: {e}"))
-            return False
-        except Exception as e:  # a driver's I/O error of any kind is a (transient) fault
-            self.post(("error", self.source, t, f"{what} failed: {type(e).__name__}: {e}"))
+        except Exception as e:
+            # roles.is_transient: a failed exchange is retried at the next poll; a refused
+            # setting (LimitError), a fault or a bug ends the run.
+            kind = "error" if is_transient(e) else "fatal"
+            self.post((kind, self.source, t, f"{what} failed: {type(e).__name__}: {e}"))
             return False
         finally:
             self._post_reports()
@@ -445,20 +426,28 @@ class _AdcThread(threading.Thread):
     ) -> None:
         super().__init__(name="adc", daemon=True)
         self.dev, self.post, self.stop_ev, self.clock = dev, post, stop, clock
+        self.failed = False
+
+    def step(self, timeout_s: float = 0.05) -> bool:
+        """One read; False after a failure (a fatal one sets ``failed``)."""
+        try:
+            got = self.dev.read(timeout_s)
+        except Exception as e:
+            if not is_transient(e):
+                msg = f"{type(e).__name__}: {e}"
+                self.post(("fatal", self.dev.name, self.clock.now(), msg))
+                self.failed = True
+                return False
+            self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
+            return False
+        if got.blocks or got.events or got.gaps:
+            self.post(("adc", self.dev.name, self.clock.now(), got))
+        return True
 
     def run(self) -> None:
-        while not self.stop_ev.is_set():
-            try:
-                got = self.dev.read(0.05)
-            except InstrumentFault as e:
-                self.post(("fatal", self.dev.name, self.clock.now(), str(e)))
-                return
-            except Exception as e:
-                self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
+        while not self.stop_ev.is_set() and not self.failed:
+            if not self.step() and not self.failed:
                 time.sleep(0.05)
-                continue
-            if got.blocks or got.events or got.gaps:
-                self.post(("adc", self.dev.name, self.clock.now(), got))
 
 
 class Acquisition:
@@ -488,8 +477,14 @@ class Acquisition:
         status_every_s: float = 0.5,
         on_samples: Callable[[float], None] | None = None,
         comm_timeout_min_wall_s: float = 0.0,
+        threaded: bool = True,
+        turn_s: float = 0.1,
     ) -> None:
         check_profile_limits(profile, limits)
+        # threaded=False: no threads; every turn of the main loop polls the instruments
+        # itself and then sleeps ``turn_s`` on ``clock`` (a fake clock in tests advances).
+        self.threaded = threaded
+        self.turn_s = turn_s
         self.comm_timeout_min_wall_s = comm_timeout_min_wall_s
         self.profile = profile
         self.plan = ProfilePlan(profile)
@@ -619,14 +614,22 @@ class Acquisition:
             ),
             _AdcThread(self.gyro, self.q.put, self.stop_ev, self.clock),
         ]
-        for th in threads:
-            th.start()
+        if self.threaded:
+            for th in threads:
+                th.start()
+        stepped, threads = (threads, []) if not self.threaded else ([], threads)
         last_status = 0.0
         outcome, reason = "completed", "profile complete"
         try:
             while True:
+                for dev in stepped:  # single-threaded engine: the pollers' turns
+                    if isinstance(dev, _AdcThread):
+                        if not dev.failed:
+                            dev.step(0.0)
+                    else:
+                        dev.step()
                 try:
-                    item = self.q.get(timeout=0.02)
+                    item = self.q.get(timeout=0.02) if self.threaded else self.q.get_nowait()
                 except queue.Empty:
                     item = None
                 if item is not None:
@@ -654,6 +657,8 @@ class Acquisition:
                     last_status = time.monotonic()
                     self._update_status(t)
                     self.on_status(self.status)
+                if stepped:
+                    self.clock.sleep(self.turn_s)
         finally:
             safe_ok = self._shutdown(outcome, reason, threads)
         if self.on_status:
@@ -1065,6 +1070,8 @@ class Acquisition:
                 sp, pv = self.oven.read()
                 if abs(sp - ss.setpoint_c) > 0.05:
                     raise RuntimeError(f"setpoint read back {sp:g} °C")
+                if ss.mode == "off":
+                    self.oven.switch_off()  # Chamber.switch_off verifies by read-back
             except Exception as e:
                 attempts.append((t, f"{type(e).__name__}: {e}", None))
                 self.clock.sleep(0.2)
@@ -1089,6 +1096,8 @@ class Acquisition:
         if ok:
             sp, pv = res
             detail = f"setpoint {ss.setpoint_c:g} °C verified"
+            if ss.mode == "off":
+                detail += ", chamber off verified"
             self.w.write_oven(t, sp, pv, "safe")
             self.w.write_event(t, "safe_state", -1, sp, detail)
             self.log(

@@ -125,11 +125,15 @@ def compensate(args: argparse.Namespace) -> int:
     in one directory (:mod:`gyrolab.compensation.axes`)."""
     from gyrolab.compensation import pipeline as pl
     from gyrolab.compensation.axes import axis_dir_name, load_runs, write_head
+    from gyrolab.compensation.config import resolve_config
+    from gyrolab.compensation.guards import check_not_calibration
 
     t_start = time.perf_counter()
-    inputs = (args.run, args.validate)
+    inputs = (args.run, args.validate, getattr(args, "config", None))
     check_output(args.out, args.force, inputs=inputs, kind="dir")
-    cfg = pl.DEFAULT_CONFIG
+    cfg, seed = resolve_config(
+        getattr(args, "config", None), pl.DEFAULT_CONFIG, getattr(args, "seed", None)
+    )
     from gyrolab.logs import log_options
 
     opts = log_options(args)
@@ -139,11 +143,13 @@ def compensate(args: argparse.Namespace) -> int:
         raise InputError(
             args.validate, f"has {len(vals)} axes but the calibration run has {len(runs)}"
         )
+    for run, val in zip(runs, vals or [], strict=False):
+        check_not_calibration(args.validate, val.content_hash, run.content_hash)
     t_read = time.perf_counter() - t_start
     fitted = []
     for k, run in enumerate(runs):
         t_axis = time.perf_counter()
-        fitted.append(_fit_axis(args, cfg, run, None if vals is None else vals[k]))
+        fitted.append(_fit_axis(args, cfg, run, None if vals is None else vals[k], seed))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
         model, metrics, _ = fitted[-1]
         metrics["timing_s"] = total
@@ -177,13 +183,16 @@ def compensate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fit_axis(args: argparse.Namespace, cfg: Any, run: Any, val: Any) -> tuple[Any, ...]:
+def _fit_axis(
+    args: argparse.Namespace, cfg: Any, run: Any, val: Any, seed: int = 0
+) -> tuple[Any, ...]:
     """Fit one axis; its metrics (held-out when ``val``) with the firmware cubic's cost."""
     from gyrolab.compensation import pipeline as pl
     from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
+    from gyrolab.compensation.guards import warn_outside
 
     with _named(run.path):
-        model, dec = pl.fit(run, cfg, seed=int(getattr(args, "seed", 0) or 0))
+        model, dec = pl.fit(run, cfg, seed=seed)
         app = pl.compensate_offline(model, run, dec)
         metrics_cal = pl.evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
@@ -193,6 +202,7 @@ def _fit_axis(args: argparse.Namespace, cfg: Any, run: Any, val: Any) -> tuple[A
             metrics = pl.evaluate(model, pl.compensate_offline(model, val), val, held_out=True)
             metrics["firmware_poly3"] = poly3_metrics(p3, val, cfg.block_s, metrics)
         metrics["calibration"] = metrics_cal
+        warn_outside(args.validate, metrics.get("temperature", {}))
     else:
         metrics = metrics_cal
     model.firmware_poly3 = p3  # type: ignore[attr-defined]
@@ -212,6 +222,7 @@ def _write_axis(directory: Path, model: Any, metrics: dict[str, Any], _cal: Any)
 def apply(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
     from gyrolab.compensation.axes import axis_dirs
+    from gyrolab.compensation.guards import range_check, warn_outside
     from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
     from gyrolab.compensation.pipeline import StreamingCompensator, compensate_offline, load_model
 
@@ -226,6 +237,8 @@ def apply(args: argparse.Namespace) -> int:
     # /gyro/rate carries the headline: the causal model when the model has one
     which = "causal" if model.causal is not None else "gabp"
     comp = StreamingCompensator(model, run.pt_t, run.pt_c, which)
+    in_range = range_check(model.calibration, run)
+    warn_outside(args.run, in_range)
     what = (
         f"causal full-rate compensated rate, raw - d (causal {model.causal.family} model on "
         "PT100 readings up to now)"
@@ -238,6 +251,7 @@ def apply(args: argparse.Namespace) -> int:
         "software_version": __version__,
         "calibration_run": model.calibration.get("path", ""),
         "vmd": {"K": model.K, "alpha": model.alpha},
+        "calibrated_range": in_range,
         "topics": {
             TOPIC_RATE: what,
             TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
@@ -275,8 +289,12 @@ def _apply_axes(args: argparse.Namespace) -> int:
     runs = load_runs(args.run, models[0].config)
     if len(runs) != len(models):
         raise InputError(args.run, f"has {len(runs)} axes, the model {len(models)}")
-    comps, y_off = [], []
-    for m, r in zip(models, runs, strict=True):
+    from gyrolab.compensation.guards import range_check, warn_outside
+
+    comps, y_off, ranges = [], [], []
+    for k, (m, r) in enumerate(zip(models, runs, strict=True)):
+        ranges.append(range_check(m.calibration, r))
+        warn_outside(f"{args.run} (axis {'xyz'[k]})", ranges[-1])
         with _named(args.run):
             off = compensate_offline(m, r)
         y_off.append(off.series["compensated"])
@@ -291,6 +309,7 @@ def _apply_axes(args: argparse.Namespace) -> int:
         "model_format_version": MODEL_FORMAT_VERSION,
         "software_version": __version__,
         "axes": len(models),
+        "calibrated_range": ranges,
         "calibration_run": models[0].calibration.get("path", ""),
         "vmd": [{"K": m.K, "alpha": m.alpha} for m in models],
         "topics": {

@@ -57,6 +57,10 @@ def block_means(x: np.ndarray, fs_hz: float, window_s: float) -> np.ndarray:
     return x[: n * w].reshape(n, w).mean(axis=1)
 
 
+def _num(v: float | None) -> float:
+    return float("nan") if v is None else float(v)
+
+
 def signal_metrics(
     rate_dps: np.ndarray,
     fs_hz: float,
@@ -85,8 +89,8 @@ def signal_metrics(
     if drift is None:
         drift = block_means(x, fs_hz, drift_window_s)
     return {
-        "arw_deg_per_sqrt_h": float(terms["arw_deg_per_sqrt_h"]),
-        "bias_instability_deg_per_h": float(terms["bias_instability_deg_per_h"]),
+        "arw_deg_per_sqrt_h": _num(terms["arw_deg_per_sqrt_h"]),
+        "bias_instability_deg_per_h": _num(terms["bias_instability_deg_per_h"]),
         "bias_stability_deg_per_h": float(np.std(stab, ddof=1) * 3600.0),
         "drift_pp_deg_per_s": float(np.ptp(drift)),
         "rms_deg_per_s": float(np.sqrt(np.mean(x * x))),

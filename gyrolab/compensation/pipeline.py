@@ -54,6 +54,7 @@ import numpy as np
 from gyrolab.compensation.baselines import PolyDriftModel, fit_plain_bp, fit_poly
 from gyrolab.compensation.causal import CausalCalibration, CausalDriftModel, fit_causal
 from gyrolab.compensation.gabp import BPConfig, GAConfig, MLPDriftModel, fit_gabp
+from gyrolab.compensation.guards import RunHasher, calibration_ranges, content_hash, range_check
 from gyrolab.errors import InputError
 from gyrolab.recording import Recording
 
@@ -68,9 +69,14 @@ class PipelineConfig:
     use_dtdt: bool = False  # paper: temperature only
     dtdt_window_s: float = 300.0
     hidden: int = 8
+    drift_model: str = "gabp"  # the drift model f(T): "gabp" (paper), "bp", "poly"
     ga_population: int = 40
     ga_generations: int = 40
+    bp_optimizer: str = "lbfgs"  # "lbfgs" or the paper's plain gradient descent "gd"
     bp_max_iter: int = 400
+    bp_learning_rate: float = 0.01  # gd only (paper prints none: traingd's default)
+    bp_epochs: int = 1000  # gd only
+    vmd_fitness: str = "drift_separation"  # GPSO criterion, fitness.CRITERIA
     k_range: tuple[int, int] = (3, 11)  # paper §4.2
     alpha_range: tuple[float, float] = (50.0, 5000.0)  # paper §4.2
     gpso_population: int = 50  # paper §4.2
@@ -94,7 +100,13 @@ class PipelineConfig:
         return GAConfig(population=self.ga_population, generations=self.ga_generations)
 
     def bp(self) -> BPConfig:
-        return BPConfig(hidden=self.hidden, max_iter=self.bp_max_iter)
+        return BPConfig(
+            hidden=self.hidden,
+            max_iter=self.bp_max_iter,
+            optimizer=self.bp_optimizer,
+            learning_rate=self.bp_learning_rate,
+            epochs=self.bp_epochs,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -131,6 +143,7 @@ class PreparedRun:
     pt_t: np.ndarray
     pt_c: np.ndarray
     filled_blocks: int = 0
+    content_hash: str = ""  # guards.RunHasher digest of the rate and PT100 data
 
 
 class BlockAverager:
@@ -281,6 +294,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     acc = BlockAverager(cfg.block_s)
     acc.add(rate.t, x, rate.period)
     tb, xb, temp, X, filled = _finish(rec.path, acc, pt_t, pt_c, cfg)
+    digest = content_hash(x, pt_t, pt_c)
     return PreparedRun(
         path=rec.path,
         t=tb,
@@ -293,6 +307,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
         pt_t=pt_t,
         pt_c=pt_c,
         filled_blocks=filled,
+        content_hash=digest,
     )
 
 
@@ -357,9 +372,12 @@ def prepare_file(path: str, cfg: PipelineConfig) -> PreparedRun:
     rec = read_recording(path, topics=[TOPIC_PT100])
     pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
     acc = BlockAverager(cfg.block_s)
+    hasher = RunHasher()
     for t, x, period in iter_rate_batches(path):
         acc.add(t, x, period)
+        hasher.add_rate(x)
     tb, xb, temp, X, filled = _finish(str(path), acc, pt_t, pt_c, cfg)
+    digest = hasher.hexdigest(pt_t, pt_c)
     return PreparedRun(
         path=str(path),
         t=tb,
@@ -372,6 +390,7 @@ def prepare_file(path: str, cfg: PipelineConfig) -> PreparedRun:
         pt_t=pt_t,
         pt_c=pt_c,
         filled_blocks=filled,
+        content_hash=digest,
     )
 
 
@@ -413,6 +432,7 @@ def _gpso_vmd(
 
     s = search_vmd_parameters(
         x,
+        criterion=cfg.vmd_fitness,
         K_bounds=cfg.k_range,
         alpha_bounds=cfg.alpha_range,
         population=cfg.gpso_population,
@@ -491,7 +511,7 @@ class CompensationModel:
     """What ``gyrolab compensate`` fits and ``gyrolab apply`` uses."""
 
     config: PipelineConfig
-    drift: MLPDriftModel
+    drift: DriftModel
     baselines: dict[str, DriftModel]
     K: int
     alpha: float
@@ -502,6 +522,7 @@ class CompensationModel:
     decomposition_info: dict[str, Any] = field(default_factory=dict)
     timing_s: dict[str, float] = field(default_factory=dict)
     causal: CausalDriftModel | None = None  # the causal headline model (causal.py)
+    seed: int | None = None  # None: a model written before the seed was recorded
 
 
 def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> CausalDriftModel:
@@ -509,6 +530,21 @@ def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> Ca
     of ``cfg.causal_families`` on the causal features, the winner by CV inside ``run``."""
     cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
     return fit_causal(cal, families=cfg.causal_families, bp=cfg.bp(), ga=cfg.ga(), seed=seed)
+
+
+DRIFT_MODELS = ("gabp", "bp", "poly")
+
+
+def fit_drift_model(X: np.ndarray, drift: np.ndarray, cfg: PipelineConfig, seed: int) -> Any:
+    """The drift model ``f`` of ``cfg.drift_model`` fitted to ``drift ≈ f(X)``: the paper's
+    GA-BP, plain BP (random initial weights) or the polynomial of :mod:`.baselines`."""
+    if cfg.drift_model == "gabp":
+        return fit_gabp(X, drift, ga=cfg.ga(), bp=cfg.bp(), seed=seed)
+    if cfg.drift_model == "bp":
+        return fit_plain_bp(X, drift, bp=cfg.bp(), seed=seed)
+    if cfg.drift_model == "poly":
+        return fit_poly(X, drift)
+    raise ValueError(f"drift_model must be one of {DRIFT_MODELS}, not {cfg.drift_model!r}")
 
 
 def fit(
@@ -533,7 +569,7 @@ def fit(
     if not dec.classes.get("drift"):
         raise InputError(run.path, "no VMD mode was classified as drift: nothing to model")
     t1 = time.perf_counter()
-    gabp = fit_gabp(run.X, drift, ga=cfg.ga(), bp=cfg.bp(), seed=seed)
+    gabp = fit_drift_model(run.X, drift, cfg, seed)
     timing["gabp"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     baselines: dict[str, DriftModel] = {}
@@ -571,10 +607,10 @@ def fit(
             "path": run.path,
             "n_points": int(run.t.size),
             "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
-            "temp_min_c": float(run.temp.min()),
-            "temp_max_c": float(run.temp.max()),
+            **calibration_ranges(run, cfg.dtdt_window_s),
             "raw_rate_hz": 1.0 / run.raw_period,
             "filled_blocks": run.filled_blocks,
+            "content_hash": run.content_hash,
         },
         flp_mixed=flp_mixed,
         flp_stream=flp_stream,
@@ -582,6 +618,7 @@ def fit(
         decomposition_info={"classes": dec.classes, "mpe": dec.mpe.tolist()},
         timing_s=timing,
         causal=causal,
+        seed=int(seed),
     )
     return model, dec
 
@@ -772,6 +809,7 @@ def save_model(model: CompensationModel, directory: str) -> None:
         bmeta[name] = meta
         arrays.update(arr)
     meta = {
+        "seed": model.seed,
         "config": model.config.to_dict(),
         "vmd": {"K": model.K, "alpha": model.alpha},
         "decomposition": model.decomposition_info,
@@ -791,7 +829,9 @@ def save_model(model: CompensationModel, directory: str) -> None:
             else None,
         },
     }
-    torch_states = {"drift_gabp": model.drift.torch_state_dict()}
+    torch_states = {}
+    if isinstance(model.drift, MLPDriftModel):
+        torch_states["drift_gabp"] = model.drift.torch_state_dict()
     bp = model.baselines.get("bp")
     if isinstance(bp, MLPDriftModel):
         torch_states["baseline_bp"] = bp.torch_state_dict()
@@ -801,10 +841,12 @@ def save_model(model: CompensationModel, directory: str) -> None:
 def load_model(directory: str) -> CompensationModel:
     """Read a model directory written by :func:`save_model` (format checked)."""
     from gyrolab.compensation.flp import ForwardLinearPredictor
+    from gyrolab.compensation.guards import check_finite
     from gyrolab.compensation.model_dir import load_model_dir
 
     meta, arrays = load_model_dir(directory)
     try:
+        check_finite(directory, meta, arrays)
         flp = meta.get("flp") or {}
         flp_mixed = flp.get("mixed")
         flp_stream = flp.get("stream")
@@ -832,6 +874,7 @@ def load_model(directory: str) -> CompensationModel:
             decomposition_info=dict(meta.get("decomposition", {})),
             timing_s=dict(meta.get("timing_s", {})),
             causal=causal,
+            seed=None if meta.get("seed") is None else int(meta["seed"]),
         )
     except (KeyError, TypeError, ValueError) as e:
         raise InputError(directory, f"incomplete or damaged model ({e!r})") from None
@@ -858,6 +901,16 @@ def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
     return signal_metrics(
         x, 1.0 / block_s, stability_window_s=block_s, drift_window_s=block_s, allan=allan
     )
+
+
+def series_noise_terms(x: np.ndarray, block_s: float) -> dict[str, Any]:
+    """The IEEE 952 terms (Q, N, B, K, R) the Allan curve of a ``block_s`` series
+    identifies — τ ≤ T/10 and slopes supported by the 1σ confidence intervals, B only at a
+    floor (:func:`gyrolab.compensation.allan.noise_terms`) — with the τ range of each and a
+    reason for each term that is not identifiable (``None``)."""
+    from gyrolab.compensation.allan import allan_deviation, noise_terms
+
+    return noise_terms(allan_deviation(x, 1.0 / block_s, taus="octave")).to_dict()
 
 
 def evaluate(
@@ -907,16 +960,19 @@ def evaluate(
         "raw_bandwidth_hz": 0.5 / run.raw_period,
         "flp": app.flp_info,
     }
-    lo, hi = model.calibration.get("temp_min_c"), model.calibration.get("temp_max_c")
-    if lo is not None and hi is not None:
-        outside = (run.temp < lo) | (run.temp > hi)
-        m["temperature"] = {
-            "min_c": float(run.temp.min()),
-            "max_c": float(run.temp.max()),
-            "calibration_min_c": lo,
-            "calibration_max_c": hi,
-            "fraction_outside_calibration": float(outside.mean()),
-        }
+    m["noise_terms"] = {
+        key: series_noise_terms(x, bs)
+        for key, x in (
+            ("raw", app.series["raw"]),
+            ("compensated", app.series["compensated"]),
+            ("compensated_drift_only", app.series["compensated_drift_only"]),
+            ("compensated_streaming", streams["gabp"]),
+            *((("causal", streams["causal"]),) if "causal" in streams else ()),
+        )
+    }
+    rng = range_check(model.calibration, run)
+    if rng:
+        m["temperature"] = rng
     m["sample_period_s"] = bs
     m["n_points"] = int(run.t.size)
     return m

@@ -144,19 +144,72 @@ def read_run(path: str | Path, log_options: dict | None = None) -> Recording:
 
 @dataclass
 class AllanData:
-    """One Allan curve plus its noise terms, in °/h for plotting."""
+    """One Allan curve plus its noise terms, in °/h for plotting.
+
+    ``arw``/``bi`` are ``None`` when the curve does not identify them
+    (:func:`gyrolab.compensation.allan.noise_terms`); ``terms`` keeps the full result
+    (τ ranges, reasons, the upper bound on B when there is no floor)."""
 
     label: str
     tau: np.ndarray
     adev_dph: np.ndarray
     lo_dph: np.ndarray
     hi_dph: np.ndarray
-    arw: float
-    bi: float
+    arw: float | None
+    bi: float | None
+    terms: Any = None
+
+    def figure_curve(self, color: str) -> F.AllanCurve:
+        t = self.terms
+        ub = None if t is None else t.upper_bounds.get("B")
+        return F.AllanCurve(
+            self.label,
+            self.tau,
+            self.adev_dph,
+            self.lo_dph,
+            self.hi_dph,
+            self.arw,
+            self.bi,
+            color=color,
+            arw_tau=None if t is None else t.tau_ranges.get("N"),
+            bi_tau=None if t is None else t.tau_ranges.get("B"),
+            tau_b=None if t is None or self.bi is None else t.tau_b,
+            bi_upper_bound=None if ub is None else 3600.0 * ub,
+        )
+
+    def caption(self) -> str:
+        """What the curve identifies and on which τ, for the figure caption."""
+        t = self.terms
+        if t is None:
+            return ""
+
+        def rng(name: str) -> str:
+            lo, hi = t.tau_ranges[name]
+            return f"τ = {lo:.3g}–{hi:.3g} s"
+
+        parts = []
+        if self.arw is not None:
+            parts.append(f"ARW {self.arw:.3g} °/√h from the −½ slope over {rng('N')} (read at 1 s)")
+        else:
+            parts.append("ARW not identifiable (no −½ slope at τ ≤ T/10)")
+        if self.bi is not None:
+            parts.append(
+                f"bias instability {self.bi:.3g} °/h at the floor, minimum at τ = "
+                f"{t.tau_b:.3g} s (flat over {rng('B')})"
+            )
+        else:
+            ub = 3600.0 * t.upper_bounds.get("B", float("nan"))
+            parts.append(
+                f"no floor within the record (the minimum, at τ = {t.tau_b:.3g} s, is not on a "
+                f"flat stretch; σ_min/0.664 = {ub:.3g} °/h is an upper bound on B)"
+            )
+        return f"{self.label}: " + "; ".join(parts)
 
 
 def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
-    """Allan deviation (octave taus, 1σ Greenhall bounds) and IEEE 952 ARW/B of ``x`` (°/s).
+    """Allan deviation (octave taus, 1σ Greenhall bounds) and the IEEE 952 ARW/B of ``x``
+    (°/s) that the curve identifies (T/10 rule, slopes supported by the confidence
+    intervals, B only at a true floor).
 
     ``None`` when the series is too short or constant (the figure then omits the curve).
     """
@@ -164,9 +217,10 @@ def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
 
     try:
         res = allan_deviation(np.asarray(x, dtype=float), rate_hz, taus="octave")
-        terms = noise_terms(res).deg_h()
+        nt = noise_terms(res, terms=("N", "B"))
     except InputError:
         return None
+    terms = nt.deg_h()
     return AllanData(
         label=label,
         tau=res.taus,
@@ -175,6 +229,7 @@ def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
         hi_dph=res.adev_hi * 3600.0,
         arw=terms["arw_deg_per_sqrt_h"],
         bi=terms["bias_instability_deg_per_h"],
+        terms=nt,
     )
 
 
@@ -604,7 +659,11 @@ def _signoff_section(
 
 
 def _is_calibration_run(model: Any, run: Any) -> bool:
-    """True when ``run`` is the run the model was fitted on (same averaged series)."""
+    """True when ``run`` is the run the model was fitted on: same content hash of the rate
+    and temperature data (models that record it), else the same averaged series."""
+    digest = model.calibration.get("content_hash")
+    if digest and getattr(run, "content_hash", ""):
+        return bool(digest == run.content_hash)
     cal = model.diagnostics.get("calib_rate")
     if cal is None:
         return Path(str(model.calibration.get("path", ""))).resolve() == Path(run.path).resolve()
@@ -737,15 +796,15 @@ def _performance_section(
 ) -> Section:
     sec = Section("performance", "Performance: Allan deviation and metrics")
     curves: list[F.AllanCurve] = []
+    notes: list[str] = []
     series = [("raw", xb, F.RAW_COLOR)]
     if app is not None:
         series.append(("compensated", app.series["compensated"], F.COMP_COLOR))
     for label, x, color in series:
         a = allan_curve(x, 1.0 / block_s, label)
         if a is not None:
-            curves.append(
-                F.AllanCurve(label, a.tau, a.adev_dph, a.lo_dph, a.hi_dph, a.arw, a.bi, color=color)
-            )
+            curves.append(a.figure_curve(color))
+            notes.append(a.caption())
     if curves:
         sec.blocks.append(
             FigureBlock(
@@ -753,8 +812,12 @@ def _performance_section(
                 "Allan deviation",
                 F.allan(curves),
                 f"Overlapping Allan deviation of the {block_s:g} s averages, with 1σ confidence "
-                "bands (Greenhall EDF); dotted: angle random walk line (−½ slope); dashed: "
-                "bias-instability floor 0.664·B (IEEE 952) (paper Fig. 15).",
+                "bands (Greenhall EDF); dotted: angle random walk line (−½ slope), drawn over "
+                "the τ it was identified on; dashed: bias-instability floor 0.664·B (IEEE 952) "
+                "over the flat stretch, ▼ its minimum. Terms are read only at τ ≤ T/10 and where "
+                "the confidence intervals support the slope (docs/allan.md) (paper Fig. 15). "
+                + ". ".join(notes)
+                + ".",
             )
         )
     else:
@@ -766,6 +829,14 @@ def _performance_section(
             cols.append(("drift only (GA-BP)", "compensated_drift_only"))
         if "compensated_streaming" in metrics:
             cols.append(("streaming (causal)", "compensated_streaming"))
+    rng = metrics.get("temperature") or {}
+    if rng.get("outside_calibration_range"):
+        from gyrolab.compensation.guards import range_warning
+
+        line = range_warning(Path(str(metrics.get("run", "this run"))).name, rng) or ""
+        sec.blocks.append(
+            TextBlock(line.replace("warning: ", "Outside the calibrated range — ", 1), "note")
+        )
     tab = _metrics_table(metrics, cols)
     tab.note = f"All metrics on {block_s:g} s averages of the output" + (
         "; held out: the model was not fitted on this run." if metrics.get("held_out") else "."

@@ -311,8 +311,11 @@ def compensated(
 class AllanCurve:
     """One Allan-deviation curve; ``adev``/``lo``/``hi`` in °/h, ``tau`` in s.
 
-    ``arw_deg_per_sqrt_h`` and ``bias_instability_deg_per_h`` draw the −½ line and the
-    flicker floor (σ = 0.664·B) when given.
+    ``arw_deg_per_sqrt_h`` draws the −½ line σ = 60·ARW/√τ (°/h) over ``arw_tau`` (the τ
+    range it was identified on; the whole curve when not given).
+    ``bias_instability_deg_per_h`` draws the floor 0.664·B over ``bi_tau`` and marks the
+    minimum at ``tau_b``; ``None`` with ``bi_upper_bound`` labels the curve "no floor
+    within the record" instead. Terms that are ``None``/NaN draw nothing.
     """
 
     label: str
@@ -323,10 +326,29 @@ class AllanCurve:
     arw_deg_per_sqrt_h: float | None = None
     bias_instability_deg_per_h: float | None = None
     color: str = RAW_COLOR
+    arw_tau: tuple[float, float] | None = None
+    bi_tau: tuple[float, float] | None = None
+    tau_b: float | None = None
+    bi_upper_bound: float | None = None
+
+
+def _finite(x: float | None) -> bool:
+    return x is not None and bool(np.isfinite(x)) and x > 0
+
+
+def _span(tau: np.ndarray, rng: tuple[float, float] | None) -> np.ndarray:
+    """τ grid for an annotation line: the identified range (log-spaced), else the curve's."""
+    if rng is None:
+        return tau
+    lo, hi = float(rng[0]), float(rng[1])
+    return np.geomspace(lo, hi, 32) if hi > lo else np.array([lo])
 
 
 def allan(curves: Sequence[AllanCurve]) -> Figure:
-    """Allan deviation with confidence bands, ARW and bias-instability lines (paper Fig. 15)."""
+    """Allan deviation with confidence bands, ARW and bias-instability lines (paper Fig. 15).
+
+    Each annotation is drawn only over the τ range its term was identified on, so a line
+    lies on the stretch of curve it describes; a curve without a floor says so."""
     fig = _figure(8.0, 4.8)
     ax = fig.add_subplot()
     for c in curves:
@@ -339,24 +361,37 @@ def allan(curves: Sequence[AllanCurve]) -> Figure:
             lo, hi = np.asarray(c.lo, dtype=float), np.asarray(c.hi, dtype=float)
             okb = ok & np.isfinite(lo) & np.isfinite(hi) & (lo > 0)
             ax.fill_between(tau[okb], lo[okb], hi[okb], color=c.color, alpha=0.2, lw=0)
-        if c.arw_deg_per_sqrt_h and np.isfinite(c.arw_deg_per_sqrt_h) and tau.size:
+        if _finite(c.arw_deg_per_sqrt_h) and tau.size:
             # N in °/√h → σ(τ) = 60·N / √τ in °/h with τ in seconds.
-            n = 60.0 * c.arw_deg_per_sqrt_h
+            n = 60.0 * float(c.arw_deg_per_sqrt_h)  # type: ignore[arg-type]
+            t = _span(tau, c.arw_tau)
             ax.loglog(
-                tau,
-                n / np.sqrt(tau),
+                t,
+                n / np.sqrt(t),
                 ls=":",
-                lw=1,
+                lw=1.6,
                 color=c.color,
                 label=f"{c.label} ARW {c.arw_deg_per_sqrt_h:.3g} °/√h",
             )
-        if c.bias_instability_deg_per_h and np.isfinite(c.bias_instability_deg_per_h):
-            ax.axhline(
-                0.664 * c.bias_instability_deg_per_h,
+        if _finite(c.bias_instability_deg_per_h):
+            level = 0.664 * float(c.bias_instability_deg_per_h)  # type: ignore[arg-type]
+            t = _span(tau, c.bi_tau)
+            ax.loglog(
+                t,
+                np.full(t.size, level),
                 ls="--",
-                lw=1,
+                lw=1.6,
                 color=c.color,
                 label=f"{c.label} bias instability {c.bias_instability_deg_per_h:.3g} °/h",
+            )
+            if c.tau_b is not None:
+                ax.plot([c.tau_b], [level], marker="v", ms=7, color=c.color, ls="none")
+        elif c.bi_upper_bound is not None:
+            ax.plot(
+                [],
+                [],
+                ls="none",
+                label=f"{c.label}: no floor within the record (B ≤ {c.bi_upper_bound:.3g} °/h)",
             )
     ax.set_xlabel("averaging time τ (s)")
     ax.set_ylabel("Allan deviation (°/h)")

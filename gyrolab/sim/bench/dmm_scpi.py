@@ -16,6 +16,7 @@ import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from gyrolab.sim.bench.clock import SimClock
 from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
@@ -224,13 +225,57 @@ class Scpi34401A:
         return self._read("")
 
 
+class Scpi34465A(Scpi34401A):
+    """Keysight 34465A (Truevolt): the 34401A's SCPI subset plus offset-compensated
+    4-wire ohms (``[SENSe:]FRESistance:OCOMpensated {ON|OFF}``, 34465A/70A only) and the
+    Truevolt NPLC set (0.02, 0.06, 0.2, 1, 10, 100). Keysight Truevolt DMM Command Quick
+    Reference (docs/instruments.md). Offset compensation doubles the reading time."""
+
+    IDN = "Keysight Technologies,34465A,MY59000001,A.03.01-03.15-03.01-00.52-04-02"
+    NPLCS_34465A = (0.02, 0.06, 0.2, 1.0, 10.0, 100.0)
+
+    def __init__(self, read_ohm: Callable[[], float], clock: SimClock | None = None) -> None:
+        super().__init__(read_ohm, clock)
+        self.ocomp = False
+        self._table[0] = (_pattern("*IDN?"), lambda a: self.IDN)
+        self._table += [
+            (_pattern("[SENSe:]FRESistance:OCOMpensated"), self._ocomp),
+            (_pattern("[SENSe:]FRESistance:OCOMpensated?"), lambda a: str(int(self.ocomp))),
+        ]
+
+    def _rst(self, arg: str) -> None:
+        super()._rst(arg)
+        self.ocomp = False
+
+    def _ocomp(self, arg: str) -> None:
+        a = arg.strip().upper()
+        if a in ("ON", "1"):
+            self.ocomp = True
+        elif a in ("OFF", "0"):
+            self.ocomp = False
+        else:
+            self._push(E_PARAM)
+
+    def _nplc(self, arg: str) -> None:
+        v = self._number(arg, self.NPLCS_34465A, 10.0)
+        if v is None:
+            self._push(E_SYNTAX)
+        elif v not in self.NPLCS_34465A:
+            self._push(E_PARAM)
+        else:
+            self.state.nplc = v
+
+    def integration_s(self) -> float:
+        return super().integration_s() * (2.0 if self.ocomp else 1.0)
+
+
 # --------------------------------------------------------------------------- transports
 
 
 class _LineServer:
     """Reads command lines from a byte source, writes replies; one thread."""
 
-    def __init__(self, responder: Scpi34401A, eol: bytes) -> None:
+    def __init__(self, responder: Any, eol: bytes) -> None:
         self.responder = responder
         self.eol = eol
         self._stop = threading.Event()
@@ -282,10 +327,13 @@ class ScpiSerialServer(_LineServer):
 
 
 class ScpiTcpServer(_LineServer):
-    """The meter on a TCP socket (``TCPIP::127.0.0.1::<port>::SOCKET``): replies end in LF."""
+    """The meter on a TCP socket (``TCPIP::127.0.0.1::<port>::SOCKET``): replies end in LF
+    (``eol``; any responder with ``handle(line) -> reply | None``)."""
 
-    def __init__(self, responder: Scpi34401A, host: str = "127.0.0.1", port: int = 0) -> None:
-        super().__init__(responder, b"\n")
+    def __init__(
+        self, responder: Any, host: str = "127.0.0.1", port: int = 0, eol: bytes = b"\n"
+    ) -> None:
+        super().__init__(responder, eol)
         self._sock = socket.create_server((host, port))
         self._sock.settimeout(0.1)
         self.address: tuple[str, int] = self._sock.getsockname()[:2]

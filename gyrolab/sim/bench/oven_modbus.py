@@ -1,8 +1,12 @@
-"""Simulated Watlow F4-style oven controller: a Modbus RTU slave on a pty.
+"""Simulated Watlow F4 oven controller: a Modbus RTU slave on a pty.
 
 Functions 03 (read holding registers) and 06 (write single register) on the map of
-docs/instruments.md (100 process value, 200 status, 300 setpoint, 606 decimal places,
-901 units). A request with a bad CRC or for another address is ignored, as on a real
+docs/instruments.md (100 process value, 103/107 heat/cool power in 0.01 %, 200 profile
+mode (0/1 constant, 2 running, 3 paused), 300 setpoint, 606 decimal places, 901 units,
+1209/1210/1217 profile resume/pause/terminate, event outputs 1-8 at 2000 + 10(N-1)).
+With ``control_event`` = N the chamber is switched by event output N (as ESPEC wires
+its F4 chambers): off, the heater and refrigerator stop and the air settles to ambient.
+A request with a bad CRC or for another address is ignored, as on a real
 line; a bad register or value gets an exception response (02 illegal data address,
 03 illegal data value). Faults from :class:`~gyrolab.sim.bench.faults.ModbusFaults`:
 exception responses, replies with a wrong CRC, no reply.
@@ -19,7 +23,10 @@ from dataclasses import dataclass
 from gyrolab.sim.bench.faults import ModbusFaults
 from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
 
-REG_PV, REG_STATUS, REG_SP, REG_DP, REG_UNITS = 100, 200, 300, 606, 901
+REG_PV, REG_PROFILE_MODE, REG_SP, REG_DP, REG_UNITS = 100, 200, 300, 606, 901
+REG_HEAT_POWER, REG_COOL_POWER = 103, 107  # output 1A / 1B, signed, 0.01 %
+REG_RESUME, REG_PAUSE, REG_TERMINATE = 1209, 1210, 1217  # write 1
+EVENTS = {2000 + 10 * (n - 1): n for n in range(1, 9)}  # event output N: 0 off, 1 on
 EX_ILLEGAL_FUNCTION, EX_ILLEGAL_ADDRESS, EX_ILLEGAL_VALUE = 0x01, 0x02, 0x03
 
 
@@ -44,6 +51,7 @@ class OvenHooks:
     chamber_c: Callable[[], float]
     setpoint_c: Callable[[], float]
     set_setpoint: Callable[[float], None]
+    ambient_c: float = 25.0
 
 
 class WatlowF4Slave:
@@ -59,8 +67,15 @@ class WatlowF4Slave:
         limits_c: tuple[float, float] = (-73.0, 190.0),
         alarm_c: tuple[float, float] = (-60.0, 80.0),
         faults: ModbusFaults | None = None,
+        control_event: int | None = None,
     ) -> None:
         self.hooks = hooks
+        if control_event is not None and not 1 <= control_event <= 8:
+            raise ValueError("control_event is an event output 1..8")
+        self.control_event = control_event
+        self.events = [0] * 8
+        self.profile_mode = 0  # no profile is ever started on the simulated controller
+        self.setpoint_raw: int | None = None  # register 300 as written (None: physics')
         self.address = address
         self.decimals = decimals
         self.units_c = units_c
@@ -84,22 +99,38 @@ class WatlowF4Slave:
         if reg == REG_PV:
             return self._to_raw(self.hooks.chamber_c())
         if reg == REG_SP:
+            if self.setpoint_raw is not None:
+                return self.setpoint_raw
             return self._to_raw(self.hooks.setpoint_c())
         if reg == REG_DP:
             return self.decimals
         if reg == REG_UNITS:
             return 1 if self.units_c else 0
-        if reg == REG_STATUS:
-            air, sp = self.hooks.chamber_c(), self.hooks.setpoint_c()
-            bits = 0
-            if sp > air + 0.5:
-                bits |= 0x01
-            if sp < air - 0.5:
-                bits |= 0x02
-            if not self.alarm_c[0] <= air <= self.alarm_c[1]:
-                bits |= 0x04
-            return bits
+        if reg == REG_PROFILE_MODE:
+            return self.profile_mode
+        if reg in (REG_HEAT_POWER, REG_COOL_POWER):
+            if not self.chamber_on():
+                return 0
+            # A proportional band of 5 °C: enough to show which output works, not a PID.
+            err = self.hooks.setpoint_c() - self.hooks.chamber_c()
+            pct = min(100.0, max(0.0, (err if reg == REG_HEAT_POWER else -err) * 20.0))
+            return round(pct * 100)
+        if reg in (REG_RESUME, REG_PAUSE, REG_TERMINATE):
+            return 0
+        if reg in EVENTS:
+            return self.events[EVENTS[reg] - 1]
         return None
+
+    def chamber_on(self) -> bool:
+        """Whether heater and refrigerator may run (the control event, if wired, is on)."""
+        return self.control_event is None or bool(self.events[self.control_event - 1])
+
+    def _apply(self) -> None:
+        """Drive the physics: the setpoint when on, the air settling to ambient when off."""
+        if self.setpoint_raw is None:
+            return
+        on = self.chamber_on()
+        self.hooks.set_setpoint(self._from_raw(self.setpoint_raw) if on else self.hooks.ambient_c)
 
     def process(self, req: bytes) -> bytes | None:
         """One request frame (with CRC) → reply frame, or None (ignored / no reply)."""
@@ -136,13 +167,24 @@ class WatlowF4Slave:
             return bytes([a, 0x03, len(body)]) + body
         if func == 0x06 and len(data) == 4:
             reg, raw = struct.unpack(">Hh", data)
+            if reg in EVENTS or reg in (REG_RESUME, REG_PAUSE, REG_TERMINATE):
+                if raw not in (0, 1):
+                    return bytes([a, 0x86, EX_ILLEGAL_VALUE])
+                if reg in EVENTS:
+                    self.events[EVENTS[reg] - 1] = raw
+                    self._apply()
+                elif raw and reg == REG_TERMINATE:
+                    self.profile_mode = 0
+                self.writes.append((reg, raw))
+                return bytes([a, 0x06]) + data
             if reg != REG_SP:
                 exists = self.register(reg) is not None
                 return bytes([a, 0x86, EX_ILLEGAL_VALUE if exists else EX_ILLEGAL_ADDRESS])
             value = self._from_raw(raw)
             if not self.limits_c[0] <= value <= self.limits_c[1]:
                 return bytes([a, 0x86, EX_ILLEGAL_VALUE])
-            self.hooks.set_setpoint(value)
+            self.setpoint_raw = raw
+            self._apply()
             self.writes.append((reg, raw))
             return bytes([a, 0x06]) + data  # echo
         return bytes([a, func | 0x80, EX_ILLEGAL_FUNCTION])

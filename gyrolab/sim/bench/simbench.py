@@ -31,7 +31,8 @@ from typing import Any
 
 from gyrolab.sim.bench.adc_source import AdcSource, AdcTruth
 from gyrolab.sim.bench.clock import SimClock
-from gyrolab.sim.bench.dmm_scpi import Scpi34401A, ScpiSerialServer, ScpiTcpServer
+from gyrolab.sim.bench.dmm_scpi import Scpi34401A, Scpi34465A, ScpiSerialServer, ScpiTcpServer
+from gyrolab.sim.bench.espec_p300 import ChamberHooks, EspecP300
 from gyrolab.sim.bench.faults import FaultEvent, FaultPlan
 from gyrolab.sim.bench.oven_modbus import ModbusRtuServer, OvenHooks, WatlowF4Slave
 from gyrolab.sim.bench.serial_pty import PtyPort
@@ -69,7 +70,15 @@ class SimBench:
         ambient_c: float = 25.0,
         oven_decimals: int = 1,
         oven_units_c: bool = True,
+        dmm_model: str = "34401A",
+        chamber_model: str = "F4",
+        oven_control_event: int | None = None,
     ) -> None:
+        # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
+        # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
+        # model each driver needs (gyrolab.acquisition.registry, DriverSpec.sim_backend).
+        if dmm_model not in ("34401A", "34465A") or chamber_model not in ("F4", "P300"):
+            raise ValueError(f"unknown simulated instrument {dmm_model!r} / {chamber_model!r}")
         if physics is None:
             from gyrolab.sim.model import nominal_model
             from gyrolab.sim.physics import Physics
@@ -108,14 +117,16 @@ class SimBench:
             write_timeout_s=0.5 if speed is None else 0.05,
         )
         self.oven = WatlowF4Slave(
-            OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint),
+            OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
+            control_event=oven_control_event,
             decimals=oven_decimals,
             units_c=oven_units_c,
             faults=self.faults.oven,
         )
         # (t_sim, noise-free Ω, Ω as read) of every reading the meter took, for tests
         self.dmm_truth: deque[tuple[float, float, float]] = deque(maxlen=100_000)
-        self.dmm = Scpi34401A(self._read_ohm, self.clock)
+        dmm_cls = Scpi34465A if dmm_model == "34465A" else Scpi34401A
+        self.dmm = dmm_cls(self._read_ohm, self.clock)
         self._servers: list[Any] = [
             ModbusRtuServer(self.oven, self.oven_pty),
             ScpiSerialServer(self.dmm, self.dmm_pty),
@@ -123,6 +134,13 @@ class SimBench:
         self.dmm_tcp: ScpiTcpServer | None = ScpiTcpServer(self.dmm) if tcp else None
         if self.dmm_tcp is not None:
             self._servers.append(self.dmm_tcp)
+        self.espec: EspecP300 | None = None
+        self.chamber_tcp: ScpiTcpServer | None = None
+        if chamber_model == "P300":
+            hooks = ChamberHooks(self._chamber_c, self._set_setpoint, ambient_c)
+            self.espec = EspecP300(hooks, setpoint_c=float(self.physics.setpoint_c))
+            self.chamber_tcp = ScpiTcpServer(self.espec, eol=b"\r\n")
+            self._servers.append(self.chamber_tcp)
         self._events: list[tuple[float, int, str, FaultEvent]] = []
         self._tie = itertools.count()
         for ev in self.faults.events:  # t_s None here means: at the first tick
@@ -174,6 +192,11 @@ class SimBench:
         """VISA resource of the multimeter's LAN socket (None without ``tcp``)."""
         return None if self.dmm_tcp is None else self.dmm_tcp.resource
 
+    @property
+    def chamber_tcp_resource(self) -> str | None:
+        """VISA resource of the ESPEC chamber's socket (None unless ``chamber_model="P300"``)."""
+        return None if self.chamber_tcp is None else self.chamber_tcp.resource
+
     def resources(self) -> dict[str, Any]:
         """Everything a bench configuration needs to reach the simulated instruments."""
         return {
@@ -181,6 +204,7 @@ class SimBench:
             "dmm_serial_resource": self.dmm_serial_resource,
             "dmm_tcp_resource": self.dmm_tcp_resource,
             "oven_port": self.oven_port,
+            "chamber_tcp_resource": self.chamber_tcp_resource,
             "adc_port": self.adc_port,
             "adc_rate_hz": self.rate_hz,
             "samples_per_frame": self.samples_per_frame,

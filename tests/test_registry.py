@@ -1,0 +1,99 @@
+"""The driver registry, the role tables of BENCH.toml and the one error vocabulary."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gyrolab.acquisition import registry
+from gyrolab.acquisition.bench_config import (
+    MultimeterConfig,
+    OvenConfig,
+    bench_from_dict,
+    load_bench,
+)
+from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.acquisition.roles import InstrumentFault, is_transient
+from gyrolab.errors import InputError
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_builtin_drivers_registered_per_role() -> None:
+    assert [s.name for s in registry.drivers("rate_stream")] == ["gyroadc"]
+    for role, name in registry.DEFAULT_DRIVER.items():
+        spec = registry.get(name, role)
+        # Every role config has what the runner polls with and what the loader checks.
+        for key in ("driver", "period_s" if role != "rate_stream" else "block_s", "serial"):
+            assert hasattr(spec.config(), key)
+        assert hasattr(spec.config(), spec.address_key)
+    with pytest.raises(KeyError, match="registered: agilent34401a"):
+        registry.get("watlowf4", "thermometer")
+
+
+def test_new_and_old_table_names_give_the_same_bench() -> None:
+    old = bench_from_dict({"multimeter": {"nplc": 1.0}, "oven": {"slave_address": 3}}, "old")
+    new = bench_from_dict(
+        {
+            "thermometer": {"driver": "agilent34401a", "nplc": 1.0},
+            "chamber": {"driver": "watlowf4", "slave_address": 3},
+        },
+        "new",
+    )
+    assert {**old.to_dict(), "name": ""} == {**new.to_dict(), "name": ""}
+    assert isinstance(new.multimeter, MultimeterConfig) and new.multimeter.nplc == 1.0
+    assert isinstance(new.oven, OvenConfig) and new.oven.slave_address == 3
+
+
+@pytest.mark.parametrize(
+    ("d", "match"),
+    [
+        ({"thermometer": {"driver": "dmm9999"}}, r"\[thermometer\] driver = 'dmm9999'"),
+        ({"chamber": {"driver": "agilent34401a"}}, "no chamber driver 'agilent34401a'"),
+        ({"thermometer": {"nplcc": 1}}, r"\[thermometer\]: unknown key\(s\) \['nplcc'\]"),
+        ({"thermometer": {}, "multimeter": {}}, "same role"),
+    ],
+)
+def test_bad_role_tables_are_one_clear_error(d: dict, match: str) -> None:
+    with pytest.raises(InputError, match=match):
+        bench_from_dict(d, "b.toml")
+
+
+def test_example_bench_names_its_drivers() -> None:
+    cfg = load_bench(REPO / "examples" / "lab.toml")
+    assert (cfg.multimeter.driver, cfg.oven.driver, cfg.adc.driver) == (
+        "agilent34401a",
+        "watlowf4",
+        "gyroadc",
+    )
+
+
+def test_one_error_vocabulary() -> None:
+    # A failed exchange is retried; a refused setting, a fault or a bug never is.
+    assert is_transient(InstrumentError("x", "no reply"))
+    assert is_transient(InstrumentTimeout("x", "silent"))
+    assert is_transient(OSError("EIO"))
+    assert not is_transient(LimitError("x", "setpoint 90 °C outside [-45, 70]"))
+    assert not is_transient(InstrumentFault("sensor fault"))
+    assert not is_transient(TypeError("bug"))
+
+
+def test_driver_option_errors_are_one_line(tmp_path: Path, capsys) -> None:
+    from gyrolab.cli import main
+
+    out = tmp_path / "x.mcap"
+    assert main(["acquire", "--bench", "sim", "--driver", "dmm9999", "--out", str(out)]) == 2
+    assert "--driver dmm9999: no such driver" in capsys.readouterr().err
+    lab = str(REPO / "examples" / "lab.toml")
+    assert main(["acquire", "--bench", lab, "--driver", "espec", "--out", str(out)]) == 2
+    assert "--driver applies to --bench sim only" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_new_drivers_registered_with_simulated_back_ends() -> None:
+    names = [s.name for s in registry.drivers("thermometer")]
+    assert names == ["agilent34401a", "keysight34465a"]
+    assert [s.name for s in registry.drivers("chamber")] == ["espec", "watlowf4"]
+    for s in registry.drivers():
+        assert s.sim_backend and s.sim_address, s.name

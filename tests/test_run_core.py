@@ -1,0 +1,178 @@
+"""The run engine without threads or pseudo-terminals (``Acquisition(threaded=False)``):
+scripted instruments that implement the roles and a fake clock drive it through the soak,
+a step, a transient fault, the PT100 and communication watchdogs and the safe state,
+deterministically, in well under a second of wall time each."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.gyro_adc import AdcBlock, AdcRead
+from gyrolab.acquisition.instrument import InstrumentTimeout
+from gyrolab.acquisition.roles import ChamberReading, ThermometerReading
+from gyrolab.acquisition.runner import Acquisition
+from gyrolab.profile import Profile, Step
+from gyrolab.pt100 import cvd_resistance
+from gyrolab.recording import RecordingWriter, read_recording
+
+
+class FakeClock:
+    """Run time that moves only when someone sleeps on it."""
+
+    speed = 1.0
+
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        self.t += max(dt, 0.0)
+
+
+class Chamber:
+    """Air follows the setpoint with a 30 s time constant; silent from ``silent_from``."""
+
+    name = "oven"
+
+    def __init__(self, clock: FakeClock, silent_from: float = math.inf) -> None:
+        self.clock, self.silent_from = clock, silent_from
+        self.sp, self.air, self.t_last = 25.0, 25.0, clock.now()
+        self.commands: list[tuple[float, float]] = []
+
+    def _advance(self) -> None:
+        dt = self.clock.now() - self.t_last
+        self.air += (self.sp - self.air) * (1.0 - math.exp(-dt / 30.0))
+        self.t_last = self.clock.now()
+        if self.clock.now() - 1000.0 >= self.silent_from:
+            raise InstrumentTimeout("chamber", "no reply")
+
+    def set_setpoint(self, c: float) -> float:
+        self._advance()
+        self.sp = c
+        self.commands.append((round(self.clock.now() - 1000.0, 3), c))
+        return c
+
+    def read(self) -> ChamberReading:
+        self._advance()
+        return ChamberReading(self.sp, self.air)
+
+    def reports(self) -> list:
+        return []
+
+
+class Thermometer:
+    """The gyro case: the chamber air; scripted (start, end, kind) faults in run seconds:
+    ``timeout`` (a failed reading) or ``hot`` (the case reads 90 °C)."""
+
+    name = "multimeter"
+
+    def __init__(self, clock: FakeClock, chamber: Chamber, faults=()) -> None:
+        self.clock, self.chamber, self.faults = clock, chamber, list(faults)
+
+    def read(self) -> ThermometerReading:
+        t = self.clock.now() - 1000.0
+        c = self.chamber.air
+        for a, b, kind in self.faults:
+            if a <= t < b:
+                if kind == "timeout":
+                    raise InstrumentTimeout("thermometer", "no reply")
+                c = 90.0
+        return ThermometerReading(float(cvd_resistance(c)), c)
+
+    def reports(self) -> list:
+        return []
+
+
+class Stream:
+    """A gap-free 100 Hz stream up to the clock's present."""
+
+    name = "adc"
+
+    def __init__(self, clock: FakeClock, rate_hz: float = 100.0) -> None:
+        self.clock, self.rate, self.next = clock, rate_hz, 0
+
+    def read(self, timeout_s: float) -> AdcRead:
+        n = int((self.clock.now() - 1000.0) * self.rate) - self.next
+        if n <= 0:
+            return AdcRead()
+        counts = np.arange(self.next, self.next + n, dtype=np.int32) % 1000
+        blk = AdcBlock(
+            self.next // 10, self.next, 1000.0 + self.next / self.rate, 1 / self.rate, counts
+        )
+        self.next += n
+        return AdcRead(blocks=[blk])
+
+    def counters(self) -> dict[str, int]:
+        return {"frames_ok": self.next // 10, "frames_bad": 0, "frames_lost": 0}
+
+
+def _run(tmp_path: Path, *, therm_faults=(), silent_from=math.inf, comm_timeout_s=20.0):
+    clock = FakeClock()
+    chamber = Chamber(clock, silent_from)
+    prof = Profile("t", (Step(25.0, 60.0, "soak"), Step(40.0, 120.0)))
+    out = tmp_path / "run.mcap"
+    w = RecordingWriter(out, start_time_ns=0, run={}, bench={})
+    acq = Acquisition(
+        profile=prof,
+        writer=w,
+        clock=clock,
+        thermometer=Thermometer(clock, chamber, therm_faults),
+        oven=chamber,
+        gyro=Stream(clock),
+        adc=AdcConfig(sample_rate_hz=100.0),
+        limits=Limits(comm_timeout_s=comm_timeout_s, pt100_max_c=75.0, watchdog_samples=3),
+        safe_state=SafeState(setpoint_c=25.0),
+        pt100_period_s=1.0,
+        oven_period_s=2.0,
+        threaded=False,
+        turn_s=0.125,  # exact in binary: the scripted times are hit exactly
+    )
+    res = acq.run()
+    w.close()
+    return res, read_recording(out), chamber
+
+
+def test_soak_step_and_safe_state(tmp_path: Path) -> None:
+    res, rec, chamber = _run(tmp_path)
+    assert res.outcome == "completed" and res.safe_state_ok
+    assert res.t_end == pytest.approx(180.0, abs=1e-9)
+    assert res.samples == pytest.approx(18000, abs=20) and res.gaps == 0
+    starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
+    assert starts == pytest.approx([0.0, 60.0], abs=1e-6)  # on the run clock exactly
+    assert [c for _, c in chamber.commands] == [25.0, 40.0, 25.0]  # soak, step, safe
+    assert [e["event"] for e in rec.events][-2:] == ["run_ended", "safe_state"]
+    assert rec.pt100_c.size == pytest.approx(180, abs=2)  # one reading per second
+
+
+def test_transient_thermometer_fault_recovers(tmp_path: Path) -> None:
+    res, rec, _ = _run(tmp_path, therm_faults=[(30.0, 40.0, "timeout")])
+    assert res.outcome == "completed" and res.faults == 1
+    (rec_log,) = [e for e in rec.logs if e["kind"] == "recovery"]
+    assert rec_log["source"] == "multimeter" and rec_log["data"]["failed_attempts"] == 10
+
+
+def test_over_temperature_watchdog_ends_in_the_safe_state(tmp_path: Path) -> None:
+    res, rec, chamber = _run(tmp_path, therm_faults=[(100.0, 1e9, "hot")])
+    assert res.outcome == "fault" and "over-temperature" in res.reason
+    # The third consecutive hot reading (100, 101, 102 s) trips it.
+    assert res.t_end == pytest.approx(102.0, abs=1e-9)
+    assert chamber.commands[-1][1] == 25.0 and res.safe_state_ok
+
+
+def test_lost_chamber_ends_the_run_and_the_safe_state_is_reported_failed(tmp_path: Path) -> None:
+    res, rec, chamber = _run(tmp_path, silent_from=50.0, comm_timeout_s=20.0)
+    assert res.outcome == "fault" and "lost communication with oven" in res.reason
+    # Last good exchange at 48 s (2 s polls), lost 20 s later (the next 0.125 s turn).
+    (ab,) = [e for e in rec.events if e["event"] == "aborted"]
+    assert ab["t"] == pytest.approx(68.125, abs=1e-9)
+    # Three safe-state attempts, 0.2 s apart, all unanswered.
+    assert not res.safe_state_ok and res.t_end == pytest.approx(68.125 + 0.6, abs=1e-9)
+    (ev,) = [e for e in rec.events if e["event"] == "safe_state"]
+    assert ev["detail"].startswith("FAILED")
