@@ -30,6 +30,7 @@ HANDLERS: dict[str, str] = {
     "demo": "gyrolab.report.demo:demo",
     "convert": "gyrolab.convert:convert",
     "export": "gyrolab.export.commands:export",
+    "batch": "gyrolab.batch:batch",
 }
 
 
@@ -196,6 +197,18 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
     dm.add_argument("--seed", type=int, default=1)
     dm.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    b = cmd("batch", "run compensate, report or discrepancy on many recordings (Dask)")
+    b.add_argument("task", choices=["compensate", "report", "discrepancy"])
+    b.add_argument("runs", nargs="+", metavar="RUNS", help="recordings or quoted glob patterns")
+    b.add_argument("--out", required=True, help="output DIR (one directory per recording)")
+    b.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: local)")
+    b.add_argument("--workers", type=int, help="local cluster size (default: CPUs)")
+    b.add_argument("--threads", type=int, default=1, help="threads per item (default 1)")
+    b.add_argument("--seed", type=int, default=0, help="compensate: seed (default 0)")
+    b.add_argument("--models", metavar="MODELS_DIR", help="report: MODELS_DIR/<stem> per run")
+    b.add_argument("--sim-model", metavar="SIM_MODEL.toml", help="discrepancy: start model")
+    b.add_argument("--force", action="store_true", help="redo items whose outputs exist")
     return p
 
 

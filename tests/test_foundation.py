@@ -30,6 +30,7 @@ def test_cli_lists_every_design_subcommand() -> None:
         "demo",
         "convert",  # issue 16
         "export",  # issue 15: firmware and tool formats
+        "batch",
     }
 
 

@@ -132,7 +132,9 @@ def compensate(args: argparse.Namespace) -> int:
     inputs = (args.run, args.validate, getattr(args, "config", None))
     check_output(args.out, args.force, inputs=inputs, kind="dir")
     cfg, seed = resolve_config(
-        getattr(args, "config", None), pl.DEFAULT_CONFIG, getattr(args, "seed", None)
+        getattr(args, "config", None),
+        getattr(args, "pipeline_config", None) or pl.DEFAULT_CONFIG,  # batch passes its own
+        getattr(args, "seed", None),
     )
     from gyrolab.logs import log_options
 

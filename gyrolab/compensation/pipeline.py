@@ -820,7 +820,6 @@ def save_model(model: CompensationModel, directory: str) -> None:
             "mixed": None if model.flp_mixed is None else model.flp_mixed.to_dict(),
             "stream": None if model.flp_stream is None else model.flp_stream.to_dict(),
         },
-        "timing_s": model.timing_s,
         "causal_model": cmeta,
         "streaming": {
             "temperature": "zero-order hold of the last PT100 reading",

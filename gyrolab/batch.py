@@ -1,0 +1,334 @@
+"""``gyrolab batch compensate|report|discrepancy 'runs/*.mcap' --out DIR`` on Dask.
+
+One item per input recording, each written to its own output directory ``DIR/<stem>``
+by the same code as the single-run command (``gyrolab compensate RUN --out DIR/<stem>``
+and so on), executed on :mod:`dask.distributed`:
+
+* by default a :class:`~distributed.LocalCluster` of ``--workers`` processes (default: the
+  number of CPUs, at most one per item), one thread each — no set-up;
+* with ``--scheduler ADDRESS`` any running Dask scheduler (a cluster); its workers need
+  gyrolab installed and must see the input and output paths (a shared file system).
+
+Each item runs with its numerical libraries bounded to ``threads`` threads (torch, numba,
+OpenMP/BLAS; default 1), so a worker's memory and CPU are those of one single-run command,
+and results do not depend on how many workers there are: the same inputs and seeds give
+the same bytes in ``model.json``.
+
+Resumable and idempotent: an item whose output directory exists and holds the
+:data:`gyrolab.outputs.MARKER` of the same command is complete (outputs are atomic, so a
+directory with the marker is whole) and is skipped — unless ``--force``. A failed item is
+reported as one line naming the file and the problem; the others go on. Exit code: 0 when
+every item is done or skipped, 1 when any item failed, 2 for bad arguments (nothing run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import glob
+import io
+import json
+import os
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gyrolab.errors import GyrolabError, InputError
+from gyrolab.outputs import MARKER
+from gyrolab.progress import progress
+
+TASKS = ("compensate", "report", "discrepancy")
+THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+@dataclass
+class ItemResult:
+    """What became of one input: ``status`` is ``done``, ``skipped`` or ``failed``."""
+
+    run: str
+    out: str
+    status: str
+    seconds: float = 0.0
+    error: str = ""
+    peak_rss_mib: float = 0.0  # the worker process's peak resident set so far
+    worker: str = ""
+
+
+@dataclass
+class BatchOptions:
+    """Per-item settings shared by every item of a batch (picklable: sent to workers)."""
+
+    seed: int = 0  # compensate
+    models: str | None = None  # report: MODELS/<stem> is the model of each run
+    sim_model: str | None = None  # discrepancy: starting SIM_MODEL.toml
+    force: bool = False
+    threads: int = 1
+    config: Any = None  # compensate: a PipelineConfig (None: the command's default)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def expand_inputs(patterns: Iterable[str]) -> list[Path]:
+    """Glob each pattern (sorted); a pattern that matches nothing is an error."""
+    runs: list[Path] = []
+    for pat in patterns:
+        hits = sorted(glob.glob(pat)) if glob.has_magic(pat) else [pat]
+        hits = [h for h in hits if Path(h).is_file()]
+        if not hits:
+            raise InputError(
+                pat, "no such recording" if not glob.has_magic(pat) else "pattern matches no file"
+            )
+        runs.extend(Path(h) for h in hits)
+    seen: set[Path] = set()
+    unique = []
+    for r in runs:
+        if r.resolve() not in seen:
+            seen.add(r.resolve())
+            unique.append(r)
+    return unique
+
+
+def plan(runs: Sequence[Path], out_dir: Path) -> list[tuple[Path, Path]]:
+    """``(run, out_dir/<stem>)`` per run; two runs with one stem are an error."""
+    by_stem: dict[str, Path] = {}
+    for r in runs:
+        if r.stem in by_stem:
+            raise InputError(
+                r,
+                f"has the same name as {by_stem[r.stem]}: both would write "
+                f"{out_dir / r.stem}; batch them separately",
+            )
+        by_stem[r.stem] = r
+    return [(r, out_dir / r.stem) for r in runs]
+
+
+def is_complete(out: Path, task: str) -> bool:
+    """True when ``out`` is a whole output of ``gyrolab <task>`` (its marker says so)."""
+    try:
+        info = json.loads((out / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(info, dict) and info.get("command") == task
+
+
+def bound_threads(n: int) -> None:
+    """Limit this process's numerical libraries to ``n`` threads (torch, numba)."""
+    import torch
+
+    torch.set_num_threads(n)
+    try:
+        import numba
+
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    except ImportError:  # pragma: no cover - numba is a dependency
+        pass
+
+
+def _peak_rss_mib() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
+
+
+def _namespace(task: str, run: Path, out: Path, opt: BatchOptions) -> argparse.Namespace:
+    if task == "compensate":
+        return argparse.Namespace(
+            run=str(run),
+            out=str(out),
+            validate=None,
+            seed=opt.seed,
+            force=opt.force,
+            config=None,  # no CONFIG.toml: the pipeline configuration itself
+            pipeline_config=opt.config,
+            **opt.extra,
+        )
+    if task == "report":
+        model = str(Path(opt.models) / run.stem) if opt.models else None
+        return argparse.Namespace(
+            run=str(run), out=str(out), model=model, force=opt.force, **opt.extra
+        )
+    return argparse.Namespace(
+        run=str(run), out=str(out), model=opt.sim_model, force=opt.force, **opt.extra
+    )
+
+
+def run_item(task: str, run: str | Path, out: str | Path, opt: BatchOptions) -> ItemResult:
+    """Run one item (in a worker): the single-run command's handler, output silenced.
+
+    Never raises for a problem with the item: it comes back as ``status="failed"`` with
+    one line naming the file and the problem."""
+    from gyrolab.cli import HANDLERS
+    from gyrolab.outputs import command_inputs
+
+    run, out = Path(run), Path(out)
+    t0 = time.perf_counter()
+    res = ItemResult(str(run), str(out), "done")
+    try:
+        from distributed import get_worker
+
+        res.worker = get_worker().address
+    except (ImportError, ValueError):
+        res.worker = "local"
+    if not opt.force and is_complete(out, task):
+        res.status = "skipped"
+        return res
+    bound_threads(opt.threads)
+    module, func = HANDLERS[task].split(":")
+    handler = getattr(__import__(module, fromlist=[func]), func)
+    args = _namespace(task, run, out, opt)
+    sink = io.StringIO()
+    try:
+        inputs = [v for v in (args.run, getattr(args, "model", None)) if v]
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            with command_inputs(inputs):
+                handler(args)
+    except GyrolabError as e:
+        res.status, res.error = "failed", str(e)
+    except Exception as e:  # a bug or a numerical failure: still one line, the rest go on
+        first = (str(e).strip().splitlines() or [""])[0]
+        res.status, res.error = "failed", f"{run}: {type(e).__name__}: {first}"
+    res.seconds = time.perf_counter() - t0
+    res.peak_rss_mib = _peak_rss_mib()
+    return res
+
+
+@contextlib.contextmanager
+def _client(scheduler: str | None, workers: int, threads: int):  # type: ignore[no-untyped-def]
+    """A Dask client: of ``scheduler`` if given, else of a fresh LocalCluster."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        with Client(scheduler) as client:
+            yield client
+        return
+    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
+    env.update({k: threads for k in THREAD_ENV})
+    env["GYROLAB_NO_PROGRESS"] = "1"
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        )
+    try:
+        with Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+def run_batch(
+    task: str,
+    patterns: Iterable[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    options: BatchOptions | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> list[ItemResult]:
+    """Run ``task`` on every recording matched by ``patterns``; results in input order."""
+    if task not in TASKS:
+        raise GyrolabError(f"gyrolab batch: unknown task {task!r} (one of {', '.join(TASKS)})")
+    opt = options or BatchOptions()
+    out_root = Path(out_dir)
+    runs = expand_inputs(patterns)
+    items = plan(runs, out_root)
+    for run, _ in items:
+        if out_root.resolve() == run.resolve() or out_root.resolve() in run.resolve().parents:
+            raise InputError(out_root, f"contains one of the inputs ({run}); choose another --out")
+    if out_root.exists() and not out_root.is_dir():
+        raise InputError(out_root, "is not a directory")
+    if not out_root.parent.is_dir():
+        raise InputError(out_root, f"directory {out_root.parent} does not exist")
+    out_root.mkdir(exist_ok=True)  # mode 0777 & ~umask
+
+    results: dict[int, ItemResult] = {}
+    todo = []
+    for i, (run, out) in enumerate(items):
+        if not opt.force and is_complete(out, task):
+            results[i] = ItemResult(str(run), str(out), "skipped")
+        else:
+            todo.append(i)
+    bar = progress(total=len(items), desc=f"batch {task}", unit="run")
+    bar.update(len(items) - len(todo))
+    try:
+        if todo:
+            from distributed import as_completed
+
+            n = workers or min(os.cpu_count() or 1, len(todo))
+            with _client(scheduler, max(1, n), opt.threads) as client:
+                futs = {
+                    client.submit(run_item, task, items[i][0], items[i][1], opt, pure=False): i
+                    for i in todo
+                }
+                for fut in as_completed(list(futs)):
+                    i = futs[fut]
+                    try:
+                        r = fut.result()
+                    except Exception as e:  # the worker died (memory, signal): item failed
+                        run, out = items[i]
+                        r = ItemResult(
+                            str(run),
+                            str(out),
+                            "failed",
+                            error=f"{run}: worker lost ({type(e).__name__}: {e})",
+                        )
+                    results[i] = r
+                    if r.status == "failed":
+                        bar.write(f"gyrolab: batch: failed: {r.error}", file=sys.stderr)
+                    bar.update(1)
+    finally:
+        bar.close()
+    return [results[i] for i in range(len(items))]
+
+
+def summary(results: Sequence[ItemResult]) -> str:
+    """One line per item and a total (what ``gyrolab batch`` prints on stdout)."""
+    lines = []
+    for r in results:
+        extra = f"{r.seconds:7.1f} s  {r.peak_rss_mib:6.0f} MiB" if r.status == "done" else ""
+        lines.append(f"{r.status:<8} {r.run} -> {r.out}  {extra}".rstrip())
+    counts = {s: sum(r.status == s for r in results) for s in ("done", "skipped", "failed")}
+    lines.append(", ".join(f"{v} {k}" for k, v in counts.items()))
+    return "\n".join(lines)
+
+
+def batch(args: argparse.Namespace) -> int:
+    """The ``gyrolab batch`` handler (module docstring)."""
+    if args.scheduler and args.workers:
+        raise GyrolabError(
+            "gyrolab batch: --workers sizes the local cluster; with "
+            "--scheduler the cluster's own workers run the items"
+        )
+    if args.workers is not None and args.workers < 1:
+        raise GyrolabError("gyrolab batch: --workers must be at least 1")
+    if args.threads < 1:
+        raise GyrolabError("gyrolab batch: --threads must be at least 1")
+    opt = BatchOptions(
+        seed=args.seed,
+        models=args.models,
+        sim_model=args.sim_model,
+        force=args.force,
+        threads=args.threads,
+    )
+    if opt.models and args.task != "report":
+        raise GyrolabError("gyrolab batch: --models is for `batch report`")
+    if opt.sim_model and args.task != "discrepancy":
+        raise GyrolabError("gyrolab batch: --sim-model is for `batch discrepancy`")
+    results = run_batch(
+        args.task,
+        args.runs,
+        args.out,
+        options=opt,
+        scheduler=args.scheduler,
+        workers=args.workers,
+    )
+    print(summary(results))
+    return 1 if any(r.status == "failed" for r in results) else 0

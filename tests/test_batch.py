@@ -1,0 +1,133 @@
+"""`gyrolab batch` on dask.distributed: same bytes as a serial loop, failures isolated,
+reruns skip complete items."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+from test_pipeline import SMALL, write_run
+
+from gyrolab import batch as B
+from gyrolab.cli import main
+from gyrolab.compensation import pipeline as pl
+from gyrolab.errors import InputError
+from gyrolab.outputs import MARKER
+
+torch.set_num_threads(1)
+
+CLI_CONFIG = replace(SMALL, vmd_K=None, vmd_alpha=None, gpso_population=4, gpso_generations=1)
+GOOD = ("a", "b", "c")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("batch")
+    for k, name in enumerate(GOOD):
+        write_run(d / f"{name}.mcap", 20 + k, hours=0.5, heating=k == 1)
+    (d / "bad.mcap").write_bytes(b"\x89MCAP0\r\n this is not a recording")
+    return d
+
+
+@pytest.fixture(scope="module")
+def serial(runs: Path) -> Path:
+    """The reference: `gyrolab compensate` once per run, in this process."""
+    out = runs / "serial"
+    out.mkdir()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+        B.bound_threads(1)
+        for name in GOOD:
+            assert main(["compensate", str(runs / f"{name}.mcap"), "--out", str(out / name)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def batched(runs: Path) -> tuple[Path, list[B.ItemResult]]:
+    """The batch on a LocalCluster of 2 worker processes, the bad recording among them."""
+    out = runs / "batched"
+    res = B.run_batch(
+        "compensate",
+        [str(runs / "*.mcap")],
+        out,
+        options=B.BatchOptions(config=CLI_CONFIG),
+        workers=2,
+    )
+    return out, res
+
+
+def test_batch_gives_the_serial_bytes_and_isolates_a_failure(
+    runs: Path, serial: Path, batched: tuple[Path, list[B.ItemResult]]
+) -> None:
+    out, res = batched
+    status = {Path(r.run).stem: r for r in res}
+    assert [Path(r.run).stem for r in res] == ["a", "b", "bad", "c"]  # input order
+    assert status["bad"].status == "failed"
+    assert status["bad"].error.startswith(str(runs / "bad.mcap"))
+    assert "\n" not in status["bad"].error
+    assert not (out / "bad").exists()
+    for name in GOOD:
+        assert status[name].status == "done", status[name].error
+        assert status[name].worker not in ("", "local")  # ran on a Dask worker
+        assert (out / name / "model.json").read_bytes() == (
+            serial / name / "model.json"
+        ).read_bytes()
+        assert json.loads((out / name / MARKER).read_text())["command"] == "compensate"
+    # two workers really shared the work
+    assert len({status[n].worker for n in (*GOOD, "bad")}) == 2
+
+
+def test_rerun_does_no_work(
+    runs: Path,
+    batched: tuple[Path, list[B.ItemResult]],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    out, _ = batched
+    before = {n: (out / n / "model.json").stat().st_mtime_ns for n in GOOD}
+
+    def no_cluster(*a: object, **k: object) -> None:
+        raise AssertionError("a rerun of complete items must not start a cluster")
+
+    monkeypatch.setattr(B, "_client", no_cluster)
+    rc = main(["batch", "compensate", str(runs / "[abc].mcap"), "--out", str(out)])
+    assert rc == 0
+    assert capsys.readouterr().out.splitlines()[-1] == "0 done, 3 skipped, 0 failed"
+    assert before == {n: (out / n / "model.json").stat().st_mtime_ns for n in GOOD}
+
+
+def test_cli_exit_code_and_one_line_per_failure(
+    runs: Path, batched: tuple[Path, list[B.ItemResult]], capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, _ = batched
+    rc = main(["batch", "compensate", str(runs / "*.mcap"), "--out", str(out), "--workers", "1"])
+    cap = capsys.readouterr()
+    assert rc == 1  # the bad recording failed again; the complete ones were skipped
+    assert cap.out.splitlines()[-1] == "0 done, 3 skipped, 1 failed"
+    fails = [ln for ln in cap.err.splitlines() if "failed:" in ln]
+    assert len(fails) == 1 and str(runs / "bad.mcap") in fails[0]
+
+
+def test_completeness_is_the_marker_of_the_same_command(tmp_path: Path) -> None:
+    d = tmp_path / "x"
+    d.mkdir()
+    assert not B.is_complete(d, "compensate")  # no marker: e.g. someone else's directory
+    (d / MARKER).write_text(json.dumps({"command": "report"}))
+    assert not B.is_complete(d, "compensate") and B.is_complete(d, "report")
+
+
+def test_bad_batch_arguments_are_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "a").mkdir()
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir(exist_ok=True)
+        (tmp_path / sub / "run.mcap").write_bytes(b"")
+    with pytest.raises(InputError, match="same name"):
+        B.plan(B.expand_inputs([str(tmp_path / "*" / "run.mcap")]), tmp_path / "out")
+    assert (
+        main(["batch", "report", str(tmp_path / "none*.mcap"), "--out", str(tmp_path / "o")]) == 2
+    )
+    assert "matches no file" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
