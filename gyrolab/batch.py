@@ -51,6 +51,7 @@ class ItemResult:
     run: str
     out: str
     status: str
+    unit: str | None = None
     seconds: float = 0.0
     error: str = ""
     peak_rss_mib: float = 0.0  # the worker process's peak resident set so far
@@ -64,6 +65,7 @@ class BatchOptions:
     seed: int = 0  # compensate
     models: str | None = None  # report: MODELS/<stem> is the model of each run
     sim_model: str | None = None  # discrepancy: starting SIM_MODEL.toml
+    validate: str | None = None  # compensate: held-out run (the same unit's topics)
     force: bool = False
     threads: int = 1
     config: Any = None  # compensate: a PipelineConfig (None: the command's default)
@@ -90,9 +92,22 @@ def expand_inputs(patterns: Iterable[str]) -> list[Path]:
     return unique
 
 
-def plan(runs: Sequence[Path], out_dir: Path) -> list[tuple[Path, Path]]:
-    """``(run, out_dir/<stem>)`` per run; two runs with one stem are an error."""
+@dataclass(frozen=True)
+class Item:
+    """One unit of work: a recording (and the unit of a multi-unit one) → an output dir."""
+
+    run: Path
+    out: Path
+    unit: str | None = None
+
+
+def plan(runs: Sequence[Path], out_dir: Path) -> list[Item]:
+    """``out_dir/<stem>`` per single-unit run, ``out_dir/<stem>/<serial>`` per unit of a
+    multi-unit run; two runs with one stem are an error."""
+    from gyrolab.recording import list_units
+
     by_stem: dict[str, Path] = {}
+    items = []
     for r in runs:
         if r.stem in by_stem:
             raise InputError(
@@ -101,7 +116,15 @@ def plan(runs: Sequence[Path], out_dir: Path) -> list[tuple[Path, Path]]:
                 f"{out_dir / r.stem}; batch them separately",
             )
         by_stem[r.stem] = r
-    return [(r, out_dir / r.stem) for r in runs]
+        try:
+            units = list_units(r)
+        except GyrolabError:
+            units = []  # a damaged file: its item fails on a worker and is reported there
+        if units:
+            items.extend(Item(r, out_dir / r.stem / u, u) for u in units)
+        else:
+            items.append(Item(r, out_dir / r.stem))
+    return items
 
 
 def is_complete(out: Path, task: str) -> bool:
@@ -132,29 +155,27 @@ def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
-def _namespace(task: str, run: Path, out: Path, opt: BatchOptions) -> argparse.Namespace:
+def _namespace(task: str, item: Item, opt: BatchOptions) -> argparse.Namespace:
+    common = {"run": str(item.run), "out": str(item.out), "force": opt.force, "unit": item.unit}
     if task == "compensate":
         return argparse.Namespace(
-            run=str(run),
-            out=str(out),
-            validate=None,
+            **common,
+            validate=opt.validate,
             seed=opt.seed,
-            force=opt.force,
             config=None,  # no CONFIG.toml: the pipeline configuration itself
             pipeline_config=opt.config,
             **opt.extra,
         )
     if task == "report":
-        model = str(Path(opt.models) / run.stem) if opt.models else None
-        return argparse.Namespace(
-            run=str(run), out=str(out), model=model, force=opt.force, **opt.extra
-        )
-    return argparse.Namespace(
-        run=str(run), out=str(out), model=opt.sim_model, force=opt.force, **opt.extra
-    )
+        model = None
+        if opt.models:
+            model = Path(opt.models) / item.run.stem
+            model = str(model / item.unit if item.unit else model)
+        return argparse.Namespace(**common, model=model, **opt.extra)
+    return argparse.Namespace(**common, model=opt.sim_model, **opt.extra)
 
 
-def run_item(task: str, run: str | Path, out: str | Path, opt: BatchOptions) -> ItemResult:
+def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
     """Run one item (in a worker): the single-run command's handler, output silenced.
 
     Never raises for a problem with the item: it comes back as ``status="failed"`` with
@@ -162,9 +183,9 @@ def run_item(task: str, run: str | Path, out: str | Path, opt: BatchOptions) -> 
     from gyrolab.cli import HANDLERS
     from gyrolab.outputs import command_inputs
 
-    run, out = Path(run), Path(out)
+    run, out = item.run, item.out
     t0 = time.perf_counter()
-    res = ItemResult(str(run), str(out), "done")
+    res = ItemResult(str(run), str(out), "done", unit=item.unit)
     try:
         from distributed import get_worker
 
@@ -177,10 +198,10 @@ def run_item(task: str, run: str | Path, out: str | Path, opt: BatchOptions) -> 
     bound_threads(opt.threads)
     module, func = HANDLERS[task].split(":")
     handler = getattr(__import__(module, fromlist=[func]), func)
-    args = _namespace(task, run, out, opt)
+    args = _namespace(task, item, opt)
     sink = io.StringIO()
     try:
-        inputs = [v for v in (args.run, getattr(args, "model", None)) if v]
+        inputs = [v for v in (args.run, args.model if task != "compensate" else args.validate) if v]
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
             with command_inputs(inputs):
                 handler(args)
@@ -189,6 +210,8 @@ def run_item(task: str, run: str | Path, out: str | Path, opt: BatchOptions) -> 
     except Exception as e:  # a bug or a numerical failure: still one line, the rest go on
         first = (str(e).strip().splitlines() or [""])[0]
         res.status, res.error = "failed", f"{run}: {type(e).__name__}: {first}"
+    if res.error and item.unit:
+        res.error += f" (unit {item.unit})"
     res.seconds = time.perf_counter() - t0
     res.peak_rss_mib = _peak_rss_mib()
     return res
@@ -233,57 +256,79 @@ def run_batch(
     scheduler: str | None = None,
     workers: int | None = None,
 ) -> list[ItemResult]:
-    """Run ``task`` on every recording matched by ``patterns``; results in input order."""
+    """Run ``task`` on every recording matched by ``patterns`` (every unit of a multi-unit
+    one); results in input order."""
     if task not in TASKS:
         raise GyrolabError(f"gyrolab batch: unknown task {task!r} (one of {', '.join(TASKS)})")
-    opt = options or BatchOptions()
     out_root = Path(out_dir)
     runs = expand_inputs(patterns)
-    items = plan(runs, out_root)
-    for run, _ in items:
+    for run in runs:
         if out_root.resolve() == run.resolve() or out_root.resolve() in run.resolve().parents:
             raise InputError(out_root, f"contains one of the inputs ({run}); choose another --out")
     if out_root.exists() and not out_root.is_dir():
         raise InputError(out_root, "is not a directory")
     if not out_root.parent.is_dir():
         raise InputError(out_root, f"directory {out_root.parent} does not exist")
+    items = plan(runs, out_root)
     out_root.mkdir(exist_ok=True)  # mode 0777 & ~umask
+    for it in items:
+        it.out.parent.mkdir(exist_ok=True)  # DIR/<stem> of a multi-unit run
+    return run_items(task, items, options, scheduler=scheduler, workers=workers)
 
+
+def run_items(
+    task: str,
+    items: Sequence[Item],
+    options: BatchOptions | None = None,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> list[ItemResult]:
+    """Run ``task`` on ``items`` (complete ones skipped) on Dask; results in item order.
+
+    ``workers=1`` without a scheduler runs the items one after the other in this process
+    (no cluster to start: what a one-core machine or a one-unit run wants)."""
+    opt = options or BatchOptions()
     results: dict[int, ItemResult] = {}
     todo = []
-    for i, (run, out) in enumerate(items):
-        if not opt.force and is_complete(out, task):
-            results[i] = ItemResult(str(run), str(out), "skipped")
+    for i, it in enumerate(items):
+        if not opt.force and is_complete(it.out, task):
+            results[i] = ItemResult(str(it.run), str(it.out), "skipped", unit=it.unit)
         else:
             todo.append(i)
-    bar = progress(total=len(items), desc=f"batch {task}", unit="run")
+    bar = progress(total=len(items), desc=f"{task}", unit="item")
     bar.update(len(items) - len(todo))
+
+    def done(i: int, r: ItemResult) -> None:
+        results[i] = r
+        if r.status == "failed":
+            bar.write(f"gyrolab: {task}: failed: {r.error}", file=sys.stderr)
+        bar.update(1)
+
     try:
-        if todo:
+        n = max(1, workers or min(os.cpu_count() or 1, len(todo)))
+        if todo and n == 1 and not scheduler:
+            for i in todo:
+                done(i, run_item(task, items[i], opt))
+        elif todo:
             from distributed import as_completed
 
-            n = workers or min(os.cpu_count() or 1, len(todo))
-            with _client(scheduler, max(1, n), opt.threads) as client:
-                futs = {
-                    client.submit(run_item, task, items[i][0], items[i][1], opt, pure=False): i
-                    for i in todo
-                }
+            with _client(scheduler, n, opt.threads) as client:
+                futs = {client.submit(run_item, task, items[i], opt, pure=False): i for i in todo}
                 for fut in as_completed(list(futs)):
                     i = futs[fut]
                     try:
                         r = fut.result()
                     except Exception as e:  # the worker died (memory, signal): item failed
-                        run, out = items[i]
+                        it = items[i]
                         r = ItemResult(
-                            str(run),
-                            str(out),
+                            str(it.run),
+                            str(it.out),
                             "failed",
-                            error=f"{run}: worker lost ({type(e).__name__}: {e})",
+                            unit=it.unit,
+                            error=f"{it.run}: worker lost ({type(e).__name__}: {e})",
                         )
-                    results[i] = r
-                    if r.status == "failed":
-                        bar.write(f"gyrolab: batch: failed: {r.error}", file=sys.stderr)
-                    bar.update(1)
+                    done(i, r)
     finally:
         bar.close()
     return [results[i] for i in range(len(items))]
@@ -294,7 +339,8 @@ def summary(results: Sequence[ItemResult]) -> str:
     lines = []
     for r in results:
         extra = f"{r.seconds:7.1f} s  {r.peak_rss_mib:6.0f} MiB" if r.status == "done" else ""
-        lines.append(f"{r.status:<8} {r.run} -> {r.out}  {extra}".rstrip())
+        name = f"{r.run} [{r.unit}]" if r.unit else r.run
+        lines.append(f"{r.status:<8} {name} -> {r.out}  {extra}".rstrip())
     counts = {s: sum(r.status == s for r in results) for s in ("done", "skipped", "failed")}
     lines.append(", ".join(f"{v} {k}" for k, v in counts.items()))
     return "\n".join(lines)

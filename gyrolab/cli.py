@@ -82,6 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rate", type=float, default=100.0, help="ADC sample rate, Hz (default 100)")
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument(
+        "--units",
+        type=int,
+        default=1,
+        help="units in the chamber, dispersed as a unit family (default 1: single-unit layout)",
+    )
+    s.add_argument(
         "--effect",
         action="append",
         default=[],
@@ -139,6 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--config", metavar="FILE.toml", help="model settings (keys: docs/compensation.md)"
     )
     _log_options(c)
+    c.add_argument("--unit", metavar="SERIAL", help="one unit of a multi-unit run (default: all)")
+    c.add_argument("--workers", type=int, help="multi-unit run: parallel fits (default: CPUs)")
     c.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     ap = cmd("apply", "apply a fitted model to a run and write the compensated recording")
@@ -153,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--spec", metavar="SPEC.toml", help="spec limits: per-line pass/fail, verdict")
     r.add_argument("--operator", help="operator for the sign-off (default: the recording's)")
     r.add_argument("--unit-serial", help="unit serial (default: the recording's)")
+    r.add_argument("--unit", metavar="SERIAL", help="the unit of a multi-unit run")
     r.add_argument("--out", required=True, help="output REPORT_DIR")
     _log_options(r)
     r.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -160,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = cmd("discrepancy", "find where the simulator and a recording disagree, and fix the model")
     d.add_argument("run", metavar="RUN.mcap")
     d.add_argument("--model", metavar="SIM_MODEL.toml", help="starting model (default nominal)")
+    d.add_argument("--unit", metavar="SERIAL", help="the unit of a multi-unit run")
     d.add_argument("--out", required=True, help="output DIR")
     d.add_argument("--force", action="store_true", help="overwrite an existing output")
 
@@ -175,9 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("--force", action="store_true", help="overwrite an existing output")
     ex = cmd("export", "write a fitted model in a firmware's or another tool's format")
     ex.add_argument("model", metavar="MODEL_DIR")
-    ex.add_argument(
-        "--format", required=True, choices=["px4", "ardupilot", "c", "json", "kalibr"]
-    )
+    ex.add_argument("--format", required=True, choices=["px4", "ardupilot", "c", "json", "kalibr"])
     ex.add_argument("--out", required=True, help="output FILE (c: NAME.c, NAME.h beside it)")
     ex.add_argument(
         "--kind",

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import struct
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -52,6 +53,38 @@ ALL_TOPICS = (
 #: gyrolab /log level -> foxglove.LogLevel (UNKNOWN 0, DEBUG 1, INFO 2, WARNING 3, ERROR 4,
 #: FATAL 5; @foxglove/schemas 2.1 jsonschema Log)
 FOXGLOVE_LOG_LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fault": 5}
+
+# Multi-unit recordings (docs/recording-format.md "Several units"): every topic under
+# /gyro/ and /temperature/ belongs to one unit and is written as /unit/<serial><topic>;
+# the chamber's topics (/oven/state, /profile/event, /log) stay shared and unprefixed.
+UNIT_PREFIX = "/unit/"
+PER_UNIT_ROOTS = ("/gyro/", "/temperature/")
+SERIAL_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
+
+def is_per_unit(topic: str) -> bool:
+    """Whether ``topic`` (single-unit name) is one unit's in a multi-unit recording."""
+    return topic.startswith(PER_UNIT_ROOTS)
+
+
+def unit_topic(topic: str, serial: str | None) -> str:
+    """The name of ``topic`` for unit ``serial`` (unchanged when ``serial`` is None or the
+    topic is shared): ``unit_topic("/gyro/rate", "SN7")`` → ``/unit/SN7/gyro/rate``."""
+    if serial is None or not is_per_unit(topic):
+        return topic
+    check_serial(serial)
+    return f"{UNIT_PREFIX}{serial}{topic}"
+
+
+def check_serial(serial: str) -> str:
+    """A serial is one topic path segment: letters, digits, ``.``, ``_``, ``-`` (≤ 64)."""
+    if not isinstance(serial, str) or not SERIAL_RE.fullmatch(serial):
+        raise ValueError(
+            f"unit serial {serial!r} must be 1-64 letters, digits, '.', '_' or '-' "
+            "(not starting with a punctuation mark)"
+        )
+    return serial
+
 
 FORMAT_VERSION = "1"
 PROFILE = "gyrolab"  # MCAP header profile
@@ -395,6 +428,7 @@ class RecordingWriter:
         flush_every_s: float | None = None,
         fsync: bool = False,
         fsync_every_s: float | None = None,
+        units: list[str] | None = None,
     ) -> None:
         from mcap.writer import CompressionType, Writer
 
@@ -422,17 +456,28 @@ class RecordingWriter:
         #: live view, gyrolab/acquisition/live.py); must not block. Its errors are ignored:
         #: a viewer never endangers the recording.
         self.tap: Callable[[str, int, bytes], None] | None = None
+        # None: the single-unit layout; a list of serials: the multi-unit layout
+        self.units = None if units is None else [check_serial(u) for u in units]
+        if self.units is not None and (not self.units or len(set(self.units)) != len(units)):
+            raise ValueError(f"units must be distinct serials, got {units}")
+        serials: list[str | None] = [None] if self.units is None else list(self.units)
         fds = _file_descriptor_set()
         adc_schema = self._w.register_schema(ADC_MESSAGE, "protobuf", fds)
         rate_schema = self._w.register_schema(RATE_MESSAGE, "protobuf", fds)
-        self._chan[TOPIC_ADC] = self._w.register_channel(TOPIC_ADC, "protobuf", adc_schema)
-        self._chan[TOPIC_RATE] = self._w.register_channel(TOPIC_RATE, "protobuf", rate_schema)
+        for u in serials:
+            for topic, sch in ((TOPIC_ADC, adc_schema), (TOPIC_RATE, rate_schema)):
+                name = unit_topic(topic, u)
+                self._chan[name] = self._w.register_channel(name, "protobuf", sch)
         for topic, schema in JSON_SCHEMAS.items():
             sid = self._w.register_schema(
                 schema["title"], "jsonschema", json.dumps(schema, sort_keys=True).encode()
             )
-            self._chan[topic] = self._w.register_channel(topic, "json", sid)
+            for u in serials if is_per_unit(topic) else [None]:
+                name = unit_topic(topic, u)
+                self._chan[name] = self._w.register_channel(name, "json", sid)
         meta_run = {"format_version": FORMAT_VERSION, "software_version": _version()}
+        if self.units is not None:
+            meta_run["units"] = list(self.units)
         meta_run.update(run or {})
         self.write_metadata("run", meta_run)
         self.write_metadata("bench", bench or {})
@@ -496,23 +541,55 @@ class RecordingWriter:
         }
         self._w.add_metadata(name, flat)
 
+    def _unit(self, topic: str, unit: str | None) -> str:
+        """The channel of ``topic`` for ``unit`` (which a multi-unit recording requires)."""
+        if (unit is None) != (self.units is None):
+            raise ValueError(
+                "a multi-unit recording needs unit=SERIAL"
+                if unit is None
+                else "unit= is for multi-unit recordings (RecordingWriter(units=...))"
+            )
+        name = unit_topic(topic, unit)
+        if name not in self._chan:
+            raise ValueError(f"unit {unit!r} is not one of this recording's {self.units}")
+        return name
+
     def write_adc_block(
-        self, t0: float, period: float, first_index: int, counts: np.ndarray
+        self,
+        t0: float,
+        period: float,
+        first_index: int,
+        counts: np.ndarray,
+        unit: str | None = None,
     ) -> None:
-        self._put(TOPIC_ADC, t0, encode_block(t0, period, first_index, counts, "adc"))
+        self._put(
+            self._unit(TOPIC_ADC, unit), t0, encode_block(t0, period, first_index, counts, "adc")
+        )
 
     def write_rate_block(
-        self, t0: float, period: float, first_index: int, rate_dps: np.ndarray
+        self,
+        t0: float,
+        period: float,
+        first_index: int,
+        rate_dps: np.ndarray,
+        unit: str | None = None,
     ) -> None:
         """One ``/gyro/rate`` block: ``(n,)`` for a single axis, ``(n, axes)`` for 2–3."""
-        self._put(TOPIC_RATE, t0, encode_block(t0, period, first_index, rate_dps, "rate"))
+        self._put(
+            self._unit(TOPIC_RATE, unit),
+            t0,
+            encode_block(t0, period, first_index, rate_dps, "rate"),
+        )
         r = np.asarray(rate_dps, dtype=np.float32).astype(np.float64)  # what the block holds
         if r.size:
             n = r.shape[0]
             tm = t0 + 0.5 * (n - 1) * period
             x = r if r.ndim == 1 else r[:, 0]  # the summary's own fields: axis x
             summary = {
-                "header": {"stamp": self.stamp(tm), "frame_id": "gyro"},
+                "header": {
+                    "stamp": self.stamp(tm),
+                    "frame_id": "gyro" if unit is None else f"gyro/{unit}",
+                },
                 "t": tm,
                 "t0": t0,
                 "first_index": int(first_index),
@@ -525,11 +602,15 @@ class RecordingWriter:
                 summary["axes_mean_dps"] = [float(v) for v in r.mean(axis=0)]
                 summary["axes_min_dps"] = [float(v) for v in r.min(axis=0)]
                 summary["axes_max_dps"] = [float(v) for v in r.max(axis=0)]
-            self._json(TOPIC_RATE_SUMMARY, summary, t0)  # log time = the block's, like /gyro/rate
+            self._json(
+                self._unit(TOPIC_RATE_SUMMARY, unit), summary, t0
+            )  # log time = the block's, like /gyro/rate
 
-    def write_pt100(self, t: float, resistance_ohm: float, temperature_c: float) -> None:
+    def write_pt100(
+        self, t: float, resistance_ohm: float, temperature_c: float, unit: str | None = None
+    ) -> None:
         self._json(
-            TOPIC_PT100,
+            self._unit(TOPIC_PT100, unit),
             {
                 "t": t,
                 "resistance_ohm": float(resistance_ohm),
@@ -668,6 +749,7 @@ class Recording:
     events: list[dict[str, Any]] = field(default_factory=list)
     logs: list[dict[str, Any]] = field(default_factory=list)
     topic_counts: dict[str, int] = field(default_factory=dict)
+    unit: str | None = None  # the unit read from a multi-unit recording
 
     def require_rate(self) -> Series:
         if self.rate is None or self.rate.t.size == 0:
@@ -733,14 +815,79 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
         fh.close()
 
 
-def iter_messages(
-    path: str | os.PathLike[str], topics: list[str] | None = None
-) -> Iterator[tuple[str, int, bytes]]:
-    """``(topic, log_time_ns, data)`` in log-time order, streaming."""
+def list_units(path: str | os.PathLike[str]) -> list[str]:
+    """The unit serials of a multi-unit recording, in file order; ``[]`` for single-unit."""
     fh, reader = _open_reader(path)
     try:
+        summary = reader.get_summary()
+        channels = summary.channels.values() if summary is not None else None
+        if channels is None:  # no summary section (a recovered file): scan the messages
+            channels = [c for _s, c, _m in reader.iter_messages()]
+        units: list[str] = []
+        for ch in channels:
+            if ch.topic.startswith(UNIT_PREFIX):
+                serial = ch.topic[len(UNIT_PREFIX) :].split("/", 1)[0]
+                if serial not in units:
+                    units.append(serial)
+        return units
+    except InputError:
+        raise
+    except Exception as e:
+        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
+    finally:
+        fh.close()
+
+
+def select_unit(path: str | os.PathLike[str], unit: str | None) -> str | None:
+    """Resolve ``--unit``: the serial to read from ``path``, or None for a single-unit file.
+
+    A multi-unit file with one unit needs no ``unit``; with several, ``unit`` is required.
+    A unit the file does not hold is an :class:`InputError` listing the serials it has."""
+    try:
+        units = list_units(path)
+    except InputError:
+        if unit is None:  # not a gyrolab MCAP (a user's log): no units; its reader reports
+            return None
+        raise
+    if not units:
+        if unit is not None:
+            serial = read_metadata(path).get("run", {}).get("unit_serial")
+            if unit != serial:
+                raise InputError(
+                    path,
+                    f"is a single-unit recording (unit {serial or 'unnamed'}); "
+                    f"it has no unit {unit!r}",
+                )
+        return None
+    if unit is None:
+        if len(units) == 1:
+            return units[0]
+        raise InputError(
+            path, f"holds {len(units)} units; choose one with --unit SERIAL: {', '.join(units)}"
+        )
+    if unit not in units:
+        raise InputError(path, f"has no unit {unit!r}; its units: {', '.join(units)}")
+    return unit
+
+
+def iter_messages(
+    path: str | os.PathLike[str], topics: list[str] | None = None, unit: str | None = None
+) -> Iterator[tuple[str, int, bytes]]:
+    """``(topic, log_time_ns, data)`` in log-time order, streaming.
+
+    ``unit``: in a multi-unit recording, read that unit's topics under their single-unit
+    names (``/unit/<unit>/gyro/rate`` comes back as ``/gyro/rate``) beside the shared ones."""
+    fh, reader = _open_reader(path)
+    if unit is not None:
+        names = list(ALL_TOPICS) if topics is None else topics
+        topics = [unit_topic(t, unit) for t in names]
+        prefix = f"{UNIT_PREFIX}{unit}"
+    try:
         for _schema, channel, message in reader.iter_messages(topics=topics):
-            yield channel.topic, message.log_time, message.data
+            topic = channel.topic
+            if unit is not None and topic.startswith(prefix):
+                topic = topic[len(prefix) :]
+            yield topic, message.log_time, message.data
     except InputError:
         raise
     except Exception as e:
@@ -750,11 +897,11 @@ def iter_messages(
 
 
 def iter_blocks(
-    path: str | os.PathLike[str], topic: str = TOPIC_RATE
+    path: str | os.PathLike[str], topic: str = TOPIC_RATE, unit: str | None = None
 ) -> Iterator[tuple[float, float, int, np.ndarray]]:
     """Stream ``/gyro/rate`` or ``/gyro/adc`` blocks as ``(t0, period, first_index, values)``."""
     kind = "adc" if topic == TOPIC_ADC else "rate"
-    for _topic, _ts, data in iter_messages(path, [topic]):
+    for _topic, _ts, data in iter_messages(path, [topic], unit=unit):
         yield decode_block(data, kind)
 
 
@@ -779,8 +926,12 @@ def _series(blocks: list[tuple[float, float, int, np.ndarray]], dtype: type) -> 
     return Series(t, v, idx, float(np.median([b[1] for b in blocks])))
 
 
-def read_recording(path: str | os.PathLike[str], topics: list[str] | None = None) -> Recording:
-    """Read a recording into arrays. ``topics`` limits what is decoded (default: all).
+def read_recording(
+    path: str | os.PathLike[str], topics: list[str] | None = None, unit: str | None = None
+) -> Recording:
+    """Read a recording into arrays. ``topics`` limits what is decoded (default: all);
+    ``unit`` selects one unit of a multi-unit recording (:func:`select_unit`), whose
+    topics come back under their single-unit names.
 
     Rate samples come back as float64 °/s, ADC counts as int32. Raises
     :class:`~gyrolab.errors.InputError` on a missing, foreign or damaged file.
@@ -790,11 +941,14 @@ def read_recording(path: str | os.PathLike[str], topics: list[str] | None = None
     rec.metadata = read_metadata(path)
     rec.run = rec.metadata.get("run", {})
     rec.bench = rec.metadata.get("bench", {})
+    if unit is not None:
+        rec.unit = unit
+        rec.run = {**rec.run, "unit_serial": unit}
     rate_blocks: list[tuple[float, float, int, np.ndarray]] = []
     adc_blocks: list[tuple[float, float, int, np.ndarray]] = []
     pt, oven = [], []
     counts: dict[str, int] = {}
-    for topic, _ts, data in iter_messages(path, topics):
+    for topic, _ts, data in iter_messages(path, topics, unit=unit):
         counts[topic] = counts.get(topic, 0) + 1
         if topic == TOPIC_RATE:
             rate_blocks.append(decode_block(data, "rate"))

@@ -43,6 +43,8 @@ from gyrolab.recording import (
     decode_block,
     encode_block,
     iter_messages,
+    list_units,
+    select_unit,
 )
 
 TOPIC_RATE_RAW = "/gyro/rate_raw"
@@ -60,10 +62,10 @@ def _named(path: str) -> Iterator[None]:
         raise
 
 
-def _load_run(path: str, cfg: Any) -> Any:
+def _load_run(path: str, cfg: Any, unit: str | None = None) -> Any:
     from gyrolab.compensation.pipeline import prepare_file
 
-    return prepare_file(path, cfg)
+    return prepare_file(path, cfg, unit=unit)
 
 
 def _summary(m: dict[str, Any]) -> str:
@@ -136,11 +138,24 @@ def compensate(args: argparse.Namespace) -> int:
         getattr(args, "pipeline_config", None) or pl.DEFAULT_CONFIG,  # batch passes its own
         getattr(args, "seed", None),
     )
+    unit_arg = getattr(args, "unit", None)
+    if unit_arg is None and _units(args.run):
+        return compensate_units(args, cfg, seed)  # a multi-unit run: every unit (docs/fleet.md)
     from gyrolab.logs import log_options
 
     opts = log_options(args)
-    runs = load_runs(args.run, cfg, **opts)
-    vals = load_runs(args.validate, cfg, **opts) if args.validate else None
+    unit = select_unit(args.run, unit_arg) if unit_arg is not None or _units(args.run) else None
+    vunit = None
+    if args.validate and unit is not None:  # the same unit of a multi-unit held-out run
+        vunit = select_unit(args.validate, unit if _units(args.validate) else None)
+    if unit is not None:  # one unit of a multi-unit recording (single-axis units)
+        runs = [pl.prepare_file(args.run, cfg, unit=unit)]
+    else:
+        runs = load_runs(args.run, cfg, **opts)
+    if vunit is not None:
+        vals = [pl.prepare_file(args.validate, cfg, unit=vunit)]
+    else:
+        vals = load_runs(args.validate, cfg, **opts) if args.validate else None
     if vals is not None and len(vals) != len(runs):
         raise InputError(
             args.validate, f"has {len(vals)} axes but the calibration run has {len(runs)}"
@@ -153,18 +168,23 @@ def compensate(args: argparse.Namespace) -> int:
         t_axis = time.perf_counter()
         fitted.append(_fit_axis(args, cfg, run, None if vals is None else vals[k], seed))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
-        model, metrics, _ = fitted[-1]
+        model, metrics, metrics_cal = fitted[-1]
         metrics["timing_s"] = total
         metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
         model.timing_s = metrics["timing_breakdown_s"]
+        if unit is not None:  # the unit the model belongs to (docs/fleet.md)
+            model.calibration["unit"] = unit
+            metrics_cal["unit"] = unit
+            if vals is None or vunit is not None:  # held out on the same serial
+                metrics["unit"] = unit if vals is None else vunit
     if len(runs) == 1:
         from gyrolab.compensation.oracle import add_oracle
 
         # the floor beside the headline, where the truth is known (gyrolab simulate runs)
         _model, metrics, metrics_cal = fitted[0]
-        add_oracle(metrics, args.validate or args.run, cfg.block_s)
+        add_oracle(metrics, args.validate or args.run, cfg.block_s, vunit if vals else unit)
         if vals is not None:
-            add_oracle(metrics_cal, args.run, cfg.block_s)
+            add_oracle(metrics_cal, args.run, cfg.block_s, unit)
     with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
         if len(runs) == 1:
             _write_axis(Path(tmp), *fitted[0])
@@ -219,6 +239,44 @@ def _write_axis(directory: Path, model: Any, metrics: dict[str, Any], _cal: Any)
     pl.save_model(model, str(directory))
     write_json(directory / "metrics.json", metrics)
     write_json(directory / FIRMWARE_JSON, {"poly3": model.firmware_poly3.to_dict()})
+
+
+def _units(path: str) -> list[str]:
+    """The units of a multi-unit gyrolab recording; ``[]`` for anything else (a foreign log
+    is not an MCAP: its reader says what is wrong with it)."""
+    try:
+        return list_units(path)
+    except InputError:
+        return []
+
+
+def compensate_units(args: argparse.Namespace, cfg: Any, seed: int = 0) -> int:
+    """``gyrolab compensate MULTI.mcap --out DIR``: one model directory per unit,
+    ``DIR/<serial>``, fitted in parallel by :func:`gyrolab.batch.run_items` (a Dask
+    LocalCluster of ``--workers``). DIR appears atomically with the units that were fitted;
+    a unit that fails is named on stderr and the exit code is 1 (all failed: exit 2)."""
+    from gyrolab.batch import BatchOptions, Item, run_items
+
+    inputs = (args.run, args.validate, getattr(args, "config", None))
+    units = list_units(args.run)
+    opt = BatchOptions(seed=seed, validate=args.validate, config=cfg)
+    with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
+        items = [Item(Path(args.run), Path(tmp) / u, u) for u in units]
+        results = run_items("compensate", items, opt, workers=getattr(args, "workers", None))
+        if not any(r.status == "done" for r in results):
+            raise InputError(
+                args.run, "no unit could be fitted: " + "; ".join(r.error for r in results)
+            )
+    for r in results:
+        where = Path(args.out) / str(r.unit)
+        print(f"{r.unit}: {r.status} {where if r.status == 'done' else r.error}")
+    failed = [r.unit for r in results if r.status == "failed"]
+    print(
+        f"{len(units) - len(failed)} of {len(units)} unit models written to {args.out}"
+        + (f"; failed: {', '.join(map(str, failed))}" if failed else ""),
+        file=sys.stderr,
+    )
+    return 1 if failed else 0
 
 
 def apply(args: argparse.Namespace) -> int:

@@ -58,6 +58,8 @@ def oracle_rate(rec: Any) -> np.ndarray | None:
     """``raw − true deterministic drift`` at the recording's full rate (°/s), or ``None``
     when the recording is not a ``gyrolab simulate`` output (module docstring)."""
     prov = rec.metadata.get("sim_provenance")
+    if getattr(rec, "unit", None) and isinstance(prov, dict):  # a multi-unit run: per serial
+        prov = prov.get(rec.unit)
     run = rec.run or {}
     if not isinstance(prov, dict) or run.get("source") != "simulation" or rec.rate is None:
         return None
@@ -90,7 +92,7 @@ def oracle_block_means(rec: Any, block_s: float) -> np.ndarray | None:
     return block_average(rec.rate.t, o, block_s, rec.rate.period)[1]
 
 
-def add_oracle(metrics: dict[str, Any], path: str, block_s: float) -> bool:
+def add_oracle(metrics: dict[str, Any], path: str, block_s: float, unit: str | None = None) -> bool:
     """Add ``oracle`` (the five metrics) and its 100 s p-p to ``metrics`` when ``path`` is
     a ``gyrolab simulate`` recording; return whether it was added."""
     from gyrolab.compensation.pipeline import drift_pp_table, series_metrics
@@ -98,7 +100,7 @@ def add_oracle(metrics: dict[str, Any], path: str, block_s: float) -> bool:
     from gyrolab.recording import TOPIC_EVENT, TOPIC_RATE, read_recording
 
     try:
-        rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_EVENT])
+        rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_EVENT], unit=unit)
     except InputError:  # a user's log (ROS bag, DataFlash, …): no simulation truth
         return False
     ob = oracle_block_means(rec, block_s)

@@ -144,6 +144,7 @@ class PreparedRun:
     pt_c: np.ndarray
     filled_blocks: int = 0
     content_hash: str = ""  # guards.RunHasher digest of the rate and PT100 data
+    unit: str | None = None  # the unit of a multi-unit recording (docs/fleet.md)
 
 
 class BlockAverager:
@@ -297,6 +298,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     digest = content_hash(x, pt_t, pt_c)
     return PreparedRun(
         path=rec.path,
+        unit=rec.unit,
         t=tb,
         rate=xb,
         temp=temp,
@@ -312,7 +314,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
 
 
 def iter_rate_batches(
-    path: str, min_samples: int = 1 << 20
+    path: str, min_samples: int = 1 << 20, unit: str | None = None
 ) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
     """``(t, rate, period)`` for runs of consecutive ``/gyro/rate`` messages holding at
     least ``min_samples`` samples (the last one fewer): per-sample times built for the
@@ -330,7 +332,7 @@ def iter_rate_batches(
         t = np.repeat(t0s, sizes) + (np.arange(sizes.sum()) - start) * np.repeat(pers, sizes)
         return t, np.concatenate(arrs).astype(float), float(np.median(pers))
 
-    for t0, period, _first, arr in iter_blocks(path, TOPIC_RATE):
+    for t0, period, _first, arr in iter_blocks(path, TOPIC_RATE, unit=unit):
         t0s.append(t0)
         pers.append(period)
         arrs.append(arr)
@@ -363,23 +365,24 @@ def prepare_arrays(
     )
 
 
-def prepare_file(path: str, cfg: PipelineConfig) -> PreparedRun:
+def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> PreparedRun:
     """Like :func:`prepare_run`, streaming ``/gyro/rate`` from the file block by block:
     memory is that of the 1000 points/h series, not of the run (``raw_t``/``raw_rate`` are
     ``None``; :func:`streaming_block_means` re-reads the file when it needs the samples)."""
     from gyrolab.recording import TOPIC_PT100, read_recording
 
-    rec = read_recording(path, topics=[TOPIC_PT100])
+    rec = read_recording(path, topics=[TOPIC_PT100], unit=unit)
     pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
     acc = BlockAverager(cfg.block_s)
     hasher = RunHasher()
-    for t, x, period in iter_rate_batches(path):
+    for t, x, period in iter_rate_batches(path, unit=unit):
         acc.add(t, x, period)
         hasher.add_rate(x)
     tb, xb, temp, X, filled = _finish(str(path), acc, pt_t, pt_c, cfg)
     digest = hasher.hexdigest(pt_t, pt_c)
     return PreparedRun(
         path=str(path),
+        unit=unit,
         t=tb,
         rate=xb,
         temp=temp,
@@ -753,7 +756,7 @@ def streaming_block_means_many(
     if run.raw_rate is not None and run.raw_t is not None:
         batches: Any = [(run.raw_t, run.raw_rate, run.raw_period)]
     else:
-        batches = iter_rate_batches(run.path)
+        batches = iter_rate_batches(run.path, unit=run.unit)
     for t, x, period in batches:
         for w in whiches:
             accs[w].add(t, comps[w](t, x), period)

@@ -117,7 +117,9 @@ def _clean(x: Any) -> Any:
 # --------------------------------------------------------------------------- reading
 
 
-def read_run(path: str | Path, log_options: dict | None = None) -> Recording:
+def read_run(
+    path: str | Path, log_options: dict | None = None, unit: str | None = None
+) -> Recording:
     """Read every topic but the raw ADC counts (the report uses the rate); check the gyro.
 
     A recording without ``/gyro/rate`` samples is refused with an :class:`InputError` that
@@ -127,7 +129,7 @@ def read_run(path: str | Path, log_options: dict | None = None) -> Recording:
 
     if detect_format(path) == "gyrolab":
         topics = [t for t in ALL_TOPICS if t != TOPIC_ADC]
-        rec = read_recording(path, topics=topics)
+        rec = read_recording(path, topics=topics, unit=unit)
     else:  # ROS 2 / ULog / DataFlash: the same in-memory recording (gyrolab.logs)
         rec = read_log(path, **(log_options or {}))
     if rec.rate is None or rec.rate.t.size == 0:
@@ -418,6 +420,7 @@ def build_report(
     serial: str | None = None,
     axis: int | None = None,
     log_options: dict | None = None,
+    unit: str | None = None,
 ) -> tuple[Document, dict[str, Any]]:
     """The report document and ``metrics.json`` content of ``run_path`` (and the model).
 
@@ -438,7 +441,7 @@ def build_report(
         step("load model")
         model = load_model(str(model_dir))
     step("read recording")
-    rec = read_run(run_path, log_options)
+    rec = read_run(run_path, log_options, unit)  # unit: of a multi-unit recording
     if axis is not None:  # one axis of a multi-axis unit (gyrolab.report.axes)
         rec = rec.axis(axis)
     rate = rec.rate
@@ -479,6 +482,8 @@ def build_report(
             "n_points": int(tb.size),
         }
 
+    if unit is not None:
+        metrics["unit"] = unit
     step("figures")
     outcome, coverage = run_outcome(rec), run_coverage(rec)
     serial = serial or unit_serial(rec)
@@ -498,8 +503,9 @@ def build_report(
     summary = _summary(rec, model, held_out, outcome, coverage)
     summary.insert(1, ("verdict", verdict.summary() if verdict else "no spec given (no verdict)"))
     if serial != unit_serial(rec):
-        summary = [("unit under test", serial) if k == "unit under test" else (k, v)
-                   for k, v in summary]
+        summary = [
+            ("unit under test", serial) if k == "unit under test" else (k, v) for k, v in summary
+        ]
     doc = Document(
         title=f"Temperature test report — {serial if serial != '—' else Path(rec.path).stem}",
         subtitle="MEMS gyroscope temperature test"
@@ -627,8 +633,10 @@ def _signoff_section(
                 "verdict",
                 f"Spec limits: {name}",
                 ["quantity", "limit", "measured", "result"],
-                [[x.quantity, x.limit, x.measured, "PASS" if x.passed else "FAIL"]
-                 for x in verdict.lines],
+                [
+                    [x.quantity, x.limit, x.measured, "PASS" if x.passed else "FAIL"]
+                    for x in verdict.lines
+                ],
                 note=f"Overall verdict: {verdict.word}. Metric limits apply to the "
                 f"{verdict.series} output; a limit that could not be measured fails.",
             )

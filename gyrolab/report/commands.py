@@ -44,6 +44,7 @@ def write_report(
     operator: str | None = None,
     serial: str | None = None,
     log_options: dict | None = None,
+    unit: str | None = None,
 ) -> dict[str, Any]:
     """Build and write the report of ``run`` into ``out``; returns the metrics.
 
@@ -68,12 +69,12 @@ def write_report(
     try:
         from gyrolab.report.axes import build_axes_report, n_axes
 
-        n = n_axes(run, model, log_options)
+        n = 1 if unit is not None else n_axes(run, model, log_options)
         kw = {"spec": spec, "operator": operator, "serial": serial, "log_options": log_options}
         if n > 1:
             doc, metrics = build_axes_report(run, model, n, step, **kw)
         else:
-            doc, metrics = build_report(run, model, step=step, **kw)
+            doc, metrics = build_report(run, model, step=step, unit=unit, **kw)
         step("write")
         with atomic_dir(out, force, command="report", inputs=(run, model, spec)) as tmp:
             (tmp / "index.html").write_text(render(doc), encoding="utf-8")
@@ -88,7 +89,12 @@ def write_report(
 def report(args: argparse.Namespace) -> int:
     """The ``gyrolab report`` handler."""
     from gyrolab.logs import log_options
+    from gyrolab.recording import select_unit
 
+    check_output(
+        args.out, args.force, inputs=(args.run, args.model, getattr(args, "spec", None)), kind="dir"
+    )
+    unit = select_unit(args.run, getattr(args, "unit", None))
     metrics = write_report(
         args.run,
         args.out,
@@ -98,6 +104,7 @@ def report(args: argparse.Namespace) -> int:
         operator=getattr(args, "operator", None),
         serial=getattr(args, "unit_serial", None),
         log_options=log_options(args),
+        unit=unit,
     )
     print(f"run outcome: {metrics['outcome']['line']}", file=sys.stderr)
     for name, m in metrics.get("axes", {"": metrics}).items():

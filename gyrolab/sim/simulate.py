@@ -25,6 +25,7 @@ from gyrolab import __version__
 from gyrolab.profile import Profile
 from gyrolab.progress import progress
 from gyrolab.recording import RecordingWriter
+from gyrolab.sim.family import Unit
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.physics import Physics
 from gyrolab.sim.sensors import cvd_temperature
@@ -116,6 +117,7 @@ def simulate_run(
     start_time: str = DEFAULT_START,
     show_progress: bool = True,
     axis_models: Sequence[SimModel] = (),
+    units: list[Unit] | None = None,
 ) -> SimSummary:
     """Simulate ``profile`` with ``model`` and write the recording to ``out``.
 
@@ -125,9 +127,29 @@ def simulate_run(
 
     ``axis_models`` makes a 2- or 3-axis unit: ``model`` is axis x, the others y (and z),
     each with its own effects and parameters on the same case (:func:`axis_physics`).
+
+    ``units`` (from :func:`gyrolab.sim.family.unit_family`): several single-axis units in
+    the one chamber, written in the multi-unit layout (docs/recording-format.md), each with
+    its own model and noise seed; ``model`` then gives only the shared chamber's metadata,
+    the profile's stability rule watches the first unit's PT100 and the chamber air is that
+    of the first unit's physics (the family shares the chamber's parameters, so every unit's
+    physics has the same air).
     """
-    phys = Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
-    extra = axis_physics(model, axis_models, rate_hz, seed, profile.ambient_c)
+    if units is not None and axis_models:
+        raise ValueError("multi-axis units in a multi-unit run are not supported yet")
+    if units is None:
+        serials: list[str | None] = [None]
+        fleet = [Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)]
+        extras = [axis_physics(model, axis_models, rate_hz, seed, profile.ambient_c)]
+    else:
+        serials = [u.serial for u in units]
+        fleet = [
+            Physics(u.model, rate_hz=rate_hz, seed=u.seed, ambient_c=profile.ambient_c)
+            for u in units
+        ]
+        extras = [[] for _ in units]
+    phys, extra = fleet[0], extras[0]  # the chamber and the stability rule: the first unit
+    every = [p for ph, ex in zip(fleet, extras, strict=True) for p in (ph, *ex)]
     bn = phys.block_n
     rate = phys.rate_hz
     run_meta = run_metadata(profile, rate, seed, start_time)
@@ -135,15 +157,30 @@ def simulate_run(
     if extra:
         run_meta["axes"] = 1 + len(extra)
         bench_meta["adc"]["axes"] = 1 + len(extra)
+    if units is not None:
+        bench_meta["units"] = {
+            u.serial: {"adc": {**u.model.sensors.adc.to_dict(), "rate_hz": float(rate)}}
+            for u in units
+        }
     w = RecordingWriter(
         out,
         start_time_ns=_start_ns(start_time),
         run=run_meta,
         bench=bench_meta,
+        units=None if units is None else [u.serial for u in units],
     )
     n_blocks = 0
     try:
-        w.write_metadata("sim_provenance", provenance(model, seed))
+        if units is None:
+            w.write_metadata("sim_provenance", provenance(model, seed))
+        else:
+            w.write_metadata(
+                "sim_provenance",
+                {
+                    u.serial: {**provenance(u.model, u.seed), "family_seed": int(seed)}
+                    for u in units
+                },
+            )
         if extra:
             w.write_metadata(
                 "sim_provenance_axes",
@@ -159,7 +196,7 @@ def simulate_run(
         steps = profile.steps
         step = 0
         step_start = 0
-        for p in (phys, *extra):
+        for p in every:
             p.set_setpoint(steps[0].setpoint_c)
         w.write_event(0.0, "step_started", 0, steps[0].setpoint_c, steps[0].label)
         pt_hist: deque[tuple[float, float]] = deque()
@@ -168,9 +205,12 @@ def simulate_run(
         while not done:
             idx = phys.index
             t_now = phys.t
-            r_ohm = phys.pt100_ohm()
-            t_c = float(cvd_temperature(r_ohm))
-            w.write_pt100(t_now, r_ohm, t_c)
+            for serial, ph in zip(serials, fleet, strict=True):
+                r_ohm = ph.pt100_ohm()
+                t_unit = float(cvd_temperature(r_ohm))
+                w.write_pt100(t_now, r_ohm, t_unit, unit=serial)
+                if ph is phys:
+                    t_c = t_unit
             w.write_oven(t_now, phys.setpoint_c, phys.chamber_c(), "run")
             s = steps[step]
             if s.stable_slope_c_per_min is not None:
@@ -179,18 +219,19 @@ def simulate_run(
                     pt_hist.popleft()
             # samples in this block, cut where the step's minimum duration ends
             end_block = (idx // bn + 1) * bn
-            parts_counts: list[np.ndarray] = []
+            parts_counts: list[list[np.ndarray]] = [[] for _ in fleet]
             pos = idx
             while pos < end_block:
                 # at least one sample per step, so every step is seen by the recording
                 min_end = step_start + max(1, int(round(s.duration_s * rate)))
                 cut = min(end_block, min_end) if pos < min_end else end_block
-                blk = phys.advance(cut - pos)
-                if extra:
-                    cols = [blk.counts] + [p.advance(cut - pos).counts for p in extra]
-                    parts_counts.append(np.column_stack(cols))
-                else:
-                    parts_counts.append(blk.counts)
+                for parts, ph, ex in zip(parts_counts, fleet, extras, strict=True):
+                    blk = ph.advance(cut - pos)
+                    if ex:
+                        cols = [blk.counts] + [p.advance(cut - pos).counts for p in ex]
+                        parts.append(np.column_stack(cols))
+                    else:
+                        parts.append(blk.counts)
                 pos = cut
                 ended = pos == min_end and s.stable_slope_c_per_min is None
                 if s.stable_slope_c_per_min is not None and pos >= min_end and pos == end_block:
@@ -206,12 +247,14 @@ def simulate_run(
                         done = True
                         break
                     s = steps[step]
-                    for p in (phys, *extra):
+                    for p in every:
                         p.set_setpoint(s.setpoint_c)
                     w.write_event(pos / rate, "step_started", step, s.setpoint_c, s.label)
-            counts = parts_counts[0] if len(parts_counts) == 1 else np.concatenate(parts_counts)
-            w.write_adc_block(idx / rate, phys.period, idx, counts)
-            w.write_rate_block(idx / rate, phys.period, idx, phys.adc.counts_to_dps(counts))
+            for serial, ph, parts in zip(serials, fleet, parts_counts, strict=True):
+                counts = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                w.write_adc_block(idx / rate, ph.period, idx, counts, unit=serial)
+                dps = ph.adc.counts_to_dps(counts)
+                w.write_rate_block(idx / rate, ph.period, idx, dps, unit=serial)
             n_blocks += 1
             bar.update(1)
         bar.close()

@@ -24,7 +24,9 @@ def discrepancy(args: argparse.Namespace) -> int:
     inputs = (args.run, args.model)
     check_output(args.out, args.force, inputs=inputs, kind="dir")
     model = load_model(args.model) if args.model else nominal_model()
-    data = load_recording(args.run)
+    from gyrolab.recording import select_unit
+
+    data = load_recording(args.run, unit=select_unit(args.run, getattr(args, "unit", None)))
 
     def log(msg: str) -> None:
         print(f"discrepancy: {msg}", file=sys.stderr)

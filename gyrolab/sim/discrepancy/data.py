@@ -250,12 +250,15 @@ def from_arrays(
     )
 
 
-def load_recording(path: str | os.PathLike[str], bin_s: float | None = None) -> BenchData:
+def load_recording(
+    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+) -> BenchData:
     """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
     blocks = []
     pt: list[tuple[float, float]] = []
     oven: list[tuple[float, float, float]] = []
-    for topic, _ts, data in iter_messages(path, [TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN]):
+    topics = [TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN]
+    for topic, _ts, data in iter_messages(path, topics, unit=unit):
         if topic == TOPIC_RATE:
             blocks.append(decode_block(data, "rate"))
         elif topic == TOPIC_PT100:
@@ -268,8 +271,9 @@ def load_recording(path: str | os.PathLike[str], bin_s: float | None = None) -> 
         raise InputError(path, f"recording has no {TOPIC_RATE} data")
     if blocks[0][3].ndim > 1:
         raise InputError(
-            path, f"a {blocks[0][3].shape[1]}-axis recording: the discrepancy analysis models "
-            "one gyro axis (simulate the axes one by one)"
+            path,
+            f"a {blocks[0][3].shape[1]}-axis recording: the discrepancy analysis models "
+            "one gyro axis (simulate the axes one by one)",
         )
     if not pt:
         raise InputError(path, f"recording has no {TOPIC_PT100} data")

@@ -1,0 +1,171 @@
+"""Multi-unit recordings: layout, unit selection, `simulate --units`, and compensate /
+report / discrepancy with and without `--unit` (docs/fleet.md, docs/recording-format.md)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from test_pipeline import SMALL
+
+from gyrolab.cli import main
+from gyrolab.compensation import pipeline as pl
+from gyrolab.errors import InputError
+from gyrolab.outputs import MARKER
+from gyrolab.recording import (
+    TOPIC_PT100,
+    TOPIC_RATE,
+    RecordingWriter,
+    list_units,
+    read_recording,
+    select_unit,
+    unit_topic,
+)
+from gyrolab.sim.family import unit_family
+from gyrolab.sim.model import nominal_model
+
+torch.set_num_threads(1)
+
+CLI_CONFIG = replace(SMALL, vmd_K=None, vmd_alpha=None, gpso_population=4, gpso_generations=1)
+SERIALS = ["SIM3-01", "SIM3-02", "SIM3-03"]
+
+
+@pytest.fixture(autouse=True)
+def small_config(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("units")
+    common = ["--profile", "short", "--rate", "10", "--seed", "3"]
+    assert main(["simulate", "--out", str(d / "multi.mcap"), "--units", "3", *common]) == 0
+    assert main(["simulate", "--out", str(d / "single.mcap"), *common]) == 0
+    return {"multi": d / "multi.mcap", "single": d / "single.mcap", "dir": d}
+
+
+def _topics(path: Path) -> set[str]:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+        assert summary is not None
+        return {c.topic for c in summary.channels.values()}
+
+
+def test_layout_per_unit_topics_and_shared_chamber(runs: dict[str, Path]) -> None:
+    multi, single = runs["multi"], runs["single"]
+    assert list_units(multi) == SERIALS and list_units(single) == []
+    per_unit = {f"/unit/{s}{t}" for s in SERIALS for t in ("/gyro/adc", TOPIC_RATE, TOPIC_PT100)}
+    shared = {"/oven/state", "/profile/event", "/log"}
+    assert _topics(multi) == per_unit | shared
+    assert not any(t.startswith("/unit/") for t in _topics(single))
+    assert unit_topic("/oven/state", "X") == "/oven/state"
+    recs = [read_recording(multi, unit=s) for s in SERIALS]
+    for s, rec in zip(SERIALS, recs, strict=True):
+        assert rec.unit == s and rec.run["unit_serial"] == s and rec.run["units"] == SERIALS
+        assert rec.rate is not None and rec.rate.t.size == 0.8 * 3600 * 10
+        assert rec.pt100_t.size > 0 and rec.oven_t.size > 0
+    # one chamber: the same oven record for every unit; units differ (a dispersed family)
+    np.testing.assert_array_equal(recs[0].oven_pv_c, recs[2].oven_pv_c)
+    means = [float(np.mean(r.rate.values)) for r in recs]  # type: ignore[union-attr]
+    assert min(abs(a - b) for i, a in enumerate(means) for b in means[i + 1 :]) > 1e-4
+
+
+def test_unit_family_is_deterministic_and_shares_the_chamber() -> None:
+    a, b = unit_family(nominal_model(), 4, 7), unit_family(nominal_model(), 4, 7)
+    assert [u.serial for u in a] == ["SIM7-01", "SIM7-02", "SIM7-03", "SIM7-04"]
+    assert [u.model.to_toml() for u in a] == [u.model.to_toml() for u in b]
+    assert len({u.seed for u in a}) == 4
+    assert len({u.model.get("bias_poly").params["c1"] for u in a}) == 4  # type: ignore[union-attr]
+    assert {u.model.thermal.air_tau_s for u in a} == {nominal_model().thermal.air_tau_s}
+
+
+def test_unit_selection_rules(runs: dict[str, Path]) -> None:
+    multi, single = runs["multi"], runs["single"]
+    assert select_unit(single, None) is None
+    assert select_unit(multi, "SIM3-02") == "SIM3-02"
+    with pytest.raises(
+        InputError, match="choose one with --unit SERIAL: SIM3-01, SIM3-02, SIM3-03"
+    ):
+        select_unit(multi, None)
+    with pytest.raises(InputError, match="has no unit 'NOPE'; its units: SIM3-01"):
+        select_unit(multi, "NOPE")
+    with pytest.raises(InputError, match="single-unit recording"):
+        select_unit(single, "SIM3-01")
+    with pytest.raises(ValueError, match="serial"):
+        RecordingWriter(runs["dir"] / "x.mcap", start_time_ns=0, units=["a/b"])
+
+
+def test_report_and_discrepancy_need_a_unit_of_a_multi_unit_run(
+    runs: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = runs["dir"]
+    for cmd in ("report", "discrepancy"):
+        assert main([cmd, str(runs["multi"]), "--out", str(d / f"no-{cmd}")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "SIM3-01, SIM3-02, SIM3-03" in err[0]
+        assert not (d / f"no-{cmd}").exists()
+        assert main([cmd, str(runs["multi"]), "--unit", "X", "--out", str(d / f"x-{cmd}")]) == 2
+        assert not (d / f"x-{cmd}").exists()
+        assert "has no unit 'X'" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def fleet_models(runs: dict[str, Path]) -> Path:
+    """`gyrolab compensate MULTI --out DIR`: every unit, on a 2-worker LocalCluster."""
+    out = runs["dir"] / "models"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+        assert main(["compensate", str(runs["multi"]), "--out", str(out), "--workers", "2"]) == 0
+    return out
+
+
+def test_compensate_fits_every_unit(fleet_models: Path, runs: dict[str, Path]) -> None:
+    assert sorted(p.name for p in fleet_models.iterdir()) == [MARKER, *SERIALS]
+    for s in SERIALS:
+        meta = json.loads((fleet_models / s / "model.json").read_text())
+        assert meta["calibration"]["unit"] == s
+        assert meta["calibration"]["path"] == str(runs["multi"])
+        m = json.loads((fleet_models / s / "metrics.json").read_text())
+        assert m["unit"] == s and m["held_out"] is False
+    # --unit gives that unit's model alone: the same bytes as its directory in the fleet
+    one = runs["dir"] / "one"
+    assert main(["compensate", str(runs["multi"]), "--unit", "SIM3-02", "--out", str(one)]) == 0
+    assert (one / "model.json").read_bytes() == (
+        fleet_models / "SIM3-02" / "model.json"
+    ).read_bytes()
+
+
+def test_compensate_without_unit_and_report_with_unit(
+    runs: dict[str, Path], fleet_models: Path
+) -> None:
+    d = runs["dir"]
+    single = runs["single"]
+    assert main(["compensate", str(single), "--out", str(d / "m_single")]) == 0
+    meta = json.loads((d / "m_single" / "model.json").read_text())
+    assert "unit" not in meta["calibration"]
+    # a unit's report with its model, held out on another unit of the same run
+    out = d / "rep2"
+    model = fleet_models / "SIM3-01"
+    assert main(["report", str(runs["multi"]), "--unit", "SIM3-02", "--model", str(model),
+                 "--out", str(out)]) == 0  # fmt: skip
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["unit"] == "SIM3-02" and m["held_out"] is True
+    cal = json.loads((fleet_models / "SIM3-02" / "metrics.json").read_text())
+    assert m["raw"] == pytest.approx(cal["raw"])  # the same unit's data as compensate read
+
+
+def test_discrepancy_reads_the_selected_unit(runs: dict[str, Path]) -> None:
+    from gyrolab.sim.discrepancy.data import load_recording
+
+    a = load_recording(runs["multi"], unit="SIM3-01")
+    b = load_recording(runs["multi"], unit="SIM3-03")
+    rec = read_recording(runs["multi"], unit="SIM3-03")
+    assert rec.rate is not None
+    assert not np.allclose(a.pt100_c, b.pt100_c) and not np.allclose(a.y, b.y)
+    np.testing.assert_allclose(b.pt100_c, rec.pt100_c)
