@@ -31,6 +31,7 @@ HANDLERS: dict[str, str] = {
     "convert": "gyrolab.convert:convert",
     "export": "gyrolab.export.commands:export",
     "batch": "gyrolab.batch:batch",
+    "fleet": "gyrolab.report.fleet:fleet",
 }
 
 
@@ -217,6 +218,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--models", metavar="MODELS_DIR", help="report: MODELS_DIR/<stem> per run")
     b.add_argument("--sim-model", metavar="SIM_MODEL.toml", help="discrepancy: start model")
     b.add_argument("--force", action="store_true", help="redo items whose outputs exist")
+
+    f = cmd("fleet", "fleet record of many units' models: tables, distributions, outliers, yield")
+    f.add_argument("models", nargs="+", metavar="MODEL_DIR", help="model dirs or dirs of them")
+    f.add_argument("--out", required=True, help="output REPORT_DIR")
+    f.add_argument("--spec", metavar="SPEC.toml", help="spec limits: yield against them")
+    f.add_argument("--force", action="store_true", help="overwrite an existing output")
     return p
 
 

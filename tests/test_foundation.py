@@ -31,6 +31,7 @@ def test_cli_lists_every_design_subcommand() -> None:
         "convert",  # issue 16
         "export",  # issue 15: firmware and tool formats
         "batch",
+        "fleet",
     }
 
 

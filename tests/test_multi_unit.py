@@ -169,3 +169,76 @@ def test_discrepancy_reads_the_selected_unit(runs: dict[str, Path]) -> None:
     assert rec.rate is not None
     assert not np.allclose(a.pt100_c, b.pt100_c) and not np.allclose(a.y, b.y)
     np.testing.assert_allclose(b.pt100_c, rec.pt100_c)
+
+
+# ------------------------------------------------------------------ the fleet record
+
+
+def test_robust_z_and_wilson_against_hand_values() -> None:
+    from gyrolab.report.fleet import robust_z, wilson
+
+    x = np.array([1.0, 2.0, 3.0, 4.0, 100.0])  # median 3, MAD median(|[-2,-1,0,1,97]|) = 1
+    np.testing.assert_allclose(robust_z(x), 0.6745 * (x - 3.0))
+    y = np.array([5.0, 5.0, 5.0, 5.0, 9.0])  # MAD 0: mean absolute deviation 0.8 instead
+    np.testing.assert_allclose(robust_z(y), (y - 5.0) / (1.253314 * 0.8))
+    z = 1.959964
+    assert wilson(0, 10) == pytest.approx((0.0, z * z / (10 + z * z)))
+    assert wilson(10, 10)[1] == pytest.approx(1.0)
+
+
+def test_fleet_record(fleet_models: Path, runs: dict[str, Path]) -> None:
+    import csv
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    from gyrolab.report.fleet import robust_z
+
+    # six units: the three fitted ones and three copies with other serials; one copy's
+    # compensated drift made 50x worse (an outlier, and a spec failure)
+    root = runs["dir"] / "fleet_in"
+    root.mkdir()
+    for k, s in enumerate([*SERIALS, *SERIALS]):
+        name = s if k < 3 else f"{s}-B"
+        shutil.copytree(fleet_models / s, root / name)
+        meta = json.loads((root / name / "model.json").read_text())
+        meta["calibration"]["unit"] = name
+        (root / name / "model.json").write_text(json.dumps(meta))
+        if name == "SIM3-02-B":
+            m = json.loads((root / name / "metrics.json").read_text())
+            m["compensated"]["drift_pp_deg_per_s"] *= 50
+            (root / name / "metrics.json").write_text(json.dumps(m))
+    spec = runs["dir"] / "spec.toml"
+    spec.write_text('name = "t"\nmax_drift_pp_deg_per_s = 0.01\nrequire_complete = true\n')
+    out = runs["dir"] / "fleet"
+    assert main(["fleet", str(root), "--spec", str(spec), "--out", str(out)]) == 0
+    assert json.loads((out / MARKER).read_text())["command"] == "fleet"
+    with open(out / "units.csv", newline="") as fh:
+        units = list(csv.DictReader(fh))
+    assert sorted(u["unit"] for u in units) == sorted([*SERIALS, *(s + "-B" for s in SERIALS)])
+    table = pq.read_table(out / "units.parquet").to_pylist()  # the same table, read back
+    assert [r["unit"] for r in table] == [u["unit"] for u in units]
+    col = "compensated.drift_pp_deg_per_s"
+    x = np.array([float(u[col]) for u in units])
+    np.testing.assert_allclose([r[col] for r in table], x)
+    z = robust_z(x)
+    flagged = {(o["unit"], o["quantity"]) for o in csv.DictReader(open(out / "outliers.csv"))}
+    assert ("SIM3-02-B", col) in flagged
+    assert {u for (u, q) in flagged if q == col} == {
+        units[i]["unit"] for i in np.flatnonzero(np.abs(z) > 3.5)
+    }
+    doc = json.loads((out / "fleet.json").read_text())
+    y = doc["yield"]
+    expect = sum(v <= 0.01 for v in x)
+    assert (y["passed"], y["total"]) == (expect, 6) and y["not_checked"] == ["require_complete"]
+    verdicts = {u["unit"]: u["verdict"] for u in units}
+    assert verdicts["SIM3-02-B"] == "FAIL"
+    html = (out / "index.html").read_text()
+    assert "SIM3-02-B" in html and "Yield against the spec" in html
+
+
+def test_fleet_bad_input_is_exit_2(runs: dict[str, Path]) -> None:
+    empty = runs["dir"] / "empty"
+    empty.mkdir()
+    assert main(["fleet", str(empty), "--out", str(runs["dir"] / "f2")]) == 2
+    assert not (runs["dir"] / "f2").exists()
