@@ -351,6 +351,8 @@ def _strip_figure(rows: list[UnitRow], cols: list[str], outliers: list[dict[str,
         ax.set_yticks([])
         ax.set_ylim(-0.6, 0.6)
         ax.tick_params(labelsize=7)
+        ax.locator_params(axis="x", nbins=4)  # readable labels on a narrow spread
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4), useOffset=False)
     return fig
 
 
