@@ -5,7 +5,8 @@
 
 Simulates one multi-unit run of ``--units`` units (``gyrolab simulate --units``: a seeded
 unit family in one chamber), then runs ``batch compensate`` on it once per worker count
-(a fresh LocalCluster each time, one thread per worker) and prints, per worker count: the
+(w = 1: one after the other in this process, the serial baseline; w ≥ 2: a fresh
+LocalCluster of w one-thread workers, its start-up included) and prints, per worker count: the
 wall time (cluster start included), time per unit, the parallel efficiency
 ``E(w) = T(1) / (w · T(w))``, the largest peak resident memory of a worker, and whether every
 unit's ``model.json`` has the same bytes as with one worker. ``--small`` uses the tests'
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -25,7 +27,6 @@ from dataclasses import replace
 from pathlib import Path
 
 from gyrolab.batch import BatchOptions, run_batch
-from gyrolab.cli import main as gyrolab_main
 from gyrolab.compensation import pipeline as pl
 
 SMALL = replace(
@@ -67,7 +68,11 @@ def main() -> int:
             "--rate",
             str(args.rate),
         ]
-        assert gyrolab_main(argv) == 0
+        # in a child process, so that this process's peak RSS (the serial w = 1 run happens
+        # here, without a cluster) is that of the compensation alone
+        subprocess.run(
+            [sys.executable, "-m", "gyrolab", *argv], check=True, stdout=subprocess.DEVNULL
+        )
         t_sim = time.perf_counter() - t0
         print(
             f"simulated {args.units} units, profile {args.profile}, {args.rate:g} Hz in "
