@@ -102,6 +102,13 @@ def main() -> int:
             if not ref:
                 ref = models
             same = models == ref
+            if not same:  # say what differs
+                import json
+
+                for k in ref:
+                    a, b = json.loads(ref[k]), json.loads(models[k])
+                    diff = [key for key in a if a.get(key) != b.get(key)]
+                    print(f"  {k}: model.json differs in {diff}", file=sys.stderr)
             t1 = t1 or (wall if w == 1 else None)
             eff = f"{100 * t1 / (w * wall):.0f} %" if t1 else "—"
             rss = max(r.peak_rss_mib for r in res)

@@ -137,9 +137,14 @@ def is_complete(out: Path, task: str) -> bool:
 
 
 def bound_threads(n: int) -> None:
-    """Limit this process's numerical libraries to ``n`` threads (torch, numba)."""
+    """Limit this process's numerical libraries to ``n`` threads (BLAS/OpenMP pools through
+    threadpoolctl, torch, numba). Also what makes results independent of the worker count:
+    a BLAS on two threads sums in another order than on one (measured: a 13 h run's
+    ``model.json`` differed between the in-process and the cluster run before this)."""
     import torch
+    from threadpoolctl import threadpool_limits
 
+    threadpool_limits(limits=n)  # stays in force for the process
     torch.set_num_threads(n)
     try:
         import numba
