@@ -237,14 +237,24 @@ def _client(scheduler: str | None, workers: int, threads: int):  # type: ignore[
     env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
     env.update({k: threads for k in THREAD_ENV})
     env["GYROLAB_NO_PROGRESS"] = "1"
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-        )
+    saved = {k: os.environ.get(k) for k in [*env, "PYTHONHASHSEED"]}
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
+    finally:
+        # the nanny sets these in *this* process's environment before spawning (by design);
+        # put them back: a caller's numba, for one, refuses a changed NUMBA_NUM_THREADS
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
     try:
         with Client(cluster) as client:
             yield client

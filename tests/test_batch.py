@@ -4,6 +4,7 @@ reruns skip complete items."""
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -49,6 +50,7 @@ def serial(runs: Path) -> Path:
 def batched(runs: Path) -> tuple[Path, list[B.ItemResult]]:
     """The batch on a LocalCluster of 2 worker processes, the bad recording among them."""
     out = runs / "batched"
+    env = dict(os.environ)
     res = B.run_batch(
         "compensate",
         [str(runs / "*.mcap")],
@@ -56,6 +58,7 @@ def batched(runs: Path) -> tuple[Path, list[B.ItemResult]]:
         options=B.BatchOptions(config=CLI_CONFIG),
         workers=2,
     )
+    assert dict(os.environ) == env  # the cluster's worker settings stay in the workers
     return out, res
 
 

@@ -60,9 +60,19 @@ def _topics(path: Path) -> set[str]:
 def test_layout_per_unit_topics_and_shared_chamber(runs: dict[str, Path]) -> None:
     multi, single = runs["multi"], runs["single"]
     assert list_units(multi) == SERIALS and list_units(single) == []
-    per_unit = {f"/unit/{s}{t}" for s in SERIALS for t in ("/gyro/adc", TOPIC_RATE, TOPIC_PT100)}
-    shared = {"/oven/state", "/profile/event", "/log"}
+    per_unit = {
+        f"/unit/{s}{t}"
+        for s in SERIALS
+        for t in ("/gyro/adc", TOPIC_RATE, "/gyro/rate_summary", TOPIC_PT100)
+    }
+    shared = {"/oven/state", "/profile/event", "/log", "/log/foxglove"}
     assert _topics(multi) == per_unit | shared
+    assert _topics(single) == {t for t in _topics(multi) if not t.startswith("/unit/")} | {
+        "/gyro/adc",
+        TOPIC_RATE,
+        "/gyro/rate_summary",
+        TOPIC_PT100,
+    }
     assert not any(t.startswith("/unit/") for t in _topics(single))
     assert unit_topic("/oven/state", "X") == "/oven/state"
     recs = [read_recording(multi, unit=s) for s in SERIALS]

@@ -96,7 +96,7 @@ def poly3_block_means(p3: Poly3, run: PreparedRun, block_s: float) -> np.ndarray
     if run.raw_rate is not None and run.raw_t is not None:
         acc.add(run.raw_t, comp(run.raw_t, run.raw_rate), run.raw_period)
     else:
-        for t, x, period in iter_rate_batches(run.path):
+        for t, x, period in iter_rate_batches(run.path, unit=run.unit):
             acc.add(t, comp(t, x), period)
     return acc.result()[1]
 
