@@ -143,6 +143,7 @@ def test_compensate_fits_every_unit(fleet_models: Path, runs: dict[str, Path]) -
         assert meta["calibration"]["path"] == str(runs["multi"])
         m = json.loads((fleet_models / s / "metrics.json").read_text())
         assert m["unit"] == s and m["held_out"] is False
+        assert set(m["oracle"]) == set(m["raw"])  # the unit's own true drift, replayed
     # --unit gives that unit's model alone: the same bytes as its directory in the fleet
     one = runs["dir"] / "one"
     assert main(["compensate", str(runs["multi"]), "--unit", "SIM3-02", "--out", str(one)]) == 0
