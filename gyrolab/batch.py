@@ -62,13 +62,14 @@ class ItemResult:
 class BatchOptions:
     """Per-item settings shared by every item of a batch (picklable: sent to workers)."""
 
-    seed: int = 0  # compensate
+    seed: int | None = None  # compensate (None: CONFIG.toml's seed, else 0)
     models: str | None = None  # report: MODELS/<stem> is the model of each run
     sim_model: str | None = None  # discrepancy: starting SIM_MODEL.toml
     validate: str | None = None  # compensate: held-out run (the same unit's topics)
     force: bool = False
     threads: int = 1
     config: Any = None  # compensate: a PipelineConfig (None: the command's default)
+    config_file: str | None = None  # compensate: CONFIG.toml (`gyrolab compensate --config`)
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -167,7 +168,7 @@ def _namespace(task: str, item: Item, opt: BatchOptions) -> argparse.Namespace:
             **common,
             validate=opt.validate,
             seed=opt.seed,
-            config=None,  # no CONFIG.toml: the pipeline configuration itself
+            config=opt.config_file,
             pipeline_config=opt.config,
             **opt.extra,
         )
@@ -374,11 +375,14 @@ def batch(args: argparse.Namespace) -> int:
         raise GyrolabError("gyrolab batch: --threads must be at least 1")
     opt = BatchOptions(
         seed=args.seed,
+        config_file=args.config,
         models=args.models,
         sim_model=args.sim_model,
         force=args.force,
         threads=args.threads,
     )
+    if opt.config_file and args.task != "compensate":
+        raise GyrolabError("gyrolab batch: --config is for `batch compensate`")
     if opt.models and args.task != "report":
         raise GyrolabError("gyrolab batch: --models is for `batch report`")
     if opt.sim_model and args.task != "discrepancy":
