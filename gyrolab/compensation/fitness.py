@@ -41,7 +41,7 @@ import numpy as np
 import scipy.signal
 
 from gyrolab.compensation.gpso import GPSOResult, gpso
-from gyrolab.compensation.vmd import VMDResult, _pick_backend, vmd_batch
+from gyrolab.compensation.vmd import _BATCH_BYTES, VMDResult, _pick_backend, vmd_batch
 
 __all__ = [
     "CRITERIA",
@@ -138,8 +138,9 @@ class VMDFitness:
 
     ``VMDFitness(signal)(X)`` decomposes ``signal`` with every row ``(K, alpha)`` of X by
     :func:`vmd_batch` and returns the criterion of each. Candidates go a slice at a time
-    (``vmd_kwargs["fitness_chunk"]``; default 4 per thread on the CPU, all at once on a
-    GPU), which bounds the memory held; the criterion is "smaller is better".
+    (``vmd_kwargs["fitness_chunk"]``; default on the CPU as many as keep 256 MB of modes,
+    so a generation of 50 on a 11 000-sample record is one call; all at once on a GPU),
+    which bounds the memory held; the criterion is "smaller is better".
     Other ``vmd_kwargs`` go to :func:`vmd_batch`.
     """
 
@@ -164,7 +165,11 @@ class VMDFitness:
         # score a slice of candidates at a time so only that slice's modes are ever held
         # (50 candidates x 11 modes of a 1e6-sample record would be 4.4 GB)
         backend, _ = _pick_backend(kw.get("backend", "auto"), kw.get("device"))
-        default = len(X) if backend == "torch" else 4 * numba.get_num_threads()
+        default = len(X)
+        if backend == "numba":  # as many as fit the numba batch's memory bound: one call
+            k_max = max(int(np.rint(X[:, 0]).max()), 1) if len(X) else 1
+            per_call = _BATCH_BYTES // (8 * self.signal.size * k_max)
+            default = max(2 * numba.get_num_threads(), per_call)
         step = max(int(kw.pop("fitness_chunk", default)), 1)
         out = np.empty(len(X))
         for i in range(0, len(X), step):
