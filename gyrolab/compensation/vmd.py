@@ -28,8 +28,10 @@ What this implementation does differently from the reference code (and from ``vm
   numba kernel): about 3.6 us per mode per iteration on 11 000 samples;
 * odd lengths are decomposed in full (the reference code silently drops the last
   sample): the signal is mirrored to ``T = 2 N`` samples in every case;
-* many ``(K, alpha)`` candidates are decomposed in one call (:func:`vmd_batch`), in
-  parallel over CPU threads (numba) or as one batched tensor program (torch, CPU or CUDA).
+* many ``(unit, K, alpha)`` candidates are decomposed in one call (:func:`vmd_batch`): in
+  parallel over CPU threads (numba, a dynamic queue over candidates), as one fused kernel
+  launch per ADMM iteration on a GPU (Triton, :mod:`gyrolab.compensation.vmd_triton`), or
+  as one batched tensor program (torch, CPU or CUDA).
 
 The returned modes are those of the last iterate (the reference code returns the
 penultimate one).
