@@ -102,3 +102,30 @@ def test_search_is_reproducible_and_inside_the_box() -> None:
     assert a.fitness == pytest.approx(drift_separation(x, vmd(x, a.alpha, a.K)))
     custom = search_vmd_parameters(x, criterion=orthogonality, **kw)
     assert custom.criterion == "orthogonality"
+
+
+def test_fleet_search_equals_each_units_own_search() -> None:
+    xs = np.stack([synthetic_drift_signal(n=1200, seed=s) for s in (5, 6, 7)])
+    kw = {"population": 6, "generations": 3, "seed": 3}
+    calls: list[int] = []
+    real = vmd_batch
+
+    def counting(*args, **kwargs):
+        calls.append(len(args[1]))
+        return real(*args, **kwargs)
+
+    import gyrolab.compensation.fitness as fitness_mod
+
+    fitness_mod.vmd_batch = counting
+    try:
+        fleet = fitness_mod.search_vmd_parameters_fleet(xs, **kw)
+    finally:
+        fitness_mod.vmd_batch = real
+    # one batched call per generation for the whole fleet (initial swarm + 3 generations)
+    assert len(calls) <= 4 and calls[0] == 3 * 6
+    for x, got in zip(xs, fleet, strict=True):
+        own = search_vmd_parameters(x, **kw)
+        assert (got.K, got.alpha, got.fitness) == (own.K, own.alpha, own.fitness)
+        np.testing.assert_array_equal(got.gpso.fitness, own.gpso.fitness)
+    with pytest.raises(ValueError, match=r"\(U, N\)"):
+        fitness_mod.search_vmd_parameters_fleet(xs[0], **kw)

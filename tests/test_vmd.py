@@ -121,7 +121,7 @@ def test_batch_chunks_do_not_change_results() -> None:
 def test_cuda_batch_matches_cpu() -> None:
     x = _signal(11000, seed=5)
     alphas, Ks = [50.0, 2000.0, 5000.0], [11, 7, 3]
-    gpu = vmd_batch(x, alphas, Ks, device="cuda")
+    gpu = vmd_batch(x, alphas, Ks, backend="torch", device="cuda")
     cpu = vmd_batch(x, alphas, Ks, backend="numba")
     for g, c in zip(gpu, cpu, strict=True):
         assert g.n_iter == c.n_iter
@@ -159,3 +159,17 @@ def test_bad_arguments_are_rejected(args: tuple, match: str) -> None:
 def test_zero_signal_gives_zero_modes() -> None:
     r = vmd(np.zeros(64), 100.0, 3)
     assert np.all(r.modes == 0) and np.all(np.isfinite(r.omega))
+
+
+def test_batch_over_units_equals_single_calls() -> None:
+    xs = np.stack([_signal(900, seed=s) for s in (7, 8)])
+    alphas, Ks, units = [300.0, 2000.0, 300.0, 60.0], [4, 3, 4, 2], [0, 1, 1, 0]
+    batch = vmd_batch(xs, alphas, Ks, units=units, backend="numba", tau=0.02)
+    for a, k, u, b in zip(alphas, Ks, units, batch, strict=True):
+        s = vmd(xs[u], a, k, tau=0.02)
+        assert b.n_iter == s.n_iter
+        np.testing.assert_array_equal(b.modes, s.modes)
+    with pytest.raises(ValueError, match="units"):
+        vmd_batch(xs, alphas, Ks)
+    with pytest.raises(ValueError, match="units"):
+        vmd_batch(xs, alphas, Ks, units=[0, 1, 2, 0])

@@ -33,6 +33,7 @@ Orthogonality index: N. E. Huang et al., Proc. R. Soc. A 454 (1998) 903, eq. (6.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -41,7 +42,7 @@ import numpy as np
 import scipy.signal
 
 from gyrolab.compensation.gpso import GPSOResult, gpso
-from gyrolab.compensation.vmd import VMDResult, _pick_backend, vmd_batch
+from gyrolab.compensation.vmd import _BATCH_BYTES, VMDResult, _pick_backend, vmd_batch
 
 __all__ = [
     "CRITERIA",
@@ -53,6 +54,7 @@ __all__ = [
     "min_envelope_entropy",
     "orthogonality",
     "search_vmd_parameters",
+    "search_vmd_parameters_fleet",
     "synthetic_drift_signal",
 ]
 
@@ -138,8 +140,9 @@ class VMDFitness:
 
     ``VMDFitness(signal)(X)`` decomposes ``signal`` with every row ``(K, alpha)`` of X by
     :func:`vmd_batch` and returns the criterion of each. Candidates go a slice at a time
-    (``vmd_kwargs["fitness_chunk"]``; default 4 per thread on the CPU, all at once on a
-    GPU), which bounds the memory held; the criterion is "smaller is better".
+    (``vmd_kwargs["fitness_chunk"]``; default on the CPU as many as keep 256 MB of modes,
+    so a generation of 50 on a 11 000-sample record is one call; all at once on a GPU),
+    which bounds the memory held; the criterion is "smaller is better".
     Other ``vmd_kwargs`` go to :func:`vmd_batch`.
     """
 
@@ -159,19 +162,79 @@ class VMDFitness:
             self._fn = self.criterion
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
+        return self.score(X)
+
+    def score(self, X: np.ndarray, units: np.ndarray | None = None) -> np.ndarray:
+        """Criterion of each row ``(K, alpha)`` of X; ``units`` picks rows of a 2-D signal."""
         X = np.atleast_2d(X)
+        sig = np.atleast_2d(self.signal)
+        units = np.zeros(len(X), dtype=np.int64) if units is None else np.asarray(units)
         kw = dict(self.vmd_kwargs or {})
         # score a slice of candidates at a time so only that slice's modes are ever held
         # (50 candidates x 11 modes of a 1e6-sample record would be 4.4 GB)
         backend, _ = _pick_backend(kw.get("backend", "auto"), kw.get("device"))
-        default = len(X) if backend == "torch" else 4 * numba.get_num_threads()
+        default = len(X)
+        if backend == "numba":  # as many as fit the numba batch's memory bound: one call
+            k_max = max(int(np.rint(X[:, 0]).max()), 1) if len(X) else 1
+            per_call = _BATCH_BYTES // (8 * sig.shape[1] * k_max)
+            default = max(2 * numba.get_num_threads(), per_call)
         step = max(int(kw.pop("fitness_chunk", default)), 1)
         out = np.empty(len(X))
         for i in range(0, len(X), step):
             sl = slice(i, i + step)
-            res = vmd_batch(self.signal, X[sl, 1], np.rint(X[sl, 0]).astype(int), **kw)
-            out[sl] = [self._fn(self.signal, r) for r in res]
+            Ks = np.rint(X[sl, 0]).astype(int)
+            res = vmd_batch(sig, X[sl, 1], Ks, units=units[sl], **kw)
+            out[sl] = [self._fn(sig[u], r) for u, r in zip(units[sl], res, strict=True)]
         return out
+
+
+class _FleetBatcher:
+    """Joins the fitness calls of U concurrent GPSO searches into one batch per generation.
+
+    Each search runs in its own thread and calls :meth:`evaluate` once per generation; the
+    call blocks until every search still running has asked (or finished), and the last to
+    ask scores all of their positions with one :meth:`VMDFitness.score` (one
+    :func:`vmd_batch` call over (unit, K, alpha) when it fits the memory bound).
+    """
+
+    def __init__(self, fitness: VMDFitness, n_units: int) -> None:
+        self.fitness = fitness
+        self.cv = threading.Condition()
+        self.live = n_units
+        self.pending: dict[int, np.ndarray] = {}
+        self.done: dict[int, np.ndarray | BaseException] = {}
+
+    def _run(self) -> None:
+        units = sorted(self.pending)
+        X = np.concatenate([self.pending[u] for u in units])
+        idx = np.concatenate([np.full(len(self.pending[u]), u) for u in units])
+        try:
+            f = self.fitness.score(X, idx)
+            for u in units:
+                self.done[u] = f[idx == u]
+        except BaseException as exc:  # every waiting search re-raises it
+            for u in units:
+                self.done[u] = exc
+        self.pending.clear()
+        self.cv.notify_all()
+
+    def evaluate(self, unit: int, X: np.ndarray) -> np.ndarray:
+        with self.cv:
+            self.pending[unit] = np.atleast_2d(X)
+            if len(self.pending) == self.live:
+                self._run()
+            while unit not in self.done:
+                self.cv.wait()
+            out = self.done.pop(unit)
+        if isinstance(out, BaseException):
+            raise out
+        return out
+
+    def finish(self) -> None:
+        with self.cv:
+            self.live -= 1
+            if self.pending and len(self.pending) == self.live:
+                self._run()
 
 
 @dataclass(frozen=True)
@@ -195,6 +258,7 @@ def search_vmd_parameters(
     generations: int = 30,
     seed: int | None = 0,
     vmd_kwargs: dict | None = None,
+    fitness: Callable[[np.ndarray], np.ndarray] | None = None,
     **gpso_kwargs,
 ) -> VMDSearch:
     """GPSO search for VMD's ``(K, alpha)`` (paper section 4.2 defaults).
@@ -210,11 +274,15 @@ def search_vmd_parameters(
     population, generations, seed : optional
         GPSO settings (paper: population 50).
     vmd_kwargs : dict, optional
-        Passed to :func:`vmd_batch` (e.g. ``device="cuda"``).
+        Passed to :func:`vmd_batch` (e.g. ``device="cuda"``; by default the fused Triton
+        kernel on a GPU when one is present and Triton is installed, numba otherwise).
+    fitness : callable, optional
+        Replaces the batch fitness built from ``signal``, ``criterion`` and
+        ``vmd_kwargs`` (used by :func:`search_vmd_parameters_fleet`).
     **gpso_kwargs
         Passed to :func:`gpso`.
     """
-    fit = VMDFitness(np.asarray(signal, dtype=np.float64), criterion, vmd_kwargs)
+    fit = fitness or VMDFitness(np.asarray(signal, dtype=np.float64), criterion, vmd_kwargs)
     res = gpso(
         fit,
         [tuple(map(float, K_bounds)), tuple(map(float, alpha_bounds))],
@@ -229,6 +297,67 @@ def search_vmd_parameters(
     return VMDSearch(
         int(res.best_position[0]), float(res.best_position[1]), res.best_fitness, name, res
     )
+
+
+def search_vmd_parameters_fleet(
+    signals: np.ndarray,
+    *,
+    criterion: str | Criterion = DEFAULT_CRITERION,
+    K_bounds: tuple[int, int] = K_BOUNDS,
+    alpha_bounds: tuple[float, float] = ALPHA_BOUNDS,
+    population: int = 50,
+    generations: int = 30,
+    seed: int | None = 0,
+    vmd_kwargs: dict | None = None,
+    **gpso_kwargs,
+) -> list[VMDSearch]:
+    """:func:`search_vmd_parameters` for U equal-length records at once (a fleet of units).
+
+    The U searches run in lockstep, and each generation of all of them is scored by one
+    batched fitness call: one :func:`vmd_batch` over (unit, K, alpha) (on a GPU the whole
+    fleet's generation is one batch of ``U x population`` candidates). Each unit's result
+    equals its own :func:`search_vmd_parameters` call with the same arguments (exactly on
+    the numba backend, whose candidates do not depend on the batch around them).
+
+    Parameters
+    ----------
+    signals : array_like, shape (U, N)
+        One record per unit.
+    criterion, K_bounds, alpha_bounds, population, generations, seed, vmd_kwargs, **gpso_kwargs
+        As for :func:`search_vmd_parameters`, shared by all units.
+
+    Returns
+    -------
+    list of VMDSearch
+        One per unit, in row order.
+    """
+    xs = np.asarray(signals, dtype=np.float64)
+    if xs.ndim != 2:
+        raise ValueError(f"search_vmd_parameters_fleet: signals must be (U, N), got {xs.shape}")
+    batcher = _FleetBatcher(VMDFitness(xs, criterion, vmd_kwargs), xs.shape[0])
+    out: list[VMDSearch | BaseException | None] = [None] * xs.shape[0]
+
+    def one(u: int) -> None:
+        try:
+            out[u] = search_vmd_parameters(
+                xs[u], criterion=criterion, K_bounds=K_bounds, alpha_bounds=alpha_bounds,
+                population=population, generations=generations, seed=seed,
+                fitness=lambda X: batcher.evaluate(u, X), **gpso_kwargs,
+            )  # fmt: skip
+        except BaseException as exc:
+            out[u] = exc
+        finally:
+            batcher.finish()
+
+    threads = [threading.Thread(target=one, args=(u,)) for u in range(xs.shape[0])]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for r in out:
+        if isinstance(r, BaseException):
+            raise r
+    return out  # type: ignore[return-value]
 
 
 # --------------------------------------------------------------------------- test signal

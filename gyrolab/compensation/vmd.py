@@ -28,8 +28,10 @@ What this implementation does differently from the reference code (and from ``vm
   numba kernel): about 3.6 us per mode per iteration on 11 000 samples;
 * odd lengths are decomposed in full (the reference code silently drops the last
   sample): the signal is mirrored to ``T = 2 N`` samples in every case;
-* many ``(K, alpha)`` candidates are decomposed in one call (:func:`vmd_batch`), in
-  parallel over CPU threads (numba) or as one batched tensor program (torch, CPU or CUDA).
+* many ``(unit, K, alpha)`` candidates are decomposed in one call (:func:`vmd_batch`): in
+  parallel over CPU threads (numba, a dynamic queue over candidates), as one fused kernel
+  launch per ADMM iteration on a GPU (Triton, :mod:`gyrolab.compensation.vmd_triton`), or
+  as one batched tensor program (torch, CPU or CUDA).
 
 The returned modes are those of the last iterate (the reference code returns the
 penultimate one).
@@ -49,7 +51,9 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 import scipy.fft
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.core.extending import intrinsic
 
 __all__ = ["VMDResult", "vmd", "vmd_batch", "initial_omega"]
 
@@ -192,13 +196,48 @@ def _admm_one(fd, alpha, K, omega, tau, tol, max_iter, dc, u):  # pragma: no cov
     return n, udiff <= tol
 
 
+@intrinsic
+def _fetch_add(typingctx, counter, value):  # pragma: no cover
+    """Atomically add ``value`` to ``counter[0]`` (int64 array) and return the old value."""
+    sig = types.int64(counter, types.int64)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(
+            context, builder, signature.args[0], ary, [context.get_constant(types.intp, 0)]
+        )
+        return builder.atomic_rmw("add", ptr, args[1], "seq_cst")
+
+    return sig, codegen
+
+
 @njit(cache=True, parallel=True, fastmath=True, nogil=True, error_model="numpy")
-def _admm_batch(fd, alphas, Ks, omega, tau, tol, max_iter, dc, u, n_iter, conv):  # pragma: no cover
-    """Independent candidates in parallel: ``u`` (B, Kmax, M), ``omega`` (B, Kmax)."""
-    for b in prange(alphas.shape[0]):
-        n, c = _admm_one(fd, alphas[b], Ks[b], omega[b], tau, tol, max_iter, dc, u[b])
-        n_iter[b] = n
-        conv[b] = c
+def _admm_batch(
+    fds, units, alphas, Ks, offs, order, omega, tau, tol, max_iter, dc, u, n_iter, conv, nxt, nthr
+):  # pragma: no cover  # fmt: skip
+    """Independent candidates in parallel over one flat mode array.
+
+    Candidate b owns rows ``offs[b] .. offs[b] + Ks[b]`` of ``u`` (R, M) and of ``omega``
+    (R,) and decomposes ``fds[units[b]]``. One worker per thread pulls the next candidate
+    of ``order`` (most expensive first) from the shared counter ``nxt`` when it is free: a
+    dynamic schedule, so the threads finish together although candidates differ in K and
+    in iterations (numba's own ``prange`` hands out fixed blocks of the range; with
+    candidates sorted by cost, one thread would get all the heavy ones). ``nthr`` is
+    the number of threads (passed in: reading it inside would defeat the disk cache).
+    """
+    for _ in prange(nthr):
+        while True:
+            i = _fetch_add(nxt, 1)
+            if i >= order.shape[0]:
+                break
+            b = order[i]
+            k0 = offs[b]
+            k1 = k0 + Ks[b]
+            n, c = _admm_one(
+                fds[units[b]], alphas[b], Ks[b], omega[k0:k1], tau, tol, max_iter, dc, u[k0:k1]
+            )
+            n_iter[b] = n
+            conv[b] = c
 
 
 # --------------------------------------------------------------------------- helpers
@@ -231,7 +270,7 @@ def _phase(n: int) -> np.ndarray:
     return np.pi * np.arange(n) * (0.5 - n // 2) / n
 
 
-def _modes_from_real(u: np.ndarray, n: int) -> np.ndarray:
+def _modes_from_real(u: np.ndarray, n: int, workers: int | None = None) -> np.ndarray:
     """Time-domain modes (K, n) from real spectra (K, n), mirror already cropped.
 
     The inverse DCT-II is exactly the reference code's ``real(ifft(...))`` of the
@@ -239,7 +278,7 @@ def _modes_from_real(u: np.ndarray, n: int) -> np.ndarray:
     it adds: it fills the Nyquist bin with the conjugate of the highest stored bin, which
     puts ``A_(N-1) cos(phi_(N-1)) (-1)^t / T`` into every mode; kept, for fidelity.
     """
-    modes = scipy.fft.idct(u, type=2, axis=-1)
+    modes = scipy.fft.idct(u, type=2, axis=-1, workers=workers)
     h = n // 2
     sign = np.where((np.arange(n) + h) % 2 == 0, 1.0, -1.0)
     c = np.cos(np.pi * (n - 1) * (0.5 - h) / n) / (2.0 * n)
@@ -366,6 +405,7 @@ def vmd_batch(
     alphas: Sequence[float] | np.ndarray,
     Ks: Sequence[int] | np.ndarray,
     *,
+    units: Sequence[int] | np.ndarray | None = None,
     tau: float = 0.0,
     tol: float = 1e-7,
     max_iter: int = 500,
@@ -375,38 +415,46 @@ def vmd_batch(
     device: str | None = None,
     chunk: int | None = None,
 ) -> list[VMDResult]:
-    """Decompose one signal with many ``(K, alpha)`` candidates at once.
+    """Decompose one signal, or a fleet of equal-length signals, with many candidates at once.
 
-    Each candidate gives what :func:`vmd` gives with the same arguments (to rounding:
-    the torch path does the same operations in another order).
+    Each candidate gives what :func:`vmd` gives with the same arguments on its own signal
+    (numba: bit for bit; torch and triton: to rounding, the sums run in another order).
 
     Parameters
     ----------
-    signal : array_like, shape (N,)
-        As for :func:`vmd`.
+    signal : array_like, shape (N,) or (U, N)
+        One record, or U records of equal length (e.g. one per unit of a fleet); as for
+        :func:`vmd` otherwise.
     alphas, Ks : array_like, shape (B,)
         One ``alpha`` and one ``K`` per candidate.
+    units : array_like of int, shape (B,), optional
+        Which row of a 2-D ``signal`` each candidate decomposes (default: all row 0,
+        which must then be the only row). A fleet's GPSO generation is one call:
+        ``units = repeat(arange(U), P)`` with the U swarms' positions stacked.
     tau, tol, max_iter, dc
         As for :func:`vmd`, shared by all candidates.
     init : {"uniform", "zero"}, optional
         As for :func:`vmd`.
-    backend : {"auto", "numba", "torch"}, optional
-        ``"numba"``: fused CPU kernel, candidates spread over threads. ``"torch"``: one
-        batched tensor program over all candidates (``device`` "cpu" or "cuda").
-        ``"auto"``: torch when ``device`` is "cuda" (or is None and CUDA is present),
-        numba otherwise.
+    backend : {"auto", "numba", "triton", "torch"}, optional
+        ``"numba"``: fused CPU kernel, candidates spread over threads. ``"triton"``: the
+        fused GPU kernel of :mod:`gyrolab.compensation.vmd_triton` (one launch per ADMM
+        iteration for the whole batch); on ``device="cpu"`` it runs in Triton's
+        interpreter (slow: for tests). ``"torch"``: one batched tensor program (unfused).
+        ``"auto"``: on CUDA (``device`` "cuda", or None and a GPU present) triton when it
+        is installed, else torch; numba otherwise.
     device : str, optional
-        Torch device for ``backend="torch"``.
+        Torch device for the triton and torch backends.
     chunk : int, optional
-        Candidates decomposed together (bounds memory: about ``8 chunk Kmax N`` bytes);
-        default: all on torch, 4 per thread on numba.
+        Candidates decomposed together (bounds memory: about ``8 N sum(K)`` bytes for
+        their modes); default: as many as fit in 256 MB of modes on numba (at least two
+        per thread), all on triton and torch.
 
     Returns
     -------
     list of VMDResult
-        In candidate order.
+        In candidate order. On numba the modes of one chunk are views of one buffer.
     """
-    x = _as_signal(signal)
+    xs, units_arr = _as_signals(signal, units, np.size(alphas))
     alphas = np.atleast_1d(np.asarray(alphas, dtype=np.float64))
     Ks_arr = np.atleast_1d(np.asarray(Ks))
     if alphas.shape != Ks_arr.shape or alphas.ndim != 1:
@@ -417,27 +465,66 @@ def vmd_batch(
     if init not in ("uniform", "zero"):
         raise ValueError("vmd_batch: init must be 'uniform' or 'zero'")
     backend, device = _pick_backend(backend, device)
+    args = (xs, units_arr, alphas, Ks_arr, tau, tol, max_iter, init, dc)
+    if backend == "triton":
+        from gyrolab.compensation.vmd_triton import vmd_batch_triton
+
+        return vmd_batch_triton(*args, device=device, chunk=chunk)
     if backend == "torch":
-        return _vmd_batch_torch(x, alphas, Ks_arr, tau, tol, max_iter, init, dc, device, chunk)
-    return _vmd_batch_numba(x, alphas, Ks_arr, tau, tol, max_iter, init, dc, chunk)
+        return _vmd_batch_torch(*args, device, chunk)
+    return _vmd_batch_numba(*args, chunk)
+
+
+def _as_signals(signal, units, B: int) -> tuple[np.ndarray, np.ndarray]:
+    """(U, N) float64 records and the (B,) row index of each candidate."""
+    arr = np.asarray(signal, dtype=np.float64)
+    if arr.ndim == 2:
+        xs = np.stack([_as_signal(row) for row in arr])
+    else:
+        xs = _as_signal(arr)[None, :]
+    if units is None:
+        if xs.shape[0] != 1:
+            raise ValueError("vmd_batch: a 2-D signal needs `units` (a row index per candidate)")
+        return xs, np.zeros(B, dtype=np.int64)
+    u = np.atleast_1d(np.asarray(units))
+    if u.shape != (B,) or not np.issubdtype(u.dtype, np.integer):
+        raise ValueError(f"vmd_batch: units must be {B} integers, one per candidate")
+    if B and (u.min() < 0 or u.max() >= xs.shape[0]):
+        raise ValueError(f"vmd_batch: units must index the {xs.shape[0]} signal rows")
+    return xs, u.astype(np.int64)
+
+
+_HAS_TRITON: bool | None = None
+
+
+def _triton_available() -> bool:
+    global _HAS_TRITON
+    if _HAS_TRITON is None:
+        try:
+            import triton  # noqa: F401
+
+            _HAS_TRITON = True
+        except ImportError:
+            _HAS_TRITON = False
+    return _HAS_TRITON
 
 
 def _pick_backend(backend: str, device: str | None) -> tuple[str, str | None]:
-    if backend not in ("auto", "numba", "torch"):
+    if backend not in ("auto", "numba", "torch", "triton"):
         raise ValueError(f"vmd_batch: unknown backend {backend!r}")
     if backend == "numba":
         if device not in (None, "cpu"):
             raise ValueError("vmd_batch: the numba backend runs on the CPU only")
         return "numba", None
-    if backend == "torch":
-        return "torch", device or "cpu"
-    if device is not None and str(device).startswith("cuda"):
-        return "torch", device
+    if backend in ("torch", "triton"):
+        return backend, device or ("cuda" if backend == "triton" else "cpu")
     if device is None:
         import torch
 
         if torch.cuda.is_available():
-            return "torch", "cuda"
+            device = "cuda"
+    if device is not None and str(device).startswith("cuda"):
+        return ("triton" if _triton_available() else "torch"), device
     return "numba", None
 
 
@@ -451,36 +538,49 @@ def _initial_block(Ks: np.ndarray, init: str, n: int, dc: bool) -> np.ndarray:
     return omega
 
 
-def _vmd_batch_numba(x, alphas, Ks, tau, tol, max_iter, init, dc, chunk) -> list[VMDResult]:
-    n = x.size
-    fd = _real_spectrum(x)
+def _cost_order(Ks: np.ndarray, alphas: np.ndarray, units: np.ndarray) -> np.ndarray:
+    """Candidates, most expensive first: many modes, then small alpha (more iterations)."""
+    return np.lexsort((units, alphas, -Ks))
+
+
+_BATCH_BYTES = 256 * 2**20  # default bound on the modes held by one numba chunk
+
+
+def _vmd_batch_numba(xs, units, alphas, Ks, tau, tol, max_iter, init, dc, chunk):
+    n = xs.shape[1]
+    fds = scipy.fft.dct(xs, type=2, axis=-1)
     B = alphas.size
+    threads = numba.get_num_threads()
     if chunk is None:
-        chunk = 4 * numba.get_num_threads()
-    # slowest candidates (many modes, small alpha) first, so the threads finish together
-    order = np.lexsort((alphas, -Ks))
+        chunk = max(2 * threads, _BATCH_BYTES // (8 * n * int(Ks.max())))
+    order = _cost_order(Ks, alphas, units)
     results: list[VMDResult | None] = [None] * B
-    for start in range(0, B, chunk):
-        idx = order[start : start + chunk]
-        u = np.zeros((idx.size, int(Ks[idx].max()), n))
-        omega = _initial_block(Ks[idx], init, n, dc)
+    for start in range(0, B, int(chunk)):
+        idx = order[start : start + int(chunk)]
+        k_c = Ks[idx]
+        offs = np.concatenate(([0], np.cumsum(k_c)[:-1])).astype(np.int64)
+        u = np.zeros((int(k_c.sum()), n))
+        omega = np.concatenate([initial_omega(int(k), init, n) for k in k_c])
+        if dc:
+            omega[offs] = 0.0
         n_iter = np.zeros(idx.size, dtype=np.int64)
         conv = np.zeros(idx.size, dtype=np.bool_)
-        with numba.parallel_chunksize(1):
-            _admm_batch(
-                fd, alphas[idx], Ks[idx], omega, float(tau), float(tol), int(max_iter),
-                bool(dc), u, n_iter, conv,
-            )  # fmt: skip
+        _admm_batch(
+            fds, units[idx], alphas[idx], k_c, offs, np.arange(idx.size), omega,
+            float(tau), float(tol), int(max_iter), bool(dc), u, n_iter, conv,
+            np.zeros(1, dtype=np.int64), threads,
+        )  # fmt: skip
+        modes = _modes_from_real(u, n, workers=threads)
         for i, j in enumerate(idx):
-            k = int(Ks[j])
+            k0, k = int(offs[i]), int(k_c[i])
             results[j] = VMDResult(
-                _modes_from_real(u[i, :k], n), omega[i, :k].copy(), int(n_iter[i]),
+                modes[k0 : k0 + k], omega[k0 : k0 + k].copy(), int(n_iter[i]),
                 bool(conv[i]), float(alphas[j]), k,
             )  # fmt: skip
     return results  # type: ignore[return-value]
 
 
-def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk):
+def _vmd_batch_torch(xs, units, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk):
     """The same ADMM as :func:`_admm_one`, as batched tensor operations over candidates.
 
     Candidates are sorted by K (descending), so the candidates that have a mode k form a
@@ -493,14 +593,14 @@ def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk)
     import torch
 
     dev = torch.device(device)
-    n = x.size
+    n = xs.shape[1]
     B = alphas.size
     chunk = B if chunk is None else int(chunk)
     f64 = torch.float64
     order = np.argsort(-Ks, kind="stable")
     out: list[VMDResult | None] = [None] * B
     with torch.no_grad():
-        fd = torch.as_tensor(_real_spectrum(x), device=dev)
+        fd_all = torch.as_tensor(scipy.fft.dct(xs, type=2, axis=-1), device=dev)
         fr = torch.arange(n, device=dev, dtype=f64) / (2.0 * n)
         for start in range(0, B, chunk):
             ids = order[start : start + chunk]  # original indices, K descending
@@ -508,6 +608,7 @@ def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk)
             kmax = int(k_np[0])
             omega = torch.as_tensor(_initial_block(k_np, init, n, dc), device=dev)
             alpha = torch.as_tensor(alphas[ids], device=dev)[:, None]
+            fd = fd_all[torch.as_tensor(units[ids], device=dev)]  # (B, n): each its unit's
             u = torch.zeros((ids.size, kmax, n), dtype=f64, device=dev)
             S = torch.zeros((ids.size, n), dtype=f64, device=dev)
             lam = torch.zeros_like(S)
@@ -523,7 +624,7 @@ def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk)
                     old = u[:m, k]
                     oth = S[:m] - old
                     g = 1.0 + alpha[:m] * (fr[None, :] - omega[:m, k : k + 1]) ** 2
-                    new = ((fd - oth - 0.5 * lam[:m]) if tau != 0.0 else (fd - oth)) / g
+                    new = ((fd[:m] - oth - 0.5 * lam[:m]) if tau != 0.0 else (fd[:m] - oth)) / g
                     p = new * new
                     den = p.sum(1)
                     if not (dc and k == 0):
@@ -551,7 +652,7 @@ def _vmd_batch_torch(x, alphas, Ks, tau, tol, max_iter, init, dc, device, chunk)
                 keep = np.flatnonzero(~done)
                 kt = torch.as_tensor(keep, device=dev)
                 ids, k_np = ids[keep], k_np[keep]
-                u, S, lam = u[kt], S[kt], lam[kt]
+                u, S, lam, fd = u[kt], S[kt], lam[kt], fd[kt]
                 omega, alpha = omega[kt], alpha[kt]
                 kmax = int(k_np[0]) if ids.size else 0
                 u = u[:, :kmax]
