@@ -17,7 +17,9 @@ full-rate compensated output (the temperature model applied, so the thermal drif
 mistaken for random walk); kalibr has one value for all axes, the largest axis is written
 (each axis's value is in a comment). When the curve has no +1/2 region (a run too short for
 the random walk to show) K comes from the weighted least-squares fit of all IEEE 952 terms
-(``noise_terms(method="fit")``), and the file says so. kalibr also needs the accelerometer
+(``noise_terms(method="fit")``); where that does not identify it either, the file carries
+the upper bound min σ(τ)·√(3/τ) over τ ≤ T/10 (a +1/2 line cannot lie above the curve) and
+says so in the axis comment. kalibr also needs the accelerometer
 fields; gyrolab measures no accelerometer, so the file names them in a comment for the user
 to fill in rather than inventing numbers.
 """
@@ -42,6 +44,15 @@ def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
     if not (np.isfinite(K) and K > 0):
         fit = noise_terms(res, method="fit", terms=("N", "B", "K"))
         K, how_k = fit.K, "least-squares fit of N, B, K (no +1/2 region on the curve)"
+    if not (np.isfinite(K) and K > 0):
+        # Not identifiable (docs/allan.md): never a guessed number, but kalibr needs one.
+        # A +1/2 term cannot exceed the curve anywhere, sigma(tau) >= K sqrt(tau/3), so
+        # min over tau <= T/10 of sigma(tau) sqrt(3/tau) bounds K from above.
+        usable = res.taus <= 0.1 * res.duration_s
+        bound = res.adev[usable] * np.sqrt(3.0 / res.taus[usable])
+        K = float(np.min(bound)) if bound.size else float("nan")
+        reason = slope.reasons.get("K", "no +1/2 region")
+        how_k = f"upper bound min sigma(tau)*sqrt(3/tau), K not identifiable: {reason}"
     if not (np.isfinite(N) and N > 0):
         fit = noise_terms(res, method="fit", terms=("N", "B", "K"))
         N = fit.N
