@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 from test_demo import MODEL_FIGURES, make_demo
 
-RAW_FIGURES = ("temperature", "raw-output", "allan")
+RAW_FIGURES = ("temperature", "raw-output", "allan", "plateau-noise")
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(
