@@ -116,12 +116,18 @@ def gls_ar(
 
 
 def bin_noise_autocov(
-    n: int, bin_s: float, n_white: float, b_floor: float, k_rrw: float = 0.0
+    n: int,
+    bin_s: float,
+    n_white: float,
+    b_floor: float,
+    k_rrw: float = 0.0,
+    gm_sigma: float = 0.0,
+    gm_tau_s: float = 1.0,
 ) -> np.ndarray:
     """Autocovariance ``R_j`` (lags ``j·Δ``, j = 0..n−1) of Δ-second means of white +
     flicker (+ random-walk) rate noise, from their one-sided PSDs (IEEE 952 Annex C)::
 
-        S(f) = 2N² + B²/(2 ln 2 · f) + K²/(2π² f²)
+        S(f) = 2N² + B²/(2 ln 2 · f) + K²/(2π² f²) + 4σ_g² T_g / (1 + (2π f T_g)²)
 
     weighted by the averaging window's ``sinc²(π f Δ)`` and folded into the bins' Nyquist
     band (aliasing) on a grid of ``Δf = 1/(8 n Δ)``, then ``R = irfft``. White noise only
@@ -133,6 +139,8 @@ def bin_noise_autocov(
     k = np.arange(1, 6 * m + 1)  # up to 3/Δ: the sinc² tail beyond is negligible
     f = k * df
     s = b_floor**2 / (2.0 * np.log(2.0) * f) + k_rrw**2 / (2.0 * np.pi**2 * f * f)
+    if gm_sigma > 0:  # first-order Gauss–Markov: variance σ_g², correlation time T_g
+        s = s + 4.0 * gm_sigma**2 * gm_tau_s / (1.0 + (2.0 * np.pi * f * gm_tau_s) ** 2)
     s *= np.sinc(f * bin_s) ** 2  # np.sinc(x) = sin(πx)/(πx)
     # fold onto 0..m/2 (bins of the length-m periodic grid), then to lags
     idx = k % m

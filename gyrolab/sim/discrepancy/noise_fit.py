@@ -42,6 +42,8 @@ OUTLIER_LR = 40.0
 SPIKE_K_HARD = 8.0
 LATTICE_RATIO = 3.0
 LATTICE_FRACTION = 0.5
+LATTICE_NOISE_RATIO = 0.1
+"""A lattice finer than this fraction of the sample noise is taken as the ADC's."""
 
 
 @dataclass
@@ -275,3 +277,113 @@ def model_phase_hist(q_data: float, q_model: float, bins: int = 21) -> np.ndarra
         h = np.zeros(bins)
         h[bins // 2] = 1.0
     return h
+
+
+# ------------------------------------------------------ the bins' learned noise model
+
+GM_CHI2 = 10.0
+"""χ² drop above which a Gauss–Markov part joins the learned noise model."""
+
+
+def gm_avar(tau: np.ndarray, sigma: float, tc: float) -> np.ndarray:
+    """Allan variance of a first-order Gauss–Markov rate process (variance σ², correlation
+    time T_c), IEEE 952 Annex C::
+
+        σ²_A(τ) = (σ² T_c/τ) [2 − (T_c/τ)(3 − 4 e^{−τ/T_c} + e^{−2τ/T_c})]
+
+    (K²τ/3 with K² = 2σ²/T_c for τ ≪ T_c, white N² = 2σ²T_c for τ ≫ T_c)."""
+    x = np.asarray(tau, dtype=float) / tc
+    small = x < 1e-3
+    xs = np.where(small, 1.0, x)
+    full = (sigma**2 / xs) * (2.0 - (3.0 - 4.0 * np.exp(-xs) + np.exp(-2.0 * xs)) / xs)
+    return np.where(small, (2.0 / 3.0) * sigma**2 * x, full)
+
+
+@dataclass
+class CovNoise:
+    """Noise model of the low-frequency bins learned from this run's residual: white N,
+    flicker B, random walk K (°/s units as :class:`NoiseFit`) and a Gauss–Markov part
+    (σ °/s, T_c s) for correlated structure that none of the three power laws has."""
+
+    n_white: float
+    b_floor: float
+    k_rrw: float
+    gm_sigma: float
+    gm_tau_s: float
+    chi2: float
+    n_points: int
+
+    def avar(self, tau: np.ndarray) -> np.ndarray:
+        v = model_avar(tau, self.n_white, self.b_floor, self.k_rrw)
+        if self.gm_sigma > 0:
+            v = v + gm_avar(tau, self.gm_sigma, self.gm_tau_s)
+        return v
+
+
+def fit_cov_noise(curve: AllanCurve, bin_s: float, rrw: bool, gm: bool | None = None) -> CovNoise:
+    """Fit the bins' noise model to the measured Allan curve in the band the bins live in
+    (τ ≥ bin/2): what happens faster than a bin (resonances, a lattice, spikes) does not
+    reach the bins' covariance and must not inflate it. Weighted least squares on
+    ``ln σ²`` (weights edf/2, as :func:`fit_allan`). ``gm=None``: the Gauss–Markov part is
+    kept when it lowers χ² by more than :data:`GM_CHI2`."""
+    keep = curve.tau >= 0.5 * bin_s
+    tau, s2 = curve.tau[keep], curve.adev[keep] ** 2
+    w = np.sqrt(curve.edf[keep] / 2.0)
+    if tau.size < 3:
+        tau, s2, w = curve.tau, curve.adev**2, np.sqrt(curve.edf / 2.0)
+
+    def run(with_gm: bool) -> CovNoise:
+        names = ["n", "b"] + (["k"] if rrw else []) + (["gs", "gt"] if with_gm else [])
+        n0 = float(np.sqrt(s2[0] * tau[0]))
+        start = {
+            "n": n0,
+            "b": float(np.sqrt(np.min(s2))) * 0.7,
+            "k": float(np.sqrt(s2[-1] / (tau[-1] / 3.0))) * 0.3,
+            "gs": float(np.sqrt(np.min(s2))),
+            "gt": float(np.sqrt(tau[0] * tau[-1])),
+        }
+
+        def unpack(x: np.ndarray) -> dict[str, float]:
+            v = dict(zip(names, np.exp(np.clip(x, -80.0, 25.0)), strict=True))
+            if "gt" in v:
+                v["gt"] = float(np.clip(v["gt"], tau[0] / 4, 4 * tau[-1]))
+            return v
+
+        def res(x: np.ndarray) -> np.ndarray:
+            v = unpack(x)
+            m = model_avar(tau, v["n"], v["b"], v.get("k", 0.0))
+            if with_gm:
+                m = m + gm_avar(tau, v["gs"], v["gt"])
+            return w * (np.log(s2) - np.log(m + 1e-300))
+
+        x0 = np.log([max(start[k], 1e-15) for k in names])
+        best = None
+        gts = [None] if not with_gm else [tau[0] * 2, np.sqrt(tau[0] * tau[-1]), tau[-1] / 2]
+        for gt in gts:
+            for shift in (0.0, -3.0):
+                x = x0.copy()
+                if gt is not None:
+                    x[names.index("gt")] = math.log(gt)
+                x[1] += shift
+                r = least_squares(res, x, method="lm", max_nfev=400)
+                if best is None or r.cost < best.cost:
+                    best = r
+        assert best is not None
+        v = unpack(best.x)
+        return CovNoise(
+            v["n"],
+            v["b"],
+            v.get("k", 0.0),
+            v.get("gs", 0.0),
+            v.get("gt", 1.0),
+            2.0 * float(best.cost),
+            int(tau.size),
+        )
+
+    plain = run(False)
+    if gm is False or tau.size < 6:
+        return plain
+    with_gm = run(True)
+    if gm or plain.chi2 - with_gm.chi2 > GM_CHI2:
+        return with_gm
+    return plain

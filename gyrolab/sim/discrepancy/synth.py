@@ -10,6 +10,8 @@ step durations).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from gyrolab.profile import Profile
@@ -20,9 +22,17 @@ from gyrolab.sim.sensors import cvd_temperature
 
 
 def simulate_bench(
-    model: SimModel, profile: Profile, rate_hz: float = 10.0, seed: int = 0
+    model: SimModel,
+    profile: Profile,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    post: Callable[[np.ndarray, float], np.ndarray] | None = None,
 ) -> BenchData:
-    """Simulate ``profile`` with ``model`` and reduce it as a recording would be."""
+    """Simulate ``profile`` with ``model`` and reduce it as a recording would be.
+
+    ``post(rate, dt)``, when given, transforms the whole rate stream (°/s, taken before
+    the bench ADC) before it is stored, e.g.
+    :func:`gyrolab.sim.discrepancy.reallike.digital_output`."""
     phys = Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
     bn = phys.block_n
     starts = profile.step_starts()
@@ -41,9 +51,14 @@ def simulate_bench(
         ov_sp[k] = phys.setpoint_c
         ov_pv[k] = phys.chamber_c()
         blk = phys.advance(bn)
-        rate[k * bn : (k + 1) * bn] = phys.adc.counts_to_dps(blk.counts)
+        # a post-transform stands for a digital gyro's own output stage: it gets the rate
+        # before the bench ADC (whose lattice would otherwise sit under its own)
+        out = blk.rate_dps if post is not None else phys.adc.counts_to_dps(blk.counts)
+        rate[k * bn : (k + 1) * bn] = out
     t = np.arange(n_sec, dtype=float)
     pt_c = np.asarray(cvd_temperature(pt_ohm), dtype=float)
+    if post is not None:
+        rate = post(rate, 1.0 / phys.rate_hz)
     # the recording stores the rate as float32
     rate32 = rate.astype(np.float32).astype(np.float64)
     return from_arrays(0.0, 1.0 / phys.rate_hz, rate32, t, pt_c, t, ov_sp, ov_pv)

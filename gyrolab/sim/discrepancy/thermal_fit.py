@@ -110,6 +110,84 @@ def _air_model(
     return np.interp(t_obs, grid_t, air)
 
 
+INIT_WINDOW_S = 120.0
+"""Window at power-on from which initial temperatures are estimated, s."""
+
+
+@dataclass
+class Initial:
+    """An initial condition estimated from a window: value and standard uncertainty."""
+
+    value: float
+    sigma: float
+    n: int
+
+
+def value_resolution(v: np.ndarray) -> float:
+    """Spacing of a channel's values when they sit on a lattice (a register that rounds,
+    e.g. to 0.1 °C), else 0."""
+    from gyrolab.sim.discrepancy.data import _lattice_of
+
+    v = np.asarray(v, dtype=float)[:20000]
+    if v.size < 10:
+        return 0.0
+    q, frac = _lattice_of(v, np.diff(v), float(np.max(np.abs(v))) or 1.0)
+    return q if frac > 0.9 and q > 1e-6 else 0.0
+
+
+def initial_value(t: np.ndarray, v: np.ndarray, window_s: float = INIT_WINDOW_S) -> Initial:
+    """The channel's value at ``t[0]`` from a line fitted over the first ``window_s``
+    (at least 5 samples): intercept and its standard error, with the channel's value
+    resolution ``r`` adding ``r/√12`` (a rounding register is biased by up to r/2 however
+    many samples are averaged). No single sample decides it."""
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(v, dtype=float)
+    m = t <= t[0] + window_s
+    if m.sum() < 5:
+        m = np.arange(t.size) < min(5, t.size)
+    tt, vv = t[m] - t[0], v[m]
+    res = value_resolution(v)
+    if tt.size >= 3 and np.ptp(tt) > 0:
+        A = np.column_stack([np.ones_like(tt), tt])
+        coef, *_ = np.linalg.lstsq(A, vv, rcond=None)
+        r = vv - A @ coef
+        s2 = float(r @ r) / max(1, tt.size - 2)
+        cov = s2 * np.linalg.pinv(A.T @ A)
+        value, se = float(coef[0]), float(math.sqrt(max(cov[0, 0], 0.0)))
+    else:
+        value, se = float(np.mean(vv)), 0.0
+    sigma = math.sqrt(se * se + res * res / 12.0 + 1e-8)
+    return Initial(value, sigma, int(tt.size))
+
+
+def effective_n(resid: np.ndarray) -> float:
+    """Number of independent samples in a residual series with lag-1 autocorrelation ρ:
+    ``n (1 − ρ)/(1 + ρ)`` (an AR(1) misfit; ρ < 0 counts as 0). A smooth misfit between a
+    model and a real chamber is strongly correlated, and a likelihood that treated its
+    readings as independent would turn it into hundreds of BIC units."""
+    r = np.asarray(resid, dtype=float)
+    n = r.size
+    if n < 3:
+        return float(n)
+    r = r - r.mean()
+    den = float(r @ r)
+    rho = float(r[1:] @ r[:-1]) / den if den > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.999)
+    return max(2.0, n * (1.0 - rho) / (1.0 + rho))
+
+
+def delta_bic_channel(
+    r0: np.ndarray, r1: np.ndarray, floor: float, extra_params: int
+) -> tuple[float, float]:
+    """ΔBIC of a richer model (residual ``r1``) over the current one (``r0``) on a
+    temperature channel, Gaussian with variance floored at ``floor²`` and the readings
+    counted as :func:`effective_n` of the richer model's residual. Returns (ΔBIC, n_eff)."""
+    ne = effective_n(r1)
+    v0 = max(float(np.mean(r0**2)), floor**2)
+    v1 = max(float(np.mean(r1**2)), floor**2)
+    return ne * math.log(v0 / v1) - extra_params * math.log(ne), ne
+
+
 def fit_oven(
     d: BenchData,
     th: ThermalParams,
@@ -131,7 +209,8 @@ def fit_oven(
     )
     lo = np.array([1.0, 1e-5, 1e-5, -150.0, 0.1])
     hi = np.array([1e4, 1.0, 1.0, 300.0, 400.0])
-    a0 = float(pv[0])
+    # the air at power-on from a window (never one reading), as the case fit does
+    a0 = initial_value(t, pv).value
 
     if not with_overshoot:
 
@@ -186,6 +265,8 @@ class CaseFit:
     resid: np.ndarray = field(default_factory=lambda: np.empty(0))
     time_shift_s: float = 0.0
     """Fitted PT100 time-stamp offset (reading time = logged time + shift)."""
+    initial_c: float = float("nan")
+    """Fitted case temperature at power-on (prior: the air over the first window)."""
 
     @property
     def rms(self) -> float:
@@ -197,7 +278,7 @@ class CaseFit:
 
     @property
     def k(self) -> int:
-        return 3 + int(self.with_offset)
+        return 4 + int(self.with_offset)
 
 
 def _lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
@@ -228,21 +309,31 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     air = np.interp(grid, d.oven_t, d.oven_pv)
     a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
     pt_c = d.pt100_c
+    # The case starts at the air temperature at power-on: estimated from a window with
+    # its uncertainty, and fitted as a parameter with that Gaussian prior (one prior row
+    # in the least squares, in units of the PT100 noise) so no single reading decides δ.
+    init = initial_value(d.oven_t, d.oven_pv)
+    w_prior = max(pt100_noise_c(d), 1e-4) / init.sigma
 
     def solve(log_tau: float, shift: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         tau = math.exp(log_tau)
         alpha = 1.0 - math.exp(-1.0 / tau)
-        f = _lowpass(a_mid, alpha, float(air[0]))
+        f = _lowpass(a_mid, alpha, init.value)
         g = _lowpass(np.ones_like(a_mid), alpha, 0.0)
+        e0 = (1.0 - alpha) ** np.arange(a_mid.size)  # response to the initial case state
         pt_t = d.pt100_t + shift
-        cols = [np.interp(pt_t, grid, g)]
+        cols = [np.interp(pt_t, grid, g), np.interp(pt_t, grid, e0)]
         if with_offset:
             cols.append(np.ones_like(pt_t))
         A = np.column_stack(cols)
         rhs = pt_c - np.interp(pt_t, grid, f)
-        coef, *_ = np.linalg.lstsq(A, rhs, rcond=None)
+        prior = np.zeros((1, A.shape[1]))
+        prior[0, 1] = w_prior
+        Ap = np.vstack([A, prior])
+        coef, *_ = np.linalg.lstsq(Ap, np.concatenate([rhs, [0.0]]), rcond=None)
         r = A @ coef - rhs
-        return float(r @ r), coef, f, g
+        rp = w_prior * coef[1]
+        return float(r @ r + rp * rp), coef, f + coef[1] * e0, g
 
     lt_bounds = (math.log(max(5.0, tau0 / 20)), math.log(tau0 * 20))
     lt, shift = math.log(tau0), 0.0
@@ -271,16 +362,36 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
             options={"xatol": 1e-4},
         ).x
     )
+    # polish (τ, skew) jointly: a coordinate search stops short on the ridge between them,
+    # and a candidate with one more linear parameter would otherwise be scored for
+    # landing nearer the optimum rather than for its parameter
+    from scipy.optimize import minimize
+
+    r0 = solve(lt, shift)[0]
+    pol = minimize(
+        lambda v: solve(v[0], v[1])[0] / r0,
+        [lt, shift],
+        method="Nelder-Mead",
+        options={
+            "xatol": 1e-5,
+            "fatol": 1e-9,
+            "initial_simplex": [[lt, shift], [lt + 0.02, shift], [lt, shift + 0.1]],
+        },
+    )
+    lt = float(np.clip(pol.x[0], *lt_bounds))
+    shift = float(np.clip(pol.x[1], -MAX_TIME_SHIFT_S, MAX_TIME_SHIFT_S))
     _, coef, f, g = solve(lt, shift)
     tau = math.exp(lt)
     dself = float(coef[0])
-    off = float(coef[1]) if with_offset else 0.0
+    off = float(coef[2]) if with_offset else 0.0
     case = f + dself * g
     dcase = (a_mid + dself - case) / tau
     resid = np.interp(d.pt100_t + shift, grid, case) + off - pt_c
     # the case temperature on the PT100's clock, as the gyro regressors use it
     grid_pt = grid - shift
-    return CaseFit(tau, dself, off, with_offset, grid_pt, case, dcase, resid, shift)
+    return CaseFit(
+        tau, dself, off, with_offset, grid_pt, case, dcase, resid, shift, init.value + coef[1]
+    )
 
 
 def pt100_noise_c(d: BenchData) -> float:

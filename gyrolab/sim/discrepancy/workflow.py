@@ -48,8 +48,10 @@ from gyrolab.sim.discrepancy.gyro_fit import (
     fit_structure,
 )
 from gyrolab.sim.discrepancy.thermal_fit import (
+    OVEN_FLOOR_C,
     CaseFit,
     OvenFit,
+    delta_bic_channel,
     fit_case,
     fit_oven,
     pt100_noise_c,
@@ -122,6 +124,8 @@ class Fitted:
     quant_q: float
     gaps: dict[str, float]
     whitener: CovWhitener | None = None
+    cov_noise: nf.CovNoise | None = None
+    """The bins' noise model the whitener comes from (learned from this residual)."""
 
     @property
     def resid(self) -> np.ndarray:
@@ -212,28 +216,38 @@ class Workflow:
         terms = {n for n in st.effects if n in ("arw", "bias_instability", "rate_random_walk")}
         noise = nf.fit_allan(curve, self.d.hr.dt, terms, q=q, white0=self.d.hr.white_sigma)
         outl = nf.fit_outliers(self.d, self.coarse_lattice()) if st.has("outliers") else None
-        # final deterministic fit and its score with the fitted noise model's covariance
-        # (white and flicker noise are always there physically: a starting model without
-        # them still gets them in the covariance, and they are candidates of their own)
-        base_terms = {"arw", "bias_instability"}
-        wn = noise
-        if not base_terms <= terms:
-            wn = nf.fit_allan(curve, self.d.hr.dt, terms | base_terms, q, self.d.hr.white_sigma)
-        w = self.whitener(wn)
+        # Final deterministic fit and its score with the covariance of the noise model
+        # learned from this residual's own Allan curve in the bins' band (white, flicker,
+        # random walk when the model has it, and a Gauss–Markov part when the data want
+        # one): white and flicker noise are always there physically, whatever the starting
+        # model says, and what happens faster than a bin does not enter.
+        cov = nf.fit_cov_noise(curve, self.d.bin_s, rrw=st.has("rate_random_walk"))
+        w = self.whitener(cov)
         if any(n in NONLINEAR for n in gyro.struct.names):
             gyro = fit_structure(gyro.struct, ctx, passes=1, whitener=w)
             st.theta.update(gyro.struct.theta)
         gyro = self.cov_fit(gyro.struct, ctx, w)
-        f = Fitted(st, oven, case, gyro, ctx, noise, outl, q, {}, w)
+        f = Fitted(st, oven, case, gyro, ctx, noise, outl, q, {}, w, cov)
         f.gaps = self.gaps(f)
         return f
 
-    def whitener(self, noise: nf.NoiseFit) -> CovWhitener:
-        """Whitener of the bins' noise covariance implied by the fitted noise terms."""
+    def whitener(self, noise: nf.CovNoise) -> CovWhitener:
+        """Whitener of the bins' noise covariance implied by a learned noise model."""
         r = bin_noise_autocov(
-            self.d.t.size, self.d.bin_s, noise.n_white, noise.b_floor, noise.k_rrw
+            self.d.t.size,
+            self.d.bin_s,
+            noise.n_white,
+            noise.b_floor,
+            noise.k_rrw,
+            noise.gm_sigma,
+            noise.gm_tau_s,
         )
         return CovWhitener(r)
+
+    @staticmethod
+    def noise_penalty(noise: nf.CovNoise) -> int:
+        """Parameters of a noise model beyond white + flicker (BIC units of ln n)."""
+        return int(noise.k_rrw > 0) + 2 * int(noise.gm_sigma > 0)
 
     @staticmethod
     def cov_fit(struct: GyroStructure, ctx: GyroContext, w: CovWhitener) -> GyroFit:
@@ -256,7 +270,10 @@ class Workflow:
             model_spikes = nf.expected_spike_excess(d, sp["rate_per_h"], sp["amplitude"])
         q_data = d.hr.lattice_step
         if q_data > 0:
-            q_model = f.quant_q if f.quant_q > 0 else self.lsb
+            # a lattice that is not a quantizer of its own is the ADC's: every model has it
+            q_model = f.quant_q if f.quant_q > 0 else q_data
+            if f.quant_q <= 0 and self.lattice_significant():
+                q_model = 0.0
             h = nf.lattice_phase_hist(d, q_data)
             hm = nf.model_phase_hist(q_data, q_model)
             tv = 0.5 * float(np.sum(np.abs(h - hm)))
@@ -278,8 +295,7 @@ class Workflow:
         st = cur.structure
         if not st.has("oven_overshoot"):
             cand = self.fit_oven_candidate(st)
-            n = cur.oven.resid.size
-            dbic = 2.0 * (cand.loglik() - cur.oven.loglik()) - 2.0 * math.log(n)
+            dbic, ne = delta_bic_channel(cur.oven.resid, cand.resid, OVEN_FLOOR_C, 2)
             gain = 1.0 - cand.rms / max(cur.oven.rms, 1e-12)
             out.append(
                 {
@@ -289,6 +305,7 @@ class Workflow:
                     "significant": dbic > TEMP_SIG and gain > TEMP_MIN_GAIN,
                     "evidence": {
                         "oven_rms_c": [cur.oven.rms, cand.rms],
+                        "effective_n": ne,
                         "overshoot": cand.overshoot[0] if cand.overshoot else None,
                         "period_s": cand.overshoot[1] if cand.overshoot else None,
                     },
@@ -296,9 +313,8 @@ class Workflow:
             )
         if not st.has("rtd_self_heating"):
             cand_c = fit_case(self.d, self.model0.thermal.case_tau_s, True)
-            n = cur.case.resid.size
             fl = 0.5 * self.pt_noise
-            dbic = 2.0 * (cand_c.loglik(fl) - cur.case.loglik(fl)) - math.log(n)
+            dbic, ne = delta_bic_channel(cur.case.resid, cand_c.resid, fl, 1)
             gain = 1.0 - cand_c.rms / max(cur.case.rms, 1e-12)
             out.append(
                 {
@@ -310,6 +326,8 @@ class Workflow:
                         "pt100_rms_c": [cur.case.rms, cand_c.rms],
                         "offset_c": cand_c.offset_c,
                         "pt100_noise_c": self.pt_noise,
+                        "effective_n": ne,
+                        "initial_case_c": cand_c.initial_c,
                     },
                 }
             )
@@ -328,9 +346,13 @@ class Workflow:
         # it, the one with a rate random walk. A candidate must beat the better of the two
         # base models (full likelihood, ln det Σ included): slow wander must not pass for a
         # ramp or a step, and a real slow term must not be explained away as wander.
-        noises: list[tuple[CovWhitener, int]] = [(cur.whitener, 0)]
+        assert cur.cov_noise is not None
+        noises: list[tuple[CovWhitener, int]] = [
+            (cur.whitener, self.noise_penalty(cur.cov_noise))
+        ]
         if not st.has("rate_random_walk"):
-            noises.append((self.whitener(self._rrw_alt(cur)), 1))
+            alt = self._rrw_alt(cur)
+            noises.append((self.whitener(alt), self.noise_penalty(alt)))
         ln_n = math.log(cur.ctx.y.size)
 
         def best_bic(struct: GyroStructure) -> tuple[float, int]:
@@ -373,11 +395,9 @@ class Workflow:
     def _noise_terms(self, cur: Fitted) -> set[str]:
         return {n for n in cur.structure.effects if n in STOCHASTIC_BASE + ("rate_random_walk",)}
 
-    def _rrw_alt(self, cur: Fitted) -> nf.NoiseFit:
-        """The current noise fit (white and flicker always) with a rate random walk added."""
-        d = self.d
-        terms = self._noise_terms(cur) | set(STOCHASTIC_BASE) | {"rate_random_walk"}
-        return nf.fit_allan(cur.noise.curve, d.hr.dt, terms, cur.quant_q, d.hr.white_sigma)
+    def _rrw_alt(self, cur: Fitted) -> nf.CovNoise:
+        """The current learned noise model with a rate random walk added."""
+        return nf.fit_cov_noise(cur.noise.curve, self.d.bin_s, rrw=True)
 
     def score_rrw(self, cur: Fitted) -> list[dict[str, Any]]:
         """Allan-curve terms missing from the model: χ² drop when each is added."""
@@ -405,11 +425,23 @@ class Workflow:
             )
         return out
 
+    def lattice_significant(self, q: float | None = None) -> bool:
+        """Whether the output's lattice (measured from its values or first differences)
+        is a quantizer of its own: on most differences, at least
+        :data:`~.noise_fit.LATTICE_RATIO` ADC LSBs, and at least
+        :data:`~.noise_fit.LATTICE_NOISE_RATIO` of the sample noise. The second rule
+        needs no assumed ADC: a lattice fine against the noise is the ADC's."""
+        hr = self.d.hr
+        q = hr.lattice_step if q is None else q
+        return (
+            hr.lattice_fraction > nf.LATTICE_FRACTION
+            and q >= nf.LATTICE_RATIO * self.lsb
+            and q >= nf.LATTICE_NOISE_RATIO * hr.white_sigma
+        )
+
     def coarse_lattice(self) -> float:
-        """The output's lattice step when it is coarser than the ADC LSB, else 0."""
-        q = self.d.hr.lattice_step
-        ok = q / self.lsb > nf.LATTICE_RATIO and self.d.hr.lattice_fraction > nf.LATTICE_FRACTION
-        return q if ok else 0.0
+        """The output's lattice step when it is a quantizer of its own, else 0."""
+        return self.d.hr.lattice_step if self.lattice_significant() else 0.0
 
     def score_sample(self, cur: Fitted) -> list[dict[str, Any]]:
         """Sample-level effects, read off the full-rate stream (independent of the fits)."""
@@ -435,8 +467,7 @@ class Workflow:
             )
         if not st.has("quantization"):
             q, frac = d.hr.lattice_step, d.hr.lattice_fraction
-            ratio = q / self.lsb if self.lsb > 0 else float("inf")
-            sig = ratio > nf.LATTICE_RATIO and frac > nf.LATTICE_FRACTION
+            sig = self.lattice_significant()
             out.append(
                 {
                     "effect": "quantization",
@@ -446,6 +477,7 @@ class Workflow:
                     "evidence": {
                         "lattice_step_dps": q,
                         "adc_lsb_dps": self.lsb,
+                        "white_sigma_dps": d.hr.white_sigma,
                         "fraction_on_lattice": frac,
                     },
                 }
