@@ -152,7 +152,8 @@ def _lattice(x: np.ndarray) -> tuple[float, float]:
     |Δx| is the first jump larger than half the value it lands on, with at least 0.02 %
     of the differences below it (a continuum has no such jump: its gaps are of order
     range/n) and larger than float32's resolution of the values; the step is the median
-    of the cluster above it.
+    of the cluster above it (of the first 20 such jumps, the one with most differences on
+    its lattice).
     """
     sub = x[: min(x.size, 200_000)]
     d = np.diff(sub)
@@ -165,8 +166,10 @@ def _lattice(x: np.ndarray) -> tuple[float, float]:
         # float32 storage puts the differences on a grid of ~eps·|x|: not a lattice
         floor = 64.0 * float(np.finfo(np.float32).eps) * max(scale, 1e-12)
         jump = np.flatnonzero((g[j0:] > 0.5 * a[j0 + 1 :]) & (g[j0:] > floor))
-        if jump.size:
-            first = float(a[j0 + jump[0] + 1])
+        # the first few jumps are candidates (a sparse tail of the zero cluster — a
+        # slow bias drift — can jump too); the one most differences sit on wins
+        for jj in jump[:20]:
+            first = float(a[j0 + jj + 1])
             q2 = float(np.median(a[(a >= first) & (a <= 1.5 * first)]))
             r = d / q2
             f2 = float(np.mean(np.abs(r - np.rint(r)) < 0.05))

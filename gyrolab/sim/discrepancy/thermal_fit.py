@@ -267,6 +267,8 @@ class CaseFit:
     """Fitted PT100 time-stamp offset (reading time = logged time + shift)."""
     initial_c: float = float("nan")
     """Fitted case temperature at power-on (prior: the air over the first window)."""
+    design: np.ndarray | None = None
+    """Linear columns (ΔT_self, initial case) at the PT100 times, with the prior row."""
 
     @property
     def rms(self) -> float:
@@ -389,8 +391,13 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     resid = np.interp(d.pt100_t + shift, grid, case) + off - pt_c
     # the case temperature on the PT100's clock, as the gyro regressors use it
     grid_pt = grid - shift
+    alpha = 1.0 - math.exp(-1.0 / tau)
+    e0 = (1.0 - alpha) ** np.arange(a_mid.size)
+    pt_t = d.pt100_t + shift
+    dm = np.column_stack([np.interp(pt_t, grid, g), np.interp(pt_t, grid, e0)])
+    dm = np.vstack([dm, [[0.0, w_prior]]])
     return CaseFit(
-        tau, dself, off, with_offset, grid_pt, case, dcase, resid, shift, init.value + coef[1]
+        tau, dself, off, with_offset, grid_pt, case, dcase, resid, shift, init.value + coef[1], dm
     )
 
 

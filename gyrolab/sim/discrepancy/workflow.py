@@ -347,9 +347,7 @@ class Workflow:
         # base models (full likelihood, ln det Σ included): slow wander must not pass for a
         # ramp or a step, and a real slow term must not be explained away as wander.
         assert cur.cov_noise is not None
-        noises: list[tuple[CovWhitener, int]] = [
-            (cur.whitener, self.noise_penalty(cur.cov_noise))
-        ]
+        noises: list[tuple[CovWhitener, int]] = [(cur.whitener, self.noise_penalty(cur.cov_noise))]
         if not st.has("rate_random_walk"):
             alt = self._rrw_alt(cur)
             noises.append((self.whitener(alt), self.noise_penalty(alt)))
@@ -555,7 +553,8 @@ class Workflow:
         steps: list[dict[str, Any]] = []
         for it in range(MAX_ITER):
             cands: list[dict[str, Any]] = []
-            chosen = None
+            accepted: tuple[dict[str, Any], list[str], Fitted] | None = None
+            rejected: list[dict[str, Any]] = []
             for scorer in (
                 self.score_sample,
                 self.score_temperature,
@@ -564,9 +563,28 @@ class Workflow:
             ):
                 cs = scorer(cur)
                 cands += cs
-                sig = [c for c in cs if c["significant"]]
-                if sig:
-                    chosen = sorted(sig, key=lambda c: -c["score"])
+                sig = sorted([c for c in cs if c["significant"]], key=lambda c: -c["score"])
+                # the best significant candidate whose own gap metric shrinks when added
+                # (issue 18: an effect is judged by the gap that belongs to it)
+                while sig and accepted is None:
+                    best, amb = select(sig)
+                    new = cur.structure.plus(best["effect"])
+                    if best.get("_theta") is not None:
+                        new.theta[best["effect"]] = float(best["_theta"])
+                    nxt = self.fit(new)
+                    key = PRIMARY_GAP.get(best["effect"], "lf_residual_rms_dps")
+                    if nxt.gaps[key] < cur.gaps[key]:
+                        accepted = (best, amb, nxt)
+                    else:
+                        rejected.append(
+                            {
+                                "effect": best["effect"],
+                                "gap_metric": key,
+                                "gap_metric_before_after": [cur.gaps[key], nxt.gaps[key]],
+                            }
+                        )
+                        sig = [c for c in sig if c is not best]
+                if accepted is not None:
                     break
             entry: dict[str, Any] = {
                 "iteration": it,
@@ -577,22 +595,20 @@ class Workflow:
                     {k: v for k, v in c.items() if not k.startswith("_")} for c in cands
                 ],
             }
-            if not chosen:
+            if rejected:
+                entry["rejected_gap_grew"] = rejected
+            if accepted is None:
                 entry["added"] = None
                 steps.append(entry)
                 break
-            best, amb = select(chosen)
-            new = cur.structure.plus(best["effect"])
-            if best.get("_theta") is not None:
-                new.theta[best["effect"]] = float(best["_theta"])
-            nxt = self.fit(new)
+            best, amb, nxt = accepted
             key = PRIMARY_GAP.get(best["effect"], "lf_residual_rms_dps")
             entry["added"] = best["effect"]
-            entry["ambiguous_with"] = amb[1:]
+            entry["ambiguous_with"] = [a for a in amb[1:] if a not in rejected_names(rejected)]
             entry["gap_metric"] = key
             entry["gap_metric_before_after"] = [cur.gaps[key], nxt.gaps[key]]
-            steps.append(entry)
             found.append(best["effect"])
+            amb = [best["effect"]] + entry["ambiguous_with"]
             if len(amb) > 1:
                 ambiguous.append(amb)
             if log:
@@ -601,7 +617,24 @@ class Workflow:
                     + (f" (ambiguous: {amb})" if len(amb) > 1 else "")
                 )
             cur = nxt
+            # revisit earlier choices: drop-one and swap moves among the gyro terms
+            revised = self.revisit(cur, found, best["effect"])
+            if revised is not None:
+                cur, moves = revised
+                entry["revisions"] = moves
+                for mv in moves:
+                    if mv["move"] == "drop":
+                        found.remove(mv["effect"])
+                    else:
+                        found[found.index(mv["effect"])] = mv["to"]
+                    ambiguous = [s for s in ambiguous if mv["effect"] not in s]
+                    if log:
+                        log(f"iteration {it}: revised {mv}")
+            steps.append(entry)
         model = self.updated_model(cur)
+        from gyrolab.sim.discrepancy.limits import detection_limits
+
+        limits = detection_limits(self, cur)
         return Result(
             effects_found=found,
             ambiguous=ambiguous,
@@ -611,8 +644,58 @@ class Workflow:
             model=model,
             first=first,
             final=cur,
+            detection_limits=limits,
             elapsed_s=time.perf_counter() - t_start,
         )
+
+    # ------------------------------------------------------------- revisiting
+    def _struct_bic(self, cur: Fitted, names: list[str], scan: tuple[str, ...]) -> tuple:
+        """BIC of a gyro structure under the current learned noise model."""
+        assert cur.whitener is not None
+        theta = {k: v for k, v in cur.gyro.struct.theta.items() if k in names}
+        g = fit_structure(GyroStructure(names, theta), cur.ctx, scan=scan, whitener=cur.whitener)
+        return self.cov_fit(g.struct, cur.ctx, cur.whitener).bic, g.struct.theta
+
+    def revisit(
+        self, cur: Fitted, found: list[str], newest: str
+    ) -> tuple[Fitted, list[dict[str, Any]]] | None:
+        """After an addition, test each earlier-added gyro term: **drop** it when the model
+        without it is within :data:`GYRO_SIG` of the model with it (the newer terms explain
+        what it did), **swap** it for another gyro term not in the model when that scores
+        better by more than :data:`GYRO_SIG`. One move (the best) per call; the refit
+        model and the moves, or None."""
+        earlier = [e for e in found if e in GYRO_EFFECTS and e != newest]
+        if not earlier:
+            return None
+        names = self._gyro_struct(cur.structure).names
+        bic_now = self.cov_fit(cur.gyro.struct, cur.ctx, cur.whitener).bic  # type: ignore[arg-type]
+        best_move: tuple[float, dict[str, Any], list[str], dict[str, float]] | None = None
+        for e in earlier:
+            without = [n for n in names if n != e]
+            b_drop, th = self._struct_bic(cur, without, ())
+            if b_drop - bic_now < GYRO_SIG:
+                gain = GYRO_SIG - (b_drop - bic_now)
+                if best_move is None or gain > best_move[0]:
+                    best_move = (gain, {"move": "drop", "effect": e}, without, th)
+            for c in GYRO_EFFECTS:
+                if c in names or c == "bias_poly":
+                    continue
+                if c == "cubic_temp" and self.poly_order >= 3:
+                    continue
+                swapped = [n if n != e else c for n in names]
+                b_sw, th = self._struct_bic(cur, swapped, (c,) if c in NONLINEAR else ())
+                gain = bic_now - b_sw - GYRO_SIG
+                if gain > 0 and (best_move is None or gain > best_move[0]):
+                    best_move = (gain, {"move": "swap", "effect": e, "to": c}, swapped, th)
+        if best_move is None:
+            return None
+        _, mv, new_names, th = best_move
+        effects = [n for n in cur.structure.effects if n not in GYRO_EFFECTS or n in new_names]
+        effects += [n for n in new_names if n not in effects and n != "bias_poly"]
+        st = Structure(effects, {**cur.structure.theta, **th}, cur.structure.overshoot)
+        if mv["move"] == "drop":
+            st.theta.pop(mv["effect"], None)
+        return self.fit(st), [mv]
 
     # ------------------------------------------------------------- the model
     def updated_model(self, f: Fitted) -> SimModel:
@@ -653,6 +736,10 @@ class Workflow:
         return SimModel(thermal=ThermalParams(**th), sensors=m0.sensors, effects=tuple(specs))
 
 
+def rejected_names(rejected: list[dict[str, Any]]) -> set[str]:
+    return {r["effect"] for r in rejected}
+
+
 def select(significant: list[dict[str, Any]]) -> tuple[dict[str, Any], list[str]]:
     """The best of one channel's significant candidates, and the set it cannot be told
     apart from: every candidate within :data:`AMBIGUITY_MARGIN` of the best score (best
@@ -677,6 +764,7 @@ class Result:
     model: SimModel
     first: Fitted
     final: Fitted
+    detection_limits: dict[str, dict[str, Any]]
     elapsed_s: float
 
     def to_json(self) -> dict[str, Any]:
@@ -686,6 +774,7 @@ class Result:
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
             "steps": self.steps,
+            "detection_limits": self.detection_limits,
             "elapsed_s": self.elapsed_s,
         }
 
