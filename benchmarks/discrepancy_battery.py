@@ -1,21 +1,32 @@
-"""Discrepancy battery: hide one (or two) vocabulary effects in simulated oven runs and
-check that ``gyrolab discrepancy`` names them (docs/discrepancy.md, issue 8 acceptance).
+"""Discrepancy battery: hide vocabulary effects (one, two or three at once) in simulated
+oven runs and check that ``gyrolab discrepancy`` names them (docs/discrepancy.md, issues 8
+and 18).
 
-For every effect a static oven test can reveal, ``--seeds`` runs of the paper profile are
-simulated with truth = nominal + that effect, its parameters drawn from the realistic
-ranges of :data:`RANGES` (a sign is drawn too where the effect has one); plus nominal-only
-runs, which must name nothing; plus a smaller battery of pairs. Each run goes through the
-same reduction as a recording (``synth.simulate_bench`` → ``data.from_arrays``) and the
-workflow starts from the nominal model.
+Cells (each run goes through the same reduction as a recording: ``synth.simulate_bench``
+→ ``data.from_arrays``; the workflow starts from the nominal model):
 
-A run counts as named when the hidden effect is in ``effects_found`` or in an ``ambiguous``
-set of at most three; the gap check compares the hidden effect's own gap metric
-(``workflow.PRIMARY_GAP``) before and after.
+* ``nominal``: nominal-only runs, which must name nothing;
+* ``single``: every effect a static oven test can reveal, parameters drawn from the
+  realistic ranges of :data:`RANGES` (a sign too where the effect has one), plus the
+  wider forms within a name (:data:`FORMS`: a warm-up of two exponentials of opposite
+  sign, a hysteresis whose width depends on temperature);
+* ``pair`` / ``triple``: gyro-side and thermal-chain effects mixed (:data:`PAIRS`,
+  :data:`TRIPLES`);
+* ``weak``: an effect injected at 2× and at 0.5× the detection limit that a nominal run
+  of the same configuration (seed 900) states for it (``detection_limits``);
+* ``reallike``: static noise with a resonance, a Gauss–Markov hump at long τ and an
+  output lattice seen only in the first differences (``reallike.py``) instead of the
+  simulator's white + flicker, nominal and with an aging ramp / a cubic term at the
+  middle of their ranges.
 
-    python benchmarks/discrepancy_battery.py --seeds 5 --nominal 10 --pairs 2 \
-        --out benchmarks/results/discrepancy_battery.json
+Scoring per hidden effect: **named** (in ``effects_found``), **ambiguous** (in an
+``ambiguous`` set of at most three), **missed**; per run, **false** effects (named, or an
+ambiguous set, with no hidden member).
 
-prints the confusion table (truth × named) in Markdown and writes every run's outcome.
+    python benchmarks/discrepancy_battery.py --seeds 3 --nominal 6 --pairs 2 --triples 1 \
+        --workers 2 --out benchmarks/results/discrepancy_battery.json
+
+prints the tables in Markdown and writes every run's outcome.
 """
 
 from __future__ import annotations
@@ -27,6 +38,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,6 +47,7 @@ os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gyrolab.profile import load_profile  # noqa: E402
+from gyrolab.sim.discrepancy.reallike import RealLike, digital_output  # noqa: E402
 from gyrolab.sim.discrepancy.synth import simulate_bench  # noqa: E402
 from gyrolab.sim.discrepancy.workflow import PRIMARY_GAP, run_discrepancy  # noqa: E402
 from gyrolab.sim.model import nominal_model  # noqa: E402
@@ -71,47 +84,117 @@ RANGES: dict[str, Sampler] = {
     "rtd_self_heating": lambda r: {"offset_c": r.uniform(0.1, 0.5)},
 }
 
+FORMS: dict[str, tuple[str, Sampler]] = {
+    "warmup (2 exp, opposite signs)": (
+        "warmup",
+        lambda r: {
+            "A": -r.uniform(3e-3, 5e-3),
+            "tau_s": r.uniform(1500.0, 2500.0),
+            "A2": r.uniform(4e-3, 6e-3),
+            "tau2_s": r.uniform(200.0, 400.0),
+        },
+    ),
+    "hysteresis (width(T))": (
+        "hysteresis",
+        lambda r: {
+            "h": _sign(r) * r.uniform(2e-3, 4e-3),
+            "width_c": r.uniform(1.0, 2.0),
+            "width_tc": r.uniform(0.01, 0.02),
+        },
+    ),
+}
+
 PAIRS = [
     ("thermal_rate", "periodic"),
-    ("warmup", "outliers"),
-    ("hysteresis", "oven_overshoot"),
-    ("aging_ramp", "quantization"),
+    ("hysteresis", "aging_ramp"),
+    ("thermal_lag", "periodic"),
     ("cubic_temp", "rtd_self_heating"),
-    ("thermal_lag", "rate_random_walk"),
+    ("hysteresis", "oven_overshoot"),
+    ("warmup", "rtd_self_heating"),
+    ("aging_ramp", "quantization"),
+    ("thermal_rate", "oven_overshoot"),
 ]
+TRIPLES = [
+    ("cubic_temp", "warmup", "rtd_self_heating"),
+    ("thermal_rate", "aging_ramp", "oven_overshoot"),
+    ("hysteresis", "periodic", "rtd_self_heating"),
+    ("thermal_lag", "aging_ramp", "outliers"),
+]
+WEAK = ["aging_ramp", "cubic_temp", "thermal_rate", "warmup", "periodic", "hysteresis"]
+WEAK += ["rtd_self_heating"]
+REALLIKE = {
+    "(nominal)": {},
+    "aging_ramp": {"aging_ramp": {"r": 3.5e-4}},
+    "cubic_temp": {"cubic_temp": {"c3": 4e-8}},
+}
 
 
-def one_run(
-    hidden: list[str], seed: int, rate_hz: float, profile: str = "paper"
-) -> dict[str, object]:
-    """Simulate truth = nominal + ``hidden`` and run the workflow on it."""
+def reallike_model(extra: dict[str, dict[str, float]]):
+    """The nominal model with its own white and flicker noise off (the real-like record
+    brings the noise), plus ``extra``."""
+    m = nominal_model().with_effect("arw", N=0.0).with_effect("bias_instability", B=0.0)
+    for k, v in extra.items():
+        m = m.with_effect(k, **v)
+    return m
+
+
+def one_run(job: dict[str, Any]) -> dict[str, Any]:
+    """Simulate one battery job (``cell``, ``hidden``, ``seed``, optional ``params`` /
+    ``reallike``) and run the workflow on it."""
+    hidden: list[str] = job["hidden"]
+    seed: int = job["seed"]
     rng = np.random.default_rng([seed, *[len(h) for h in hidden], 8])
-    model = nominal_model()
-    params = {}
-    for h in hidden:
-        params[h] = RANGES[h](rng)
-        model = model.with_effect(h, **params[h])
+    params: dict[str, dict[str, float]] = {}
+    post = None
+    if job.get("reallike") is not None:
+        model = reallike_model(job["params"])
+        params = job["params"]
+        dt = 1.0 / job["rate"]
+        sw = RealLike().n_arw / 60.0 / np.sqrt(dt)
+        post = digital_output(RealLike(lattice_q=0.05 * sw), seed)
+    else:
+        model = nominal_model()
+        for h in hidden:
+            if h in job.get("params", {}):
+                params[h] = job["params"][h]
+            elif job.get("form"):
+                params[h] = FORMS[job["form"]][1](rng)
+            else:
+                params[h] = RANGES[h](rng)
+            model = model.with_effect(h, **params[h])
     t0 = time.perf_counter()
-    data = simulate_bench(model, load_profile(profile), rate_hz=rate_hz, seed=seed)
+    data = simulate_bench(model, load_profile(job.get("profile", "paper")), job["rate"], seed, post)
     t1 = time.perf_counter()
     res = run_discrepancy(data)
     t2 = time.perf_counter()
-    named = set(res.effects_found) | {e for s in res.ambiguous if len(s) <= 3 for e in s}
+    amb_members = {e for s in res.ambiguous if len(s) <= 3 for e in s}
+    status = {}
+    for h in hidden:
+        status[h] = (
+            "named" if h in res.effects_found else "ambiguous" if h in amb_members else "missed"
+        )
+    false = [e for e in res.effects_found if e not in hidden and e not in amb_members]
+    false += [e for s in res.ambiguous if not set(s) & set(hidden) for e in s]
+    # an effect named that belongs to an ambiguous set with a hidden member is ambiguous,
+    # not false; one named outside any such set is false
+    false = sorted(set(false) - set(hidden))
     shrink = {}
     for h in hidden:
         key = PRIMARY_GAP[h]
         b, a = res.gap_before[key], res.gap_after[key]
         shrink[h] = {"metric": key, "before": b, "after": a, "shrink": 1.0 - a / b if b else 0.0}
     return {
-        "hidden": hidden,
-        "seed": seed,
+        **{k: v for k, v in job.items() if k != "params"},
         "params": params,
         "effects_found": res.effects_found,
         "ambiguous": res.ambiguous,
-        "named_ok": {h: h in named for h in hidden},
+        "status": status,
+        "named_ok": {h: status[h] != "missed" for h in hidden},
+        "false": false,
         "gap": shrink,
         "gap_before": res.gap_before,
         "gap_after": res.gap_after,
+        "detection_limits": res.detection_limits,
         "sim_s": t1 - t0,
         "analysis_s": t2 - t1,
     }
@@ -145,48 +228,135 @@ def confusion_table(runs: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def score_table(runs: list[dict]) -> str:
+    """Markdown: per cell and truth, hidden effects named / ambiguous / missed, runs with
+    a false effect, and the hidden effects' own gaps shrinking ≥ 50 %."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in runs:
+        label = r.get("form") or (" + ".join(r["hidden"]) or "(nominal)")
+        if r["cell"] == "weak":
+            label = f"{r['hidden'][0]} at {r['factor']:g}× limit"
+        groups.setdefault((r["cell"], label), []).append(r)
+    lines = [
+        "| cell | truth | runs | named | ambiguous | missed | runs with a false effect "
+        "| all hidden found | own gap shrink ≥ 50 % |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (cell, label), rs in groups.items():
+        st = [s for r in rs for s in r["status"].values()]
+        n_named, n_amb = st.count("named"), st.count("ambiguous")
+        n_miss = st.count("missed")
+        n_false = sum(1 for r in rs if r["false"])
+        allf = sum(1 for r in rs if r["hidden"] and all(r["named_ok"].values()))
+        gaps = [g["shrink"] >= 0.5 for r in rs for g in r["gap"].values()]
+        lines.append(
+            f"| {cell} | {label} | {len(rs)} | {n_named} | {n_amb} | {n_miss} | {n_false} "
+            f"| {f'{allf}/{len(rs)}' if rs[0]['hidden'] else '—'} "
+            f"| {f'{sum(gaps)}/{len(gaps)}' if gaps else '—'} |"
+        )
+    return "\n".join(lines)
+
+
+def weak_jobs(rate: float, seeds: int, profile: str) -> list[dict[str, Any]]:
+    """2× and 0.5× the limits a nominal run (seed 900) states, on other seeds."""
+    ref = one_run({"cell": "weak-ref", "hidden": [], "seed": 900, "rate": rate, "profile": profile})
+    lim = ref["detection_limits"]
+    jobs = []
+    for e in WEAK:
+        entry = lim.get(e)
+        if not entry or entry["limit"] is None:
+            continue
+        for factor in (2.0, 0.5):
+            for s in range(seeds):
+                p = {entry["parameter"]: factor * entry["limit"], **entry.get("at", {})}
+                if e == "periodic":
+                    p["phase_rad"] = 0.7
+                jobs.append(
+                    {
+                        "cell": "weak",
+                        "hidden": [e],
+                        "seed": 910 + s,
+                        "rate": rate,
+                        "profile": profile,
+                        "factor": factor,
+                        "limit": entry["limit"],
+                        "params": {e: p},
+                    }
+                )
+    return jobs
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--nominal", type=int, default=10)
+    ap.add_argument("--seeds", type=int, default=3, help="runs per single effect")
+    ap.add_argument("--nominal", type=int, default=6)
     ap.add_argument("--pairs", type=int, default=2, help="seeds per pair of effects")
+    ap.add_argument("--triples", type=int, default=1, help="seeds per triple")
+    ap.add_argument("--forms", type=int, default=2, help="seeds per wider form")
+    ap.add_argument("--weak", type=int, default=1, help="seeds per effect and factor")
+    ap.add_argument("--reallike", type=int, default=2, help="seeds per real-like cell")
     ap.add_argument("--rate", type=float, default=10.0, help="ADC rate, Hz (default 10)")
-    ap.add_argument("--only", nargs="*", help="effects to run (default all)")
+    ap.add_argument("--only", nargs="*", help="single effects to run (default all)")
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--profile", default="paper", help="profile (default: the paper's 13 h)")
     ap.add_argument("--out", default="benchmarks/results/discrepancy_battery.json")
     a = ap.parse_args(argv)
-    jobs: list[list[str]] = []
-    for _ in range(a.nominal):
-        jobs.append([])
-    effects = a.only or list(RANGES)
-    for e in effects:
-        jobs += [[e]] * a.seeds
-    for p in PAIRS if not a.only else []:
-        jobs += [list(p)] * a.pairs
+    jobs: list[dict[str, Any]] = []
+
+    def add(cell: str, hidden: list[str], n: int, **extra: Any) -> None:
+        for s in range(n):
+            jobs.append(
+                {
+                    "cell": cell,
+                    "hidden": hidden,
+                    "seed": 100 + s,
+                    "rate": a.rate,
+                    "profile": a.profile,
+                    **extra,
+                }
+            )
+
+    add("nominal", [], a.nominal)
+    for e in a.only or list(RANGES):
+        add("single", [e], a.seeds)
+    if not a.only:
+        for f, (e, _) in FORMS.items():
+            add("single", [e], a.forms, form=f)
+        for p in PAIRS:
+            add("pair", list(p), a.pairs)
+        for t in TRIPLES:
+            add("triple", list(t), a.triples)
+        for label, extra in REALLIKE.items():
+            n = a.reallike + (1 if not extra else 0)
+            add("reallike", list(extra), n, reallike=label, params=extra)
+        if a.weak:
+            jobs += weak_jobs(a.rate, a.weak, a.profile)
     runs = []
-    seen: dict[tuple[str, ...], int] = {}
-    for hidden in jobs:
-        k = tuple(hidden)
-        seed = seen.get(k, 0)
-        seen[k] = seed + 1
-        r = one_run(hidden, 100 + seed, a.rate)
+    t_all = time.perf_counter()
+    if a.workers > 1:
+        from multiprocessing import get_context
+
+        pool = get_context("fork").Pool(a.workers)
+        it = pool.imap_unordered(one_run, jobs)
+    else:
+        it = map(one_run, jobs)
+    for r in it:
         runs.append(r)
-        ok = all(r["named_ok"].values()) if hidden else not r["effects_found"]
+        ok = all(r["named_ok"].values()) and not r["false"]
         print(
-            f"{'+'.join(hidden) or 'nominal'} seed {seed}: found {r['effects_found']} "
-            f"amb {r['ambiguous']} {'OK' if ok else 'MISS'} "
-            f"gap {[round(g['shrink'], 2) for g in r['gap'].values()]} "
-            f"({r['analysis_s']:.1f} s)",
+            f"[{len(runs)}/{len(jobs)}] {r['cell']} {'+'.join(r['hidden']) or 'nominal'} "
+            f"seed {r['seed']}{' ×' + str(r['factor']) if 'factor' in r else ''}: "
+            f"found {r['effects_found']} amb {r['ambiguous']} false {r['false']} "
+            f"{'OK' if ok else 'MISS'} ({r['analysis_s']:.1f} s)",
             flush=True,
         )
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(runs, indent=1, default=float))
+    print(f"\n{len(runs)} runs in {time.perf_counter() - t_all:.0f} s\n")
+    print(score_table(runs))
     print()
-    print(confusion_table(runs))
-    pairs = [r for r in runs if len(r["hidden"]) == 2]
-    if pairs:
-        both = sum(1 for r in pairs if all(r["named_ok"].values()))
-        print(f"\npairs: both named in {both}/{len(pairs)}")
+    print(confusion_table([r for r in runs if r["cell"] in ("nominal", "single")]))
     return 0
 
 

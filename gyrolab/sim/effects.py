@@ -170,17 +170,48 @@ def _play(temp: np.ndarray, p0: float, half: float, out: np.ndarray) -> float:  
     return p
 
 
+@numba.njit(cache=True, nogil=True)
+def _play_var(
+    temp: np.ndarray, p0: float, half: np.ndarray, out: np.ndarray
+) -> float:  # pragma: no cover
+    """Play operator whose half-width varies per sample (``half[i]`` > 0), as :func:`_play`."""
+    p = p0
+    for i in range(temp.size):
+        x = temp[i]
+        h = half[i]
+        if p < x - h:
+            p = x - h
+        elif p > x + h:
+            p = x + h
+        out[i] = (x - p) / h
+    return p
+
+
+HYST_MIN_WIDTH_C = 0.01
+"""Floor of a temperature-dependent hysteresis width, °C."""
+
+
+def hysteresis_width(temp: np.ndarray, width_c: float, width_tc: float) -> np.ndarray:
+    """``w(T) = max(w_min, width_c + width_tc · (T − 25 °C))`` (°C)."""
+    return np.maximum(HYST_MIN_WIDTH_C, width_c + width_tc * (np.asarray(temp) - 25.0))
+
+
 class Hysteresis(Effect):
     """``bias += (h/2) · s``, ``s = (T − p)/(w/2)`` with ``p`` the play operator of width w.
 
     ``p`` follows T with a backlash of ±w/2, so after any monotone excursion longer than
-    ``w`` the bias sits at +h/2 while T rises and −h/2 while it falls (°/s).
+    ``w`` the bias sits at +h/2 while T rises and −h/2 while it falls (°/s). The width may
+    depend on temperature, ``w(T) = width_c + width_tc·(T − 25 °C)`` (floored at 0.01 °C;
+    ``width_tc`` = 0, the default, is the constant width).
     """
 
     name = "hysteresis"
     PARAMS = {
         "h": Param(2.0e-3, "deg/s", "full bias difference heating vs cooling"),
-        "width_c": Param(1.0, "degC", "temperature reversal that flips the branch", "pos"),
+        "width_c": Param(
+            1.0, "degC", "temperature reversal that flips the branch (at 25 °C)", "pos"
+        ),
+        "width_tc": Param(0.0, "degC/degC", "change of the width per °C from 25 °C"),
     }
 
     def __init__(
@@ -193,21 +224,34 @@ class Hysteresis(Effect):
         if self._p is None:
             self._p = float(ctx.temp_c[0]) if ctx.n else 0.0
         s = np.empty(ctx.n)
-        self._p = _play(ctx.temp_c, self._p, 0.5 * self.p["width_c"], s)
+        if self.p["width_tc"] == 0.0:
+            self._p = _play(ctx.temp_c, self._p, 0.5 * self.p["width_c"], s)
+        else:
+            half = 0.5 * hysteresis_width(ctx.temp_c, self.p["width_c"], self.p["width_tc"])
+            self._p = _play_var(
+                np.ascontiguousarray(ctx.temp_c, dtype=np.float64), self._p, half, s
+            )
         return 0.5 * self.p["h"] * s
 
 
 class Warmup(Effect):
-    """``bias += A · exp(−t/τw)`` (°/s) after power-on."""
+    """``bias += A · exp(−t/τw) + A2 · exp(−t/τ2)`` (°/s) after power-on: one or two
+    exponentials (opposite signs allowed: a fast rise inside a slow settling). ``A2`` = 0,
+    the default, is the single exponential."""
 
     name = "warmup"
     PARAMS = {
         "A": Param(5.0e-3, "deg/s", "warm-up amplitude at power-on"),
         "tau_s": Param(600.0, "s", "warm-up time constant", "pos"),
+        "A2": Param(0.0, "deg/s", "second exponential's amplitude"),
+        "tau2_s": Param(600.0, "s", "second exponential's time constant", "pos"),
     }
 
     def rate(self, ctx: BlockContext) -> np.ndarray:
-        return self.p["A"] * np.exp(-ctx.t / self.p["tau_s"])
+        y = self.p["A"] * np.exp(-ctx.t / self.p["tau_s"])
+        if self.p["A2"] != 0.0:
+            y = y + self.p["A2"] * np.exp(-ctx.t / self.p["tau2_s"])
+        return y
 
 
 class AgingRamp(Effect):

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from gyrolab.sim.discrepancy.gls import GlsResult, ar_whiten, gls_ar, gls_cov
-from gyrolab.sim.effects import _play
+from gyrolab.sim.effects import _play, _play_var, hysteresis_width
 
 AR_ORDER = 8
 GYRO_EFFECTS = (
@@ -44,6 +44,20 @@ GYRO_EFFECTS = (
     "aging_ramp",
     "periodic",
 )
+WARMUP2 = "warmup.tau2"
+"""theta key of a second warm-up exponential's time constant (the two-exponential form)."""
+HYST_TC = "hysteresis.width_tc"
+"""theta key of a temperature-dependent hysteresis width's slope (°C/°C)."""
+FORM_KEYS = (WARMUP2, HYST_TC)
+
+
+def n_nonlinear(struct: GyroStructure) -> int:
+    """Nonlinear parameters of a structure (the wider forms' extra shape parameters too)."""
+    return sum(1 for n in struct.names if n in NONLINEAR) + sum(
+        1 for k in FORM_KEYS if k in struct.theta and k.split(".")[0] in struct.names
+    )
+
+
 NONLINEAR = {
     "thermal_lag": "tau_s",
     "hysteresis": "width_c",
@@ -135,14 +149,22 @@ def design(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, list[st
             cols.append(60.0 * np.interp(ctx.t, ctx.grid_t, dtemp_g))
             names.append("thermal_rate.k")
         elif name == "hysteresis":
-            half = 0.5 * struct.theta["hysteresis"]
             s = np.empty(temp_g.size)
-            _play(temp_g, float(temp_g[0]), half, s)
+            tc = struct.theta.get(HYST_TC, 0.0)
+            if tc == 0.0:
+                _play(temp_g, float(temp_g[0]), 0.5 * struct.theta["hysteresis"], s)
+            else:
+                half = 0.5 * hysteresis_width(temp_g, struct.theta["hysteresis"], tc)
+                tg = np.ascontiguousarray(temp_g, dtype=np.float64)
+                _play_var(tg, float(temp_g[0]), half, s)
             cols.append(0.5 * np.interp(ctx.t, ctx.grid_t, s))
             names.append("hysteresis.h")
         elif name == "warmup":
             cols.append(np.exp(-ctx.t / struct.theta["warmup"]))
             names.append("warmup.A")
+            if WARMUP2 in struct.theta:
+                cols.append(np.exp(-ctx.t / struct.theta[WARMUP2]))
+                names.append("warmup.A2")
         elif name == "aging_ramp":
             cols.append(ctx.t / 3600.0)
             names.append("aging_ramp.r")
@@ -176,8 +198,7 @@ class GyroFit:
 
 def _fit_fixed(struct: GyroStructure, ctx: GyroContext, phi: np.ndarray | None = None) -> GyroFit:
     X, cols = design(struct, ctx)
-    n_nl = sum(1 for n in struct.names if n in NONLINEAR)
-    g = gls_ar(ctx.y, X, AR_ORDER, extra_params=n_nl, phi=phi)
+    g = gls_ar(ctx.y, X, AR_ORDER, extra_params=n_nonlinear(struct), phi=phi)
     return GyroFit(struct, g, cols, X @ g.beta)
 
 
@@ -308,9 +329,15 @@ def effect_params(fit: GyroFit) -> dict[str, dict[str, float]]:
         elif name == "thermal_lag":
             out[name] = {"tau_s": th["thermal_lag"]}
         elif name == "hysteresis":
-            out[name] = {"h": c["hysteresis.h"], "width_c": th["hysteresis"]}
+            out[name] = {
+                "h": c["hysteresis.h"],
+                "width_c": th["hysteresis"],
+                "width_tc": th.get(HYST_TC, 0.0),
+            }
         elif name == "warmup":
             out[name] = {"A": c["warmup.A"], "tau_s": th["warmup"]}
+            if WARMUP2 in th:
+                out[name].update({"A2": c["warmup.A2"], "tau2_s": th[WARMUP2]})
         elif name == "aging_ramp":
             out[name] = {"r": c["aging_ramp.r"]}
         elif name == "periodic":
@@ -321,3 +348,39 @@ def effect_params(fit: GyroFit) -> dict[str, dict[str, float]]:
                 "phase_rad": float(math.atan2(b, a)),
             }
     return out
+
+
+def widen_form(fit: GyroFit, ctx: GyroContext, name: str, score: Any) -> tuple[GyroFit, str]:
+    """The wider form of ``name`` within its vocabulary name, when ``score`` (a BIC:
+    lower is better, parameters counted) prefers it: warm-up as two exponentials (the
+    second time constant scanned on the warm-up grid, then the first re-scanned; signs
+    free), hysteresis with a width that changes linearly with temperature (slope scanned
+    over ±2 %/°C of the width at 25 °C). Returns the chosen fit and the form's label."""
+    st = fit.struct
+    best, best_bic, label = fit, score(fit.struct), "single"
+    if name == "warmup":
+        grid = nonlinear_grid("warmup", ctx)
+        phi = fit.gls.phi if fit.gls.phi.size else _fit_fixed(st, ctx).gls.phi
+        t1 = st.theta["warmup"]
+        cands = [v for v in grid if abs(math.log(v / t1)) > 0.3]
+
+        def rss(t1: float, t2: float) -> float:
+            s2 = GyroStructure(st.names, {**st.theta, "warmup": t1, WARMUP2: t2})
+            return _fit_fixed(s2, ctx, phi).gls.rss
+
+        if cands:
+            t2 = float(min(cands, key=lambda v: rss(t1, float(v))))
+            c1 = [v for v in grid if abs(math.log(v / t2)) > 0.3]
+            t1 = float(min(c1, key=lambda v: rss(float(v), t2)))
+            s2 = GyroStructure(st.names, {**st.theta, "warmup": t1, WARMUP2: t2})
+            b = score(s2)
+            if b < best_bic:
+                best, best_bic, label = _fit_fixed(s2, ctx), b, "two exponentials"
+    elif name == "hysteresis":
+        w0 = st.theta["hysteresis"]
+        for rel in (-0.02, -0.01, -0.005, 0.005, 0.01, 0.02):
+            s2 = GyroStructure(st.names, {**st.theta, HYST_TC: rel * w0})
+            b = score(s2)
+            if b < best_bic:
+                best, best_bic, label = _fit_fixed(s2, ctx), b, "temperature-dependent width"
+    return best, label

@@ -38,14 +38,19 @@ from gyrolab.sim.discrepancy import noise_fit as nf
 from gyrolab.sim.discrepancy.data import BenchData
 from gyrolab.sim.discrepancy.gls import CovWhitener, bin_noise_autocov, gls_cov
 from gyrolab.sim.discrepancy.gyro_fit import (
+    FORM_KEYS,
     GYRO_EFFECTS,
+    HYST_TC,
     NONLINEAR,
+    WARMUP2,
     GyroContext,
     GyroFit,
     GyroStructure,
     design,
     effect_params,
     fit_structure,
+    n_nonlinear,
+    widen_form,
 )
 from gyrolab.sim.discrepancy.thermal_fit import (
     OVEN_FLOOR_C,
@@ -200,7 +205,11 @@ class Workflow:
         names = [n for n in st.effects if n in GYRO_EFFECTS]
         if "bias_poly" not in names:
             names = ["bias_poly"] + names
-        theta = {n: st.theta[n] for n in names if n in NONLINEAR and n in st.theta}
+        theta = {
+            k: v
+            for k, v in st.theta.items()
+            if (k in NONLINEAR and k in names) or (k in FORM_KEYS and k.split(".")[0] in names)
+        }
         return GyroStructure(names, theta)
 
     def fit(self, st: Structure, scan: tuple[str, ...] = ()) -> Fitted:
@@ -253,8 +262,7 @@ class Workflow:
     def cov_fit(struct: GyroStructure, ctx: GyroContext, w: CovWhitener) -> GyroFit:
         """GLS of a structure (nonlinear parameters fixed) with a known noise covariance."""
         X, cols = design(struct, ctx)
-        n_nl = sum(1 for n in struct.names if n in NONLINEAR)
-        g = gls_cov(ctx.y, X, w, n_nl)
+        g = gls_cov(ctx.y, X, w, n_nonlinear(struct))
         return GyroFit(struct, g, cols, X @ g.beta)
 
     # --------------------------------------------------------------------- gaps
@@ -371,6 +379,9 @@ class Workflow:
                 scan=(name,) if name in NONLINEAR else (),
                 whitener=cur.whitener,
             )
+            form = "single"
+            if name in ("warmup", "hysteresis"):
+                g, form = widen_form(g, cur.ctx, name, lambda s: best_bic(s)[0])
             cand_bic, cand_noise = best_bic(g.struct)
             dbic = base_bic - cand_bic
             params = effect_params(g).get(name, {})
@@ -384,8 +395,10 @@ class Workflow:
                         "delta_bic": float(dbic),
                         "params": params,
                         "noise_with_rrw": [bool(base_noise), bool(cand_noise)],
+                        "form": form,
                     },
                     "_theta": g.struct.theta.get(name),
+                    "_form": {k: v for k, v in g.struct.theta.items() if k in FORM_KEYS},
                 }
             )
         return out
@@ -543,6 +556,12 @@ class Workflow:
             spec = self.model0.get(n)
             if spec is not None:
                 st.theta[n] = float(spec.params[{"periodic": "period_s"}.get(n, NONLINEAR[n])])
+        wu = self.model0.get("warmup")
+        if wu is not None and wu.params.get("A2", 0.0) != 0.0:
+            st.theta[WARMUP2] = float(wu.params["tau2_s"])
+        hy = self.model0.get("hysteresis")
+        if hy is not None and hy.params.get("width_tc", 0.0) != 0.0:
+            st.theta[HYST_TC] = float(hy.params["width_tc"])
         ovs = self.model0.get("oven_overshoot")
         if ovs is not None:
             st.overshoot = (ovs.params["overshoot"], ovs.params["period_s"])
@@ -571,6 +590,7 @@ class Workflow:
                     new = cur.structure.plus(best["effect"])
                     if best.get("_theta") is not None:
                         new.theta[best["effect"]] = float(best["_theta"])
+                    new.theta.update(best.get("_form") or {})
                     nxt = self.fit(new)
                     key = PRIMARY_GAP.get(best["effect"], "lf_residual_rms_dps")
                     if nxt.gaps[key] < cur.gaps[key]:
@@ -652,7 +672,7 @@ class Workflow:
     def _struct_bic(self, cur: Fitted, names: list[str], scan: tuple[str, ...]) -> tuple:
         """BIC of a gyro structure under the current learned noise model."""
         assert cur.whitener is not None
-        theta = {k: v for k, v in cur.gyro.struct.theta.items() if k in names}
+        theta = {k: v for k, v in cur.gyro.struct.theta.items() if k.split(".")[0] in names}
         g = fit_structure(GyroStructure(names, theta), cur.ctx, scan=scan, whitener=cur.whitener)
         return self.cov_fit(g.struct, cur.ctx, cur.whitener).bic, g.struct.theta
 
@@ -693,8 +713,9 @@ class Workflow:
         effects = [n for n in cur.structure.effects if n not in GYRO_EFFECTS or n in new_names]
         effects += [n for n in new_names if n not in effects and n != "bias_poly"]
         st = Structure(effects, {**cur.structure.theta, **th}, cur.structure.overshoot)
-        if mv["move"] == "drop":
-            st.theta.pop(mv["effect"], None)
+        for k in list(st.theta):
+            if k.split(".")[0] == mv["effect"]:
+                st.theta.pop(k)
         return self.fit(st), [mv]
 
     # ------------------------------------------------------------- the model
