@@ -131,7 +131,7 @@ def rtd_limit(wf: Workflow, cur: Fitted, threshold: float, min_gain: float) -> f
     coef, *_ = np.linalg.lstsq(dm, one, rcond=None)
     e = float(np.sum((one - dm @ coef)[:n_pt] ** 2)) / n_pt  # mean-square per unit δ²
     v1 = max(float(np.mean(cur.case.resid**2)), (0.5 * wf.pt_noise) ** 2)
-    ne = effective_n(cur.case.resid)
+    ne = effective_n(cur.case.resid, floor=0.5 * wf.pt_noise)
     if e <= 0:
         return None
     # ΔBIC: ne·ln(1 + δ²e/v1) − ln ne > threshold;  gain: v1/(v1 + δ²e) < (1 − g)²
@@ -160,7 +160,7 @@ def overshoot_limit(
     plain = cur.oven.pred
     r1 = cur.oven.resid
     v1 = max(float(np.mean(r1**2)), OVEN_FLOOR_C**2)
-    ne = effective_n(r1)
+    ne = effective_n(r1, floor=OVEN_FLOOR_C)
 
     def passes(o: float) -> bool:
         sig = _air_model(d.oven_t, d.oven_t, d.oven_sp, a0, x, (o, period_s)) - plain

@@ -150,6 +150,29 @@ def render(res: Result, source: str) -> str:
                 str(loc["allan_tau_range_s"] or "—"),
             ]
         )
+    added_rows = []
+    for s in res.steps:
+        if s.get("added"):
+            b, a = s["gap_metric_before_after"]
+            moves = "; ".join(
+                f"{m['move']} {m['effect']}" + (f" → {m['to']}" if "to" in m else "")
+                for m in s.get("revisions", [])
+            )
+            added_rows.append([s["added"], s["gap_metric"], b, a, moves or "—"])
+        for r in s.get("rejected_gap_grew", []):
+            b, a = r["gap_metric_before_after"]
+            added_rows.append([r["effect"] + " (rejected)", r["gap_metric"], b, a, "gap grew"])
+    limit_rows = [
+        [
+            name,
+            e["parameter"],
+            "not computed" if e["limit"] is None else e["limit"],
+            e["unit"],
+            ", ".join(f"{k} = {v:g}" for k, v in e.get("at", {}).items()) or "—",
+            e["method"],
+        ]
+        for name, e in sorted(res.detection_limits.items())
+    ]
     imgs = "".join(
         f'<figure><img alt="{k}" src="data:image/png;base64,{v}"></figure>' for k, v in figs.items()
     )
@@ -167,6 +190,14 @@ font-size:13px}}th{{background:#eee}}img{{max-width:100%}}code{{background:#f4f4
 <b>{html.escape(amb)}</b>.</p>
 <h2>Gap before and after</h2>
 {_table(gap_rows, ["metric", "before", "after", "shrink"])}
+<h2>Each added effect and its own gap</h2>
+<p>An effect is added only when the gap metric that belongs to it shrinks.</p>
+{_table(added_rows, ["effect", "its gap metric", "before", "after", "revisions"])}
+<h2>Detection limits</h2>
+<p>For every effect not added: the smallest amplitude this run would have revealed
+(expected score at the significance threshold). Below it, "not found" means
+"not detectable here", not "not there".</p>
+{_table(limit_rows, ["effect", "parameter", "limit", "unit", "at", "method"])}
 <h2>Iterations</h2>
 {
         _table(

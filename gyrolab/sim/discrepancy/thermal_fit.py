@@ -125,14 +125,15 @@ class Initial:
 
 def value_resolution(v: np.ndarray) -> float:
     """Spacing of a channel's values when they sit on a lattice (a register that rounds,
-    e.g. to 0.1 °C), else 0."""
-    from gyrolab.sim.discrepancy.data import _lattice_of
-
-    v = np.asarray(v, dtype=float)[:20000]
-    if v.size < 10:
-        return 0.0
-    q, frac = _lattice_of(v, np.diff(v), float(np.max(np.abs(v))) or 1.0)
-    return q if frac > 0.9 and q > 1e-6 else 0.0
+    e.g. to 0.1 °C): the smallest gap between distinct values when every gap is a
+    multiple of it, else 0."""
+    u = np.unique(np.round(np.asarray(v, dtype=float), 9))
+    if u.size < 2 or u.size > 0.5 * max(np.asarray(v).size, 1) + 2:
+        return 0.0  # a continuum: (almost) every reading distinct
+    du = np.diff(u)
+    q = float(np.min(du))
+    r = du / q
+    return q if q > 1e-6 and bool(np.all(np.abs(r - np.rint(r)) < 0.05)) else 0.0
 
 
 def initial_value(t: np.ndarray, v: np.ndarray, window_s: float = INIT_WINDOW_S) -> Initial:
@@ -160,20 +161,30 @@ def initial_value(t: np.ndarray, v: np.ndarray, window_s: float = INIT_WINDOW_S)
     return Initial(value, sigma, int(tt.size))
 
 
-def effective_n(resid: np.ndarray) -> float:
-    """Number of independent samples in a residual series with lag-1 autocorrelation ρ:
-    ``n (1 − ρ)/(1 + ρ)`` (an AR(1) misfit; ρ < 0 counts as 0). A smooth misfit between a
-    model and a real chamber is strongly correlated, and a likelihood that treated its
-    readings as independent would turn it into hundreds of BIC units."""
+def effective_n(resid: np.ndarray, rho_stop: float = 0.05, floor: float = 0.0) -> float:
+    """Number of independent samples in a residual series: ``n / (1 + 2 Σ_k ρ_k)``, the
+    autocorrelations ``ρ_k`` (by FFT) summed from lag 1 until they first fall below
+    ``rho_stop`` (an initial-positive-sequence estimate of the integrated correlation
+    time). A smooth misfit between a model and a real chamber is correlated over
+    thousands of readings, and a likelihood that treated them as independent would turn
+    it into hundreds of BIC units; white reading noise keeps ``n``. ``floor`` (the
+    channel's resolution) counts as white noise beside the residual: a misfit below the
+    resolution is not evidence of anything, correlated or not."""
     r = np.asarray(resid, dtype=float)
     n = r.size
     if n < 3:
         return float(n)
     r = r - r.mean()
     den = float(r @ r)
-    rho = float(r[1:] @ r[:-1]) / den if den > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.999)
-    return max(2.0, n * (1.0 - rho) / (1.0 + rho))
+    if den <= 0:
+        return float(n)
+    m = 1 << int(math.ceil(math.log2(2 * n)))
+    f = np.fft.rfft(r, m)
+    acf = np.fft.irfft(f * np.conj(f), m)[: n // 2] / (den + n * floor * floor)
+    below = np.flatnonzero(acf[1:] < rho_stop)
+    k = int(below[0]) if below.size else acf.size - 1
+    s = float(np.sum(acf[1 : k + 1]))
+    return max(2.0, n / (1.0 + 2.0 * s))
 
 
 def delta_bic_channel(
@@ -182,7 +193,7 @@ def delta_bic_channel(
     """ΔBIC of a richer model (residual ``r1``) over the current one (``r0``) on a
     temperature channel, Gaussian with variance floored at ``floor²`` and the readings
     counted as :func:`effective_n` of the richer model's residual. Returns (ΔBIC, n_eff)."""
-    ne = effective_n(r1)
+    ne = effective_n(r1, floor=floor)
     v0 = max(float(np.mean(r0**2)), floor**2)
     v1 = max(float(np.mean(r1**2)), floor**2)
     return ne * math.log(v0 / v1) - extra_params * math.log(ne), ne
