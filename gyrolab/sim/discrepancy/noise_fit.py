@@ -346,7 +346,8 @@ def fit_cov_noise(curve: AllanCurve, bin_s: float, rrw: bool, gm: bool | None = 
         def unpack(x: np.ndarray) -> dict[str, float]:
             v = dict(zip(names, np.exp(np.clip(x, -80.0, 25.0)), strict=True))
             if "gt" in v:
-                v["gt"] = float(np.clip(v["gt"], tau[0] / 4, 4 * tau[-1]))
+                # a hump must show inside the measured range (peak at τ ≈ 1.9 T_c)
+                v["gt"] = float(np.clip(v["gt"], tau[0] / 4, tau[-1] / 2))
             return v
 
         def res(x: np.ndarray) -> np.ndarray:

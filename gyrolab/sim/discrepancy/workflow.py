@@ -346,20 +346,19 @@ class Workflow:
         return self._oven(tmp)
 
     def score_gyro(self, cur: Fitted) -> list[dict[str, Any]]:
+        """ΔBIC of each gyro term not in the model, every one judged with one noise model:
+        the one learned from the residual of the *saturated* model (current terms plus
+        every candidate, each at its own best shape). A missing slow term inflates the
+        current residual's long-τ Allan curve, and a noise model learned from that would
+        swallow the very terms being tested (two of them at once all the more); the
+        saturated residual is free of them, and since the noise scale is profiled out of
+        the BIC, only the learned *shape* of the spectrum matters. Unless the model has
+        it, a random-walk alternative learned from the same residual competes (the better
+        of the two for each model, its parameter counted): slow wander must not pass for
+        a ramp or a step."""
         out = []
-        st = cur.structure
-        base_struct = self._gyro_struct(st)
-        assert cur.whitener is not None
-        # Noise models to judge against: the current one and, unless the model already has
-        # it, the one with a rate random walk. A candidate must beat the better of the two
-        # base models (full likelihood, ln det Σ included): slow wander must not pass for a
-        # ramp or a step, and a real slow term must not be explained away as wander.
-        assert cur.cov_noise is not None
-        noises: list[tuple[CovWhitener, int]] = [(cur.whitener, self.noise_penalty(cur.cov_noise))]
-        if not st.has("rate_random_walk"):
-            alt = self._rrw_alt(cur)
-            noises.append((self.whitener(alt), self.noise_penalty(alt)))
         ln_n = math.log(cur.ctx.y.size)
+        fits, noises = self.judging_noises(cur)
 
         def best_bic(struct: GyroStructure) -> tuple[float, int]:
             bics = [self.cov_fit(struct, cur.ctx, w).bic + extra * ln_n for w, extra in noises]
@@ -367,18 +366,7 @@ class Workflow:
             return bics[i], i
 
         base_bic, base_noise = best_bic(cur.gyro.struct)
-        for name in GYRO_EFFECTS:
-            if name in base_struct.names or name == "bias_poly":
-                continue
-            if name == "cubic_temp" and self.poly_order >= 3:
-                continue
-            s2 = GyroStructure(base_struct.names + [name], dict(cur.gyro.struct.theta))
-            g = fit_structure(
-                s2,
-                cur.ctx,
-                scan=(name,) if name in NONLINEAR else (),
-                whitener=cur.whitener,
-            )
+        for name, g in fits.items():
             form = "single"
             if name in ("warmup", "hysteresis"):
                 g, form = widen_form(g, cur.ctx, name, lambda s: best_bic(s)[0])
@@ -402,6 +390,50 @@ class Workflow:
                 }
             )
         return out
+
+    def judging_noises(
+        self, cur: Fitted
+    ) -> tuple[dict[str, GyroFit], list[tuple[CovWhitener, int]]]:
+        """Each gyro candidate fitted alone (its shape scanned), and the whiteners of the
+        noise models learned from the saturated model's residual (see
+        :meth:`score_gyro`), each with its parameter penalty."""
+        st = cur.structure
+        base_struct = self._gyro_struct(st)
+        assert cur.whitener is not None
+        fits: dict[str, GyroFit] = {}
+        for name in GYRO_EFFECTS:
+            if name in base_struct.names or name == "bias_poly":
+                continue
+            if name == "cubic_temp" and self.poly_order >= 3:
+                continue
+            s2 = GyroStructure(base_struct.names + [name], dict(cur.gyro.struct.theta))
+            fits[name] = fit_structure(
+                s2,
+                cur.ctx,
+                scan=(name,) if name in NONLINEAR else (),
+                whitener=cur.whitener,
+            )
+        sat_names = list(base_struct.names) + [n for n in fits if n != "thermal_lag"]
+        sat_theta = dict(cur.gyro.struct.theta)
+        for n, g in fits.items():
+            if n in NONLINEAR and n != "thermal_lag":
+                sat_theta[n] = g.struct.theta[n]
+        sat = self.cov_fit(GyroStructure(sat_names, sat_theta), cur.ctx, cur.whitener)
+        curve = nf.measured_allan(self.d, cur.ctx.y - sat.pred)
+        has_k = st.has("rate_random_walk")
+        learned = [nf.fit_cov_noise(curve, self.d.bin_s, rrw=has_k)]
+        if not has_k:
+            learned.append(nf.fit_cov_noise(curve, self.d.bin_s, rrw=True))
+        return fits, [(self.whitener(c), self.noise_penalty(c)) for c in learned]
+
+    def own_noise_bic(self, cur: Fitted, g: GyroFit) -> float:
+        """BIC of a candidate fit under the noise model learned from its own residual
+        (parameters of that noise model counted as for the base models)."""
+        curve = nf.measured_allan(self.d, cur.ctx.y - g.pred)
+        cov = nf.fit_cov_noise(curve, self.d.bin_s, rrw=cur.structure.has("rate_random_walk"))
+        w = self.whitener(cov)
+        fit = self.cov_fit(g.struct, cur.ctx, w)
+        return fit.bic + self.noise_penalty(cov) * math.log(cur.ctx.y.size)
 
     def _noise_terms(self, cur: Fitted) -> set[str]:
         return {n for n in cur.structure.effects if n in STOCHASTIC_BASE + ("rate_random_walk",)}
