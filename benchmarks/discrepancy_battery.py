@@ -299,6 +299,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", help="single effects to run (default all)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--profile", default="paper", help="profile (default: the paper's 13 h)")
+    ap.add_argument("--table", help="only print the tables of an existing results file")
     ap.add_argument("--out", default="benchmarks/results/discrepancy_battery.json")
     a = ap.parse_args(argv)
     jobs: list[dict[str, Any]] = []
@@ -316,21 +317,29 @@ def main(argv: list[str] | None = None) -> int:
                 }
             )
 
+    if a.table:
+        runs = json.loads(Path(a.table).read_text())
+        print(score_table(runs))
+        print()
+        print(confusion_table([r for r in runs if r["cell"] in ("nominal", "single")]))
+        return 0
+    # acceptance-critical cells first: the results file is rewritten after every run, so
+    # a battery cut short still leaves every finished run on disk
     add("nominal", [], a.nominal)
     for e in a.only or list(RANGES):
         add("single", [e], a.seeds)
     if not a.only:
-        for f, (e, _) in FORMS.items():
-            add("single", [e], a.forms, form=f)
         for p in PAIRS:
             add("pair", list(p), a.pairs)
-        for t in TRIPLES:
-            add("triple", list(t), a.triples)
+        if a.weak:
+            jobs += weak_jobs(a.rate, a.weak, a.profile)
         for label, extra in REALLIKE.items():
             n = a.reallike + (1 if not extra else 0)
             add("reallike", list(extra), n, reallike=label, params=extra)
-        if a.weak:
-            jobs += weak_jobs(a.rate, a.weak, a.profile)
+        for t in TRIPLES:
+            add("triple", list(t), a.triples)
+        for f, (e, _) in FORMS.items():
+            add("single", [e], a.forms, form=f)
     runs = []
     t_all = time.perf_counter()
     if a.workers > 1:
@@ -340,8 +349,13 @@ def main(argv: list[str] | None = None) -> int:
         it = pool.imap_unordered(one_run, jobs)
     else:
         it = map(one_run, jobs)
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     for r in it:
         runs.append(r)
+        tmp = out.with_suffix(".tmp")
+        tmp.write_text(json.dumps(runs, indent=1, default=float))
+        os.replace(tmp, out)
         ok = all(r["named_ok"].values()) and not r["false"]
         print(
             f"[{len(runs)}/{len(jobs)}] {r['cell']} {'+'.join(r['hidden']) or 'nominal'} "
@@ -350,9 +364,6 @@ def main(argv: list[str] | None = None) -> int:
             f"{'OK' if ok else 'MISS'} ({r['analysis_s']:.1f} s)",
             flush=True,
         )
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(runs, indent=1, default=float))
     print(f"\n{len(runs)} runs in {time.perf_counter() - t_all:.0f} s\n")
     print(score_table(runs))
     print()

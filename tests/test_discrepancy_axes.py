@@ -1,0 +1,46 @@
+"""The discrepancy workflow per axis with the temperature channels shared (issue 18,
+point 6): effects of the bench reported once, effects of one axis on that axis."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gyrolab.profile import Profile, Step
+from gyrolab.sim.discrepancy.axes import from_arrays_axes, run_discrepancy_axes
+from gyrolab.sim.discrepancy.synth import simulate_bench
+from gyrolab.sim.model import nominal_model
+
+STEPS = [(25.0, 1800.0), (60.0, 2400.0), (20.0, 2400.0), (-20.0, 2400.0), (-40.0, 2400.0)]
+PROFILE = Profile("stairs", tuple(Step(sp, d) for sp, d in STEPS))
+
+
+def test_two_axes_share_the_bench_and_keep_their_own_terms():
+    bench = nominal_model().with_effect("rtd_self_heating", offset_c=0.3)
+    a0 = simulate_bench(bench.with_effect("thermal_rate", k=5e-3), PROFILE, 2.0, 51)
+    a1 = simulate_bench(bench, PROFILE, 2.0, 52)
+    # one chamber, one PT100: the second axis sees the first's temperature channels
+    a1 = replace(a1, pt100_c=a0.pt100_c, oven_pv=a0.oven_pv, oven_sp=a0.oven_sp)
+    res = run_discrepancy_axes([a0, a1])
+    assert res.shared == ["rtd_self_heating"]
+    assert res.by_axis[0] in (["thermal_rate"], ["thermal_lag"]) or "thermal_rate" in {
+        e for s in res.axes[0].ambiguous for e in s
+    }
+    assert res.by_axis[1] == []
+    doc = res.to_json()
+    assert doc["effects_shared"] == ["rtd_self_heating"] and len(doc["axes"]) == 2
+    # the thermal fit is the same object on both axes (done once)
+    assert res.axes[0].final.case.offset_c == pytest.approx(res.axes[1].final.case.offset_c)
+
+
+def test_axes_from_one_array_and_mismatched_channels_refused():
+    t = np.arange(400.0)
+    rates = np.random.default_rng(0).standard_normal((4000, 3)) * 1e-3
+    axes = from_arrays_axes(0.0, 0.1, rates, t, np.full(400, 25.0), t, np.full(400, 25.0), t)
+    assert len(axes) == 3
+    np.testing.assert_allclose(axes[2].y[:3], rates[:, 2].reshape(-1, 10)[:3].mean(axis=1))
+    bad = replace(axes[1], pt100_c=axes[1].pt100_c + 0.1)
+    with pytest.raises(ValueError, match="axis 1"):
+        run_discrepancy_axes([axes[0], bad])
