@@ -257,12 +257,34 @@ def score_table(runs: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def weak_jobs(rate: float, seeds: int, profile: str) -> list[dict[str, Any]]:
+def job_key(j: dict[str, Any]) -> tuple:
+    """Identity of a battery job (for --resume)."""
+    return (
+        j["cell"],
+        tuple(j["hidden"]),
+        j["seed"],
+        j.get("form"),
+        j.get("factor"),
+        j.get("reallike"),
+    )
+
+
+def weak_jobs(
+    rate: float, seeds: int, profile: str, effects: list[str] | None = None
+) -> list[dict[str, Any]]:
     """2× and 0.5× the limits a nominal run (seed 900) states, on other seeds."""
-    ref = one_run({"cell": "weak-ref", "hidden": [], "seed": 900, "rate": rate, "profile": profile})
-    lim = ref["detection_limits"]
+    cache = Path(os.environ.get("GYROLAB_BATTERY_WEAKREF", "/nonexistent"))
+    if cache.is_file():
+        lim = json.loads(cache.read_text())
+    else:
+        ref = one_run(
+            {"cell": "weak-ref", "hidden": [], "seed": 900, "rate": rate, "profile": profile}
+        )
+        lim = ref["detection_limits"]
+        if cache.parent.is_dir():
+            cache.write_text(json.dumps(lim, default=float))
     jobs = []
-    for e in WEAK:
+    for e in effects or WEAK:
         entry = lim.get(e)
         if not entry or entry["limit"] is None:
             continue
@@ -300,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--profile", default="paper", help="profile (default: the paper's 13 h)")
     ap.add_argument("--table", help="only print the tables of an existing results file")
+    ap.add_argument("--resume", action="store_true", help="keep the runs already in --out")
+    ap.add_argument("--weak-effects", nargs="*", help=f"effects of the weak cell ({WEAK})")
     ap.add_argument("--out", default="benchmarks/results/discrepancy_battery.json")
     a = ap.parse_args(argv)
     jobs: list[dict[str, Any]] = []
@@ -324,15 +348,16 @@ def main(argv: list[str] | None = None) -> int:
         print(confusion_table([r for r in runs if r["cell"] in ("nominal", "single")]))
         return 0
     # acceptance-critical cells first: the results file is rewritten after every run, so
-    # a battery cut short still leaves every finished run on disk
+    # a battery cut short still leaves every finished run on disk (and --resume reuses it)
     add("nominal", [], a.nominal)
-    for e in a.only or list(RANGES):
-        add("single", [e], a.seeds)
     if not a.only:
         for p in PAIRS:
             add("pair", list(p), a.pairs)
+    for e in a.only or list(RANGES):
+        add("single", [e], a.seeds)
+    if not a.only:
         if a.weak:
-            jobs += weak_jobs(a.rate, a.weak, a.profile)
+            jobs += weak_jobs(a.rate, a.weak, a.profile, a.weak_effects)
         for label, extra in REALLIKE.items():
             n = a.reallike + (1 if not extra else 0)
             add("reallike", list(extra), n, reallike=label, params=extra)
@@ -340,7 +365,13 @@ def main(argv: list[str] | None = None) -> int:
             add("triple", list(t), a.triples)
         for f, (e, _) in FORMS.items():
             add("single", [e], a.forms, form=f)
-    runs = []
+    runs: list[dict[str, Any]] = []
+    if a.resume and Path(a.out).exists():
+        runs = json.loads(Path(a.out).read_text())
+        done = {job_key(r) for r in runs}
+        jobs = [j for j in jobs if job_key(j) not in done]
+        print(f"resuming: {len(runs)} runs on file, {len(jobs)} to go", flush=True)
+    n_jobs = len(runs) + len(jobs)
     t_all = time.perf_counter()
     if a.workers > 1:
         from multiprocessing import get_context
@@ -358,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
         os.replace(tmp, out)
         ok = all(r["named_ok"].values()) and not r["false"]
         print(
-            f"[{len(runs)}/{len(jobs)}] {r['cell']} {'+'.join(r['hidden']) or 'nominal'} "
+            f"[{len(runs)}/{n_jobs}] {r['cell']} {'+'.join(r['hidden']) or 'nominal'} "
             f"seed {r['seed']}{' ×' + str(r['factor']) if 'factor' in r else ''}: "
             f"found {r['effects_found']} amb {r['ambiguous']} false {r['false']} "
             f"{'OK' if ok else 'MISS'} ({r['analysis_s']:.1f} s)",

@@ -179,6 +179,11 @@ class CovWhitener:
             self.v[k] = self.v[k - 1] * (1.0 - kap * kap)
             self.rows.append(a.copy())
         self.a = a
+        # rows t < p of the inverse Cholesky factor as one lower-triangular matrix
+        # (prediction coefficients on x_{t-1}, x_{t-2}, …): one product per call
+        self._head = np.zeros((p, p))
+        for t in range(1, p):
+            self._head[t, t - 1 :: -1] = self.rows[t]
         # ln det Σ = Σ_t ln v_t (prediction-error variances; v_p for every t ≥ p)
         self.logdet = float(np.sum(np.log(self.v[:p])) + (n - p) * np.log(self.v[p]))
 
@@ -188,10 +193,9 @@ class CovWhitener:
         x2 = x.reshape(x.shape[0], -1)
         out = np.empty_like(x2, dtype=float)
         p = self.p
-        for t in range(min(p, x2.shape[0])):
-            a = self.rows[t]
-            pred = a @ x2[t - 1 :: -1][: a.size] if t > 0 else 0.0
-            out[t] = (x2[t] - pred) / np.sqrt(self.v[t])
+        h = min(p, x2.shape[0])
+        head = x2[:h] - self._head[:h, :h] @ x2[:h]
+        out[:h] = head / np.sqrt(self.v[:h])[:, None]
         if x2.shape[0] > p:
             filt = lfilter(np.concatenate([[1.0], -self.a]), [1.0], x2, axis=0)
             out[p:] = filt[p:] / np.sqrt(self.v[p])

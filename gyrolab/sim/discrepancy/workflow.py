@@ -320,7 +320,9 @@ class Workflow:
                 }
             )
         if not st.has("rtd_self_heating"):
-            cand_c = fit_case(self.d, self.model0.thermal.case_tau_s, True)
+            if True not in self._case_cache:  # the same data every iteration: fit once
+                self._case_cache[True] = fit_case(self.d, self.model0.thermal.case_tau_s, True)
+            cand_c = self._case_cache[True]
             fl = 0.5 * self.pt_noise
             dbic, ne = delta_bic_channel(cur.case.resid, cand_c.resid, fl, 1)
             gain = 1.0 - cand_c.rms / max(cur.case.rms, 1e-12)
