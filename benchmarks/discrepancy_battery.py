@@ -350,17 +350,16 @@ def main(argv: list[str] | None = None) -> int:
     # acceptance-critical cells first: the results file is rewritten after every run, so
     # a battery cut short still leaves every finished run on disk (and --resume reuses it)
     add("nominal", [], a.nominal)
-    if not a.only:
-        for p in PAIRS:
-            add("pair", list(p), a.pairs)
     for e in a.only or list(RANGES):
         add("single", [e], a.seeds)
     if not a.only:
-        if a.weak:
-            jobs += weak_jobs(a.rate, a.weak, a.profile, a.weak_effects)
+        for p in PAIRS:
+            add("pair", list(p), a.pairs)
         for label, extra in REALLIKE.items():
             n = a.reallike + (1 if not extra else 0)
             add("reallike", list(extra), n, reallike=label, params=extra)
+        if a.weak:
+            jobs += weak_jobs(a.rate, a.weak, a.profile, a.weak_effects)
         for t in TRIPLES:
             add("triple", list(t), a.triples)
         for f, (e, _) in FORMS.items():
