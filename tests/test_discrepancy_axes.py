@@ -44,3 +44,30 @@ def test_axes_from_one_array_and_mismatched_channels_refused():
     bad = replace(axes[1], pt100_c=axes[1].pt100_c + 0.1)
     with pytest.raises(ValueError, match="axis 1"):
         run_discrepancy_axes([axes[0], bad])
+
+
+def test_three_axis_recording_loads_one_bench_per_axis(tmp_path):
+    """A recording in issue 15's multi-axis layout (``gyrolab simulate --axis-model``) is
+    read as one BenchData per axis with the same temperature channels; the single-axis
+    reader still refuses it with one line."""
+    from gyrolab.cli import main
+    from gyrolab.errors import InputError
+    from gyrolab.sim.discrepancy.data import load_recording, load_recording_axes
+
+    base = tmp_path / "x.toml"
+    base.write_text('format = "gyrolab-sim-model/1"\n[[effect]]\nname = "bias_poly"\n')
+    y = tmp_path / "y.toml"
+    y.write_text('format = "gyrolab-sim-model/1"\n[[effect]]\nname = "bias_poly"\nc0 = -0.5\n')
+    prof = tmp_path / "p.toml"
+    prof.write_text('name = "tiny"\n[[step]]\nsetpoint_c = 30.0\nduration_s = 30.0\n')
+    three = tmp_path / "three.mcap"
+    args = ["simulate", "--profile", str(prof), "--model", str(base), "--rate", "20"]
+    assert main([*args, "--axis-model", str(y), "--axis-model", str(y), "--out", str(three)]) == 0
+    axes = load_recording_axes(three)
+    assert len(axes) == 3
+    for a in axes[1:]:
+        np.testing.assert_array_equal(a.pt100_c, axes[0].pt100_c)
+        np.testing.assert_array_equal(a.oven_pv, axes[0].oven_pv)
+    assert np.mean(axes[1].y) == pytest.approx(np.mean(axes[0].y) - 0.52, abs=0.05)
+    with pytest.raises(InputError, match="3-axis"):
+        load_recording(three)

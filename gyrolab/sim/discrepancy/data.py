@@ -300,10 +300,11 @@ def from_arrays(
     )
 
 
-def load_recording(
-    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
-) -> BenchData:
-    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
+def _read_bench(
+    path: str | os.PathLike[str], unit: str | None
+) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The bench channels of a recording: rate start and period, rate samples (n, or
+    n × axes), their indices, PT100 rows (t, °C) and oven rows (t, SP, PV)."""
     blocks = []
     pt: list[tuple[float, float]] = []
     oven: list[tuple[float, float, float]] = []
@@ -319,29 +320,36 @@ def load_recording(
             oven.append((m["t"], m["setpoint_c"], m["process_value_c"]))
     if not blocks:
         raise InputError(path, f"recording has no {TOPIC_RATE} data")
-    if blocks[0][3].ndim > 1:
-        raise InputError(
-            path,
-            f"a {blocks[0][3].shape[1]}-axis recording: the discrepancy analysis models "
-            "one gyro axis (simulate the axes one by one)",
-        )
     if not pt:
         raise InputError(path, f"recording has no {TOPIC_PT100} data")
     if not oven:
         raise InputError(path, f"recording has no {TOPIC_OVEN} data")
     blocks.sort(key=lambda b: b[2])
     period = float(np.median([b[1] for b in blocks]))
-    n = sum(b[3].size for b in blocks)
-    x = np.empty(n)
+    n = sum(b[3].shape[0] for b in blocks)
+    x = np.empty((n,) + blocks[0][3].shape[1:])
     idx = np.empty(n, dtype=np.int64)
     pos = 0
     for _t0, _p, first, arr in blocks:
-        x[pos : pos + arr.size] = arr
-        idx[pos : pos + arr.size] = first + np.arange(arr.size)
-        pos += arr.size
+        k = arr.shape[0]
+        x[pos : pos + k] = arr
+        idx[pos : pos + k] = first + np.arange(k)
+        pos += k
     t0 = blocks[0][0] - blocks[0][2] * period
-    p = np.asarray(sorted(pt), dtype=float)
-    o = np.asarray(sorted(oven), dtype=float)
+    return t0, period, x, idx, np.asarray(sorted(pt), dtype=float), np.asarray(sorted(oven))
+
+
+def load_recording(
+    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+) -> BenchData:
+    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
+    t0, period, x, idx, p, o = _read_bench(path, unit)
+    if x.ndim > 1:
+        raise InputError(
+            path,
+            f"a {x.shape[1]}-axis recording: the discrepancy analysis models "
+            "one gyro axis (simulate the axes one by one)",
+        )
     return from_arrays(
         t0,
         period,
@@ -355,6 +363,32 @@ def load_recording(
         bin_s=bin_s,
         source=str(path),
     )
+
+
+def load_recording_axes(
+    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+) -> list[BenchData]:
+    """One :class:`BenchData` per gyro axis of a recording (one for a single-axis one),
+    all with the same temperature channels, for
+    :func:`gyrolab.sim.discrepancy.axes.run_discrepancy_axes`."""
+    t0, period, x, idx, p, o = _read_bench(path, unit)
+    cols = x if x.ndim > 1 else x[:, None]
+    return [
+        from_arrays(
+            t0,
+            period,
+            cols[:, k],
+            p[:, 0],
+            p[:, 1],
+            o[:, 0],
+            o[:, 1],
+            o[:, 2],
+            rate_index=idx,
+            bin_s=bin_s,
+            source=f"{path} (axis {k})",
+        )
+        for k in range(cols.shape[1])
+    ]
 
 
 _ = TOPIC_EVENT  # profile events are not needed: steps come from the setpoint channel
