@@ -18,7 +18,7 @@ import importlib
 import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 ROLES = ("thermometer", "chamber", "rate_stream")
 SOURCE_NAME = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
@@ -64,6 +64,20 @@ class DriverSpec:
 
 _SPECS: dict[str, DriverSpec] = {}
 _loaded = False
+
+
+_D = TypeVar("_D")
+
+
+def connected(device: _D) -> _D:
+    """``device.connect()``, closing the device first if that fails (no port is left half
+    open when a bench does not come up), then re-raising; returns the connected device."""
+    try:
+        device.connect()  # type: ignore[attr-defined]
+    except BaseException:
+        device.close()  # type: ignore[attr-defined]
+        raise
+    return device
 
 
 def register(spec: DriverSpec) -> DriverSpec:

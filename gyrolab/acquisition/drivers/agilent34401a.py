@@ -12,7 +12,7 @@ from typing import Any
 from gyrolab.acquisition.bench_config import MultimeterConfig
 from gyrolab.acquisition.instrument import InstrumentReport
 from gyrolab.acquisition.multimeter import Agilent34401A, scpi_reports
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
+from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
 from gyrolab.acquisition.roles import ThermometerReading
 
 
@@ -59,22 +59,18 @@ class Agilent34401AThermometer(Agilent34401A):
 
 
 def open_34401a(c: MultimeterConfig, ctx: OpenContext) -> Agilent34401AThermometer:
-    dmm = Agilent34401AThermometer(
-        ctx.address,
-        config=c,
-        visa_library=ctx.visa_library,
-        timeout_s=ctx.timeout(c.timeout_s),
-        range_ohm=c.range_ohm,
-        nplc=c.nplc,
-        r0_ohm=c.r0_ohm,
-        baud_rate=c.baud_rate,
+    return connected(
+        Agilent34401AThermometer(
+            ctx.address,
+            config=c,
+            visa_library=ctx.visa_library,
+            timeout_s=ctx.timeout(c.timeout_s),
+            range_ohm=c.range_ohm,
+            nplc=c.nplc,
+            r0_ohm=c.r0_ohm,
+            baud_rate=c.baud_rate,
+        )
     )
-    try:
-        dmm.connect()
-    except BaseException:
-        dmm.close()
-        raise
-    return dmm
 
 
 SPEC = register(

@@ -37,7 +37,7 @@ from gyrolab.acquisition.instrument import (
     InstrumentTimeout,
     LimitError,
 )
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
+from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
 from gyrolab.acquisition.roles import ChamberReading, InstrumentFault
 
 NAME = "ESPEC"
@@ -231,19 +231,15 @@ class EspecChamber:
 
 
 def open_espec(c: EspecConfig, ctx: OpenContext) -> EspecChamber:
-    ch = EspecChamber(
-        ctx.address,
-        config=c,
-        visa_library=ctx.visa_library,
-        timeout_s=ctx.timeout(c.timeout_s),
-        setpoint_limits_c=ctx.setpoint_limits_c,
+    return connected(
+        EspecChamber(
+            ctx.address,
+            config=c,
+            visa_library=ctx.visa_library,
+            timeout_s=ctx.timeout(c.timeout_s),
+            setpoint_limits_c=ctx.setpoint_limits_c,
+        )
     )
-    try:
-        ch.connect()
-    except BaseException:
-        ch.close()
-        raise
-    return ch
 
 
 SPEC = register(

@@ -25,7 +25,7 @@ from typing import Any
 
 from gyrolab.acquisition.drivers.agilent34401a import Agilent34401AThermometer
 from gyrolab.acquisition.instrument import LimitError
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
+from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
 
 
 @dataclass(frozen=True)
@@ -80,21 +80,17 @@ class Keysight34465A(Agilent34401AThermometer):
 
 
 def open_34465a(c: Keysight34465AConfig, ctx: OpenContext) -> Keysight34465A:
-    dmm = Keysight34465A(
-        ctx.address,
-        config=c,
-        visa_library=ctx.visa_library,
-        timeout_s=ctx.timeout(c.timeout_s),
-        range_ohm=c.range_ohm,
-        nplc=c.nplc,
-        r0_ohm=c.r0_ohm,
+    return connected(
+        Keysight34465A(
+            ctx.address,
+            config=c,
+            visa_library=ctx.visa_library,
+            timeout_s=ctx.timeout(c.timeout_s),
+            range_ohm=c.range_ohm,
+            nplc=c.nplc,
+            r0_ohm=c.r0_ohm,
+        )
     )
-    try:
-        dmm.connect()
-    except BaseException:
-        dmm.close()
-        raise
-    return dmm
 
 
 SPEC = register(

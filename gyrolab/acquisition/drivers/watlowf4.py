@@ -11,7 +11,7 @@ from typing import Any
 from gyrolab.acquisition.bench_config import OvenConfig
 from gyrolab.acquisition.instrument import InstrumentError, InstrumentReport
 from gyrolab.acquisition.oven import NAME, PROFILE_PAUSED, PROFILE_RUNNING, WatlowF4
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
+from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
 from gyrolab.acquisition.roles import ChamberReading, InstrumentFault
 
 
@@ -84,23 +84,19 @@ class WatlowF4Chamber(WatlowF4):
 
 def open_f4(c: OvenConfig, ctx: OpenContext) -> WatlowF4Chamber:
     timeout_s = ctx.timeout(c.timeout_s)
-    oven = WatlowF4Chamber(
-        ctx.address,
-        config=c,
-        address=c.slave_address,
-        baudrate=c.baud_rate,
-        timeout_s=timeout_s,
-        # A reply later than timeout + silence cannot be told from the next one's
-        # (oven.py); the simulated slave is late by scheduling jitter at most.
-        silence_s=timeout_s,
-        setpoint_limits_c=ctx.setpoint_limits_c,
+    return connected(
+        WatlowF4Chamber(
+            ctx.address,
+            config=c,
+            address=c.slave_address,
+            baudrate=c.baud_rate,
+            timeout_s=timeout_s,
+            # A reply later than timeout + silence cannot be told from the next one's
+            # (oven.py); the simulated slave is late by scheduling jitter at most.
+            silence_s=timeout_s,
+            setpoint_limits_c=ctx.setpoint_limits_c,
+        )
     )
-    try:
-        oven.connect()
-    except BaseException:
-        oven.close()
-        raise
-    return oven
 
 
 SPEC = register(
