@@ -10,57 +10,21 @@ packages are installed on first use into a cache directory (``GYROLAB_JS_CACHE``
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from jscheck import js_script, run_js
 
 from gyrolab.acquisition.recover import recover_recording
 from gyrolab.recording import ALL_TOPICS, RecordingWriter, read_recording
 
-HERE = Path(__file__).resolve().parent
 PACKAGES = ["@mcap/core@2.2.2", "fzstd@0.1.1"]
 
 
 @pytest.fixture(scope="module")
 def js_reader() -> Path:
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if not node or not npm:
-        pytest.skip("node/npm not installed: the @mcap/core interoperability check needs them")
-    cache = Path(os.environ.get("GYROLAB_JS_CACHE", Path.home() / ".cache" / "gyrolab-js"))
-    cache.mkdir(parents=True, exist_ok=True)
-    if (
-        not (cache / "node_modules" / "@mcap" / "core" / "package.json").is_file()
-        or not (cache / "node_modules" / "fzstd").is_dir()
-    ):
-        (cache / "package.json").write_text('{"name": "gyrolab-js-check", "private": true}\n')
-        r = subprocess.run(
-            [npm, "install", "--no-audit", "--no-fund", "--silent", *PACKAGES],
-            cwd=cache,
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        assert r.returncode == 0, f"npm install {PACKAGES} failed: {r.stderr[-2000:]}"
-    # ES modules resolve packages beside the script, not through NODE_PATH.
-    script = cache / "read_mcap.mjs"
-    shutil.copyfile(HERE / "js" / "read_mcap.mjs", script)
-    return script
-
-
-def _read_js(script: Path, mcap: Path) -> dict:
-    r = subprocess.run(
-        ["node", str(script), str(mcap)],
-        cwd=script.parent,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 0, r.stderr[-3000:]
-    return json.loads(r.stdout)
+    return js_script("read_mcap.mjs", PACKAGES)
 
 
 def _recording(path: Path, seconds: int = 60, finish: bool = True) -> None:
@@ -94,7 +58,7 @@ def test_typescript_reader_sees_every_message(js_reader: Path, tmp_path: Path) -
     f = tmp_path / "run.mcap"
     _recording(f)
     py = read_recording(f)
-    js = _read_js(js_reader, f)
+    js = run_js(js_reader, f)
     assert js["profile"] == "gyrolab"
     assert js["indexed"] == py.topic_counts == js["streamed"]
     assert set(js["indexed"]) == set(ALL_TOPICS)
@@ -114,7 +78,7 @@ def test_typescript_reader_opens_a_recovered_file(js_reader: Path, tmp_path: Pat
     broken.write_bytes(data[: len(data) - 333])  # cut inside the last records
     fixed = tmp_path / "fixed.mcap"
     rep = recover_recording(broken, fixed)
-    js = _read_js(js_reader, fixed)
+    js = run_js(js_reader, fixed)
     py = read_recording(fixed)
     assert js["indexed"] == py.topic_counts == js["streamed"] == rep.messages
     assert js["metadata"]["bench"]["adc"] == '{"bits": 24}'

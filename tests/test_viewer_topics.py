@@ -11,13 +11,11 @@ skipped only where node or npm is absent.
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from jscheck import js_script, run_js
 
 from gyrolab.recording import (
     FOXGLOVE_LOG_LEVEL,
@@ -28,45 +26,13 @@ from gyrolab.recording import (
     read_recording,
 )
 
-HERE = Path(__file__).resolve().parent
 PACKAGES = ["@mcap/core@2.2.2", "fzstd@0.1.1", "@foxglove/schemas@2.1.0", "ajv@8.17.1"]
 START_NS = 1_618_876_800_123_000_000
 
 
 @pytest.fixture(scope="module")
 def js_checker() -> Path:
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if not node or not npm:
-        pytest.skip("node/npm not installed: the independent viewer-topic check needs them")
-    root = Path(os.environ.get("GYROLAB_JS_CACHE", Path.home() / ".cache" / "gyrolab-js"))
-    cache = root / "viewer"
-    cache.mkdir(parents=True, exist_ok=True)
-    mods = cache / "node_modules"
-    if not all((mods / p.rsplit("@", 1)[0] / "package.json").is_file() for p in PACKAGES):
-        (cache / "package.json").write_text('{"name": "gyrolab-viewer-check", "private": true}\n')
-        r = subprocess.run(
-            [npm, "install", "--no-audit", "--no-fund", "--silent", *PACKAGES],
-            cwd=cache,
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        assert r.returncode == 0, f"npm install {PACKAGES} failed: {r.stderr[-2000:]}"
-    script = cache / "check_viewer_topics.mjs"
-    shutil.copyfile(HERE / "js" / "check_viewer_topics.mjs", script)
-    return script
-
-
-def _check(script: Path, mcap: Path) -> dict:
-    r = subprocess.run(
-        ["node", str(script), str(mcap)],
-        cwd=script.parent,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert r.returncode == 0, r.stderr[-3000:]
-    return json.loads(r.stdout)
+    return js_script("check_viewer_topics.mjs", PACKAGES, "viewer")
 
 
 def _recording(path: Path) -> None:
@@ -87,7 +53,7 @@ def _recording(path: Path) -> None:
 def test_viewer_topics_decode_to_the_panel_schemas(js_checker: Path, tmp_path: Path) -> None:
     f = tmp_path / "run.mcap"
     _recording(f)
-    js = _check(js_checker, f)
+    js = run_js(js_checker, f)
     assert js["schema_names"][TOPIC_LOG_FOXGLOVE] == "foxglove.Log"
     assert js["log_schema_equal"] is True  # the schema stored is @foxglove/schemas' Log
     assert js["logs"] == len(FOXGLOVE_LOG_LEVEL) + 1 and js["log_errors"] == []
