@@ -26,6 +26,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import (
     BenchConfig,
     RunInfo,
@@ -468,6 +469,7 @@ def run_acquisition(
                     acquisition_hook(acq)
                 if sim is not None:
                     sim.clock.speed = sim.speed  # connected: now run at the asked speed
+                interrupts.check()  # a stop signal while connecting: end before the run
                 result = acq.run()
             finally:
                 # Also on an interrupt before the run started: a finished, readable file.
@@ -492,6 +494,7 @@ def _start_live(port: int, host: str) -> Any:
     return live
 
 
+@interrupts.deferring_stop_signals
 def acquire(args: argparse.Namespace) -> int:
     """``gyrolab acquire --bench sim|BENCH.toml --out RUN.mcap [--profile] [--speed]``."""
     out = Path(args.out)
@@ -528,6 +531,8 @@ def acquire(args: argparse.Namespace) -> int:
     sim: SimHandle | None = None
     from gyrolab.acquisition.simdir import sim_workdir
 
+    interrupts.check()  # a stop signal while the inputs were read: end before the bench
+
     old_switch = sys.getswitchinterval()
     if args.bench == "sim":
         # The simulated instruments share this process (and its GIL) with the drivers:
@@ -549,6 +554,7 @@ def acquire(args: argparse.Namespace) -> int:
         t0 = time.monotonic()
         live = None
         try:
+            interrupts.check()  # a stop signal while the bench started: end here
             if getattr(args, "live", None) is not None:
                 live = _start_live(args.live, args.live_host)
                 show = live.status_hook(show)

@@ -40,6 +40,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
 from gyrolab.acquisition.roles import (  # noqa: F401 - re-exported for compatibility
     Chamber,
@@ -557,17 +558,19 @@ class Acquisition:
 
     # -- the run
     def run(self) -> RunResult:
-        old_int = old_term = None
-        in_main = threading.current_thread() is threading.main_thread()
-        if in_main:
-            old_int = signal.signal(signal.SIGINT, self._on_signal)
-            old_term = signal.signal(signal.SIGTERM, self._on_signal)
+        old = {}
+        if threading.current_thread() is threading.main_thread():
+            # SIGINT, SIGTERM, SIGHUP: a clean stop (safe state), never an exception mid-run.
+            old = {sig: signal.signal(sig, self._on_signal) for sig in interrupts.STOP_SIGNALS}
+            # One that came just before (noted by gyrolab.acquisition.interrupts) stops it too.
+            name = interrupts.take()
+            if name is not None:
+                self._interrupt = f"interrupted by {name}"
         try:
             return self._run()
         finally:
-            if in_main:
-                signal.signal(signal.SIGINT, old_int)
-                signal.signal(signal.SIGTERM, old_term)
+            for sig, handler in old.items():
+                signal.signal(sig, handler)
 
     def _on_signal(self, signum: int, _frame: Any) -> None:
         self._interrupt = f"interrupted by {signal.Signals(signum).name}"

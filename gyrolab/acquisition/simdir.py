@@ -4,9 +4,9 @@
 temporary directory. It is removed
 
 * on a normal end and on any exception (``finally``);
-* on SIGTERM and SIGHUP while the bench is being set up: they are turned into
-  ``KeyboardInterrupt`` so the ``finally`` runs (during the run itself the runner handles
-  SIGINT/SIGTERM: safe state, then the same ``finally``);
+* on SIGINT, SIGTERM and SIGHUP at any moment of ``acquire``: they end the command through
+  the same ``finally`` (gyrolab/acquisition/interrupts.py says how and why they are
+  deferred to safe points instead of raised where they land);
 * at interpreter exit (``atexit``), should anything bypass the above;
 * after a ``kill -9``, which runs no code at all: the directory holds an ``owner.pid``
   marker, and the next ``acquire --bench sim`` removes every ``gyrolab-sim-*`` directory
@@ -20,9 +20,7 @@ import atexit
 import contextlib
 import os
 import shutil
-import signal
 import tempfile
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -54,10 +52,6 @@ def sweep_stale(tmp: str | os.PathLike[str] | None = None) -> list[Path]:
     return removed
 
 
-def _raise_interrupt(signum: int, _frame: object) -> None:
-    raise KeyboardInterrupt(f"{signal.Signals(signum).name}")
-
-
 @contextlib.contextmanager
 def sim_workdir() -> Iterator[Path]:
     """A fresh ``gyrolab-sim-*`` directory with its owner marker; removed on every exit."""
@@ -69,15 +63,8 @@ def sim_workdir() -> Iterator[Path]:
         shutil.rmtree(work, ignore_errors=True)
 
     atexit.register(remove)
-    main = threading.current_thread() is threading.main_thread()
-    old = {}
-    if main:
-        for sig in (signal.SIGTERM, signal.SIGHUP):
-            old[sig] = signal.signal(sig, _raise_interrupt)
     try:
         yield work
     finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
         remove()
         atexit.unregister(remove)
