@@ -87,6 +87,9 @@ def test_any_chunking_gives_the_same_frames(cuts: list[int]) -> None:
     drop=st.floats(0.0, 0.01),
 )
 @example(seed=399, corrupt=0.005859375, drop=0.0078125)
+@example(seed=3536, corrupt=0.001953125, drop=0.0078125)
+@example(seed=7153, corrupt=0.044273302062198094, drop=0.005322688840613625)
+@example(seed=2510, corrupt=0.005570037489240631, drop=0.007908521498201095)
 def test_damaged_frames_never_pass_and_intact_ones_always_do(
     seed: int, corrupt: float, drop: float
 ) -> None:
@@ -101,14 +104,23 @@ def test_damaged_frames_never_pass_and_intact_ones_always_do(
     b = dec.feed(b"".join(wire))
     intact = np.flatnonzero(~np.asarray(damaged))
     stream = b"".join(wire)
-    # Every intact frame is delivered, and every delivered frame carries its exact samples.
-    assert set(intact.tolist()) <= set(b.seq.tolist())
-    assert np.array_equal(b.counts, counts[b.seq])
-    # A frame hit by the fault injector is delivered only when its bytes still reached the
-    # decoder verbatim: a dropped last byte can be restored by the next frame's equal first
-    # byte (seed=399, corrupt=0.005859375, drop=0.0078125: a CRC ending in 0xA5, the sync).
-    for s in sorted(set(b.seq.tolist()) - set(intact.tolist())):
-        assert frames[s] in stream
+    delivered = set(b.seq.tolist())
+    # A random corruption passes CRC-16/CCITT with probability 2**-16 per damaged frame
+    # (docs/instruments.md): over the <= 200 frames here at most one such frame is
+    # plausible (two: ~5e-6); seeds 7153 and 2510 below each hold one.
+    pairs = zip(b.seq, b.counts, strict=True)
+    wrong = {int(q) for q, c in pairs if not np.array_equal(c, counts[q])}
+    assert len(wrong) <= 1, wrong
+    # Any other frame hit by the fault injector is delivered only when its bytes still
+    # reached the decoder verbatim: a dropped last byte can be restored by the next frame's
+    # equal first byte (seed=399: a CRC ending in 0xA5, the sync byte).
+    borrowed = {q + 1 for q in wrong}
+    for q in sorted(delivered - set(intact.tolist()) - wrong):
+        assert frames[q] in stream
+        borrowed.add(q + 1)
+    # Every intact frame is delivered, except one whose sync byte completed such a frame:
+    # the bytes hold one of the two, never both (seed=3536, corrupt=0.001953125).
+    assert set(intact.tolist()) - delivered <= borrowed
     # Every missing frame after the first delivered one is reported as a gap.
     if b.seq.size:
         gaps = b.gaps_before.values()
