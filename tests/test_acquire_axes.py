@@ -4,11 +4,13 @@ per-axis physics as `simulate --axis-model`."""
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from gyrolab.acquisition.gyro_adc import AdcRead, GyroAdcReader
 from gyrolab.cli import main
@@ -21,8 +23,9 @@ N = 10
 
 
 def test_three_axis_frames_through_the_pty_match_the_physics_per_axis() -> None:
-    """1 kHz, 3 axes, 0.1 % of bytes corrupted (~10 % of 106-byte frames): every delivered sample is the source's, in
-    (n, 3) sample-major order, and axis k is the k-th physics."""
+    """1 kHz, 3 axes, 0.1 % of bytes corrupted (~10 % of the 108-byte frames): every
+    delivered sample is the source's, in (n, 3) sample-major order, and the axes are three
+    gyros."""
     model = nominal_model()
     extras = axis_physics(model, [model, model], 1000.0, 3, 25.0)
     bench = SimBench(
@@ -89,6 +92,9 @@ def test_acquire_records_three_axes_as_simulate_does(runs) -> None:
     assert a.run["axes"] == 3 == s.run["axes"]
     assert a.bench["adc"]["axes"] == 3
     assert a.adc.values.shape == a.rate.values.shape  # counts and rates block for block
+    with open(acq, "rb") as fh:  # the other axes' models, read back by the mcap library
+        meta = {m.name: m.metadata for m in make_reader(fh).iter_metadata()}
+    assert json.loads(meta["sim_provenance_axes"]["axes"]) == 3
     step = a.rate.t[1] - a.rate.t[0]
     assert np.all(np.abs(np.diff(a.rate.t) - step) < 1e-6)  # no gap, whole run
     for k in range(2):  # per step: each axis' mean over its second half, acquire vs simulate

@@ -157,6 +157,7 @@ class SimHandle:
         speed: float | None = None,
         bench: Any = None,
         provenance: dict[str, Any] | None = None,
+        axes_provenance: dict[str, Any] | None = None,
     ) -> None:
         self.dmm_resource = dmm_resource
         self.oven_port = oven_port
@@ -168,6 +169,7 @@ class SimHandle:
         self.speed = speed
         self.bench = bench
         self.provenance = provenance or {}
+        self.axes_provenance = axes_provenance  # as simulate's sim_provenance_axes
 
 
 def sim_bench_config(seed: int) -> BenchConfig:
@@ -286,6 +288,11 @@ def start_sim_bench(
         speed=speed,
         bench=bench,
         provenance=provenance(bench.physics.model, seed),
+        axes_provenance=(
+            {"axes": 1 + len(axis_models), "models_toml": [m.to_toml() for m in axis_models]}
+            if axis_models
+            else None
+        ),
     )
     return handle, cfg
 
@@ -464,6 +471,8 @@ def run_acquisition(
             try:
                 if sim is not None and sim.provenance:
                     writer.write_metadata("sim_provenance", sim.provenance)
+                if sim is not None and sim.axes_provenance:
+                    writer.write_metadata("sim_provenance_axes", sim.axes_provenance)
                 fh.flush()  # header + metadata on disk before the first reading
                 assert inst.thermometer and inst.oven and inst.gyro
                 acq = Acquisition(
