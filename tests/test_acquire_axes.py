@@ -115,3 +115,21 @@ def test_axis_model_is_refused_on_a_bench_file(runs, tmp_path: Path) -> None:
     out = tmp_path / "o.mcap"
     rc = main(["acquire", "--bench", str(lab), "--axis-model", str(prof), "--out", str(out)])
     assert rc == 2 and not out.exists()
+
+
+def test_convert_writes_one_rate_and_adc_column_per_axis(runs, tmp_path: Path) -> None:
+    """The 3-axis acquisition as Parquet, read back with pyarrow: every axis' rate and code."""
+    import pyarrow.parquet as pq
+
+    acq = runs[0]
+    out = tmp_path / "a.parquet"
+    assert main(["convert", str(acq), "--to", "parquet", "--out", str(out)]) == 0
+    t = pq.read_table(out)
+    rec = read_recording(acq)
+    assert t.column_names[:8] == [
+        "index", "t_s", "rate_x_dps", "rate_y_dps", "rate_z_dps",
+        "adc_counts_x", "adc_counts_y", "adc_counts_z",
+    ]  # fmt: skip
+    for j, a in enumerate("xyz"):
+        np.testing.assert_array_equal(t[f"rate_{a}_dps"].to_numpy(), rec.rate.values[:, j])
+        np.testing.assert_array_equal(t[f"adc_counts_{a}"].to_numpy(), rec.adc.values[:, j])
