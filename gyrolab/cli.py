@@ -120,6 +120,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FAULTS.toml",
         help="--bench sim only: inject faults into the simulated bench (docs/instruments.md)",
     )
+    a.add_argument(
+        "--axis-model",
+        action="append",
+        default=[],
+        metavar="SIM_MODEL.toml",
+        help="--bench sim only: model of the next axis (y, then z), as simulate (repeatable)",
+    )
     a.add_argument("--force", action="store_true", help="overwrite an existing output")
     a.add_argument(
         "--live",

@@ -4,7 +4,8 @@ The sample table is the same in every format, one row per gyro sample (docs/conv
 
     index        sample index since the run's start (a jump is a gap; nothing is filled in)
     t_s          s since the run's start
-    rate_dps     angular rate, °/s (float32, as recorded)
+    rate_dps     angular rate, °/s (float32, as recorded); a multi-axis unit has
+                 rate_x_dps, rate_y_dps (, rate_z_dps) instead, and adc_counts_x … likewise
     adc_counts   raw 24-bit ADC code (int32; only when the recording has /gyro/adc)
     pt100_c      PT100 temperature, °C: the last reading at or before t_s (NaN before the
                  first); held, never interpolated
@@ -91,6 +92,32 @@ class RunTables:
     events: list[dict[str, Any]] = field(default_factory=list)
     logs: list[dict[str, Any]] = field(default_factory=list)
     gaps: int = 0
+    axes: int = 1  # a multi-axis unit has one rate (and ADC) column per axis
+
+
+AXIS_NAMES = "xyz"
+
+
+def table_columns(tables: RunTables) -> dict[str, tuple[str, str, str]]:
+    """The sample table's columns in order. A single-axis run has :data:`COLUMNS`
+    (``adc_counts`` only with /gyro/adc); a unit of a axes has ``rate_x_dps``,
+    ``rate_y_dps`` (, ``rate_z_dps``) and likewise ``adc_counts_x`` … instead."""
+    out: dict[str, tuple[str, str, str]] = {}
+    for k, (dt, u, d) in COLUMNS.items():
+        if k == "adc_counts" and not tables.has_adc:
+            continue
+        if tables.axes > 1 and k in ("rate_dps", "adc_counts"):
+            for j in range(tables.axes):
+                a = AXIS_NAMES[j]
+                name = f"rate_{a}_dps" if k == "rate_dps" else f"adc_counts_{a}"
+                out[name] = (dt, u, f"{d}, axis {a}")
+        else:
+            out[k] = (dt, u, d)
+    return out
+
+
+def _is_adc(name: str) -> bool:
+    return name.startswith("adc_counts")
 
 
 def _summary(path: Path) -> dict[str, int]:
@@ -137,20 +164,30 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
     def emit() -> Iterator[dict[str, np.ndarray]]:
         nonlocal last_pt, last_ov, next_index
         for t0, period, first, rate in pending:
-            n = rate.size
+            n = len(rate)
             t = t0 + np.arange(n) * period
             cols: dict[str, np.ndarray] = {
                 "index": first + np.arange(n, dtype=np.int64),
                 "t_s": t,
-                "rate_dps": rate.astype(np.float32),
             }
+            ax = tables.axes
+            if ax == 1:
+                cols["rate_dps"] = rate.astype(np.float32)
+            else:
+                for j in range(ax):
+                    cols[f"rate_{AXIS_NAMES[j]}_dps"] = rate[:, j].astype(np.float32)
             if tables.has_adc:
                 a = adc.pop(first, None)
-                cols["adc_counts"] = (
-                    a.astype(np.int32)
-                    if a is not None and a.size == n
-                    else np.full(n, ADC_FILL, np.int32)
+                codes = (
+                    a.astype(np.int32).reshape(n, ax)
+                    if a is not None and a.size == n * ax
+                    else np.full((n, ax), ADC_FILL, np.int32)
                 )
+                if ax == 1:
+                    cols["adc_counts"] = codes[:, 0]
+                else:
+                    for j in range(ax):
+                        cols[f"adc_counts_{AXIS_NAMES[j]}"] = codes[:, j]
             cols["pt100_c"] = held(t, pt_t, pt_c, last_pt)
             cols["setpoint_c"] = held(t, ov_t, ov_sp, last_ov)
             if next_index is not None and first != next_index:
@@ -172,10 +209,9 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
     for topic, _ts, data in iter_messages(path, topics):
         if topic == TOPIC_RATE:
             blk = decode_block(data, "rate")
-            if blk[3].ndim > 1:  # the table has one rate column (docs/convert.md)
-                raise InputError(
-                    path, f"a {blk[3].shape[1]}-axis recording: convert writes one rate column"
-                )
+            axes = 1 if blk[3].ndim == 1 else blk[3].shape[1]
+            if axes != tables.axes:  # the columns were fixed from the first block
+                raise InputError(path, f"/gyro/rate mixes {tables.axes}- and {axes}-axis blocks")
             if pending and blk[0] > pending[-1][0]:
                 # every reading logged before this block's start is known: emit the rest,
                 # keeping readings that fall after the emitted blocks' start for later
@@ -218,12 +254,13 @@ def _batched(blocks: Iterator[dict[str, np.ndarray]], rows: int) -> Iterator[dic
 
 def _attrs(tables: RunTables, src: Path) -> dict[str, str]:
     """File-level attributes: all JSON text (string maps are what every format stores)."""
+    cols = COLUMNS if tables.axes == 1 else table_columns(tables)  # single-axis: as always
     return {
         "gyrolab_source": str(src.name),
         "gyrolab_start_time_ns": str(tables.start_time_ns),
         "gyrolab_metadata": json.dumps(tables.metadata, sort_keys=True, default=str),
         "gyrolab_columns": json.dumps(
-            {k: {"unit": u, "description": d} for k, (_t, u, d) in COLUMNS.items()}
+            {k: {"unit": u, "description": d} for k, (_t, u, d) in cols.items()}
         ),
     }
 
@@ -241,13 +278,14 @@ def _tail_attrs(tables: RunTables) -> dict[str, str]:
 
 
 def _write_csv(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) -> int:
-    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    spec = table_columns(tables)
+    names = list(spec)
     n = 0
     with open(tmp, "w", encoding="utf-8", newline="") as fh:
         for k, v in _attrs(tables, src).items():
             fh.write(f"# {k}: {v}\n")
         for k in names:
-            _t, u, d = COLUMNS[k]
+            _t, u, d = spec[k]
             fh.write(f"# column {k}: {u}; {d}\n")
         fh.write(",".join(names) + "\n")
         out = csv.writer(fh, lineterminator="\n")
@@ -255,11 +293,10 @@ def _write_csv(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) 
             # Python's float repr is the shortest string that reads back to the same float64
             # (float32 rates widened to float64 read back exactly too); an ADC code of a
             # block whose ADC message is missing is an empty field
-            cols = [b[k].astype(np.float64 if k == "rate_dps" else b[k].dtype).tolist()
+            cols = [b[k].astype(np.float64 if k.startswith("rate_") else b[k].dtype).tolist()
                     for k in names]  # fmt: skip
-            if tables.has_adc:
-                j = names.index("adc_counts")
-                if np.any(b["adc_counts"] == ADC_FILL):
+            for j, k in enumerate(names):
+                if _is_adc(k) and np.any(b[k] == ADC_FILL):
                     cols[j] = ["" if v == ADC_FILL else v for v in cols[j]]
             out.writerows(zip(*cols, strict=True))
             n += b["t_s"].size
@@ -273,13 +310,14 @@ def _write_parquet(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Pa
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    spec = table_columns(tables)
+    names = list(spec)
     fields = [
         pa.field(
             k,
-            pa.from_numpy_dtype(np.dtype(COLUMNS[k][0])),
-            nullable=k == "adc_counts",
-            metadata={"unit": COLUMNS[k][1], "description": COLUMNS[k][2]},
+            pa.from_numpy_dtype(np.dtype(spec[k][0])),
+            nullable=_is_adc(k),
+            metadata={"unit": spec[k][1], "description": spec[k][2]},
         )
         for k in names
     ]
@@ -290,7 +328,7 @@ def _write_parquet(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Pa
             arrays = []
             for k in names:
                 v = b[k]
-                mask = v == ADC_FILL if k == "adc_counts" else None
+                mask = v == ADC_FILL if _is_adc(k) else None
                 arrays.append(pa.array(v, type=schema.field(k).type, mask=mask))
             w.write_table(pa.Table.from_arrays(arrays, schema=schema))
             n += b["t_s"].size
@@ -302,7 +340,8 @@ def _write_parquet(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Pa
 def _write_hdf5(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path) -> int:
     import h5py
 
-    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    spec = table_columns(tables)
+    names = list(spec)
     n = 0
     with h5py.File(tmp, "w") as f:
         for k, v in _attrs(tables, src).items():
@@ -310,16 +349,17 @@ def _write_hdf5(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path)
         g = f.create_group("samples")
         ds = {}
         for k in names:
-            dt, u, d = COLUMNS[k]
+            dt, u, d = spec[k]
             ds[k] = g.create_dataset(
                 k, shape=(0,), maxshape=(None,), dtype=dt, chunks=(min(ROWS_PER_WRITE, 65536),),
                 compression="gzip", compression_opts=4,
-                **({"fillvalue": ADC_FILL} if k == "adc_counts" else {}),
+                **({"fillvalue": ADC_FILL} if _is_adc(k) else {}),
             )  # fmt: skip
             ds[k].attrs["units"] = u
             ds[k].attrs["description"] = d
-        if tables.has_adc:
-            ds["adc_counts"].attrs["_FillValue"] = np.int32(ADC_FILL)
+        for k in names:
+            if _is_adc(k):
+                ds[k].attrs["_FillValue"] = np.int32(ADC_FILL)
         for b in _batched(blocks, ROWS_PER_WRITE):
             m = b["t_s"].size
             for k in names:
@@ -349,7 +389,8 @@ def _write_netcdf(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Pat
 
     import netCDF4
 
-    names = [k for k in COLUMNS if k != "adc_counts" or tables.has_adc]
+    spec = table_columns(tables)
+    names = list(spec)
     start = _dt.datetime.fromtimestamp(tables.start_time_ns / 1e9, tz=_dt.timezone.utc)
     n = 0
     with netCDF4.Dataset(tmp, "w", format="NETCDF4") as nc:
@@ -360,10 +401,10 @@ def _write_netcdf(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Pat
         nc.createDimension("sample", None)
         var = {}
         for k in names:
-            dt, u, d = COLUMNS[k]
+            dt, u, d = spec[k]
             var[k] = nc.createVariable(
                 k, np.dtype(dt), ("sample",), zlib=True, complevel=4,
-                fill_value=ADC_FILL if k == "adc_counts" else None,
+                fill_value=ADC_FILL if _is_adc(k) else None,
             )  # fmt: skip
             var[k].units = u
             var[k].long_name = d
@@ -425,8 +466,14 @@ def convert_recording(
         raise InputError(src_p, f"recording has no {TOPIC_RATE} data")
     # log_time = start + t (docs/recording-format.md): the start from the first rate block
     _topic, ts, data = next(iter_messages(src_p, [TOPIC_RATE]))
-    start_ns = ts - int(round(decode_block(data, "rate")[0] * 1e9))
-    tables = RunTables(metadata=meta, has_adc=counts.get(TOPIC_ADC, 0) > 0, start_time_ns=start_ns)
+    first = decode_block(data, "rate")
+    start_ns = ts - int(round(first[0] * 1e9))
+    tables = RunTables(
+        metadata=meta,
+        has_adc=counts.get(TOPIC_ADC, 0) > 0,
+        start_time_ns=start_ns,
+        axes=1 if first[3].ndim == 1 else int(first[3].shape[1]),
+    )
     bar = progress(total=counts[TOPIC_RATE], desc=f"convert → {to}", unit="block")
 
     def counted() -> Iterator[dict[str, np.ndarray]]:

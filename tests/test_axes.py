@@ -77,9 +77,18 @@ def test_recording_reads_axes(tmp_path) -> None:
     assert [m["n"] for m in s] == [10, 10]
     assert s[0]["mean_dps"] == pytest.approx(float(v[:10, 0].astype(float).mean()))
     assert s[1]["axes_max_dps"] == pytest.approx(v[20:].astype(float).max(axis=0).tolist())
-    # convert writes one rate column: a 3-axis recording is refused, nothing written
-    assert main(["convert", str(p), "--to", "csv", "--out", str(tmp_path / "r.csv")]) == 2
-    assert not (tmp_path / "r.csv").exists()
+    # convert writes one rate column per axis (rate_x_dps, …); the gap stays a jump in index
+    out = tmp_path / "r.csv"
+    assert main(["convert", str(p), "--to", "csv", "--out", str(out)]) == 0
+    lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
+    t = np.genfromtxt(lines, delimiter=",", names=True)
+    assert t.dtype.names == ("index", "t_s", "rate_x_dps", "rate_y_dps", "rate_z_dps",
+                             "pt100_c", "setpoint_c")  # fmt: skip
+    np.testing.assert_array_equal(t["index"], np.r_[0:10, 20:30])
+    for j, a in enumerate("xyz"):
+        np.testing.assert_array_equal(t[f"rate_{a}_dps"].astype(np.float32), rec.rate.values[:, j])
+    assert main(["convert", str(bad), "--to", "csv", "--out", str(tmp_path / "m.csv")]) == 2
+    assert not (tmp_path / "m.csv").exists()
 
 
 def test_adc_frame_with_three_axes() -> None:

@@ -74,6 +74,7 @@ class AdcConfig:
     baud_rate: int = 921600
     sample_rate_hz: float = 100.0
     samples_per_frame: int = 10  # the ADC's frame length (docs/instruments.md)
+    axes: int = 1  # values per sample (x, y, z), interleaved in each frame; 1..3
     bits: int = 24
     vref_v: float = 2.5
     gain_v_per_dps: float = 0.01  # gyro scale factor seen at the ADC input
@@ -290,6 +291,8 @@ def validate(cfg: BenchConfig) -> None:
         raise InputError(s, "[adc] needs 2 <= bits <= 32, vref_v > 0, gain_v_per_dps != 0")
     if not (a.sample_rate_hz > 0 and a.block_s > 0 and 1 <= a.samples_per_frame <= 4096):
         raise InputError(s, "[adc] sample_rate_hz, block_s must be > 0; samples_per_frame 1..4096")
+    if not (1 <= a.axes <= 3 and a.samples_per_frame * a.axes <= 4096):
+        raise InputError(s, "[adc] axes must be 1..3 with samples_per_frame·axes <= 4096")
     for name, period in (("multimeter", cfg.multimeter.period_s), ("oven", cfg.oven.period_s)):
         if not period > 0:
             raise InputError(s, f"[{name}] period_s must be > 0")

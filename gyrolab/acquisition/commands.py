@@ -157,6 +157,7 @@ class SimHandle:
         speed: float | None = None,
         bench: Any = None,
         provenance: dict[str, Any] | None = None,
+        axes_provenance: dict[str, Any] | None = None,
     ) -> None:
         self.dmm_resource = dmm_resource
         self.oven_port = oven_port
@@ -168,6 +169,7 @@ class SimHandle:
         self.speed = speed
         self.bench = bench
         self.provenance = provenance or {}
+        self.axes_provenance = axes_provenance  # as simulate's sim_provenance_axes
 
 
 def sim_bench_config(seed: int) -> BenchConfig:
@@ -210,16 +212,19 @@ def start_sim_bench(
     faults: Any = None,
     keep_truth: bool = False,
     model: Any = None,
+    axis_models: Any = (),
 ) -> tuple[SimHandle, BenchConfig]:
     """Start the wire-level simulated bench; returns it and the bench config to use.
 
     The config's ADC calibration is the simulated gyro's (what a lab takes from the
     unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
-    the same path as ``examples/lab.toml``.
+    the same path as ``examples/lab.toml``. ``axis_models`` (0–2 SimModels) make a 2- or
+    3-axis unit exactly as ``gyrolab simulate --axis-model`` does (one ADC, axes interleaved).
     """
     from gyrolab.acquisition import registry
     from gyrolab.sim.bench import SimBench
-    from gyrolab.sim.simulate import provenance
+    from gyrolab.sim.model import nominal_model
+    from gyrolab.sim.simulate import axis_physics, provenance
 
     specs = {
         "thermometer": registry.get(cfg.multimeter.driver, "thermometer"),
@@ -228,11 +233,22 @@ def start_sim_bench(
     for role, spec in specs.items():
         if not spec.sim_backend:
             raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
+    try:
+        extra_axes = axis_physics(
+            model or nominal_model(),
+            list(axis_models),
+            cfg.adc.sample_rate_hz,
+            seed,
+            profile.ambient_c,
+        )
+    except ValueError as e:
+        raise InputError("--axis-model", str(e)) from None
     bench = SimBench(
         dmm_model=specs["thermometer"].sim_backend,
         chamber_model=specs["chamber"].sim_backend,
         oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
         model=model,
+        axis_physics=extra_axes,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,
         samples_per_frame=cfg.adc.samples_per_frame,
@@ -256,6 +272,7 @@ def start_sim_bench(
             vref_v=float(adc.vref_v),
             gain_v_per_dps=float(adc.gain_v_per_dps),
             offset_v=float(adc.offset_v),
+            axes=1 + len(axis_models),
         ),
     )
     bench.start()
@@ -271,6 +288,11 @@ def start_sim_bench(
         speed=speed,
         bench=bench,
         provenance=provenance(bench.physics.model, seed),
+        axes_provenance=(
+            {"axes": 1 + len(axis_models), "models_toml": [m.to_toml() for m in axis_models]}
+            if axis_models
+            else None
+        ),
     )
     return handle, cfg
 
@@ -423,6 +445,8 @@ def run_acquisition(
         }
         if sim is not None:
             run_meta.update(seed=seed, speed=speed if speed is not None else "max")
+        if cfg.adc.axes > 1:
+            run_meta["axes"] = cfg.adc.axes  # as simulate writes it (recording-format.md)
         bench_meta: dict[str, Any] = {
             "name": cfg.name,
             "simulated": sim is not None,
@@ -447,6 +471,8 @@ def run_acquisition(
             try:
                 if sim is not None and sim.provenance:
                     writer.write_metadata("sim_provenance", sim.provenance)
+                if sim is not None and sim.axes_provenance:
+                    writer.write_metadata("sim_provenance_axes", sim.axes_provenance)
                 fh.flush()  # header + metadata on disk before the first reading
                 assert inst.thermometer and inst.oven and inst.gyro
                 acq = Acquisition(
@@ -503,6 +529,11 @@ def acquire(args: argparse.Namespace) -> int:
     drivers = getattr(args, "driver", None) or []
     if drivers and args.bench != "sim":
         raise GyrolabError("--driver applies to --bench sim only (a bench file names its drivers)")
+    axis_paths = getattr(args, "axis_model", None) or []
+    if axis_paths and args.bench != "sim":
+        raise GyrolabError(
+            "--axis-model applies to --bench sim only (a bench file sets [adc] axes)"
+        )
     if args.bench == "sim":
         cfg = sim_drivers(sim_bench_config(args.seed), drivers)
     else:
@@ -511,6 +542,13 @@ def acquire(args: argparse.Namespace) -> int:
             raise GyrolabError(
                 "--speed applies to --bench sim only (real hardware runs in real time)"
             )
+    axis_models = []
+    if axis_paths:
+        from gyrolab.sim.model import load_model
+
+        if len(axis_paths) > 2:
+            raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
+        axis_models = [load_model(m) for m in axis_paths]
     faults_path = getattr(args, "faults", None)
     faults = None
     if faults_path is not None:
@@ -525,7 +563,7 @@ def acquire(args: argparse.Namespace) -> int:
         cfg = replace(cfg, run=replace(cfg.run, profile=str(args.profile)))
     check_profile_limits(profile, cfg.limits, str(args.profile or cfg.run.profile))
     check_bench_for_profile(cfg, profile, str(profile_spec))
-    inputs = (None if args.bench == "sim" else args.bench, profile_spec, faults_path)
+    inputs = (None if args.bench == "sim" else args.bench, profile_spec, faults_path, *axis_paths)
     check_output(out, args.force, inputs=inputs, kind="file")
 
     sim: SimHandle | None = None
@@ -543,7 +581,13 @@ def acquire(args: argparse.Namespace) -> int:
     with sim_workdir() as work:
         if args.bench == "sim":
             sim, cfg = start_sim_bench(
-                cfg, profile, seed=args.seed, speed=args.speed, workdir=Path(work), faults=faults
+                cfg,
+                profile,
+                seed=args.seed,
+                speed=args.speed,
+                workdir=Path(work),
+                faults=faults,
+                axis_models=axis_models,
             )
             if faults is not None:
                 from gyrolab.sim.bench.fault_file import plan_to_dict

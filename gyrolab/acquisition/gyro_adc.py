@@ -33,7 +33,8 @@ class AdcBlock:
 
     ``t0`` (s) is the ADC clock at the first sample, ``period`` (s) the nominal sample
     period, ``first_index`` the first sample's index since the stream's frame 0
-    (``first_seq · samples_per_frame``), ``counts`` int32.
+    (``first_seq · samples_per_frame``), ``counts`` int32: ``(n,)`` for a single-axis ADC,
+    ``(n, axes)`` for several.
     """
 
     first_seq: int
@@ -64,7 +65,7 @@ class AdcRead:
 
     @property
     def samples(self) -> int:
-        return sum(b.counts.size for b in self.blocks)
+        return sum(len(b.counts) for b in self.blocks)
 
 
 @dataclass
@@ -80,7 +81,8 @@ class ReaderStats:
 class GyroAdcReader:
     """Reads and decodes the ADC stream from ``port``.
 
-    ``samples_per_frame`` and ``rate_hz`` (samples/s) must match the ADC's configuration.
+    ``samples_per_frame``, ``rate_hz`` (samples/s) and ``axes`` must match the ADC's
+    configuration.
     ``read()`` returns whatever arrived since the last call (waiting up to ``timeout_s``
     for the first bytes). When the port fails, ``read()`` closes it, reports a
     ``disconnect`` event and from then on retries opening it every ``backoff`` seconds,
@@ -94,6 +96,7 @@ class GyroAdcReader:
         *,
         samples_per_frame: int = 10,
         rate_hz: float = 1000.0,
+        axes: int = 1,
         baudrate: int = 921600,
         backoff_initial_s: float = 0.05,
         backoff_max_s: float = 2.0,
@@ -109,7 +112,8 @@ class GyroAdcReader:
         self.backoff_max_s = backoff_max_s
         self._factory = serial_factory or serial.Serial
         self._clock = clock
-        self.decoder = FrameDecoder(samples_per_frame, rate_hz)
+        self.axes = int(axes)
+        self.decoder = FrameDecoder(samples_per_frame, rate_hz, axes=self.axes)
         self.stats = ReaderStats()
         self._ser: Any = None
         self._backoff = backoff_initial_s
@@ -241,6 +245,10 @@ class GyroAdcReader:
                     first_index=seq0 * spf,
                     t0=float(batch.timestamp_us[a]) * 1e-6,
                     period=self.period,
-                    counts=batch.counts[a:b].reshape(-1),
+                    counts=(
+                        batch.counts[a:b].reshape(-1)
+                        if self.axes == 1
+                        else batch.counts[a:b].reshape(-1, self.axes)
+                    ),
                 )
             )

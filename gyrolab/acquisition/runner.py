@@ -884,9 +884,9 @@ class Acquisition:
         self._log_counter_changes(t)
 
     def _on_adc_block(self, blk: AdcBlockLike, t_arrival: float, causes: list[str]) -> None:
-        counts = np.asarray(blk.counts, dtype=np.int32)
+        counts = np.asarray(blk.counts, dtype=np.int32)  # (n,) or (n, axes)
         idx = int(blk.first_index)
-        n = int(counts.size)
+        n = int(len(counts))
         if n == 0:
             return
         if self._idx0 is None:
@@ -965,8 +965,8 @@ class Acquisition:
         t0 = self._blk_t0
         self.w.write_adc_block(t0, self._period, self._blk_first, counts)
         self.w.write_rate_block(t0, self._period, self._blk_first, self.adc.to_dps(counts))
-        self._samples += counts.size
-        self._blk_first += counts.size
+        self._samples += len(counts)
+        self._blk_first += len(counts)
         self._blk = []
         self._blk_n = 0
 

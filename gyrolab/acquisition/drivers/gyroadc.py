@@ -54,6 +54,8 @@ class GyroAdcStream(GyroAdcReader):
             "gain_v_per_dps": a.gain_v_per_dps,
             "offset_v": a.offset_v,
             "dps_per_count": a.dps_per_count(),
+            # Only a multi-axis ADC says so: single-axis metadata stays as it always was.
+            **({"axes": a.axes} if a.axes > 1 else {}),
         }
 
 
@@ -63,6 +65,7 @@ def open_adc(c: AdcConfig, ctx: OpenContext) -> GyroAdcStream:
         config=c,
         samples_per_frame=c.samples_per_frame,
         rate_hz=c.sample_rate_hz,
+        axes=c.axes,
         baudrate=c.baud_rate,
         clock=ctx.clock,
     )

@@ -61,6 +61,7 @@ class AdcSource:
         *,
         samples_per_frame: int,
         rate_hz: float,
+        axes: int = 1,
         faults: ByteFaults | None = None,
         keep_truth: bool = False,
         write_timeout_s: float = 0.5,
@@ -75,7 +76,8 @@ class AdcSource:
         self.write_timeout_s = write_timeout_s
         self._stall_backlog: list[tuple[int, bytes]] | None = None
         self._lock = threading.Lock()
-        self._frame_bytes = frame_size(self.n)
+        self.axes = int(axes)
+        self._frame_bytes = frame_size(self.n, self.axes)
         self._congested = False
 
     # ----------------------------------------------------------------- faults
@@ -100,11 +102,13 @@ class AdcSource:
 
     # ----------------------------------------------------------------- output
     def emit(self, first_index: int, counts: np.ndarray) -> None:
-        """Frame and send samples ``first_index …`` (a whole number of frames)."""
+        """Frame and send samples ``first_index …`` (a whole number of frames); ``counts``
+        is ``(samples,)`` for one axis or ``(samples, axes)``, sent interleaved."""
         n = self.n
-        if first_index % n or counts.size % n:
+        if first_index % n or len(counts) % n:
             raise ValueError("blocks must hold whole frames, aligned on frame boundaries")
-        c = np.clip(counts, -(1 << 23), (1 << 23) - 1).reshape(-1, n)
+        shape = (-1, n) if self.axes == 1 else (-1, n, self.axes)
+        c = np.clip(counts, -(1 << 23), (1 << 23) - 1).reshape(shape)
         seq0 = first_index // n
         frames: list[bytes] = []
         slots: list[int] = []

@@ -29,6 +29,8 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from gyrolab.sim.bench.adc_source import AdcSource, AdcTruth
 from gyrolab.sim.bench.clock import SimClock
 from gyrolab.sim.bench.dmm_scpi import Scpi34401A, Scpi34465A, ScpiSerialServer, ScpiTcpServer
@@ -73,6 +75,7 @@ class SimBench:
         dmm_model: str = "34401A",
         chamber_model: str = "F4",
         oven_control_event: int | None = None,
+        axis_physics: list[Any] | None = None,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
@@ -87,6 +90,9 @@ class SimBench:
                 model or nominal_model(), rate_hz=adc_rate_hz, seed=seed, ambient_c=ambient_c
             )
         self.physics = physics
+        # Axes y (and z) of a multi-axis unit (gyrolab.sim.simulate.axis_physics): they
+        # follow the same setpoint and are framed with axis x, interleaved, by one ADC.
+        self.axis_physics = list(axis_physics or [])
         self.rate_hz = float(physics.rate_hz)
         self.samples_per_frame = int(samples_per_frame)
         if physics.index % self.samples_per_frame:
@@ -110,6 +116,7 @@ class SimBench:
             self.adc_pty,
             samples_per_frame=self.samples_per_frame,
             rate_hz=self.rate_hz,
+            axes=1 + len(self.axis_physics),
             faults=self.faults.adc,
             keep_truth=keep_truth,
             # Back-pressure only when running as fast as possible; paced, a slow reader
@@ -164,6 +171,8 @@ class SimBench:
     def _set_setpoint(self, value_c: float) -> None:
         with self.lock:
             self.physics.set_setpoint(value_c)
+            for p in self.axis_physics:
+                p.set_setpoint(value_c)
 
     def _read_ohm(self) -> float:
         with self.lock:
@@ -264,6 +273,8 @@ class SimBench:
         # The first tick's noise chunk now, before anything waits on the lock; the copy
         # below then reuses it.
         self.physics.prefetch(n)
+        for p in self.axis_physics:
+            p.prefetch(n)
         # Compile the physics' JIT kernels on a throwaway copy first (about 1 s, once per
         # process), so the first tick does not hold the physics lock while responders wait.
         copy.deepcopy(self.physics).advance(n)
@@ -286,6 +297,8 @@ class SimBench:
         try:
             while not self._stop.is_set():
                 self.physics.prefetch(lead)  # no lock: see Physics.prefetch
+                for p in self.axis_physics:
+                    p.prefetch(lead)
                 self._stop.wait(PREFETCH_POLL_S)
         except BaseException as e:  # surfaced like the tick thread's; ticks still work
             self.error = e
@@ -300,7 +313,11 @@ class SimBench:
                     break
                 with self.lock:
                     block = self.physics.advance(n)
-                self.adc.emit(block.first_index, block.counts)
+                    counts = block.counts
+                    if self.axis_physics:
+                        cols = [counts] + [p.advance(n).counts for p in self.axis_physics]
+                        counts = np.stack(cols, axis=1)
+                self.adc.emit(block.first_index, counts)
                 self._fire_due()
         except BaseException as e:  # surfaced by stop() / tests; never silent
             self.error = e
