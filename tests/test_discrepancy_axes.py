@@ -71,3 +71,39 @@ def test_three_axis_recording_loads_one_bench_per_axis(tmp_path):
     assert np.mean(axes[1].y) == pytest.approx(np.mean(axes[0].y) - 0.52, abs=0.05)
     with pytest.raises(InputError, match="3-axis"):
         load_recording(three)
+
+
+def test_cli_on_a_two_axis_recording_writes_the_axes_layout(tmp_path):
+    """``gyrolab discrepancy`` on a 2-axis recording: shared effects once in
+    discrepancy.json, one model (readable by ``load_model``) and one report per axis."""
+    import json
+
+    from gyrolab.cli import main
+    from gyrolab.sim.model import load_model
+
+    base = tmp_path / "x.toml"
+    y = tmp_path / "y.toml"
+    bench = nominal_model().with_effect("rtd_self_heating")
+    base.write_text(bench.to_toml())
+    y.write_text(bench.with_effect("thermal_rate", k=5e-3).to_toml())
+    prof = tmp_path / "p.toml"
+    prof.write_text(
+        'name = "short"\n'
+        + "".join(
+            f"[[step]]\nsetpoint_c = {sp}\nduration_s = {d}\n"
+            for sp, d in [(25.0, 1200.0), (60.0, 2400.0), (0.0, 2400.0)]
+        )
+    )
+    run = tmp_path / "two.mcap"
+    args = ["simulate", "--profile", str(prof), "--model", str(base), "--rate", "2"]
+    assert main([*args, "--axis-model", str(y), "--seed", "7", "--out", str(run)]) == 0
+    out = tmp_path / "d"
+    assert main(["discrepancy", str(run), "--out", str(out)]) == 0
+    doc = json.loads((out / "discrepancy.json").read_text())
+    assert len(doc["axes"]) == 2 and "rtd_self_heating" in doc["effects_shared"]
+    assert "rtd_self_heating" not in doc["effects_by_axis"][1]
+    for k in range(2):
+        m = load_model(out / f"model_axis{k}.toml")
+        assert "rtd_self_heating" in [e.name for e in m.effects]
+        assert (out / f"index_axis{k}.html").read_text().startswith("<")
+    assert "index_axis1.html" in (out / "index.html").read_text()

@@ -4,6 +4,12 @@ Writes ``DIR/discrepancy.json`` (``effects_found``, ``ambiguous``, ``gap_before`
 ``gap_after``, ``steps``), ``DIR/model.toml`` (the updated simulator model, accepted by
 ``gyrolab simulate --model``) and ``DIR/index.html``, atomically. Reads only the bench
 channels of the recording, never its metadata (where a simulator keeps its provenance).
+
+On a multi-axis recording (issue 15's layout) each axis is analysed with the thermal fits
+shared (:mod:`gyrolab.sim.discrepancy.axes`) and ``DIR`` holds ``discrepancy.json``
+(``effects_shared`` once, ``effects_by_axis`` and one full single-axis document per axis
+under ``axes``), ``model_axis{K}.toml`` and ``index_axis{K}.html`` per axis, and an
+``index.html`` that links them (docs/discrepancy.md, "Several axes").
 """
 
 from __future__ import annotations
@@ -11,9 +17,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
+from html import escape
+from typing import Any
 
 from gyrolab.outputs import atomic_dir, check_output
-from gyrolab.sim.discrepancy.data import load_recording
+from gyrolab.sim.discrepancy.axes import run_discrepancy_axes
+from gyrolab.sim.discrepancy.data import load_recording_axes
 from gyrolab.sim.discrepancy.report import _json_default, render
 from gyrolab.sim.discrepancy.workflow import run_discrepancy
 from gyrolab.sim.model import load_model, nominal_model
@@ -26,11 +36,14 @@ def discrepancy(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else nominal_model()
     from gyrolab.recording import select_unit
 
-    data = load_recording(args.run, unit=select_unit(args.run, getattr(args, "unit", None)))
+    axes = load_recording_axes(args.run, unit=select_unit(args.run, getattr(args, "unit", None)))
 
     def log(msg: str) -> None:
         print(f"discrepancy: {msg}", file=sys.stderr)
 
+    if len(axes) > 1:
+        return _discrepancy_axes(args, axes, model, inputs, log)
+    data = replace(axes[0], source=str(args.run))
     res = run_discrepancy(data, model, log=log)
     with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
@@ -48,5 +61,44 @@ def discrepancy(args: argparse.Namespace) -> int:
         f"{res.gap_after['allan_log_distance']:.3g}, "
         f"temperature {res.gap_before['temperature_rms_c']:.3g} -> "
         f"{res.gap_after['temperature_rms_c']:.3g} C ({res.elapsed_s:.0f} s)"
+    )
+    return 0
+
+
+def _discrepancy_axes(
+    args: argparse.Namespace, axes: list[Any], model: Any, inputs: tuple[Any, ...], log: Any
+) -> int:
+    """The multi-axis layout (module docstring): shared effects once, one model per axis."""
+    res = run_discrepancy_axes(axes, model, log=log)
+    n = len(res.axes)
+    links = "".join(
+        f'<li>axis {k}: <a href="index_axis{k}.html">report</a>, '
+        f'<a href="model_axis{k}.toml">model</a>; own effects: '
+        f"{escape(', '.join(res.by_axis[k]) or 'none')}</li>"
+        for k in range(n)
+    )
+    index = (
+        "<!doctype html><meta charset=utf-8><title>discrepancy</title>"
+        f"<h1>Discrepancy: {escape(str(args.run))} ({n} axes)</h1>"
+        f"<p>Shared by every axis: {escape(', '.join(res.shared) or 'none')}</p><ul>{links}</ul>"
+    )
+    with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
+        (tmp / "discrepancy.json").write_text(
+            json.dumps(res.to_json(), indent=1, default=_json_default), encoding="utf-8"
+        )
+        for k, r in enumerate(res.axes):
+            (tmp / f"model_axis{k}.toml").write_text(r.model.to_toml(), encoding="utf-8")
+            (tmp / f"index_axis{k}.html").write_text(
+                render(r, f"{args.run} (axis {k})"), encoding="utf-8"
+            )
+        (tmp / "index.html").write_text(index, encoding="utf-8")
+    own = "; ".join(f"axis {k}: {', '.join(e) or 'nothing'}" for k, e in enumerate(res.by_axis))
+    print(
+        f"wrote {args.out}: {n} axes; shared {', '.join(res.shared) or 'nothing'}; {own}; "
+        + ", ".join(
+            f"axis {k} LF residual {r.gap_before['lf_residual_rms_dps']:.3g} -> "
+            f"{r.gap_after['lf_residual_rms_dps']:.3g} deg/s"
+            for k, r in enumerate(res.axes)
+        )
     )
     return 0
