@@ -155,15 +155,7 @@ def overshoot_limit(
     the current first-order model passes the oven channel's rules; the first-order
     refit's partial absorption of it is neglected (the limit is optimistic by that)."""
     d = wf.d
-    x = np.array(
-        [
-            cur.oven.params["air_tau_s"],
-            cur.oven.params["heat_rate_c_per_s"],
-            cur.oven.params["cool_rate_c_per_s"],
-            cur.oven.params["cool_knee_c"],
-            cur.oven.params["cool_knee_c"] - cur.oven.params["cool_floor_c"],
-        ]
-    )
+    x = cur.oven.x
     a0 = float(cur.oven.pred[0])
     plain = cur.oven.pred
     r1 = cur.oven.resid
@@ -171,7 +163,7 @@ def overshoot_limit(
     ne = effective_n(r1, floor=OVEN_FLOOR_C)
 
     def passes(o: float) -> bool:
-        sig = _air_model(d.oven_t, d.oven_t, d.oven_sp, a0, x, (o, period_s)) - plain
+        sig = _air_model(d.oven_t, d.oven_t, d.oven_sp, a0, x, (o, period_s), cur.oven.form) - plain
         v0 = v1 + float(np.mean(sig**2))
         dbic = ne * math.log(v0 / v1) - 2.0 * math.log(ne)
         return dbic > threshold and 1.0 - math.sqrt(v1 / v0) > min_gain

@@ -22,8 +22,9 @@ fitted white-noise level) so that an exact fit cannot make a meaningless gain.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+import numba
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import lfilter
@@ -54,6 +55,13 @@ class OvenFit:
     overshoot: tuple[float, float] | None
     pred: np.ndarray
     resid: np.ndarray
+    form: str = "knee"
+    """Cooling rate limit: ``"knee"`` (the simulator's linear knee) or ``"smooth"``
+    (:func:`_air_kernel_smooth`); ``params`` always hold the knee form (what a
+    ``model.toml`` can express), ``smooth`` the smooth form's when it was chosen."""
+    x: np.ndarray | None = None
+    """The fitted vector of :func:`_air_model` for ``form``."""
+    smooth: dict[str, float] | None = None
 
     @property
     def rms(self) -> float:
@@ -68,6 +76,33 @@ class OvenFit:
         return 5 + (2 if self.overshoot else 0)
 
 
+@numba.njit(cache=True, nogil=True)
+def _air_kernel_smooth(
+    n: int, dt: float, setpoint: float, state: np.ndarray, p: np.ndarray, air: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """The air part of :func:`gyrolab.sim.thermal.thermal_kernel` with a cooling rate
+    limit that derates smoothly towards the chamber's floor instead of with a knee:
+    ``r_cool(T) = r_cool0 · (1 − exp(−max(T − T_floor, 0)/s))`` (a saturating
+    exponential: full rate well above the floor, slope ``r_cool0/s`` at it).
+    ``p`` = [τ_air, r_heat, r_cool0, T_floor, s, ω, ζ]; ``state`` as the kernel's."""
+    tau_air, r_heat, r_cool0, floor, scale, w, zeta = p[0], p[1], p[2], p[3], p[4], p[5], p[6]
+    a, v = state[0], state[1]
+    for i in range(n):
+        air[i] = a
+        u = a - floor
+        r_cool = r_cool0 * (1.0 - math.exp(-u / scale)) if u > 0.0 else 0.0
+        if w > 0.0:
+            v += dt * (w * w * (setpoint - a) - 2.0 * zeta * w * v)
+        else:
+            v = (setpoint - a) / tau_air
+        if v > r_heat:
+            v = r_heat
+        elif v < -r_cool:
+            v = -r_cool
+        a += dt * v
+    state[0], state[1] = a, v
+
+
 def _air_model(
     t_obs: np.ndarray,
     sp_t: np.ndarray,
@@ -75,13 +110,20 @@ def _air_model(
     a0: float,
     x: np.ndarray,
     overshoot: tuple[float, float] | None,
+    form: str = "knee",
 ) -> np.ndarray:
-    """Air temperature at ``t_obs`` from the setpoint history (kernel on a 0.5 s grid)."""
+    """Air temperature at ``t_obs`` from the setpoint history (kernel on a 0.5 s grid).
+    ``x`` = [τ_air, r_heat, r_cool0, T_knee, T_knee − T_floor] (``form="knee"``) or
+    [τ_air, r_heat, r_cool0, T_floor, s] (``form="smooth"``)."""
     tau, rh, rc, knee, gap = x[:5]
     w = z = 0.0
     if overshoot is not None:
         w, z = overshoot_to_omega_zeta(*overshoot)
-    p = np.array([tau, rh, rc, knee, knee - gap, 1000.0, 0.0, 0.0, w, z])
+    smooth = form == "smooth"
+    if smooth:
+        p = np.array([tau, rh, rc, knee, gap, w, z])
+    else:
+        p = np.array([tau, rh, rc, knee, knee - gap, 1000.0, 0.0, 0.0, w, z])
     state = np.array([a0, 0.0, a0, a0])
     t_end = float(t_obs[-1])
     n_tot = int(math.ceil((t_end - t_obs[0]) / OVEN_DT_S)) + 1
@@ -94,7 +136,9 @@ def _air_model(
     values = np.concatenate([[sp[0]], sp[change]])
     ends = np.concatenate([starts[1:], [n_tot]])
     for s0, s1, v in zip(starts, ends, values, strict=True):
-        if s1 > s0:
+        if s1 > s0 and smooth:
+            _air_kernel_smooth(int(s1 - s0), OVEN_DT_S, float(v), state, p, air[s0:s1])
+        elif s1 > s0:
             thermal_kernel(
                 int(s1 - s0),
                 OVEN_DT_S,
@@ -204,8 +248,34 @@ def fit_oven(
     th: ThermalParams,
     overshoot: tuple[float, float] | None = None,
     with_overshoot: bool = False,
+    form: str | None = None,
+    x_start: np.ndarray | None = None,
 ) -> OvenFit:
-    """Least-squares fit of the oven air model to the recorded process value."""
+    """Least-squares fit of the oven air model to the recorded process value.
+
+    ``form=None`` fits both cooling rate limits (the simulator's linear knee and the
+    smooth saturating one of :func:`_air_kernel_smooth`, five parameters each) and keeps
+    the one with the better BIC — with equal parameter counts, the smaller floored
+    residual variance. ``x_start`` starts the fit of the given ``form`` (e.g. the
+    first-order fit's vector when adding the overshoot)."""
+    if form is None:
+        knee = fit_oven(d, th, overshoot, with_overshoot, "knee")
+        sm = fit_oven(d, th, overshoot, with_overshoot, "smooth")
+        if sm.loglik() > knee.loglik():
+            return replace(sm, params=knee.params)  # model.toml keeps the knee form
+        return knee
+    return _fit_oven_form(d, th, overshoot, with_overshoot, form, x_start)
+
+
+def _fit_oven_form(
+    d: BenchData,
+    th: ThermalParams,
+    overshoot: tuple[float, float] | None,
+    with_overshoot: bool,
+    form: str,
+    x_start: np.ndarray | None,
+) -> OvenFit:
+    """:func:`fit_oven` for one cooling form."""
     t, sp, pv = d.oven_t, d.oven_sp, d.oven_pv
     step = max(1, t.size // OVEN_MAX_POINTS)
     to, pvo = t[::step], pv[::step]
@@ -218,6 +288,10 @@ def fit_oven(
             th.cool_knee_c - th.cool_floor_c,
         ]
     )
+    if form == "smooth":  # [.., T_floor, s]: the knee's floor, s half the knee-floor gap
+        x0[3], x0[4] = th.cool_floor_c, 0.5 * (th.cool_knee_c - th.cool_floor_c)
+    if x_start is not None:
+        x0 = np.asarray(x_start, dtype=float).copy()
     lo = np.array([1.0, 1e-5, 1e-5, -150.0, 0.1])
     hi = np.array([1e4, 1.0, 1.0, 300.0, 400.0])
     # the air at power-on from a window (never one reading), as the case fit does
@@ -226,7 +300,7 @@ def fit_oven(
     if not with_overshoot:
 
         def res1(x: np.ndarray) -> np.ndarray:
-            return _air_model(to, t, sp, a0, x, None) - pvo
+            return _air_model(to, t, sp, a0, x, None, form) - pvo
 
         r = least_squares(res1, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=40)
         x, os_ = r.x, None
@@ -236,7 +310,7 @@ def fit_oven(
         starts += [(o, p) for o in (0.05, 0.15, 0.35) for p in (400.0, 1200.0, 3000.0)]
         best = None
         for o, p in starts:
-            e = _air_model(to, t, sp, a0, x0, (o, p)) - pvo
+            e = _air_model(to, t, sp, a0, x0, (o, p), form) - pvo
             c = float(e @ e)
             if best is None or c < best[0]:
                 best = (c, o, p)
@@ -245,12 +319,22 @@ def fit_oven(
         hi7 = np.concatenate([hi, [0.95, 2e4]])
 
         def res2(x: np.ndarray) -> np.ndarray:
-            return _air_model(to, t, sp, a0, x[:5], (x[5], x[6])) - pvo
+            return _air_model(to, t, sp, a0, x[:5], (x[5], x[6]), form) - pvo
 
         x7 = np.clip(np.concatenate([x0, [best[1], best[2]]]), lo7, hi7)
         r = least_squares(res2, x7, bounds=(lo7, hi7), x_scale="jac", max_nfev=60)
         x, os_ = r.x[:5], (float(r.x[5]), float(r.x[6]))
-    pred = _air_model(t, t, sp, a0, x, os_)
+    pred = _air_model(t, t, sp, a0, x, os_, form)
+    if form == "smooth":
+        sm = {"air_tau_s": float(x[0]), "heat_rate_c_per_s": float(x[1])}
+        sm |= {"cool_rate_c_per_s": float(x[2]), "cool_floor_c": float(x[3])}
+        sm["cool_derate_scale_c"] = float(x[4])
+        # the knee form's fields: the same floor, the knee where the derating is 86 %
+        x = np.array([x[0], x[1], x[2], x[3] + 2.0 * x[4], 2.0 * x[4]])
+        smooth: dict[str, float] | None = sm
+    else:
+        smooth = None
+    xf = np.array(r.x[:5])
     params = {
         "air_tau_s": float(x[0]),
         "heat_rate_c_per_s": float(x[1]),
@@ -258,7 +342,7 @@ def fit_oven(
         "cool_knee_c": float(x[3]),
         "cool_floor_c": float(x[3] - x[4]),
     }
-    return OvenFit(params, os_, pred, pred - pv)
+    return OvenFit(params, os_, pred, pred - pv, form, xf, smooth)
 
 
 @dataclass

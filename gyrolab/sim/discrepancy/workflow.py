@@ -175,7 +175,9 @@ class Workflow:
             if st.has("oven_overshoot"):
                 base = self._oven_cache.get("first") or fit_oven(self.d, th)
                 th = replace(th, **base.params)
-                self._oven_cache[key] = fit_oven(self.d, th, st.overshoot, with_overshoot=True)
+                self._oven_cache[key] = fit_oven(
+                    self.d, th, st.overshoot, True, form=base.form, x_start=base.x
+                )
             else:
                 self._oven_cache[key] = fit_oven(self.d, th)
         return self._oven_cache[key]
