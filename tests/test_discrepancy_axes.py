@@ -102,6 +102,7 @@ def test_cli_on_a_two_axis_recording_writes_the_axes_layout(tmp_path):
     doc = json.loads((out / "discrepancy.json").read_text())
     assert len(doc["axes"]) == 2 and "rtd_self_heating" in doc["effects_shared"]
     assert "rtd_self_heating" not in doc["effects_by_axis"][1]
+    assert doc["axes"][0]["chamber_cooling"]["form"] == "knee"  # the simulator's chamber
     for k in range(2):
         m = load_model(out / f"model_axis{k}.toml")
         assert "rtd_self_heating" in [e.name for e in m.effects]

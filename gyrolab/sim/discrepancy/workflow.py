@@ -832,6 +832,7 @@ class Result:
             "gap_after": self.gap_after,
             "steps": self.steps,
             "detection_limits": self.detection_limits,
+            "chamber_cooling": {"form": self.final.oven.form, "smooth": self.final.oven.smooth},
             "elapsed_s": self.elapsed_s,
         }
 
