@@ -84,6 +84,32 @@ class ThermalParams:
         return asdict(self)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def air_rate(
+    v: float,
+    a: float,
+    setpoint: float,
+    tau_air: float,
+    r_heat: float,
+    r_cool: float,
+    w: float,
+    zeta: float,
+    dt: float,
+) -> float:  # pragma: no cover - compiled
+    """The chamber air's next rate of change (°C/s): the controller's demand — first order
+    ``(SP − a)/τ_air`` (ω = 0) or the second-order loop ``v̇ = ω²(SP − a) − 2ζωv`` — clamped
+    to the heating limit and to the cooling limit ``r_cool`` at the air's temperature."""
+    if w > 0.0:
+        v += dt * (w * w * (setpoint - a) - 2.0 * zeta * w * v)
+    else:
+        v = (setpoint - a) / tau_air
+    if v > r_heat:
+        return r_heat
+    if v < -r_cool:
+        return -r_cool
+    return v
+
+
 # state vector: [air, air_velocity, case, die]
 @numba.njit(cache=True, nogil=True)
 def thermal_kernel(
@@ -118,15 +144,7 @@ def thermal_kernel(
             frac = 1.0
         elif frac < 0.0:
             frac = 0.0
-        r_cool = r_cool0 * frac
-        if w > 0.0:
-            v += dt * (w * w * (setpoint - a) - 2.0 * zeta * w * v)
-        else:
-            v = (setpoint - a) / tau_air
-        if v > r_heat:
-            v = r_heat
-        elif v < -r_cool:
-            v = -r_cool
+        v = air_rate(v, a, setpoint, tau_air, r_heat, r_cool0 * frac, w, zeta, dt)
         c_next = c + (a + dself - c) * kc
         d += (c - d) * kd
         a += dt * v

@@ -30,7 +30,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import lfilter
 
 from gyrolab.sim.discrepancy.data import BenchData
-from gyrolab.sim.thermal import ThermalParams, thermal_kernel
+from gyrolab.sim.thermal import ThermalParams, air_rate, thermal_kernel
 
 OVEN_DT_S = 0.5
 OVEN_MAX_POINTS = 6000
@@ -91,14 +91,7 @@ def _air_kernel_smooth(
         air[i] = a
         u = a - floor
         r_cool = r_cool0 * (1.0 - math.exp(-u / scale)) if u > 0.0 else 0.0
-        if w > 0.0:
-            v += dt * (w * w * (setpoint - a) - 2.0 * zeta * w * v)
-        else:
-            v = (setpoint - a) / tau_air
-        if v > r_heat:
-            v = r_heat
-        elif v < -r_cool:
-            v = -r_cool
+        v = air_rate(v, a, setpoint, tau_air, r_heat, r_cool, w, zeta, dt)
         a += dt * v
     state[0], state[1] = a, v
 
