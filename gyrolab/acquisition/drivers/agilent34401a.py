@@ -7,7 +7,7 @@ read after every reading, the identity) and registers it.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 from gyrolab.acquisition.bench_config import MultimeterConfig
 from gyrolab.acquisition.instrument import InstrumentReport
@@ -58,9 +58,14 @@ class Agilent34401AThermometer(Agilent34401A):
         }
 
 
-def open_34401a(c: MultimeterConfig, ctx: OpenContext) -> Agilent34401AThermometer:
+_T = TypeVar("_T", bound=Agilent34401AThermometer)
+
+
+def open_thermometer(cls: type[_T], c: Any, ctx: OpenContext, **extra: Any) -> _T:
+    """Open and identify ``cls`` — this driver or a SCPI DMM derived from it — with the
+    settings every such config has (``extra``: the model's own, e.g. ``baud_rate``)."""
     return connected(
-        Agilent34401AThermometer(
+        cls(
             ctx.address,
             config=c,
             visa_library=ctx.visa_library,
@@ -68,9 +73,13 @@ def open_34401a(c: MultimeterConfig, ctx: OpenContext) -> Agilent34401AThermomet
             range_ohm=c.range_ohm,
             nplc=c.nplc,
             r0_ohm=c.r0_ohm,
-            baud_rate=c.baud_rate,
+            **extra,
         )
     )
+
+
+def open_34401a(c: MultimeterConfig, ctx: OpenContext) -> Agilent34401AThermometer:
+    return open_thermometer(Agilent34401AThermometer, c, ctx, baud_rate=c.baud_rate)
 
 
 SPEC = register(

@@ -23,9 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.acquisition.drivers.agilent34401a import Agilent34401AThermometer
+from gyrolab.acquisition.drivers.agilent34401a import Agilent34401AThermometer, open_thermometer
 from gyrolab.acquisition.instrument import LimitError
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
+from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
 
 
 @dataclass(frozen=True)
@@ -80,17 +80,7 @@ class Keysight34465A(Agilent34401AThermometer):
 
 
 def open_34465a(c: Keysight34465AConfig, ctx: OpenContext) -> Keysight34465A:
-    return connected(
-        Keysight34465A(
-            ctx.address,
-            config=c,
-            visa_library=ctx.visa_library,
-            timeout_s=ctx.timeout(c.timeout_s),
-            range_ohm=c.range_ohm,
-            nplc=c.nplc,
-            r0_ohm=c.r0_ohm,
-        )
-    )
+    return open_thermometer(Keysight34465A, c, ctx)
 
 
 SPEC = register(
