@@ -71,7 +71,7 @@ BP_RUNS = (("gd", GD_PAPER), ("gd_long", GD_LONG), ("lbfgs", LBFGS))
 
 
 def simulate(work: Path, seed: int) -> tuple[Path, Path]:
-    from gyrolab.profile import load_profile
+    from gyrolab.profiles.profile import load_profile
     from gyrolab.sim.model import nominal_model
     from gyrolab.sim.simulate import simulate_run
 

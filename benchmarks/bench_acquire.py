@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.acquisition.recover import recover_recording
-from gyrolab.recording import read_recording
+from gyrolab.record.recording import read_recording
+from gyrolab.record.recover import recover_recording
 
 
 def _acquire_cmd(out: Path, profile: str, speed: float | None, seed: int) -> list[str]:

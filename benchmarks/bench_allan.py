@@ -63,12 +63,12 @@ PEER = {"oadev": "oadev", "mdev": "mdev", "tdev": "tdev", "hdev": "ohdev", "totd
 def _one(which: str, n: int, rate: float, taus: str, kind: str = "oadev") -> dict:
     y = _data(n)
     if which == "gyrolab" and kind == "oadev":
-        from gyrolab.compensation.allan import allan_deviation
+        from gyrolab.numerics.allan import allan_deviation
 
         def call(v: np.ndarray) -> np.ndarray:
             return allan_deviation(v, rate, taus=taus).adev
     elif which == "gyrolab":
-        from gyrolab.compensation.deviations import deviation
+        from gyrolab.numerics.deviations import deviation
 
         def call(v: np.ndarray) -> np.ndarray:
             return deviation(v, rate, kind, taus=taus).dev  # type: ignore[union-attr]

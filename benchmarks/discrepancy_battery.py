@@ -46,7 +46,7 @@ os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
 # run against this checkout, not whatever gyrolab happens to be installed
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gyrolab.profile import load_profile  # noqa: E402
+from gyrolab.profiles.profile import load_profile  # noqa: E402
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output  # noqa: E402
 from gyrolab.sim.discrepancy.synth import simulate_bench  # noqa: E402
 from gyrolab.sim.discrepancy.workflow import PRIMARY_GAP, run_discrepancy  # noqa: E402

@@ -184,7 +184,7 @@ def main() -> int:
     import tomli_w
 
     from gyrolab import __version__
-    from gyrolab.profile import load_profile
+    from gyrolab.profiles.profile import load_profile
 
     rev_toml = work / "paper-reversed.toml"
     rev_toml.write_bytes(tomli_w.dumps(load_profile("paper").reversed().to_dict()).encode())
@@ -203,7 +203,7 @@ def main() -> int:
     m_s2 = json.loads((model / "metrics.json").read_text())
 
     from gyrolab.compensation import pipeline as pl
-    from gyrolab.recording import TOPIC_PT100, TOPIC_RATE, read_recording
+    from gyrolab.record.recording import TOPIC_PT100, TOPIC_RATE, read_recording
 
     mdl = pl.load_model(str(model))
     rv = pl.prepare_run(read_recording(runs["rev"][1], [TOPIC_RATE, TOPIC_PT100]), mdl.config)

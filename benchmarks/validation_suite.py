@@ -56,7 +56,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from docsections import write_section  # noqa: E402
 
-from gyrolab.profile import BUILTIN, Profile, Step  # noqa: E402
+from gyrolab.profiles.profile import BUILTIN, Profile, Step  # noqa: E402
 
 TRAJECTORIES = ("paper", "heating", "ramp0.5", "ramp2", "random", "soak")
 CALIBRATION = "paper"

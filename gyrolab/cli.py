@@ -21,13 +21,13 @@ from gyrolab.errors import GyrolabError, NotYetAvailable
 
 HANDLERS: dict[str, str] = {
     "simulate": "gyrolab.sim.commands:simulate",
-    "acquire": "gyrolab.acquisition.commands:acquire",
+    "acquire": "gyrolab.app.acquire:acquire",
     "compensate": "gyrolab.compensation.commands:compensate",
     "apply": "gyrolab.compensation.commands:apply",
     "report": "gyrolab.report.commands:report",
     "discrepancy": "gyrolab.sim.discrepancy.commands:discrepancy",
-    "recover": "gyrolab.acquisition.commands:recover",
-    "demo": "gyrolab.report.demo:demo",
+    "recover": "gyrolab.app.acquire:recover",
+    "demo": "gyrolab.app.demo:demo",
     "convert": "gyrolab.convert:convert",
     "export": "gyrolab.export.commands:export",
     "batch": "gyrolab.batch:batch",

@@ -39,7 +39,7 @@ import numpy as np
 from gyrolab.errors import GyrolabError, InputError
 from gyrolab.outputs import atomic_file, check_output
 from gyrolab.progress import progress
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     TOPIC_ADC,
     TOPIC_EVENT,
     TOPIC_LOG,

@@ -18,7 +18,7 @@ import pytest
 
 from gyrolab.acquisition.bench_config import AdcConfig
 from gyrolab.cli import main
-from gyrolab.recording import TOPIC_LOG, read_recording
+from gyrolab.record.recording import TOPIC_LOG, read_recording
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -181,8 +181,8 @@ def _run_in_process(tmp_path: Path, profile: Path, *, speed: float, faults, limi
     """run_acquisition against a SimBench built here (for faults and ground truth)."""
     from dataclasses import replace
 
-    from gyrolab.acquisition.commands import run_acquisition, sim_bench_config, start_sim_bench
-    from gyrolab.profile import load_profile
+    from gyrolab.app.acquire import run_acquisition, sim_bench_config, start_sim_bench
+    from gyrolab.profiles.profile import load_profile
 
     prof = load_profile(profile)
     sim, cfg = start_sim_bench(

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from gyrolab.acquisition.gyro_adc import AdcRead, GyroAdcReader
 from gyrolab.cli import main
-from gyrolab.recording import read_recording
+from gyrolab.instruments.gyro_adc import AdcRead, GyroAdcReader
+from gyrolab.record.recording import read_recording
 from gyrolab.sim.bench import ByteFaults, FaultPlan, SimBench
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import axis_physics

@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gyrolab.compensation.allan import (
+from gyrolab.errors import InputError
+from gyrolab.numerics.allan import (
     allan_deviation,
     edf_greenhall,
     noise_terms,
     tau_grid,
 )
-from gyrolab.errors import InputError
 
 
 def _ocxo(shared_dir: Path) -> np.ndarray:

@@ -11,7 +11,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from gyrolab.cli import main
 from gyrolab.framing import FrameDecoder, encode_frame, frame_size
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     RecordingWriter,
     _file_descriptor_set,
     decode_block,
@@ -71,7 +71,7 @@ def test_recording_reads_axes(tmp_path) -> None:
     # the viewer summary keeps axis x in its own fields and lists every axis
     import json
 
-    from gyrolab.recording import TOPIC_RATE_SUMMARY, iter_messages
+    from gyrolab.record.recording import TOPIC_RATE_SUMMARY, iter_messages
 
     s = [json.loads(d) for _t, _ts, d in iter_messages(p, [TOPIC_RATE_SUMMARY])]
     assert [m["n"] for m in s] == [10, 10]

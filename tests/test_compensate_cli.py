@@ -16,7 +16,7 @@ from test_pipeline import SMALL, write_run
 from gyrolab.cli import main
 from gyrolab.compensation import pipeline as pl
 from gyrolab.compensation.commands import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     TOPIC_PT100,
     TOPIC_RATE,
     RecordingWriter,

@@ -21,7 +21,7 @@ from test_pipeline import case_temperature, true_bias, write_run
 from gyrolab.cli import main
 from gyrolab.compensation import pipeline as pl
 from gyrolab.compensation.gabp import BPConfig, _gd_train, fit_mlp
-from gyrolab.recording import RecordingWriter, read_metadata
+from gyrolab.record.recording import RecordingWriter, read_metadata
 
 torch.set_num_threads(1)
 REPO = Path(__file__).resolve().parents[1]

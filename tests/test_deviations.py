@@ -10,9 +10,9 @@ import allantools
 import numpy as np
 import pytest
 
-from gyrolab.compensation.allan import edf_greenhall
-from gyrolab.compensation.deviations import KINDS, deviation, gap_filled
 from gyrolab.errors import InputError
+from gyrolab.numerics.allan import edf_greenhall
+from gyrolab.numerics.deviations import KINDS, deviation, gap_filled
 
 PEER = {
     "oadev": allantools.oadev,
@@ -166,7 +166,7 @@ def test_bad_input() -> None:
 def test_plateau_noise_on_a_simulated_run(tmp_path: Path) -> None:
     from gyrolab.cli import main
     from gyrolab.compensation.plateau_noise import plateau_noise
-    from gyrolab.recording import read_recording
+    from gyrolab.record.recording import read_recording
 
     f = tmp_path / "short.mcap"
     assert (

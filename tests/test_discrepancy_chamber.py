@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from gyrolab.profile import Profile, Step
+from gyrolab.profiles.profile import Profile, Step
 from gyrolab.sim.discrepancy.synth import simulate_bench
 from gyrolab.sim.discrepancy.thermal_fit import _air_model, _lowpass, fit_oven
 from gyrolab.sim.discrepancy.workflow import Structure, Workflow

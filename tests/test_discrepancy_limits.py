@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrolab.profile import Profile, Step
+from gyrolab.profiles.profile import Profile, Step
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output
 from gyrolab.sim.discrepancy.synth import simulate_bench
 from gyrolab.sim.discrepancy.workflow import Structure, Workflow, run_discrepancy

@@ -14,7 +14,7 @@ import pytest
 import tomllib
 
 from gyrolab.cli import main
-from gyrolab.profile import Profile, Step
+from gyrolab.profiles.profile import Profile, Step
 from gyrolab.sim.discrepancy.synth import simulate_bench
 from gyrolab.sim.discrepancy.workflow import run_discrepancy
 from gyrolab.sim.model import load_model, nominal_model
@@ -103,12 +103,12 @@ def test_cli_reads_only_bench_channels_and_writes_contract(tmp_path, monkeypatch
     # The workflow must never look at metadata records (simulator provenance lives there).
     import mcap.reader
 
-    import gyrolab.recording
+    import gyrolab.record.recording
 
     def forbidden(*a, **k):
         raise AssertionError("discrepancy read the recording's metadata")
 
-    monkeypatch.setattr(gyrolab.recording, "read_metadata", forbidden)
+    monkeypatch.setattr(gyrolab.record.recording, "read_metadata", forbidden)
     for cls in (mcap.reader.SeekingReader, mcap.reader.NonSeekingReader):
         monkeypatch.setattr(cls, "iter_metadata", forbidden)
 
@@ -145,7 +145,7 @@ def test_cli_reads_only_bench_channels_and_writes_contract(tmp_path, monkeypatch
 def test_short_thermal_lag_is_reported_ambiguous_with_thermal_rate():
     """A die lag of 100 s is, on a step profile, a rate sensitivity k ≈ −τ·bias′(T)/60:
     the workflow adds the better of the two and reports both (docs/discrepancy.md)."""
-    from gyrolab.profile import load_profile
+    from gyrolab.profiles.profile import load_profile
 
     model = nominal_model().with_effect("thermal_lag", tau_s=100.0)
     res = run_discrepancy(simulate_bench(model, load_profile("paper"), 2.0, 7))
@@ -158,7 +158,7 @@ def test_short_thermal_lag_is_reported_ambiguous_with_thermal_rate():
 def test_starting_model_without_noise_terms_gets_them_named():
     """White and flicker noise are vocabulary effects too (the 13 h run is needed to see
     the flicker floor clearly)."""
-    from gyrolab.profile import load_profile
+    from gyrolab.profiles.profile import load_profile
     from gyrolab.sim.model import SimModel, make_effect_spec
 
     bare = SimModel(effects=(make_effect_spec("bias_poly"),))

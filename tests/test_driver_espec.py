@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import pytest
 
-from gyrolab.acquisition import registry
-from gyrolab.acquisition.drivers.espec import EspecChamber, EspecConfig
-from gyrolab.acquisition.instrument import InstrumentError, LimitError
-from gyrolab.acquisition.roles import InstrumentFault, is_transient
-from gyrolab.acquisition.testing import ExpectedVisa, expected_protocol
+from gyrolab.instruments import registry
+from gyrolab.instruments.drivers.espec import EspecChamber, EspecConfig
+from gyrolab.instruments.errors import InstrumentError, LimitError
+from gyrolab.instruments.roles import InstrumentFault, is_transient
+from gyrolab.instruments.testing import ExpectedVisa, expected_protocol
 from gyrolab.sim.bench import SimBench
 
 CONNECT = [
@@ -120,7 +120,7 @@ def test_acquire_on_the_simulated_bench_with_the_new_drivers(tmp_path, thermomet
     """``acquire --bench sim --driver …``: any combination runs, and the recording names
     the drivers that took it."""
     from gyrolab.cli import main
-    from gyrolab.recording import read_recording
+    from gyrolab.record.recording import read_recording
 
     prof = tmp_path / "p.toml"
     prof.write_text(

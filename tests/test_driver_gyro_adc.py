@@ -10,7 +10,6 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from gyrolab.acquisition.gyro_adc import AdcRead, GyroAdcReader
 from gyrolab.framing import (
     SYNC,
     FrameDecoder,
@@ -20,6 +19,7 @@ from gyrolab.framing import (
     encode_frames,
     frame_size,
 )
+from gyrolab.instruments.gyro_adc import AdcRead, GyroAdcReader
 from gyrolab.sim.bench import ByteFaults, FaultEvent, FaultPlan, SimBench
 
 N = 10

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrolab.acquisition import registry
-from gyrolab.acquisition.drivers.keysight34465a import Keysight34465A, Keysight34465AConfig
-from gyrolab.acquisition.instrument import InstrumentError, LimitError
-from gyrolab.acquisition.testing import ExpectedVisa, expected_protocol
+from gyrolab.instruments import registry
+from gyrolab.instruments.drivers.keysight34465a import Keysight34465A, Keysight34465AConfig
+from gyrolab.instruments.errors import InstrumentError, LimitError
+from gyrolab.instruments.testing import ExpectedVisa, expected_protocol
 from gyrolab.pt100 import cvd_resistance
 from gyrolab.sim.bench import SimBench
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import gyrolab.sim.bench as bench_pkg
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.acquisition.multimeter import Agilent34401A
-from gyrolab.acquisition.testing import ExpectedVisa
+from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.instruments.multimeter import Agilent34401A
+from gyrolab.instruments.testing import ExpectedVisa
 from gyrolab.pt100 import cvd_resistance, cvd_temperature
 from gyrolab.sim.bench import FaultEvent, SimBench
 

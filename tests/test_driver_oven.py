@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.acquisition.oven import WatlowF4
-from gyrolab.acquisition.testing import ExpectedSerial
+from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.instruments.oven import WatlowF4
+from gyrolab.instruments.testing import ExpectedSerial
 from gyrolab.sim.bench import FaultEvent, SimBench
 from gyrolab.sim.bench.oven_modbus import OvenHooks, WatlowF4Slave, crc16_modbus, with_crc
 from gyrolab.sim.bench.serial_pty import PtyPort
@@ -395,8 +395,8 @@ def test_event_output_written_and_read_back() -> None:
 
 def test_running_profile_refused_at_connect_and_a_fault_mid_run() -> None:
     from gyrolab.acquisition.bench_config import OvenConfig
-    from gyrolab.acquisition.drivers.watlowf4 import WatlowF4Chamber
-    from gyrolab.acquisition.roles import InstrumentFault
+    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber
+    from gyrolab.instruments.roles import InstrumentFault
 
     connect = [(READ_DP, DP_1), (READ_UNITS, UNITS_C), (READ_SP, SP_M40), (READ_PV, PV_25_3)]
     fake = ExpectedSerial([*connect, (_rd(200), _val(2))])
@@ -413,7 +413,7 @@ def test_running_profile_refused_at_connect_and_a_fault_mid_run() -> None:
 
 def test_simulated_f4_control_event_switches_the_chamber() -> None:
     from gyrolab.acquisition.bench_config import OvenConfig
-    from gyrolab.acquisition.drivers.watlowf4 import WatlowF4Chamber
+    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber
 
     with SimBench(speed=200.0, oven_control_event=2, ambient_c=22.0) as bench:
         bench.inject(FaultEvent("disconnect", duration_s=1e9))
@@ -433,9 +433,9 @@ def test_safe_state_off_leaves_the_chamber_switched_off(tmp_path, chamber) -> No
     """``[safe_state] mode = "off"``: at the end of a run the safe setpoint is verified and
     the chamber switched off (F4: its control event output; ESPEC: STANDBY), verified."""
     from gyrolab.acquisition.bench_config import bench_from_dict
-    from gyrolab.acquisition.commands import run_acquisition, start_sim_bench
-    from gyrolab.profile import load_profile
-    from gyrolab.recording import read_recording
+    from gyrolab.app.acquire import run_acquisition, start_sim_bench
+    from gyrolab.profiles.profile import load_profile
+    from gyrolab.record.recording import read_recording
 
     prof_file = tmp_path / "p.toml"
     prof_file.write_text('name = "t"\n[[step]]\nsetpoint_c = 30\nduration_s = 40\n')

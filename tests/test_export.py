@@ -28,8 +28,8 @@ from gyrolab.export.params import (
     read_px4_params,
 )
 from gyrolab.export.spec import evaluate_spec, export_spec
-from gyrolab.profile import load_profile
-from gyrolab.recording import read_recording
+from gyrolab.profiles.profile import load_profile
+from gyrolab.record.recording import read_recording
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import simulate_run
 
@@ -412,7 +412,7 @@ def test_c_export_other_kinds(unit: dict[str, Path], kind: str) -> None:
 
 
 def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
-    from gyrolab.compensation.allan import allan_deviation, noise_terms
+    from gyrolab.numerics.allan import allan_deviation, noise_terms
 
     out = unit["dir"] / "imu.yaml"
     assert (

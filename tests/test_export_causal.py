@@ -20,8 +20,8 @@ from gyrolab.cli import main
 from gyrolab.compensation import pipeline as pl
 from gyrolab.compensation.axes import axis_dirs
 from gyrolab.export.spec import evaluate_causal, export_spec
-from gyrolab.profile import load_profile
-from gyrolab.recording import read_recording
+from gyrolab.profiles.profile import load_profile
+from gyrolab.record.recording import read_recording
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import simulate_run
 

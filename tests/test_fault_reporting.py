@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from gyrolab.cli import main
-from gyrolab.recording import read_recording
+from gyrolab.record.recording import read_recording
 
 
 def _write(path: Path, text: str) -> Path:
@@ -172,8 +172,8 @@ class _LateMeter:
 def test_multimeter_stays_in_step_after_a_late_reply() -> None:
     """Without the resync every later answer is the previous query's: READ? gets the
     late reading (stale) and SYST:ERR? gets a reading (unparsable), for good."""
-    from gyrolab.acquisition.instrument import InstrumentTimeout
-    from gyrolab.acquisition.multimeter import Agilent34401A
+    from gyrolab.instruments.errors import InstrumentTimeout
+    from gyrolab.instruments.multimeter import Agilent34401A
 
     res = _LateMeter()
     dmm = Agilent34401A(res, timeout_s=0.25)

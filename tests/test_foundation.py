@@ -8,8 +8,8 @@ import pytest
 from gyrolab.cli import HANDLERS, main
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file
-from gyrolab.profile import load_profile
-from gyrolab.recording import (
+from gyrolab.profiles.profile import load_profile
+from gyrolab.record.recording import (
     TOPIC_RATE,
     RecordingWriter,
     decode_block,

@@ -19,7 +19,7 @@ import pytest
 from websockets.sync.client import connect
 
 from gyrolab.acquisition.live import TOPIC_LIVE_STATUS, LiveServer
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     TOPIC_LOG_FOXGLOVE,
     TOPIC_PT100,
     TOPIC_RATE,
@@ -184,7 +184,7 @@ def test_offer_never_blocks_when_the_queue_is_full() -> None:
 
 def test_acquire_live_at_300x_with_a_client(tmp_path: Path) -> None:
     from gyrolab.cli import main
-    from gyrolab.recording import read_recording
+    from gyrolab.record.recording import read_recording
 
     prof = tmp_path / "p.toml"
     prof.write_text(
@@ -238,7 +238,7 @@ def test_shipped_layout_names_topics_and_fields_that_exist() -> None:
     """Every panel of docs/foxglove/gyrolab-layout.json reads a topic and field that the
     recording or the live server publishes (schema properties), and every panel is placed."""
     from gyrolab.acquisition.live import LIVE_STATUS_SCHEMA
-    from gyrolab.recording import JSON_SCHEMAS
+    from gyrolab.record.recording import JSON_SCHEMAS
 
     layout = json.loads(
         (

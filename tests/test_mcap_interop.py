@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from jscheck import js_script, run_js
 
-from gyrolab.acquisition.recover import recover_recording
-from gyrolab.recording import ALL_TOPICS, RecordingWriter, read_recording
+from gyrolab.record.recording import ALL_TOPICS, RecordingWriter, read_recording
+from gyrolab.record.recover import recover_recording
 
 PACKAGES = ["@mcap/core@2.2.2", "fzstd@0.1.1"]
 

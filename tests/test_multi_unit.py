@@ -16,7 +16,7 @@ from gyrolab.cli import main
 from gyrolab.compensation import pipeline as pl
 from gyrolab.errors import InputError
 from gyrolab.outputs import MARKER
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     TOPIC_PT100,
     TOPIC_RATE,
     RecordingWriter,

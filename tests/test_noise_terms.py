@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from test_allan import flicker_noise
 
-from gyrolab.compensation.allan import FLICKER_FLOOR, allan_deviation, noise_terms
 from gyrolab.compensation.metrics import signal_metrics
+from gyrolab.numerics.allan import FLICKER_FLOOR, allan_deviation, noise_terms
 
 
 def _record(n: int, fs: float, q: float, big_n: float, b: float, k: float, seed: int):

@@ -13,7 +13,7 @@ import torch
 from gyrolab.compensation import pipeline as pl
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
 from gyrolab.errors import InputError
-from gyrolab.recording import RecordingWriter, read_recording
+from gyrolab.record.recording import RecordingWriter, read_recording
 
 torch.set_num_threads(1)
 

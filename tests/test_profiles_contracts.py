@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from gyrolab.cli import main
-from gyrolab.profile import BUILTIN
-from gyrolab.recording import read_recording
+from gyrolab.profiles.profile import BUILTIN
+from gyrolab.record.recording import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
 STEP = "[[step]]\nsetpoint_c = 25\nduration_s = 60\n"

@@ -6,16 +6,16 @@ from pathlib import Path
 
 import pytest
 
-from gyrolab.acquisition import registry
 from gyrolab.acquisition.bench_config import (
     MultimeterConfig,
     OvenConfig,
     bench_from_dict,
     load_bench,
 )
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.acquisition.roles import InstrumentFault, is_transient
 from gyrolab.errors import InputError
+from gyrolab.instruments import registry
+from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.instruments.roles import InstrumentFault, is_transient
 
 REPO = Path(__file__).resolve().parents[1]
 

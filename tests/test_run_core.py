@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
-from gyrolab.acquisition.gyro_adc import AdcBlock, AdcRead
-from gyrolab.acquisition.instrument import InstrumentTimeout
-from gyrolab.acquisition.roles import ChamberReading, ThermometerReading
 from gyrolab.acquisition.runner import Acquisition
-from gyrolab.profile import Profile, Step
+from gyrolab.instruments.errors import InstrumentTimeout
+from gyrolab.instruments.gyro_adc import AdcBlock, AdcRead
+from gyrolab.instruments.roles import ChamberReading, ThermometerReading
+from gyrolab.profiles.profile import Profile, Step
 from gyrolab.pt100 import cvd_resistance
-from gyrolab.recording import RecordingWriter, read_recording
+from gyrolab.record.recording import RecordingWriter, read_recording
 
 
 class FakeClock:

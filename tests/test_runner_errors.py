@@ -1,4 +1,4 @@
-"""The run engine's one error vocabulary (gyrolab.acquisition.roles.is_transient), with
+"""The run engine's one error vocabulary (gyrolab.instruments.roles.is_transient), with
 in-memory instruments that implement the roles: a failed exchange is retried, a refused
 setting (LimitError) and a fault end the run at once, in the safe state."""
 
@@ -8,13 +8,13 @@ import time
 from pathlib import Path
 
 from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
-from gyrolab.acquisition.gyro_adc import AdcRead
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.acquisition.roles import ChamberReading, ThermometerReading
 from gyrolab.acquisition.runner import Acquisition, WallClock
-from gyrolab.profile import Profile, Step
+from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
+from gyrolab.instruments.gyro_adc import AdcRead
+from gyrolab.instruments.roles import ChamberReading, ThermometerReading
+from gyrolab.profiles.profile import Profile, Step
 from gyrolab.pt100 import cvd_resistance
-from gyrolab.recording import RecordingWriter, read_recording
+from gyrolab.record.recording import RecordingWriter, read_recording
 
 
 class MemoryThermometer:

@@ -18,7 +18,7 @@ from gyrolab.acquisition.runner import (
     slope_c_per_min,
 )
 from gyrolab.errors import InputError
-from gyrolab.profile import Profile, Step, load_profile
+from gyrolab.profiles.profile import Profile, Step, load_profile
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -9,7 +9,7 @@ import pytest
 
 from gyrolab.cli import main
 from gyrolab.errors import InputError
-from gyrolab.recording import read_recording
+from gyrolab.record.recording import read_recording
 from gyrolab.sim.model import load_model, nominal_model
 
 PROFILE = """

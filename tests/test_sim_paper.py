@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from gyrolab.cli import main
-from gyrolab.recording import TOPIC_PT100, TOPIC_RATE, read_recording
+from gyrolab.record.recording import TOPIC_PT100, TOPIC_RATE, read_recording
 
 BIN_S = 3600.0 / 1000.0  # 1000 points/h
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from jscheck import js_script, run_js
 
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     FOXGLOVE_LOG_LEVEL,
     TOPIC_LOG_FOXGLOVE,
     TOPIC_RATE_SUMMARY,

@@ -37,7 +37,7 @@ class RunInfo:
 class MultimeterConfig:
     """Agilent/HP 34401A reading the PT100 (4-wire): the ``agilent34401a`` driver's config."""
 
-    driver: str = "agilent34401a"  # gyrolab.acquisition.registry
+    driver: str = "agilent34401a"  # gyrolab.instruments.registry
     resource: str = ""  # "ASRL/dev/ttyUSB0::INSTR" or "TCPIP::host::5025::SOCKET"
     timeout_s: float = 5.0
     nplc: float = 10.0
@@ -53,7 +53,7 @@ class MultimeterConfig:
 class OvenConfig:
     """Watlow F4 controller, Modbus RTU: the ``watlowf4`` driver's config."""
 
-    driver: str = "watlowf4"  # gyrolab.acquisition.registry
+    driver: str = "watlowf4"  # gyrolab.instruments.registry
     port: str = ""  # "/dev/ttyUSB1"
     slave_address: int = 1
     baud_rate: int = 19200
@@ -69,7 +69,7 @@ class OvenConfig:
 class AdcConfig:
     """The gyro's ADC stream and its conversion to °/s (``Ω = (V − offset)/gain``)."""
 
-    driver: str = "gyroadc"  # gyrolab.acquisition.registry
+    driver: str = "gyroadc"  # gyrolab.instruments.registry
     port: str = ""  # "/dev/ttyUSB2"
     baud_rate: int = 921600
     sample_rate_hz: float = 100.0
@@ -128,7 +128,7 @@ class BenchConfig:
     name: str = "bench"
     run: RunInfo = field(default_factory=RunInfo)
     # The three roles (``[thermometer]``, ``[chamber]``, ``[adc]``), each the config
-    # dataclass of the driver its table names (gyrolab.acquisition.registry). The field
+    # dataclass of the driver its table names (gyrolab.instruments.registry). The field
     # names are the tables' older names, which are still accepted.
     multimeter: Any = field(default_factory=MultimeterConfig)
     oven: Any = field(default_factory=OvenConfig)
@@ -205,7 +205,7 @@ _ROLE_TABLES = (
 def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source: str) -> Any:
     """The driver config of one role: ``driver`` (default: the bench's original driver)
     picks the dataclass the rest of the table is checked against."""
-    from gyrolab.acquisition import registry
+    from gyrolab.instruments import registry
 
     given = [t for t in tables if t in d]
     if len(given) > 1:
@@ -326,7 +326,7 @@ def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str)
 
 def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     """Read and check a bench TOML file."""
-    from gyrolab.acquisition import registry
+    from gyrolab.instruments import registry
 
     p = Path(path)
     d = read_toml(p, "bench file")

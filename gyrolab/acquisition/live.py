@@ -28,7 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 from gyrolab.errors import GyrolabError
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     ADC_MESSAGE,
     JSON_SCHEMAS,
     RATE_MESSAGE,

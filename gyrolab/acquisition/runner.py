@@ -12,8 +12,8 @@ Three parts, Bluesky/ophyd style — the plan never touches a port:
   it stable), not at the moment the engine got round to looking, and the next step
   starts at that time, so the engine's reaction time never accumulates over a profile.
 * Devices (:class:`Thermometer`, :class:`Chamber`, :class:`RateStream`, in
-  ``gyrolab.acquisition.roles``) are the hardware abstraction: the role protocols that
-  every registered driver implements itself (``gyrolab.acquisition.registry``).
+  ``gyrolab.instruments.roles``) are the hardware abstraction: the role protocols that
+  every registered driver implements itself (``gyrolab.instruments.registry``).
 * :class:`Acquisition` is the run engine: one polling thread per instrument feeding a
   queue, and the main thread that owns the recorder, runs the plan, watches the safety
   limits, and ends the run cleanly on completion, fault or SIGINT.
@@ -42,7 +42,8 @@ import numpy as np
 
 from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
-from gyrolab.acquisition.roles import (  # noqa: F401 - re-exported for compatibility
+from gyrolab.errors import InputError
+from gyrolab.instruments.roles import (  # noqa: F401 - re-exported for compatibility
     Chamber,
     ChamberReading,
     InstrumentFault,
@@ -51,9 +52,8 @@ from gyrolab.acquisition.roles import (  # noqa: F401 - re-exported for compatib
     ThermometerReading,
     is_transient,
 )
-from gyrolab.errors import InputError
-from gyrolab.profile import Profile, Step
-from gyrolab.recording import RecordingWriter
+from gyrolab.profiles.profile import Profile, Step
+from gyrolab.record.recording import RecordingWriter
 
 # ------------------------------------------------------------------------ protocols
 

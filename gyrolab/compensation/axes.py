@@ -28,7 +28,7 @@ from gyrolab import __version__
 from gyrolab.compensation.firmware import Poly3
 from gyrolab.compensation.model_dir import MODEL_FORMAT, MODEL_FORMAT_VERSION, write_json
 from gyrolab.errors import InputError
-from gyrolab.recording import AXIS_NAMES
+from gyrolab.record.recording import AXIS_NAMES
 
 FIRMWARE_JSON = "firmware.json"
 

@@ -37,7 +37,7 @@ import numpy as np
 from gyrolab import __version__
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     PROFILE,
     TOPIC_RATE,
     decode_block,

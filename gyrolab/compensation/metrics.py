@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrolab.compensation.allan import AllanResult, allan_deviation, noise_terms
 from gyrolab.errors import InputError
+from gyrolab.numerics.allan import AllanResult, allan_deviation, noise_terms
 
 __all__ = ["METRIC_KEYS", "block_means", "signal_metrics"]
 

@@ -97,7 +97,7 @@ def add_oracle(metrics: dict[str, Any], path: str, block_s: float, unit: str | N
     a ``gyrolab simulate`` recording; return whether it was added."""
     from gyrolab.compensation.pipeline import drift_pp_table, series_metrics
     from gyrolab.errors import InputError
-    from gyrolab.recording import TOPIC_EVENT, TOPIC_RATE, read_recording
+    from gyrolab.record.recording import TOPIC_EVENT, TOPIC_RATE, read_recording
 
     try:
         rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_EVENT], unit=unit)

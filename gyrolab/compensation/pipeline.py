@@ -56,7 +56,7 @@ from gyrolab.compensation.causal import CausalCalibration, CausalDriftModel, fit
 from gyrolab.compensation.gabp import BPConfig, GAConfig, MLPDriftModel, fit_gabp
 from gyrolab.compensation.guards import RunHasher, calibration_ranges, content_hash, range_check
 from gyrolab.errors import InputError
-from gyrolab.recording import Recording
+from gyrolab.record.recording import Recording
 
 PAPER_BLOCK_S = 3.6  # 1000 points/h (paper §4.1)
 
@@ -319,7 +319,7 @@ def iter_rate_batches(
     """``(t, rate, period)`` for runs of consecutive ``/gyro/rate`` messages holding at
     least ``min_samples`` samples (the last one fewer): per-sample times built for the
     whole batch at once, so the per-message Python cost is one decode."""
-    from gyrolab.recording import TOPIC_RATE, iter_blocks
+    from gyrolab.record.recording import TOPIC_RATE, iter_blocks
 
     t0s: list[float] = []
     pers: list[float] = []
@@ -369,7 +369,7 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
     """Like :func:`prepare_run`, streaming ``/gyro/rate`` from the file block by block:
     memory is that of the 1000 points/h series, not of the run (``raw_t``/``raw_rate`` are
     ``None``; :func:`streaming_block_means` re-reads the file when it needs the samples)."""
-    from gyrolab.recording import TOPIC_PT100, read_recording
+    from gyrolab.record.recording import TOPIC_PT100, read_recording
 
     rec = read_recording(path, topics=[TOPIC_PT100], unit=unit)
     pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
@@ -891,8 +891,8 @@ def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
     1000 points/h, so ``rms_deg_per_s`` is that of the 3.6 s averages, and bias stability
     and drift peak-to-peak are those of the series itself. The Allan curve behind ARW and
     bias instability stops at T/10."""
-    from gyrolab.compensation.allan import allan_deviation
     from gyrolab.compensation.metrics import signal_metrics
+    from gyrolab.numerics.allan import allan_deviation
 
     # Octave taus up to T/10 only: beyond that an Allan point rests on a handful of
     # averages, and a long-tau stretch that happens to fall at slope -1/2 (drift residual
@@ -908,9 +908,9 @@ def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
 def series_noise_terms(x: np.ndarray, block_s: float) -> dict[str, Any]:
     """The IEEE 952 terms (Q, N, B, K, R) the Allan curve of a ``block_s`` series
     identifies — τ ≤ T/10 and slopes supported by the 1σ confidence intervals, B only at a
-    floor (:func:`gyrolab.compensation.allan.noise_terms`) — with the τ range of each and a
+    floor (:func:`gyrolab.numerics.allan.noise_terms`) — with the τ range of each and a
     reason for each term that is not identifiable (``None``)."""
-    from gyrolab.compensation.allan import allan_deviation, noise_terms
+    from gyrolab.numerics.allan import allan_deviation, noise_terms
 
     return noise_terms(allan_deviation(x, 1.0 / block_s, taus="octave")).to_dict()
 

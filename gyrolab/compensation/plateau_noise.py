@@ -6,9 +6,9 @@ the recording's ``/profile/event`` topic shows ending (``step_started`` ... ``st
 the step soaked), the *soaked segment* is the tail of the step in which the PT100 stays
 within ``tol_c`` of its final value (the median of the step's last tenth): the gyro case has
 settled, so the segment is a static test at one temperature. On the segment's rate samples
-(gaps stay gaps: NaN, :func:`~gyrolab.compensation.deviations.gap_filled`) the overlapping
-Allan deviation (:func:`~gyrolab.compensation.deviations.deviation`) and the slope-rule
-noise terms (:func:`~gyrolab.compensation.allan.noise_terms`) give N and B, with B's
+(gaps stay gaps: NaN, :func:`~gyrolab.numerics.deviations.gap_filled`) the overlapping
+Allan deviation (:func:`~gyrolab.numerics.deviations.deviation`) and the slope-rule
+noise terms (:func:`~gyrolab.numerics.allan.noise_terms`) give N and B, with B's
 one-sigma interval from the curve's bounds at the tau of the minimum.
 """
 
@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyrolab.compensation.allan import FLICKER_FLOOR, AllanResult, noise_terms
-from gyrolab.compensation.deviations import DeviationResult, deviation, gap_filled
-from gyrolab.recording import Recording
+from gyrolab.numerics.allan import FLICKER_FLOOR, AllanResult, noise_terms
+from gyrolab.numerics.deviations import DeviationResult, deviation, gap_filled
+from gyrolab.record.recording import Recording
 
 __all__ = ["Plateau", "as_allan_result", "plateau_noise", "soaked_segments"]
 

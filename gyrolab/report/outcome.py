@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.recording import Recording
+from gyrolab.record.recording import Recording
 
 #: Outcome statuses, most to least orderly.
 STATUSES = ("complete", "aborted", "interrupted", "recovered", "incomplete")

@@ -8,7 +8,7 @@ import sys
 
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file, check_output
-from gyrolab.profile import load_profile
+from gyrolab.profiles.profile import load_profile
 from gyrolab.sim.family import unit_family
 from gyrolab.sim.model import apply_effect_args, load_model, nominal_model
 from gyrolab.sim.simulate import axis_physics, simulate_run

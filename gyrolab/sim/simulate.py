@@ -22,9 +22,9 @@ from typing import IO, Any
 import numpy as np
 
 from gyrolab import __version__
-from gyrolab.profile import Profile
+from gyrolab.profiles.profile import Profile
 from gyrolab.progress import progress
-from gyrolab.recording import RecordingWriter
+from gyrolab.record.recording import RecordingWriter
 from gyrolab.sim.family import Unit
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.physics import Physics

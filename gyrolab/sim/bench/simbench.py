@@ -79,7 +79,7 @@ class SimBench:
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
-        # model each driver needs (gyrolab.acquisition.registry, DriverSpec.sim_backend).
+        # model each driver needs (gyrolab.instruments.registry, DriverSpec.sim_backend).
         if dmm_model not in ("34401A", "34465A") or chamber_model not in ("F4", "P300"):
             raise ValueError(f"unknown simulated instrument {dmm_model!r} / {chamber_model!r}")
         if physics is None:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.recording import (
+from gyrolab.record.recording import (
     TOPIC_EVENT,
     TOPIC_OVEN,
     TOPIC_PT100,

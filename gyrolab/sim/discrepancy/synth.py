@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gyrolab.profile import Profile
+from gyrolab.profiles.profile import Profile
 from gyrolab.sim.discrepancy.data import BenchData, from_arrays
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.physics import Physics

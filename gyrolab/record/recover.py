@@ -1,6 +1,6 @@
 """Salvage a recording cut short by a crash (``gyrolab recover``).
 
-A recording written by :class:`~gyrolab.recording.RecordingWriter` is an append-only
+A recording written by :class:`~gyrolab.record.recording.RecordingWriter` is an append-only
 sequence of MCAP records: magic, header, the ``run`` and ``bench`` metadata, then one
 chunk (schemas, channels, messages; zstd; CRC-32 of the uncompressed bytes) plus its
 message indexes per flush. A ``kill -9`` or a power cut leaves every record that reached
@@ -397,7 +397,7 @@ def _account(content: dict[str, Any], rep: RecoveryReport) -> None:
     """
     import json
 
-    from gyrolab.recording import decode_block
+    from gyrolab.record.recording import decode_block
 
     by_topic: dict[str, list[_Message]] = {}
     for m in content["messages"]:

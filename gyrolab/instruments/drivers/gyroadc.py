@@ -1,7 +1,7 @@
 """``gyroadc``: the gyro's framed ADC stream (docs/instruments.md) as the rate stream.
 
-The reader is :class:`gyrolab.acquisition.gyro_adc.GyroAdcReader`; this module makes it
-fill the :class:`~gyrolab.acquisition.roles.RateStream` role and registers it.
+The reader is :class:`gyrolab.instruments.gyro_adc.GyroAdcReader`; this module makes it
+fill the :class:`~gyrolab.instruments.roles.RateStream` role and registers it.
 """
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ from __future__ import annotations
 from typing import Any
 
 from gyrolab.acquisition.bench_config import AdcConfig
-from gyrolab.acquisition.gyro_adc import GyroAdcReader
-from gyrolab.acquisition.instrument import InstrumentReport
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
+from gyrolab.instruments.errors import InstrumentReport
+from gyrolab.instruments.gyro_adc import GyroAdcReader
+from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 
 
 class GyroAdcStream(GyroAdcReader):

@@ -1,7 +1,7 @@
 """``agilent34401a``: the HP/Agilent 34401A as the bench's thermometer (4-wire PT100).
 
-The SCPI driver is :class:`gyrolab.acquisition.multimeter.Agilent34401A`; this module
-makes it fill the :class:`~gyrolab.acquisition.roles.Thermometer` role (the error queue
+The SCPI driver is :class:`gyrolab.instruments.multimeter.Agilent34401A`; this module
+makes it fill the :class:`~gyrolab.instruments.roles.Thermometer` role (the error queue
 read after every reading, the identity) and registers it.
 """
 
@@ -10,10 +10,10 @@ from __future__ import annotations
 from typing import Any, TypeVar
 
 from gyrolab.acquisition.bench_config import MultimeterConfig
-from gyrolab.acquisition.instrument import InstrumentReport
-from gyrolab.acquisition.multimeter import Agilent34401A, scpi_reports
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
-from gyrolab.acquisition.roles import ThermometerReading
+from gyrolab.instruments.errors import InstrumentReport
+from gyrolab.instruments.multimeter import Agilent34401A, scpi_reports
+from gyrolab.instruments.registry import DriverSpec, OpenContext, connected, register
+from gyrolab.instruments.roles import ThermometerReading
 
 
 class Agilent34401AThermometer(Agilent34401A):

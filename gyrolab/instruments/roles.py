@@ -9,17 +9,17 @@ A bench has three roles (docs/instruments.md, "Roles and drivers"):
   :class:`ChamberReading`, and where the driver can, ``switch_off()`` (verified).
 * :class:`RateStream` — the gyro's ADC stream.
 
-Every driver registered in :mod:`gyrolab.acquisition.registry` implements one role itself
+Every driver registered in :mod:`gyrolab.instruments.registry` implements one role itself
 (no adapters) and says who it is with ``describe()`` (into the recording's ``bench``
 metadata).
 
 Errors (one vocabulary, :func:`is_transient`): a driver raises
 
-* :class:`~gyrolab.acquisition.instrument.InstrumentError` (or an ``OSError`` /
+* :class:`~gyrolab.instruments.errors.InstrumentError` (or an ``OSError`` /
   ``TimeoutError`` from the transport) for a failed exchange — **transient**: the runner
   logs it and retries at the next poll, until ``comm_timeout_s`` says the instrument is
   lost;
-* :class:`~gyrolab.acquisition.instrument.LimitError` for a setting outside the configured
+* :class:`~gyrolab.instruments.errors.LimitError` for a setting outside the configured
   limits (nothing was sent) — **never retried**: the run stops, chamber to the safe state;
 * :class:`InstrumentFault` for a condition the instrument reports that must end the run
   (a sensor fault) — **never retried**.
@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple, Protocol
 
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentReport, LimitError
+from gyrolab.instruments.errors import InstrumentError, InstrumentReport, LimitError
 
 
 class InstrumentFault(Exception):
@@ -106,7 +106,7 @@ class Chamber(Instrument, Protocol):
 
 
 class RateStream(Instrument, Protocol):
-    """The gyro's ADC stream (:class:`gyrolab.acquisition.gyro_adc.GyroAdcReader`)."""
+    """The gyro's ADC stream (:class:`gyrolab.instruments.gyro_adc.GyroAdcReader`)."""
 
     def read(self, timeout_s: float) -> Any:
         """Intact samples received so far (an ``AdcRead``: blocks, gaps, events)."""

@@ -49,7 +49,7 @@ from typing import Any
 import minimalmodbus
 import serial
 
-from gyrolab.acquisition.instrument import (
+from gyrolab.instruments.errors import (
     InstrumentError,
     InstrumentReport,
     InstrumentTimeout,

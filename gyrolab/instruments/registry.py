@@ -1,6 +1,6 @@
 """The driver registry: which driver fills which role on a bench.
 
-Each module in :mod:`gyrolab.acquisition.drivers` registers one :class:`DriverSpec` at
+Each module in :mod:`gyrolab.instruments.drivers` registers one :class:`DriverSpec` at
 import time with :func:`register`. ``BENCH.toml`` names the driver per role
 (``[thermometer] driver = "agilent34401a"``); the bench loader checks the rest of the
 table against the spec's config dataclass (unknown keys are errors), and
@@ -95,7 +95,7 @@ def _load() -> None:
     global _loaded
     if _loaded:
         return
-    from gyrolab.acquisition import drivers
+    from gyrolab.instruments import drivers
 
     for m in sorted(pkgutil.iter_modules(drivers.__path__), key=lambda m: m.name):
         importlib.import_module(f"{drivers.__name__}.{m.name}")

@@ -23,7 +23,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.acquisition.instrument import (
+from gyrolab.instruments.errors import (
     InstrumentError,
     InstrumentReport,
     InstrumentTimeout,

@@ -33,7 +33,6 @@ from gyrolab.acquisition.bench_config import (
     check_bench_for_profile,
     load_bench,
 )
-from gyrolab.acquisition.roles import Chamber, RateStream, Thermometer
 from gyrolab.acquisition.runner import (
     Acquisition,
     RunResult,
@@ -42,9 +41,10 @@ from gyrolab.acquisition.runner import (
     check_profile_limits,
 )
 from gyrolab.errors import GyrolabError, InputError
+from gyrolab.instruments.roles import Chamber, RateStream, Thermometer
 from gyrolab.outputs import check_output
-from gyrolab.profile import Profile, load_profile
-from gyrolab.recording import RecordingWriter
+from gyrolab.profiles.profile import Profile, load_profile
+from gyrolab.record.recording import RecordingWriter
 
 # --------------------------------------------------------------------- instruments
 
@@ -63,7 +63,7 @@ SIM_TIMEOUT_FLOOR_S = 0.25
 
 
 class Instruments:
-    """The three connected drivers (each implements its role, gyrolab.acquisition.roles)
+    """The three connected drivers (each implements its role, gyrolab.instruments.roles)
     and their identities."""
 
     def __init__(self) -> None:
@@ -92,7 +92,7 @@ def connect_instruments(
     clock: Callable[[], float] = time.monotonic,
 ) -> Instruments:
     """Open and identify the bench's three drivers (``driver`` of each role's table,
-    gyrolab.acquisition.registry) at the given addresses; raises InputError naming what
+    gyrolab.instruments.registry) at the given addresses; raises InputError naming what
     failed.
 
     ``time_scale`` divides the drivers' wall-clock timeouts (a simulated bench running
@@ -101,7 +101,7 @@ def connect_instruments(
     seconds, which protects against scheduling jitter; in real time the configured
     timeouts are used as they are (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
     """
-    from gyrolab.acquisition import registry
+    from gyrolab.instruments import registry
 
     inst = Instruments()
     src = cfg.source
@@ -190,7 +190,7 @@ def sim_bench_config(seed: int) -> BenchConfig:
 def sim_drivers(cfg: BenchConfig, names: list[str]) -> BenchConfig:
     """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
     name picks its role; the driver's default settings)."""
-    from gyrolab.acquisition import registry
+    from gyrolab.instruments import registry
 
     fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
     for name in names:
@@ -221,7 +221,7 @@ def start_sim_bench(
     the same path as ``examples/lab.toml``. ``axis_models`` (0–2 SimModels) make a 2- or
     3-axis unit exactly as ``gyrolab simulate --axis-model`` does (one ADC, axes interleaved).
     """
-    from gyrolab.acquisition import registry
+    from gyrolab.instruments import registry
     from gyrolab.sim.bench import SimBench
     from gyrolab.sim.model import nominal_model
     from gyrolab.sim.simulate import axis_physics, provenance
@@ -641,7 +641,7 @@ def acquire(args: argparse.Namespace) -> int:
 
 def recover(args: argparse.Namespace) -> int:
     """``gyrolab recover BROKEN.mcap --out FIXED.mcap``: salvage and report what was lost."""
-    from gyrolab.acquisition.recover import recover_recording
+    from gyrolab.record.recover import recover_recording
 
     rep = recover_recording(args.broken, args.out, force=args.force)
     print(rep.summary())

@@ -31,14 +31,14 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.acquisition.instrument import (
+from gyrolab.instruments.errors import (
     InstrumentError,
     InstrumentReport,
     InstrumentTimeout,
     LimitError,
 )
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
-from gyrolab.acquisition.roles import ChamberReading, InstrumentFault
+from gyrolab.instruments.registry import DriverSpec, OpenContext, connected, register
+from gyrolab.instruments.roles import ChamberReading, InstrumentFault
 
 NAME = "ESPEC"
 

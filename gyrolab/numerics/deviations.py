@@ -1,7 +1,7 @@
 """The time-and-frequency family beside the Allan deviation: MDEV, TDEV, HDEV, TOTDEV.
 
 All estimators work on the phase (angle) ``x_k = tau0 * sum_{i<k} y_i`` of rate data ``y``
-(built once by :mod:`gyrolab.compensation.allan`'s compensated cumulative sum), ``N`` phase
+(built once by :mod:`gyrolab.numerics.allan`'s compensated cumulative sum), ``N`` phase
 points, ``tau = m * tau0`` (NIST SP 1065, W. J. Riley, "Handbook of Frequency Stability
 Analysis", 2008; equation numbers below are SP 1065's)::
 
@@ -33,7 +33,7 @@ SP 1065 table 7, ``edf = b T/tau - c`` for alpha = 0, -1, -2 (white, flicker, ra
 rate), and the OADEV EDF for alpha = 1, 2 (phase noise, where TOTDEV ~ OADEV); bounds
 ``s sqrt(edf / chi2_{1-p}(edf))``, ``s sqrt(edf / chi2_p(edf))`` (SP 1065 eq. 45). The noise
 type alpha at each tau comes from the lag-1 autocorrelation of the tau-averaged rate
-(:func:`~gyrolab.compensation.allan.noise_id_lag1`), averages that touch a gap left out;
+(:func:`~gyrolab.numerics.allan.noise_id_lag1`), averages that touch a gap left out;
 with gaps, ``N`` in the EDF is the number of samples present plus one (an approximation).
 """
 
@@ -47,7 +47,8 @@ import numba
 import numpy as np
 from scipy import stats
 
-from gyrolab.compensation.allan import (
+from gyrolab.errors import InputError
+from gyrolab.numerics.allan import (
     NOISE_ID_MAX_POINTS,
     ONE_SIGMA,
     _phase_detrended,
@@ -56,7 +57,6 @@ from gyrolab.compensation.allan import (
     noise_id_lag1,
     tau_grid,
 )
-from gyrolab.errors import InputError
 
 __all__ = ["KINDS", "DeviationResult", "deviation", "gap_filled"]
 

@@ -34,7 +34,7 @@ from typing import Any
 
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
-from gyrolab.profile import load_profile
+from gyrolab.profiles.profile import load_profile
 from gyrolab.progress import progress
 
 

@@ -14,7 +14,7 @@ Command Quick Reference; docs/instruments.md):
     SYST:ERR?                       +0,"No error" | <code>,"<text>"  (SCPI error classes)
 
 The transport, late-reply resynchronisation and error-queue handling are the 34401A
-driver's (:class:`gyrolab.acquisition.multimeter.Agilent34401A`): same SCPI subset, same
+driver's (:class:`gyrolab.instruments.multimeter.Agilent34401A`): same SCPI subset, same
 reply formats.
 """
 
@@ -23,9 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.acquisition.drivers.agilent34401a import Agilent34401AThermometer, open_thermometer
-from gyrolab.acquisition.instrument import LimitError
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, register
+from gyrolab.instruments.drivers.agilent34401a import Agilent34401AThermometer, open_thermometer
+from gyrolab.instruments.errors import LimitError
+from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 
 
 @dataclass(frozen=True)

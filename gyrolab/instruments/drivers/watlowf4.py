@@ -1,7 +1,7 @@
 """``watlowf4``: the Watlow F4 controller (Modbus RTU) as the bench's chamber.
 
-The Modbus driver is :class:`gyrolab.acquisition.oven.WatlowF4`; this module makes it fill
-the :class:`~gyrolab.acquisition.roles.Chamber` role and registers it.
+The Modbus driver is :class:`gyrolab.instruments.oven.WatlowF4`; this module makes it fill
+the :class:`~gyrolab.instruments.roles.Chamber` role and registers it.
 """
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from __future__ import annotations
 from typing import Any
 
 from gyrolab.acquisition.bench_config import OvenConfig
-from gyrolab.acquisition.instrument import InstrumentError, InstrumentReport
-from gyrolab.acquisition.oven import NAME, PROFILE_PAUSED, PROFILE_RUNNING, WatlowF4
-from gyrolab.acquisition.registry import DriverSpec, OpenContext, connected, register
-from gyrolab.acquisition.roles import ChamberReading, InstrumentFault
+from gyrolab.instruments.errors import InstrumentError, InstrumentReport
+from gyrolab.instruments.oven import NAME, PROFILE_PAUSED, PROFILE_RUNNING, WatlowF4
+from gyrolab.instruments.registry import DriverSpec, OpenContext, connected, register
+from gyrolab.instruments.roles import ChamberReading, InstrumentFault
 
 
 class WatlowF4Chamber(WatlowF4):
