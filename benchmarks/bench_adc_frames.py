@@ -7,7 +7,7 @@ Three measurements, all in one process:
    bytes, for 1, 10 and 100 samples per frame.
 2. ``reference``: the decoder one usually writes first — a byte-at-a-time state machine
    with a bitwise CRC-16/CCITT — on the same streams; its output is checked identical.
-3. ``pty``: :class:`gyrolab.instruments.gyro_adc.GyroAdcReader` reading a real pseudo-
+3. ``pty``: :class:`gyrolab.instruments.drivers.gyroadc.GyroAdcReader` reading a real pseudo-
    terminal that a writer thread fills as fast as the kernel takes it (decode + port I/O).
 
 The need is 1 kHz (1000 samples/s); the target is ≥ 20× that. Usage::
@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from gyrolab.framing import FrameDecoder, encode_frames
-from gyrolab.instruments.gyro_adc import GyroAdcReader
+from gyrolab.instruments.drivers.gyroadc import GyroAdcReader
 from gyrolab.sim.bench.faults import ByteFaults
 from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
 

@@ -1,6 +1,6 @@
 """The gyro ADC's binary frame: encoder, streaming decoder and CRC-16/CCITT.
 
-Shared by the driver (``gyrolab.instruments.gyro_adc``) and the simulated ADC source
+Shared by the driver (``gyrolab.instruments.drivers.gyroadc``) and the simulated ADC source
 (``gyrolab.sim.bench.adc_source``); it lives at package level so that ``sim`` never
 imports ``acquisition``. docs/instruments.md is the reference for the format.
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrolab.acquisition.bench_config import AdcConfig
 from gyrolab.cli import main
+from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
 from gyrolab.record.recording import TOPIC_LOG, read_recording
 
 REPO = Path(__file__).resolve().parents[1]
@@ -84,7 +84,7 @@ def test_short_run_adc_stream_is_whole_and_converted_exactly(short_run) -> None:
     assert adc.t[-1] + adc.period >= t_end - 1e-6
     assert adc.index.size >= 100 * (t_end - 3.0)
     assert np.array_equal(adc.index, rate.index) and np.allclose(adc.t, rate.t)
-    expect = AdcConfig().to_dps(adc.values.astype(np.float64)).astype(np.float32)
+    expect = GyroAdcConfig().to_dps(adc.values.astype(np.float64)).astype(np.float32)
     assert np.array_equal(rate.values.astype(np.float32), expect)
     # PT100 read about once a (simulated) second; the oven every ~2 s.
     assert np.median(np.diff(rec.pt100_t)) == pytest.approx(1.0, abs=0.2)

@@ -13,7 +13,8 @@ import pytest
 from mcap.reader import make_reader
 
 from gyrolab.cli import main
-from gyrolab.instruments.gyro_adc import AdcRead, GyroAdcReader
+from gyrolab.instruments.drivers.gyroadc import GyroAdcReader
+from gyrolab.instruments.roles import AdcRead
 from gyrolab.record.recording import read_recording
 from gyrolab.sim.bench import ByteFaults, FaultPlan, SimBench
 from gyrolab.sim.model import nominal_model

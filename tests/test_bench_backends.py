@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import serial
 
-from gyrolab.instruments.gyro_adc import GyroAdcReader
+from gyrolab.instruments.drivers.gyroadc import GyroAdcReader
 from gyrolab.sim.bench import ByteFaults, FaultEvent, ModbusFaults, SimBench, SimClock
 from gyrolab.sim.bench.dmm_scpi import OVERLOAD, Scpi34401A
 from gyrolab.sim.bench.oven_modbus import OvenHooks, WatlowF4Slave, request_length, with_crc

@@ -8,8 +8,7 @@ import pytest
 
 from gyrolab.instruments import registry
 from gyrolab.instruments.drivers.espec import EspecChamber, EspecConfig
-from gyrolab.instruments.errors import InstrumentError, LimitError
-from gyrolab.instruments.roles import InstrumentFault, is_transient
+from gyrolab.instruments.roles import InstrumentError, InstrumentFault, LimitError, is_transient
 from gyrolab.instruments.testing import ExpectedVisa, expected_protocol
 from gyrolab.sim.bench import SimBench
 

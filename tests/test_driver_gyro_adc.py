@@ -19,7 +19,8 @@ from gyrolab.framing import (
     encode_frames,
     frame_size,
 )
-from gyrolab.instruments.gyro_adc import AdcRead, GyroAdcReader
+from gyrolab.instruments.drivers.gyroadc import GyroAdcReader
+from gyrolab.instruments.roles import AdcRead
 from gyrolab.sim.bench import ByteFaults, FaultEvent, FaultPlan, SimBench
 
 N = 10

@@ -8,7 +8,7 @@ import pytest
 
 from gyrolab.instruments import registry
 from gyrolab.instruments.drivers.keysight34465a import Keysight34465A, Keysight34465AConfig
-from gyrolab.instruments.errors import InstrumentError, LimitError
+from gyrolab.instruments.roles import InstrumentError, LimitError
 from gyrolab.instruments.testing import ExpectedVisa, expected_protocol
 from gyrolab.pt100 import cvd_resistance
 from gyrolab.sim.bench import SimBench

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import gyrolab.sim.bench as bench_pkg
-from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.instruments.multimeter import Agilent34401A
+from gyrolab.instruments.drivers.agilent34401a import Agilent34401A
+from gyrolab.instruments.roles import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.instruments.testing import ExpectedVisa
 from gyrolab.pt100 import cvd_resistance, cvd_temperature
 from gyrolab.sim.bench import FaultEvent, SimBench

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.instruments.oven import WatlowF4
+from gyrolab.instruments.drivers.watlowf4 import WatlowF4
+from gyrolab.instruments.roles import InstrumentError, InstrumentTimeout, LimitError
 from gyrolab.instruments.testing import ExpectedSerial
 from gyrolab.sim.bench import FaultEvent, SimBench
 from gyrolab.sim.bench.oven_modbus import OvenHooks, WatlowF4Slave, crc16_modbus, with_crc
@@ -394,30 +394,28 @@ def test_event_output_written_and_read_back() -> None:
 
 
 def test_running_profile_refused_at_connect_and_a_fault_mid_run() -> None:
-    from gyrolab.acquisition.bench_config import OvenConfig
-    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber
+    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber, WatlowF4Config
     from gyrolab.instruments.roles import InstrumentFault
 
     connect = [(READ_DP, DP_1), (READ_UNITS, UNITS_C), (READ_SP, SP_M40), (READ_PV, PV_25_3)]
     fake = ExpectedSerial([*connect, (_rd(200), _val(2))])
     with pytest.raises(InstrumentError, match="profile is running"):
-        WatlowF4Chamber(fake, config=OvenConfig()).connect()
+        WatlowF4Chamber(fake, config=WatlowF4Config()).connect()
     fake = ExpectedSerial(
         [*connect, (_rd(200), _val(0)), (READ_SP, SP_M40), (READ_PV, PV_25_3), (_rd(200), _val(3))]
     )
-    ch = WatlowF4Chamber(fake, config=OvenConfig())
+    ch = WatlowF4Chamber(fake, config=WatlowF4Config())
     ch.connect()
     with pytest.raises(InstrumentFault, match="register 200 = 3"):
         ch.read()
 
 
 def test_simulated_f4_control_event_switches_the_chamber() -> None:
-    from gyrolab.acquisition.bench_config import OvenConfig
-    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber
+    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber, WatlowF4Config
 
     with SimBench(speed=200.0, oven_control_event=2, ambient_c=22.0) as bench:
         bench.inject(FaultEvent("disconnect", duration_s=1e9))
-        with WatlowF4Chamber(bench.oven_port, config=OvenConfig(control_event=2)) as oven:
+        with WatlowF4Chamber(bench.oven_port, config=WatlowF4Config(control_event=2)) as oven:
             assert oven.connect()["event_2"] == 0
             assert oven.set_setpoint(50.0) == 50.0  # and event 2 on, read back
             assert bench.oven.events[1] == 1 and bench.physics.setpoint_c == 50.0

@@ -172,8 +172,8 @@ class _LateMeter:
 def test_multimeter_stays_in_step_after_a_late_reply() -> None:
     """Without the resync every later answer is the previous query's: READ? gets the
     late reading (stale) and SYST:ERR? gets a reading (unparsable), for good."""
-    from gyrolab.instruments.errors import InstrumentTimeout
-    from gyrolab.instruments.multimeter import Agilent34401A
+    from gyrolab.instruments.drivers.agilent34401a import Agilent34401A
+    from gyrolab.instruments.roles import InstrumentTimeout
 
     res = _LateMeter()
     dmm = Agilent34401A(res, timeout_s=0.25)

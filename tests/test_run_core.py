@@ -11,11 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.bench_config import Limits, SafeState
 from gyrolab.acquisition.runner import Acquisition
-from gyrolab.instruments.errors import InstrumentTimeout
-from gyrolab.instruments.gyro_adc import AdcBlock, AdcRead
-from gyrolab.instruments.roles import ChamberReading, ThermometerReading
+from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
+from gyrolab.instruments.roles import (
+    AdcBlock,
+    AdcRead,
+    ChamberReading,
+    InstrumentTimeout,
+    ThermometerReading,
+)
 from gyrolab.profiles.profile import Profile, Step
 from gyrolab.pt100 import cvd_resistance
 from gyrolab.record.recording import RecordingWriter, read_recording
@@ -126,7 +131,7 @@ def _run(tmp_path: Path, *, therm_faults=(), silent_from=math.inf, comm_timeout_
         thermometer=Thermometer(clock, chamber, therm_faults),
         oven=chamber,
         gyro=Stream(clock),
-        adc=AdcConfig(sample_rate_hz=100.0),
+        adc=GyroAdcConfig(sample_rate_hz=100.0),
         limits=Limits(comm_timeout_s=comm_timeout_s, pt100_max_c=75.0, watchdog_samples=3),
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,

@@ -7,11 +7,17 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.bench_config import Limits, SafeState
 from gyrolab.acquisition.runner import Acquisition, WallClock
-from gyrolab.instruments.errors import InstrumentError, InstrumentTimeout, LimitError
-from gyrolab.instruments.gyro_adc import AdcRead
-from gyrolab.instruments.roles import ChamberReading, ThermometerReading
+from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
+from gyrolab.instruments.roles import (
+    AdcRead,
+    ChamberReading,
+    InstrumentError,
+    InstrumentTimeout,
+    LimitError,
+    ThermometerReading,
+)
 from gyrolab.profiles.profile import Profile, Step
 from gyrolab.pt100 import cvd_resistance
 from gyrolab.record.recording import RecordingWriter, read_recording
@@ -85,7 +91,7 @@ def _run(tmp_path: Path, chamber: MemoryChamber, thermo: MemoryThermometer, dura
         thermometer=thermo,
         oven=chamber,
         gyro=SilentStream(),
-        adc=AdcConfig(),
+        adc=GyroAdcConfig(),
         limits=Limits(comm_timeout_s=30.0),
         safe_state=SafeState(),
         pt100_period_s=0.05,

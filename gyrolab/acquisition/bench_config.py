@@ -6,6 +6,11 @@ ADC's conversion from counts to °/s, the recorder's crash-loss policy, and who 
 unit. ``docs/bench-config.md`` documents every key; ``examples/lab.toml`` is a complete
 example. Unknown keys are errors (a typo in a safety limit must not pass silently).
 
+Each instrument table (``[thermometer]``, ``[chamber]``, ``[adc]``) is the config dataclass
+of the driver its ``driver`` key names, declared in that driver's module and found through
+:mod:`gyrolab.instruments.registry`; this module holds only what is bench-wide (run, limits,
+safe state, recorder) and names no driver.
+
 The ``run`` table goes into the recording's ``run`` metadata, the instrument tables (with
 the identities the drivers read at connect time) into ``bench``.
 """
@@ -19,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from gyrolab.errors import InputError
+from gyrolab.instruments import registry
 from gyrolab.tomlfile import read_toml
 
 
@@ -31,63 +37,6 @@ class RunInfo:
     unit_model: str = ""
     profile: str = "paper"  # built-in name or a profile TOML (relative to the bench file)
     notes: str = ""
-
-
-@dataclass(frozen=True)
-class MultimeterConfig:
-    """Agilent/HP 34401A reading the PT100 (4-wire): the ``agilent34401a`` driver's config."""
-
-    driver: str = "agilent34401a"  # gyrolab.instruments.registry
-    resource: str = ""  # "ASRL/dev/ttyUSB0::INSTR" or "TCPIP::host::5025::SOCKET"
-    timeout_s: float = 5.0
-    nplc: float = 10.0
-    range_ohm: float = 1000.0  # 100 Ω range overflows above ~0 °C for a PT100 at 60 °C
-    baud_rate: int = 9600  # RS-232 only
-    period_s: float = 1.0  # one reading per period
-    r0_ohm: float = 100.0  # the PT100's R at 0 °C (calibration)
-    serial: str = ""  # asset serial, if *IDN? does not give it
-    calibration_due: str = ""
-
-
-@dataclass(frozen=True)
-class OvenConfig:
-    """Watlow F4 controller, Modbus RTU: the ``watlowf4`` driver's config."""
-
-    driver: str = "watlowf4"  # gyrolab.instruments.registry
-    port: str = ""  # "/dev/ttyUSB1"
-    slave_address: int = 1
-    baud_rate: int = 19200
-    timeout_s: float = 0.3
-    period_s: float = 2.0  # /oven/state poll period
-    serial: str = ""
-    # The F4 event output (1..8) that switches the chamber on (ESPEC wires one so); 0: none.
-    # Needed for [safe_state] mode = "off".
-    control_event: int = 0
-
-
-@dataclass(frozen=True)
-class AdcConfig:
-    """The gyro's ADC stream and its conversion to °/s (``Ω = (V − offset)/gain``)."""
-
-    driver: str = "gyroadc"  # gyrolab.instruments.registry
-    port: str = ""  # "/dev/ttyUSB2"
-    baud_rate: int = 921600
-    sample_rate_hz: float = 100.0
-    samples_per_frame: int = 10  # the ADC's frame length (docs/instruments.md)
-    axes: int = 1  # values per sample (x, y, z), interleaved in each frame; 1..3
-    bits: int = 24
-    vref_v: float = 2.5
-    gain_v_per_dps: float = 0.01  # gyro scale factor seen at the ADC input
-    offset_v: float = 0.0
-    block_s: float = 0.5  # samples per recorded block = block_s · rate (bounds crash loss)
-    serial: str = ""
-
-    def dps_per_count(self) -> float:
-        return self.vref_v / 2 ** (self.bits - 1) / self.gain_v_per_dps
-
-    def to_dps(self, counts: Any) -> Any:
-        """Counts → °/s with this calibration (works on numpy arrays)."""
-        return (counts * (self.vref_v / 2 ** (self.bits - 1)) - self.offset_v) / self.gain_v_per_dps
 
 
 @dataclass(frozen=True)
@@ -130,9 +79,9 @@ class BenchConfig:
     # The three roles (``[thermometer]``, ``[chamber]``, ``[adc]``), each the config
     # dataclass of the driver its table names (gyrolab.instruments.registry). The field
     # names are the tables' older names, which are still accepted.
-    multimeter: Any = field(default_factory=MultimeterConfig)
-    oven: Any = field(default_factory=OvenConfig)
-    adc: AdcConfig = field(default_factory=AdcConfig)
+    multimeter: Any = field(default_factory=lambda: registry.default_config("thermometer"))
+    oven: Any = field(default_factory=lambda: registry.default_config("chamber"))
+    adc: Any = field(default_factory=lambda: registry.default_config("rate_stream"))
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
@@ -205,8 +154,6 @@ _ROLE_TABLES = (
 def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source: str) -> Any:
     """The driver config of one role: ``driver`` (default: the bench's original driver)
     picks the dataclass the rest of the table is checked against."""
-    from gyrolab.instruments import registry
-
     given = [t for t in tables if t in d]
     if len(given) > 1:
         raise InputError(source, f"[{given[0]}] and [{given[1]}] are the same role: keep one")
@@ -275,27 +222,25 @@ def validate(cfg: BenchConfig) -> None:
     ss = cfg.safe_state
     if ss.mode not in ("setpoint", "off"):
         raise InputError(s, f"[safe_state] mode = {ss.mode!r}: 'setpoint' or 'off'")
-    if ss.mode == "off" and getattr(cfg.oven, "control_event", None) == 0:
-        raise InputError(
-            s, "[safe_state] mode = 'off' needs [chamber] control_event (the F4 event output "
-            "that switches the chamber)"
-        )
-    if not 0 <= getattr(cfg.oven, "control_event", 0) <= 8:
-        raise InputError(s, "[chamber] control_event must be an event output 1..8 (0: none)")
     if not lim.setpoint_min_c <= ss.setpoint_c <= lim.setpoint_max_c:
         raise InputError(s, "[safe_state] setpoint_c is outside the setpoint limits")
     if not lim.pt100_min_c < ss.setpoint_c < lim.pt100_max_c:
         raise InputError(s, "[safe_state] setpoint_c is outside [limits] pt100_min_c..pt100_max_c")
-    a = cfg.adc
-    if not (2 <= a.bits <= 32 and a.vref_v > 0 and a.gain_v_per_dps != 0):
-        raise InputError(s, "[adc] needs 2 <= bits <= 32, vref_v > 0, gain_v_per_dps != 0")
-    if not (a.sample_rate_hz > 0 and a.block_s > 0 and 1 <= a.samples_per_frame <= 4096):
-        raise InputError(s, "[adc] sample_rate_hz, block_s must be > 0; samples_per_frame 1..4096")
-    if not (1 <= a.axes <= 3 and a.samples_per_frame * a.axes <= 4096):
-        raise InputError(s, "[adc] axes must be 1..3 with samples_per_frame·axes <= 4096")
+    for fname, _, names in _ROLE_TABLES:
+        sub = getattr(cfg, fname)
+        # The driver's own checks (its config's optional check(), registry.DriverSpec).
+        check = getattr(sub, "check", None)
+        if check is not None:
+            try:
+                check(ss.mode)
+            except ValueError as e:
+                raise InputError(s, f"[{names[0]}] {sub.driver}: {e}") from None
     for name, period in (("multimeter", cfg.multimeter.period_s), ("oven", cfg.oven.period_s)):
         if not period > 0:
             raise InputError(s, f"[{name}] period_s must be > 0")
+    a = cfg.adc
+    if not (a.sample_rate_hz > 0 and a.block_s > 0):
+        raise InputError(s, "[adc] sample_rate_hz and block_s must be > 0")
     r = cfg.recorder
     if not (0 < r.flush_every_s <= 1.5):
         # The 2 s crash-loss promise needs flush period + one ADC block below 2 s.
@@ -326,8 +271,6 @@ def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str)
 
 def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     """Read and check a bench TOML file."""
-    from gyrolab.instruments import registry
-
     p = Path(path)
     d = read_toml(p, "bench file")
     cfg = bench_from_dict(d, str(p))

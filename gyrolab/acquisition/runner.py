@@ -41,13 +41,14 @@ from typing import Any, Protocol
 import numpy as np
 
 from gyrolab.acquisition import interrupts
-from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.bench_config import Limits, SafeState
 from gyrolab.errors import InputError
 from gyrolab.instruments.roles import (  # noqa: F401 - re-exported for compatibility
     Chamber,
     ChamberReading,
     InstrumentFault,
     RateStream,
+    RateStreamConfig,
     Thermometer,
     ThermometerReading,
     is_transient,
@@ -469,7 +470,7 @@ class Acquisition:
         thermometer: Thermometer,
         oven: Oven,
         gyro: GyroStream,
-        adc: AdcConfig,
+        adc: RateStreamConfig,
         limits: Limits,
         safe_state: SafeState,
         pt100_period_s: float = 1.0,

@@ -41,6 +41,7 @@ from gyrolab.acquisition.runner import (
     check_profile_limits,
 )
 from gyrolab.errors import GyrolabError, InputError
+from gyrolab.instruments import registry
 from gyrolab.instruments.roles import Chamber, RateStream, Thermometer
 from gyrolab.outputs import check_output
 from gyrolab.profiles.profile import Profile, load_profile
@@ -88,7 +89,7 @@ def connect_instruments(
     adc_port: str,
     time_scale: float = 1.0,
     timeout_floor_s: float = LAB_TIMEOUT_FLOOR_S,
-    visa_library: str = "@py",
+    visa_library: Any = "@py",
     clock: Callable[[], float] = time.monotonic,
 ) -> Instruments:
     """Open and identify the bench's three drivers (``driver`` of each role's table,
@@ -101,8 +102,6 @@ def connect_instruments(
     seconds, which protects against scheduling jitter; in real time the configured
     timeouts are used as they are (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
     """
-    from gyrolab.instruments import registry
-
     inst = Instruments()
     src = cfg.source
 
@@ -120,18 +119,15 @@ def connect_instruments(
             ("oven", "chamber", cfg.oven, oven_port),
             ("gyro", "rate_stream", cfg.adc, adc_port),
         ):
-            spec = registry.get(sub.driver, role)
-            source = registry.SOURCE_NAME[role]
             ctx = registry.OpenContext(address, scaled, limits, clock, visa_library)
             try:
-                dev = spec.open(sub, ctx)
+                dev = registry.open_driver(sub, role, ctx)
             except Exception as e:
                 table = "adc" if role == "rate_stream" else role
-                raise InputError(src, f"[{table}] {spec.name} at {address}: {e}") from None
-            dev.name = source
+                raise InputError(src, f"[{table}] {sub.driver} at {address}: {e}") from None
             inst.closers.append(dev.close)
             setattr(inst, attr, dev)
-            inst.identity[source] = dev.describe()
+            inst.identity[dev.name] = dev.describe()
     except BaseException:
         inst.close()
         raise
@@ -190,8 +186,6 @@ def sim_bench_config(seed: int) -> BenchConfig:
 def sim_drivers(cfg: BenchConfig, names: list[str]) -> BenchConfig:
     """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
     name picks its role; the driver's default settings)."""
-    from gyrolab.instruments import registry
-
     fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
     for name in names:
         spec = next((s for s in registry.drivers() if s.name == name), None)
@@ -221,7 +215,6 @@ def start_sim_bench(
     the same path as ``examples/lab.toml``. ``axis_models`` (0–2 SimModels) make a 2- or
     3-axis unit exactly as ``gyrolab simulate --axis-model`` does (one ADC, axes interleaved).
     """
-    from gyrolab.instruments import registry
     from gyrolab.sim.bench import SimBench
     from gyrolab.sim.model import nominal_model
     from gyrolab.sim.simulate import axis_physics, provenance
@@ -428,9 +421,9 @@ def run_acquisition(
         clock = WallClock()
         inst = connect_instruments(
             cfg,
-            dmm_resource=cfg.multimeter.resource,
-            oven_port=cfg.oven.port,
-            adc_port=cfg.adc.port,
+            dmm_resource=registry.address(cfg.multimeter, "thermometer"),
+            oven_port=registry.address(cfg.oven, "chamber"),
+            adc_port=registry.address(cfg.adc, "rate_stream"),
         )
     try:
         run_meta: dict[str, Any] = {

@@ -4,7 +4,7 @@ Each module in :mod:`gyrolab.instruments.drivers` registers one :class:`DriverSp
 import time with :func:`register`. ``BENCH.toml`` names the driver per role
 (``[thermometer] driver = "agilent34401a"``); the bench loader checks the rest of the
 table against the spec's config dataclass (unknown keys are errors), and
-``gyrolab acquire`` opens the driver through ``spec.open``. Adding a driver is one module
+``gyrolab acquire`` opens it with :func:`open_driver` (``spec.open``). Adding a driver is one module
 in ``drivers/`` plus its test (docs/instruments.md, "Adding a driver").
 
 Roles and the recording's name for each (the ``source`` of its ``/log`` entries and the key
@@ -44,13 +44,19 @@ class OpenContext:
 
 @dataclass(frozen=True)
 class DriverSpec:
-    """A driver: its ``name`` in BENCH.toml, its ``role``, its ``config`` dataclass (every
-    field a BENCH.toml key; it must have ``period_s``, ``timeout_s`` and ``serial``
-    where the role polls), ``open(config, ctx)`` returning the connected role object, the
-    config field holding its address (``address_key``), ``sim_backend``: the simulated
-    instrument in ``gyrolab.sim.bench.SimBench`` that speaks its protocol (its model
-    name there; "" = none) and ``sim_address``: the key of ``SimBench.resources()`` the
-    driver connects to."""
+    """A driver: its ``name`` in BENCH.toml, its ``role``, its ``config`` dataclass,
+    ``open(config, ctx)`` returning the connected role object, the config field holding its
+    address (``address_key``), ``sim_backend``: the simulated instrument in
+    ``gyrolab.sim.bench.SimBench`` that speaks its protocol (its model name there; "" =
+    none) and ``sim_address``: the key of ``SimBench.resources()`` the driver connects to.
+
+    The config dataclass, declared in the driver's module: frozen, every field a BENCH.toml
+    key with a default (typed ``str``, ``int``, ``float`` or ``bool``: the loader checks
+    them), a ``driver`` field defaulting to the driver's name, ``serial``, the address
+    field, ``period_s`` and ``timeout_s`` where the role is polled (thermometer,
+    chamber), and what :class:`~gyrolab.instruments.roles.RateStreamConfig` names for a
+    rate stream. Optionally ``check(safe_state_mode)``, raising ``ValueError`` with a
+    message for settings that make no sense (the loader reports it as an input error)."""
 
     name: str
     role: str
@@ -91,6 +97,11 @@ def register(spec: DriverSpec) -> DriverSpec:
     return spec
 
 
+def unregister(name: str) -> None:
+    """Remove a driver (a test's throw-away driver, after the test)."""
+    _SPECS.pop(name, None)
+
+
 def _load() -> None:
     global _loaded
     if _loaded:
@@ -116,3 +127,21 @@ def get(name: str, role: str) -> DriverSpec:
         names = ", ".join(s.name for s in drivers(role))
         raise KeyError(f"no {role} driver {name!r} (registered: {names})")
     return spec
+
+
+def default_config(role: str) -> Any:
+    """The config, all defaults, of the role's default driver (``DEFAULT_DRIVER``)."""
+    return get(DEFAULT_DRIVER[role], role).config()
+
+
+def address(config: Any, role: str) -> str:
+    """Where the instrument of ``config`` is: its driver's ``address_key`` field."""
+    return str(getattr(config, get(config.driver, role).address_key))
+
+
+def open_driver(config: Any, role: str, ctx: OpenContext) -> Any:
+    """Open, identify and name the driver ``config.driver`` for ``role`` at ``ctx.address``:
+    the connected role object, its ``name`` the role's source name in the recording."""
+    dev = get(config.driver, role).open(config, ctx)
+    dev.name = SOURCE_NAME[role]
+    return dev

@@ -7,7 +7,8 @@ A bench has three roles (docs/instruments.md, "Roles and drivers"):
 * :class:`Chamber` — the temperature chamber's controller: ``set_setpoint()`` (limits
   checked before any byte is sent, verified by read-back), ``read()`` gives a
   :class:`ChamberReading`, and where the driver can, ``switch_off()`` (verified).
-* :class:`RateStream` — the gyro's ADC stream.
+* :class:`RateStream` — the gyro's ADC stream: ``read()`` gives an :class:`AdcRead` of
+  gap-free :class:`AdcBlock` s; its config satisfies :class:`RateStreamConfig`.
 
 Every driver registered in :mod:`gyrolab.instruments.registry` implements one role itself
 (no adapters) and says who it is with ``describe()`` (into the recording's ``bench``
@@ -15,11 +16,11 @@ metadata).
 
 Errors (one vocabulary, :func:`is_transient`): a driver raises
 
-* :class:`~gyrolab.instruments.errors.InstrumentError` (or an ``OSError`` /
+* :class:`InstrumentError` (or an ``OSError`` /
   ``TimeoutError`` from the transport) for a failed exchange — **transient**: the runner
   logs it and retries at the next poll, until ``comm_timeout_s`` says the instrument is
   lost;
-* :class:`~gyrolab.instruments.errors.LimitError` for a setting outside the configured
+* :class:`LimitError` for a setting outside the configured
   limits (nothing was sent) — **never retried**: the run stops, chamber to the safe state;
 * :class:`InstrumentFault` for a condition the instrument reports that must end the run
   (a sensor fault) — **never retried**.
@@ -31,9 +32,66 @@ what it does not understand with a chamber under power.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol
 
-from gyrolab.instruments.errors import InstrumentError, InstrumentReport, LimitError
+import numpy as np
+
+from gyrolab.framing import Gap
+
+
+class InstrumentError(Exception):
+    """An instrument refused, failed or reported an error."""
+
+    def __init__(self, instrument: str, message: str) -> None:
+        self.instrument = instrument
+        super().__init__(f"{instrument}: {message}")
+
+
+class InstrumentTimeout(InstrumentError):
+    """No (complete) reply within the timeout: communication lost or instrument busy."""
+
+
+class LimitError(InstrumentError, ValueError):
+    """A requested setting is outside the configured safety limits; nothing was sent."""
+
+
+@dataclass(frozen=True)
+class InstrumentReport:
+    """An error the instrument itself reported (not a transport failure): an entry of a
+    SCPI error queue (``SYST:ERR?``) or a Modbus exception response.
+
+    The runner logs each to ``/log`` as level ``fault`` with ``code`` and ``text``;
+    ``fatal`` ones end the run (oven to the safe state), the others let it continue.
+    ``error_class`` names the class the decision was taken on (docs/instruments.md,
+    "Errors the instruments report").
+    """
+
+    protocol: str  # "SCPI" | "Modbus"
+    code: int
+    text: str
+    error_class: str
+    fatal: bool
+    context: str = ""  # the command or transaction it came with
+
+    def message(self, instrument: str) -> str:
+        action = "run stopped" if self.fatal else "run continues"
+        ctx = f" ({self.context})" if self.context else ""
+        code = f"{self.code:+d}" if self.protocol == "SCPI" else f"{self.code:02d}"
+        return (
+            f"{instrument} reported {self.protocol} error {code} "
+            f'"{self.text}"{ctx}: {self.error_class}; {action}'
+        )
+
+    def data(self) -> dict[str, object]:
+        return {
+            "protocol": self.protocol,
+            "code": self.code,
+            "text": self.text,
+            "error_class": self.error_class,
+            "fatal": self.fatal,
+            "context": self.context,
+        }
 
 
 class InstrumentFault(Exception):
@@ -60,6 +118,48 @@ class ChamberReading(NamedTuple):
 
     setpoint_c: float
     process_value_c: float
+
+
+# The rate stream's reading: one ``read`` returns an AdcRead of gap-free AdcBlocks.
+@dataclass(frozen=True)
+class AdcBlock:
+    """Consecutive samples with no gap inside (the recorder's ``/gyro/adc`` block).
+
+    ``t0`` (s) is the ADC clock at the first sample, ``period`` (s) the nominal sample
+    period, ``first_index`` the first sample's index since the stream's frame 0
+    (``first_seq · samples_per_frame``), ``counts`` int32: ``(n,)`` for a single-axis ADC,
+    ``(n, axes)`` for several.
+    """
+
+    first_seq: int
+    first_index: int
+    t0: float
+    period: float
+    counts: np.ndarray
+
+
+@dataclass
+class AdcEvent:
+    """A port event worth logging: ``kind`` is disconnect | reconnect | open_failed | gap."""
+
+    wall_time: float
+    kind: str
+    message: str
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class AdcRead:
+    """What one ``RateStream.read`` returned: blocks in order, the gaps between
+    them (and before the first), and port events."""
+
+    blocks: list[AdcBlock] = field(default_factory=list)
+    gaps: list[Gap] = field(default_factory=list)
+    events: list[AdcEvent] = field(default_factory=list)
+
+    @property
+    def samples(self) -> int:
+        return sum(len(b.counts) for b in self.blocks)
 
 
 class Instrument(Protocol):
@@ -106,12 +206,24 @@ class Chamber(Instrument, Protocol):
 
 
 class RateStream(Instrument, Protocol):
-    """The gyro's ADC stream (:class:`gyrolab.instruments.gyro_adc.GyroAdcReader`)."""
+    """The gyro's ADC stream (e.g. the ``gyroadc`` driver)."""
 
-    def read(self, timeout_s: float) -> Any:
-        """Intact samples received so far (an ``AdcRead``: blocks, gaps, events)."""
+    def read(self, timeout_s: float) -> AdcRead:
+        """Intact samples received so far: blocks, gaps, events."""
         ...
 
     def counters(self) -> dict[str, int]:
         """Running totals: at least ``frames_ok``, ``frames_bad`` and ``frames_lost``."""
         ...
+
+
+class RateStreamConfig(Protocol):
+    """What the run engine reads from a rate-stream driver's config (besides the
+    ``driver``, ``serial`` and address every config has): the sample rate (Hz), the
+    recorded block length (s), the number of axes and the counts → °/s conversion."""
+
+    sample_rate_hz: float
+    block_s: float
+    axes: int
+
+    def to_dps(self, counts: Any) -> Any: ...

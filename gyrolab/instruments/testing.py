@@ -4,6 +4,8 @@ against an expected list, in order, and plays back the paired reply.
 
 * :class:`ExpectedVisa` stands in for a pyvisa resource (SCPI lines: ``write``, ``read``,
   ``query``); dialogue ``[(command, reply or None)]``.
+* :class:`ExpectedResourceManager` stands in for a pyvisa ResourceManager: a driver opened
+  by address (as ``gyrolab acquire`` opens it) gets an :class:`ExpectedVisa`.
 * :class:`ExpectedSerial` stands in for a pyserial port (bytes: Modbus RTU frames, any
   binary protocol); dialogue ``[(request bytes, reply bytes or None = stay silent)]``.
 * :func:`expected_protocol` opens a driver on either and checks, on leaving the block,
@@ -55,6 +57,32 @@ class ExpectedVisa:
 
     def assert_done(self) -> None:
         assert not self.dialogue, f"commands never sent: {self.dialogue}"
+
+
+class ExpectedResourceManager:
+    """Stands in for a pyvisa ``ResourceManager`` (a driver's ``visa_library``): hands out
+    an :class:`ExpectedVisa` per resource name, each with its own dialogue, so that a
+    driver can be opened by address the way ``gyrolab acquire`` opens it
+    (``OpenContext.visa_library``)."""
+
+    def __init__(self, dialogues: dict[str, list[tuple[str, str | None]]]) -> None:
+        self.dialogues = {name: list(d) for name, d in dialogues.items()}
+        self.opened: dict[str, ExpectedVisa] = {}
+
+    def open_resource(self, name: str, **kw: Any) -> ExpectedVisa:
+        if name not in self.dialogues:
+            # pyvisa raises VisaIOError (an OSError-like failure) for an absent resource
+            raise OSError(f"no instrument at {name!r}")
+        res = self.opened[name] = ExpectedVisa(self.dialogues.pop(name), name)
+        return res
+
+    def close(self) -> None:
+        pass
+
+    def assert_done(self) -> None:
+        assert not self.dialogues, f"resources never opened: {sorted(self.dialogues)}"
+        for res in self.opened.values():
+            res.assert_done()
 
 
 class ExpectedSerial:

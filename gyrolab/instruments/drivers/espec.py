@@ -31,14 +31,15 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.instruments.errors import (
+from gyrolab.instruments.registry import DriverSpec, OpenContext, connected, register
+from gyrolab.instruments.roles import (
+    ChamberReading,
     InstrumentError,
+    InstrumentFault,
     InstrumentReport,
     InstrumentTimeout,
     LimitError,
 )
-from gyrolab.instruments.registry import DriverSpec, OpenContext, connected, register
-from gyrolab.instruments.roles import ChamberReading, InstrumentFault
 
 NAME = "ESPEC"
 
@@ -213,7 +214,7 @@ class EspecChamber:
 
     def describe(self) -> dict[str, Any]:
         return {
-            "driver": "espec",
+            "driver": self.config.driver,
             "model": "ESPEC P-300/SCP-220 (TCP)",
             "resource": self.resource_name,
             "serial": self.config.serial,

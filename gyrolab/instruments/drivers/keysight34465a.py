@@ -14,8 +14,8 @@ Command Quick Reference; docs/instruments.md):
     SYST:ERR?                       +0,"No error" | <code>,"<text>"  (SCPI error classes)
 
 The transport, late-reply resynchronisation and error-queue handling are the 34401A
-driver's (:class:`gyrolab.instruments.multimeter.Agilent34401A`): same SCPI subset, same
-reply formats.
+driver's (:class:`~gyrolab.instruments.drivers.agilent34401a.Agilent34401A`): same SCPI subset,
+same reply formats.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from gyrolab.instruments.drivers.agilent34401a import Agilent34401AThermometer, open_thermometer
-from gyrolab.instruments.errors import LimitError
 from gyrolab.instruments.registry import DriverSpec, OpenContext, register
+from gyrolab.instruments.roles import LimitError
 
 
 @dataclass(frozen=True)
@@ -70,13 +70,7 @@ class Keysight34465A(Agilent34401AThermometer):
         self.check_errors()
 
     def describe(self) -> dict[str, Any]:
-        d = super().describe()
-        d.update(
-            driver="keysight34465a",
-            model="34465A",
-            offset_compensation=self.offset_compensation,
-        )
-        return d
+        return {**super().describe(), "offset_compensation": self.offset_compensation}
 
 
 def open_34465a(c: Keysight34465AConfig, ctx: OpenContext) -> Keysight34465A:
