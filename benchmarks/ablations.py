@@ -56,11 +56,13 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gyrolab import __version__  # noqa: E402
-from gyrolab.compensation import pipeline as pl  # noqa: E402
+from gyrolab.compensation.apply import run_flp  # noqa: E402
+from gyrolab.compensation.config import PipelineConfig  # noqa: E402
+from gyrolab.compensation.fit import Decomposition, decompose, fit_drift_model, fit_flp  # noqa: E402
 from gyrolab.compensation.gabp import BPConfig, fit_mlp  # noqa: E402
-from gyrolab.compensation.metrics import block_means  # noqa: E402
+from gyrolab.compensation.prepare import PreparedRun, prepare_file  # noqa: E402
+from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means  # noqa: E402
 
-BLOCK = pl.PAPER_BLOCK_S
 GPSO = {"gpso_population": 20, "gpso_generations": 12}  # paper: 50 x 30 (see docstring)
 PAPER_KA = (11, 4641.0)
 MID_KA = (6, 1000.0)
@@ -89,21 +91,23 @@ def scores(y: np.ndarray) -> dict[str, float]:
     """Held-out figures of a 3.6 s series (°/s)."""
     return {
         "bias_stability_deg_per_h": float(np.std(y, ddof=1) * 3600.0),
-        "drift_pp_100s_deg_per_s": float(np.ptp(block_means(y, 1.0 / BLOCK, 28 * BLOCK))),
+        "drift_pp_100s_deg_per_s": float(
+            np.ptp(block_means(y, 1.0 / PAPER_BLOCK_S, 28 * PAPER_BLOCK_S))
+        ),
     }
 
 
-def classes_by_frequency(dec: pl.Decomposition) -> dict[str, list[int]]:
+def classes_by_frequency(dec: Decomposition) -> dict[str, list[int]]:
     k = int(np.argmin(dec.omega))
     return {"noise": [i for i in range(dec.K) if i != k], "mixed": [], "drift": [k]}
 
 
 def reconstruct(
-    cfg: pl.PipelineConfig,
-    cal: pl.PreparedRun,
-    val: pl.PreparedRun,
-    dec_c: pl.Decomposition,
-    dec_v: pl.Decomposition,
+    cfg: PipelineConfig,
+    cal: PreparedRun,
+    val: PreparedRun,
+    dec_c: Decomposition,
+    dec_v: Decomposition,
     seed: int,
     *,
     flp: bool = True,
@@ -115,22 +119,22 @@ def reconstruct(
     if by_frequency:
         dec_c = replace(dec_c, classes=classes_by_frequency(dec_c))
         dec_v = replace(dec_v, classes=classes_by_frequency(dec_v))
-    f = drift_fit or pl.fit_drift_model(cal.X, dec_c.part("drift"), cfg, seed)
+    f = drift_fit or fit_drift_model(cal.X, dec_c.part("drift"), cfg, seed)
     mixed = dec_v.part("mixed")
     if drop_mixed:
         mixed = np.zeros_like(mixed)
     elif flp and dec_c.classes.get("mixed") and dec_v.classes.get("mixed"):
-        mixed, _ = pl._run_flp(pl._fit_flp(dec_c.part("mixed"), cfg), mixed, cfg.block_s)
+        mixed, _ = run_flp(fit_flp(dec_c.part("mixed"), cfg), mixed, cfg.block_s)
     return mixed + dec_v.part("drift") - f.predict(val.X), f
 
 
 def one_seed(work: Path, seed: int, log: Any) -> dict[str, Any]:
     t0 = time.perf_counter()
     cal_p, val_p = simulate(work, seed)
-    cfg = replace(pl.PipelineConfig(), **GPSO)
-    cal, val = pl.prepare_file(str(cal_p), cfg), pl.prepare_file(str(val_p), cfg)
+    cfg = replace(PipelineConfig(), **GPSO)
+    cal, val = prepare_file(str(cal_p), cfg), prepare_file(str(val_p), cfg)
     out: dict[str, Any] = {"raw": scores(val.rate)}
-    decs: dict[str, tuple[pl.Decomposition, pl.Decomposition]] = {}
+    decs: dict[str, tuple[Decomposition, Decomposition]] = {}
     choices = {
         "gpso_project": (cfg, None),
         "gpso_envelope": (replace(cfg, vmd_fitness="envelope_entropy"), None),
@@ -139,8 +143,8 @@ def one_seed(work: Path, seed: int, log: Any) -> dict[str, Any]:
     }
     ka: dict[str, tuple[int, float]] = {}
     for name, (c, fixed) in choices.items():
-        dc = pl.decompose(cal.rate, c, seed, *(fixed or (None, None)))
-        dv = pl.decompose(val.rate, c, 0, K=dc.K, alpha=dc.alpha)
+        dc = decompose(cal.rate, c, seed, *(fixed or (None, None)))
+        dv = decompose(val.rate, c, 0, K=dc.K, alpha=dc.alpha)
         decs[name] = (dc, dv)
         ka[name] = (dc.K, dc.alpha)
         y, _ = reconstruct(cfg, cal, val, dc, dv, seed)
@@ -154,7 +158,7 @@ def one_seed(work: Path, seed: int, log: Any) -> dict[str, Any]:
     }.items():
         y, _ = reconstruct(cfg, cal, val, dc, dv, seed, **kw)
         out[f"mpe.{name}"] = scores(y)
-    raw_fit = pl.fit_drift_model(cal.X, cal.rate, cfg, seed)
+    raw_fit = fit_drift_model(cal.X, cal.rate, cfg, seed)
     out["mpe.no_decomposition"] = scores(val.rate - raw_fit.predict(val.X))
     target = dc.part("drift")
     for init in ("ga", "random"):

@@ -27,10 +27,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from gyrolab.batch import BatchOptions, run_batch
-from gyrolab.compensation import pipeline as pl
+from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig
 
 SMALL = replace(
-    pl.PipelineConfig(),
+    PipelineConfig(),
     ga_population=12,
     ga_generations=6,
     bp_max_iter=150,
@@ -51,7 +51,7 @@ def main() -> int:
     args = ap.parse_args()
     os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
     counts = [int(w) for w in args.workers.split(",")]
-    cfg = SMALL if args.small else pl.DEFAULT_CONFIG
+    cfg = SMALL if args.small else DEFAULT_CONFIG
     with tempfile.TemporaryDirectory(prefix="bench_batch.") as d:
         run = Path(d) / "fleet.mcap"
         t0 = time.perf_counter()

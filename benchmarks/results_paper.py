@@ -202,12 +202,15 @@ def main() -> int:
     wall = run([*gl, "compensate", s1, "--out", str(model), "--validate", s2])
     m_s2 = json.loads((model / "metrics.json").read_text())
 
-    from gyrolab.compensation import pipeline as pl
+    from gyrolab.compensation.apply import compensate_offline
+    from gyrolab.compensation.evaluate import evaluate
+    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.compensation.prepare import prepare_run
     from gyrolab.record.recording import TOPIC_PT100, TOPIC_RATE, read_recording
 
-    mdl = pl.load_model(str(model))
-    rv = pl.prepare_run(read_recording(runs["rev"][1], [TOPIC_RATE, TOPIC_PT100]), mdl.config)
-    m_rev = pl.evaluate(mdl, pl.compensate_offline(mdl, rv), rv, held_out=True)
+    mdl = load_model(str(model))
+    rv = prepare_run(read_recording(runs["rev"][1], [TOPIC_RATE, TOPIC_PT100]), mdl.config)
+    m_rev = evaluate(mdl, compensate_offline(mdl, rv), rv, held_out=True)
     from gyrolab.compensation.oracle import add_oracle
 
     add_oracle(m_rev, str(runs["rev"][1]), mdl.config.block_s)

@@ -56,12 +56,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from docsections import write_section  # noqa: E402
 
+from gyrolab.compensation.evaluate import DRIFT_PP_WINDOW_S  # noqa: E402
+from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means  # noqa: E402
 from gyrolab.profiles.profile import BUILTIN, Profile, Step  # noqa: E402
 
 TRAJECTORIES = ("paper", "heating", "ramp0.5", "ramp2", "random", "soak")
 CALIBRATION = "paper"
-BLOCK_S = 3.6
-PP_BLOCKS = 28  # 100.8 s
 
 
 # ----------------------------------------------------------------------- trajectories
@@ -181,8 +181,7 @@ def simulate(model, profile: Profile, rate_hz: float, seed: int) -> dict[str, np
 def _metrics(x: np.ndarray) -> dict[str, float]:
     """Bias stability (°/h) and drift p-p of 3.6 s and 100 s averages (°/s) of a 3.6 s
     block-mean series."""
-    n = x.size // PP_BLOCKS
-    m100 = x[: n * PP_BLOCKS].reshape(n, PP_BLOCKS).mean(axis=1)
+    m100 = block_means(x, 1.0 / PAPER_BLOCK_S, DRIFT_PP_WINDOW_S)  # 28 blocks: 100.8 s
     return {
         "bias_stability_deg_per_h": float(np.std(x, ddof=1) * 3600.0),
         "drift_pp_100s_deg_per_s": float(np.ptp(m100)),
@@ -191,7 +190,7 @@ def _metrics(x: np.ndarray) -> dict[str, float]:
 
 
 def suite_config(quick: bool):
-    from gyrolab.compensation.pipeline import PipelineConfig
+    from gyrolab.compensation.config import PipelineConfig
 
     cfg = PipelineConfig(vmd_K=11, vmd_alpha=5000.0)
     if quick:
@@ -203,9 +202,11 @@ def run_unit(unit: int, rate_hz: float, quick: bool) -> dict[str, Any]:
     """Simulate one unit on every trajectory, calibrate on ``paper``, evaluate the rest."""
     import torch
 
-    from gyrolab.compensation import pipeline as pl
+    from gyrolab.compensation.apply import compensate_offline
     from gyrolab.compensation.causal import family_models
-    from gyrolab.compensation.pipeline import block_average
+    from gyrolab.compensation.fit import fit
+    from gyrolab.compensation.prepare import prepare_arrays
+    from gyrolab.numerics.averaging import block_average
 
     torch.set_num_threads(1)
     t0 = time.perf_counter()
@@ -217,11 +218,11 @@ def run_unit(unit: int, rate_hz: float, quick: bool) -> dict[str, Any]:
     }
     t_sim = time.perf_counter() - t0
     prep = {
-        k: pl.prepare_arrays(k, r["t"], r["raw"], 1.0 / rate_hz, r["pt_t"], r["pt_c"], cfg)
+        k: prepare_arrays(k, r["t"], r["raw"], 1.0 / rate_hz, r["pt_t"], r["pt_c"], cfg)
         for k, r in runs.items()
     }
     t1 = time.perf_counter()
-    cm, dec = pl.fit(prep[CALIBRATION], cfg, seed=unit)
+    cm, dec = fit(prep[CALIBRATION], cfg, seed=unit)
     t_fit = time.perf_counter() - t1
     fams = family_models(cm.causal)
     bs = cfg.block_s
@@ -236,7 +237,7 @@ def run_unit(unit: int, rate_hz: float, quick: bool) -> dict[str, Any]:
     }
     for name, r in runs.items():
         run = prep[name]
-        app = pl.compensate_offline(cm, run, dec if name == CALIBRATION else None)
+        app = compensate_offline(cm, run, dec if name == CALIBRATION else None)
 
         def causal_means(c, r=r, run=run) -> np.ndarray:
             y = r["raw"] - c.drift_at(r["t"], run.pt_t, run.pt_c)
@@ -278,7 +279,9 @@ def rotation_check(rate_hz: float, quick: bool) -> dict[str, dict[str, float]]:
     held-out ``soak`` run; the share of each event's angle every output keeps."""
     import torch
 
-    from gyrolab.compensation import pipeline as pl
+    from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
+    from gyrolab.compensation.fit import fit
+    from gyrolab.compensation.prepare import prepare_arrays
     from gyrolab.compensation.rotation import angle_kept, rotation_events
 
     torch.set_num_threads(1)
@@ -287,14 +290,14 @@ def rotation_check(rate_hz: float, quick: bool) -> dict[str, dict[str, float]]:
     cal = simulate(model, trajectory(CALIBRATION, 0), rate_hz, seed=1)
     static = simulate(model, trajectory("soak", 0), rate_hz, seed=6)
     per = 1.0 / rate_hz
-    prep = pl.prepare_arrays("cal", cal["t"], cal["raw"], per, cal["pt_t"], cal["pt_c"], cfg)
-    cm, _ = pl.fit(prep, cfg, seed=0)
+    prep = prepare_arrays("cal", cal["t"], cal["raw"], per, cal["pt_t"], cal["pt_c"], cfg)
+    cm, _ = fit(prep, cfg, seed=0)
     t, pt_t, pt_c = static["t"], static["pt_t"], static["pt_c"]
-    comp = pl.StreamingCompensator(cm, pt_t, pt_c, "causal")
+    comp = StreamingCompensator(cm, pt_t, pt_c, "causal")
 
     def outputs(x: np.ndarray) -> dict[str, np.ndarray]:
-        run = pl.prepare_arrays("static", t, x, per, pt_t, pt_c, cfg)
-        app = pl.compensate_offline(cm, run)
+        run = prepare_arrays("static", t, x, per, pt_t, pt_c, cfg)
+        app = compensate_offline(cm, run)
         return {
             "causal": comp(t, x),
             "offline": app.series["compensated"],

@@ -14,7 +14,6 @@ from test_pipeline import SMALL, write_run
 
 from gyrolab import batch as B
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
 from gyrolab.errors import InputError
 from gyrolab.outputs import MARKER
 
@@ -39,7 +38,7 @@ def serial(runs: Path) -> Path:
     out = runs / "serial"
     out.mkdir()
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+        mp.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
         B.bound_threads(1)
         for name in GOOD:
             assert main(["compensate", str(runs / f"{name}.mcap"), "--out", str(out / name)]) == 0

@@ -14,8 +14,9 @@ from contract import METRIC_KEYS
 from test_pipeline import SMALL, write_run
 
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
 from gyrolab.compensation.commands import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
+from gyrolab.compensation.model_dir import load_model
+from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_average
 from gyrolab.record.recording import (
     TOPIC_PT100,
     TOPIC_RATE,
@@ -41,7 +42,7 @@ CLI_CONFIG = replace(
 
 @pytest.fixture(autouse=True)
 def small_config(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+    monkeypatch.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def model_dir(runs: dict[str, Path]) -> Path:
     out = runs["dir"] / "model"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+        mp.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
         rc = main(
             ["compensate", str(runs["cal"]), "--out", str(out), "--validate", str(runs["val"])]
         )
@@ -110,13 +111,13 @@ def test_apply_writes_compensated_recording(
     np.testing.assert_array_equal(dst.rate.index, src.rate.index)
     raw = np.concatenate([b[3] for b in iter_blocks(out, TOPIC_RATE_RAW)])
     np.testing.assert_array_equal(raw, src.rate.values.astype(np.float32))
-    model = pl.load_model(str(model_dir))
+    model = load_model(str(model_dir))
     # /gyro/rate is the causal headline: raw minus the causal model's held drift estimate
     expect = src.rate.values - model.causal.drift_at(src.rate.t, src.pt100_t, src.pt100_c)
     np.testing.assert_allclose(dst.rate.values, expect, atol=1e-6)
     # the drift is gone from the written rate: hour-scale mean is near zero everywhere
     assert np.abs(np.mean(dst.rate.values)) < 0.05 * np.ptp(
-        pl.block_average(src.rate.t, src.rate.values, 3.6, src.rate.period)[1]
+        block_average(src.rate.t, src.rate.values, PAPER_BLOCK_S, src.rate.period)[1]
     )
     off = list(iter_blocks(out, TOPIC_RATE_OFFLINE))
     assert off and off[0][1] == pytest.approx(3.6)

@@ -19,8 +19,10 @@ from test_compensate_cli import CLI_CONFIG
 from test_pipeline import case_temperature, true_bias, write_run
 
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
-from gyrolab.compensation.gabp import BPConfig, _gd_train, fit_mlp
+from gyrolab.compensation.config import PipelineConfig
+from gyrolab.compensation.gabp import BPConfig, fit_mlp, gd_train
+from gyrolab.compensation.model_dir import load_model
+from gyrolab.compensation.prepare import prepare_file
 from gyrolab.record.recording import RecordingWriter, read_metadata
 
 torch.set_num_threads(1)
@@ -29,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(autouse=True)
 def small_config(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+    monkeypatch.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
 
 
 def write_hot_run(path: Path, seed: int, offset_c: float = 25.0) -> Path:
@@ -66,7 +68,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def model_dir(runs: dict[str, Path]) -> Path:
     out = runs["dir"] / "model"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+        mp.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
         assert main(["compensate", str(runs["cal"]), "--out", str(out), "--seed", "7"]) == 0
     return out
 
@@ -94,15 +96,15 @@ def test_model_json_records_seed_config_and_calibration_hash(
 ) -> None:
     meta = json.loads((model_dir / "model.json").read_text())
     assert meta["seed"] == 7
-    assert set(meta["config"]) == {f.name for f in fields(pl.PipelineConfig)}
+    assert set(meta["config"]) == {f.name for f in fields(PipelineConfig)}
     h = meta["calibration"]["content_hash"]
     assert h.startswith("blake2b-160:")
-    assert h == pl.prepare_file(str(runs["copy"]), CLI_CONFIG).content_hash  # not the name
-    assert h != pl.prepare_file(str(runs["val"]), CLI_CONFIG).content_hash
+    assert h == prepare_file(str(runs["copy"]), CLI_CONFIG).content_hash  # not the name
+    assert h != prepare_file(str(runs["val"]), CLI_CONFIG).content_hash
     cal = meta["calibration"]
     assert cal["temp_rate_min_c_per_min"] < 0 and cal["temp_rate_window_s"] == 300.0
     # an older model directory (no seed, no hash, no dT/dt range) still loads and applies
-    assert pl.load_model(str(model_dir)).seed == 7
+    assert load_model(str(model_dir)).seed == 7
 
 
 def test_older_model_dir_still_loads(
@@ -117,7 +119,7 @@ def test_older_model_dir_still_loads(
     for k in ("drift_model", "bp_optimizer", "bp_learning_rate", "bp_epochs", "vmd_fitness"):
         del meta["config"][k]
     (old / "model.json").write_text(json.dumps(meta))
-    m = pl.load_model(str(old))
+    m = load_model(str(old))
     assert m.seed is None and m.config.drift_model == "gabp"
     assert main(["apply", str(old), str(runs["val"]), "--out", str(tmp_path / "c.mcap")]) == 0
 
@@ -234,7 +236,7 @@ def test_config_file_selects_settings_and_rejects_unknown_keys(
 def test_every_config_key_is_documented() -> None:
     doc = (REPO / "docs" / "compensation.md").read_text()
     section = doc[doc.index("## Configuration file") :]
-    for f in fields(pl.PipelineConfig):
+    for f in fields(PipelineConfig):
         assert f"| `{f.name}` |" in section, f.name
     assert "| `seed` |" in section
 
@@ -247,7 +249,7 @@ def test_gradient_descent_bp_is_the_chain_rule_and_lowers_the_loss() -> None:
     Xs = (X - X.mean()) / X.std()
     ys = (y - y.mean()) / y.std()
     th0 = rng.normal(size=3 * 5 + 1)
-    th1, _ = _gd_train(th0, Xs, ys, 5, BPConfig(optimizer="gd", learning_rate=1.0, epochs=1))
+    th1, _ = gd_train(th0, Xs, ys, 5, BPConfig(optimizer="gd", learning_rate=1.0, epochs=1))
     t = torch.tensor(th0, requires_grad=True)
     Xt, yt = torch.tensor(Xs), torch.tensor(ys)
     z = torch.sigmoid(Xt @ t[:5].reshape(1, 5) + t[5:10]) @ t[10:15] + t[15]
@@ -263,7 +265,7 @@ def test_gradient_descent_bp_is_the_chain_rule_and_lowers_the_loss() -> None:
             assert h[-1] < 0.5 * h[0]
         assert m.config["optimizer"] == "gradient-descent"
     with pytest.raises(ValueError, match="diverged"):
-        _gd_train(th0, Xs, ys, 5, BPConfig(optimizer="gd", learning_rate=1e6, epochs=50))
+        gd_train(th0, Xs, ys, 5, BPConfig(optimizer="gd", learning_rate=1e6, epochs=50))
 
 
 def test_report_says_when_a_run_is_outside_the_calibrated_range(

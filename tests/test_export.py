@@ -18,9 +18,12 @@ import yaml
 from test_pipeline import SMALL
 
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
+from gyrolab.compensation.apply import StreamingCompensator, streaming_compensate
 from gyrolab.compensation.axes import axis_dirs, load_poly3
+from gyrolab.compensation.evaluate import series_metrics
 from gyrolab.compensation.firmware import DEG2RAD
+from gyrolab.compensation.model_dir import load_model
+from gyrolab.compensation.prepare import causal_temperature
 from gyrolab.export.params import (
     ardupilot_correction,
     px4_correction,
@@ -28,6 +31,7 @@ from gyrolab.export.params import (
     read_px4_params,
 )
 from gyrolab.export.spec import evaluate_spec, export_spec
+from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.recording import read_recording
 from gyrolab.sim.model import nominal_model
@@ -62,7 +66,7 @@ def unit(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
             show_progress=False,
         )
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pl, "DEFAULT_CONFIG", SMALL)
+        mp.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", SMALL)
         rc = main(
             [
                 "compensate",
@@ -85,10 +89,10 @@ def held_out(unit: dict[str, Path]):
 def residual_metrics(rec, k: int, offset_dps) -> dict[str, float]:
     """Causal raw - offset(T(t-)) on axis k, averaged like the pipeline, scored by it."""
     s = rec.axis(k).rate
-    T = pl.causal_temperature(s.t, rec.pt100_t, rec.pt100_c)
-    acc = pl.BlockAverager(SMALL.block_s)
+    T = causal_temperature(s.t, rec.pt100_t, rec.pt100_c)
+    acc = BlockAverager(SMALL.block_s)
     acc.add(s.t, s.values - offset_dps(T), s.period)
-    return pl.series_metrics(acc.result()[1], SMALL.block_s)
+    return series_metrics(acc.result()[1], SMALL.block_s)
 
 
 KEYS = ("rms_deg_per_s", "drift_pp_deg_per_s", "bias_stability_deg_per_h")
@@ -124,7 +128,7 @@ def test_three_axis_recording_and_model_dir(unit: dict[str, Path]) -> None:
     from gyrolab.errors import InputError
 
     with pytest.raises(InputError, match="3-axis model: give one axis's directory"):
-        pl.load_model(str(unit["model"]))
+        load_model(str(unit["model"]))
 
 
 def test_apply_three_axes(unit: dict[str, Path]) -> None:
@@ -135,8 +139,8 @@ def test_apply_three_axes(unit: dict[str, Path]) -> None:
     assert got.rate.values.shape == rec.rate.values.shape == (115200, 3)
     assert got.metadata["compensation"]["axes"] == 3
     for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
-        want = pl.streaming_compensate(
-            pl.load_model(str(d)), rec.rate.t, rec.rate.values[:, a], rec.pt100_t, rec.pt100_c
+        want = streaming_compensate(
+            load_model(str(d)), rec.rate.t, rec.rate.values[:, a], rec.pt100_t, rec.pt100_c
         )
         np.testing.assert_array_equal(got.rate.values[:, a], want.astype(np.float32))
 
@@ -268,13 +272,13 @@ def test_json_schema_is_the_fitted_model(unit: dict[str, Path]) -> None:
         mdl = ax["model"]
         assert mdl["kind"] == "mlp" and mdl["inputs"] == ["T"]
         assert np.asarray(mdl["W"]).shape == (1, mdl["hidden"])
-        want = pl.load_model(str(d)).drift.predict(T)
+        want = load_model(str(d)).drift.predict(T)
         np.testing.assert_allclose(evaluate_spec(mdl, T), want, rtol=1e-12, atol=1e-15)
     for kind in ("poly", "poly3"):
         for ax, (_a, d) in zip(
             export_spec(unit["model"], kind)["axes"], axis_dirs(unit["model"]), strict=True
         ):
-            m = pl.load_model(str(d))
+            m = load_model(str(d))
             want = (
                 m.baselines["poly"].predict(T) if kind == "poly" else load_poly3(d).predict(T[:, 0])
             )
@@ -367,8 +371,8 @@ def test_c_export_matches_python_over_a_whole_profile(unit: dict[str, Path]) -> 
     ok, drift_c = run_c(tmp, out, rec, 3)
     assert ok.all() and drift_c.shape[0] >= 100_000
     for a, (name, d) in enumerate(axis_dirs(unit["model"])):
-        model = pl.load_model(str(d))
-        py = pl.StreamingCompensator(model, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
+        model = load_model(str(d))
+        py = StreamingCompensator(model, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
         err = np.abs(drift_c[:, a] - py)
         scale = np.abs(py).max()
         assert err.max() <= 1e-5 * scale  # relative to the drift's full scale
@@ -382,9 +386,9 @@ def test_c_export_matches_python_over_a_whole_profile(unit: dict[str, Path]) -> 
             m["axes"][name]["raw"]["rms_deg_per_s"], rel=1e-9
         )
         s = rec.axis(a).rate
-        acc = pl.BlockAverager(SMALL.block_s)
+        acc = BlockAverager(SMALL.block_s)
         acc.add(s.t, s.values.astype(np.float32) - drift_c[:, a], s.period)
-        comp = pl.series_metrics(acc.result()[1], SMALL.block_s)
+        comp = series_metrics(acc.result()[1], SMALL.block_s)
         for k in KEYS:
             assert comp[k] == pytest.approx(m["axes"][name]["compensated_streaming"][k], rel=1e-4)
 
@@ -402,7 +406,7 @@ def test_c_export_other_kinds(unit: dict[str, Path], kind: str) -> None:
     tmp.mkdir()
     ok, drift_c = run_c(tmp, out, rec, 3)
     spec = export_spec(unit["model"], kind)
-    T = pl.causal_temperature(rec.rate.t, rec.pt100_t, rec.pt100_c)
+    T = causal_temperature(rec.rate.t, rec.pt100_t, rec.pt100_c)
     for a, ax in enumerate(spec["axes"]):
         py = evaluate_spec(ax["model"], T[:, None])
         assert np.abs(drift_c[:, a] - py).max() <= 1e-5 * np.abs(py).max()
@@ -439,9 +443,7 @@ def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
     nds = []
     for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
         s = rec.axis(a).rate
-        comp = pl.streaming_compensate(
-            pl.load_model(str(d)), s.t, s.values, rec.pt100_t, rec.pt100_c
-        )
+        comp = streaming_compensate(load_model(str(d)), s.t, s.values, rec.pt100_t, rec.pt100_c)
         nds.append(noise_terms(allan_deviation(comp, RATE_HZ, confidence=None)).N)
     # continuous-time density = Allan N (deg/s * sqrt(s)) in rad/s/sqrt(Hz), largest axis
     assert y["gyroscope_noise_density"] == pytest.approx(max(nds) * math.pi / 180, rel=1e-6)
@@ -467,7 +469,9 @@ def test_c_export_with_dtdt_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     from test_pipeline import write_run
 
     cal = write_run(tmp_path / "cal.mcap", 1, fs=28.0, hours=1.0)
-    monkeypatch.setattr(pl, "DEFAULT_CONFIG", replace(SMALL, use_dtdt=True))
+    monkeypatch.setattr(
+        "gyrolab.compensation.commands.DEFAULT_CONFIG", replace(SMALL, use_dtdt=True)
+    )
     assert main(["compensate", str(cal), "--out", str(tmp_path / "m")]) == 0
     out = tmp_path / "g.c"
     argv = ["export", str(tmp_path / "m"), "--format", "c", "--kind", "gabp", "--out", str(out)]
@@ -477,9 +481,9 @@ def test_c_export_with_dtdt_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     (tmp_path / "b").mkdir()
     ok, drift_c = run_c(tmp_path / "b", out, rec, 1)
     assert ok.all() and drift_c.shape[0] >= 100_000
-    model = pl.load_model(str(tmp_path / "m"))
+    model = load_model(str(tmp_path / "m"))
     assert model.config.use_dtdt and model.drift.n_in == 2
-    py = pl.StreamingCompensator(model, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
+    py = StreamingCompensator(model, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
     err = np.abs(drift_c[:, 0] - py)
     scale = np.abs(py).max()
     assert err.max() <= 1e-5 * scale

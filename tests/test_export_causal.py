@@ -17,9 +17,12 @@ from test_export import CC, KEYS, run_c
 from test_pipeline import SMALL
 
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
+from gyrolab.compensation.apply import StreamingCompensator
 from gyrolab.compensation.axes import axis_dirs
+from gyrolab.compensation.evaluate import series_metrics
+from gyrolab.compensation.model_dir import load_model
 from gyrolab.export.spec import evaluate_causal, export_spec
+from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.recording import read_recording
 from gyrolab.sim.model import nominal_model
@@ -46,7 +49,10 @@ def test_causal_model_exported_to_c_and_json(
         )
     # the structured family (the one with the lag/rate/hysteresis terms) and GA-BP on the
     # causal features: both inner forms of the causal model
-    monkeypatch.setattr(pl, "DEFAULT_CONFIG", replace(SMALL, causal_families=("structured",)))
+    monkeypatch.setattr(
+        "gyrolab.compensation.commands.DEFAULT_CONFIG",
+        replace(SMALL, causal_families=("structured",)),
+    )
     model = tmp_path / "m"
     assert (
         main(
@@ -73,7 +79,7 @@ def test_causal_model_exported_to_c_and_json(
     ok, drift_c = run_c(tmp_path / "b", out, rec, 3)
     assert ok.all() and drift_c.shape[0] >= 100_000
     for a, (name, d) in enumerate(axis_dirs(model)):
-        cm = pl.load_model(str(d))
+        cm = load_model(str(d))
         assert abs(cm.causal.params.tau_s - 300.0) < 60.0  # the die lag is found
         ref = cm.causal.reading_drift(rec.pt100_t, rec.pt100_c)
         np.testing.assert_allclose(
@@ -82,15 +88,15 @@ def test_causal_model_exported_to_c_and_json(
             rtol=0,
             atol=1e-15,
         )
-        py = pl.StreamingCompensator(cm, rec.pt100_t, rec.pt100_c, "causal").drift(rec.rate.t)
+        py = StreamingCompensator(cm, rec.pt100_t, rec.pt100_c, "causal").drift(rec.rate.t)
         err = np.abs(drift_c[:, a] - py)
         scale = np.abs(py).max()
         assert err.max() <= 1e-5 * scale
         big = np.abs(py) >= 0.1 * scale
         assert np.all(err[big] <= 1e-5 * np.abs(py[big]))
         s = rec.axis(a).rate
-        acc = pl.BlockAverager(SMALL.block_s)
+        acc = BlockAverager(SMALL.block_s)
         acc.add(s.t, s.values.astype(np.float32) - drift_c[:, a], s.period)
-        got = pl.series_metrics(acc.result()[1], SMALL.block_s)
+        got = series_metrics(acc.result()[1], SMALL.block_s)
         for k in KEYS:
             assert got[k] == pytest.approx(metrics["axes"][name]["causal"][k], rel=1e-4)

@@ -15,7 +15,7 @@ from logwriters import write_dataflash, write_ros2, write_ulog
 from test_pipeline import SMALL
 
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
+from gyrolab.compensation.prepare import causal_temperature
 from gyrolab.errors import InputError
 from gyrolab.logs import detect_format, read_log
 from gyrolab.profiles.profile import load_profile
@@ -46,7 +46,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     keep[DROP] = False
     t = rec.rate.t[keep]
     g = np.radians(rec.rate.values[keep])  # the logs carry rad/s
-    T = pl.causal_temperature(t, rec.pt100_t, rec.pt100_c)  # IMU temperature per sample
+    T = causal_temperature(t, rec.pt100_t, rec.pt100_c)  # IMU temperature per sample
     t_us = (3_000_000 + np.rint(t * 1e6)).astype(np.int64)
     return {
         "dir": d,
@@ -150,7 +150,7 @@ def test_unstamped_ros2_bag_uses_log_time(tmp_path: Path) -> None:
 
 
 def test_compensate_a_ros2_bag_per_axis(logs: dict, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(pl, "DEFAULT_CONFIG", SMALL)
+    monkeypatch.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", SMALL)
     out = logs["dir"] / "model_ros2"
     assert (
         main(

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrolab.compensation.metrics import METRIC_KEYS, block_means, signal_metrics
+from gyrolab.compensation.metrics import METRIC_KEYS, signal_metrics
 from gyrolab.errors import InputError
 from gyrolab.numerics.allan import allan_deviation
+from gyrolab.numerics.averaging import block_means
 
 
 def _flicker(n: int, fs: float, b: float, rng: np.random.Generator) -> np.ndarray:

@@ -13,7 +13,6 @@ import torch
 from test_pipeline import SMALL
 
 from gyrolab.cli import main
-from gyrolab.compensation import pipeline as pl
 from gyrolab.errors import InputError
 from gyrolab.outputs import MARKER
 from gyrolab.record.recording import (
@@ -36,7 +35,7 @@ SERIALS = ["SIM3-01", "SIM3-02", "SIM3-03"]
 
 @pytest.fixture(autouse=True)
 def small_config(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+    monkeypatch.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +129,7 @@ def fleet_models(runs: dict[str, Path]) -> Path:
     """`gyrolab compensate MULTI --out DIR`: every unit, on a 2-worker LocalCluster."""
     out = runs["dir"] / "models"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pl, "DEFAULT_CONFIG", CLI_CONFIG)
+        mp.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", CLI_CONFIG)
         assert main(["compensate", str(runs["multi"]), "--out", str(out), "--workers", "2"]) == 0
     return out
 

@@ -10,15 +10,31 @@ import numpy as np
 import pytest
 import torch
 
-from gyrolab.compensation import pipeline as pl
-from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
+from gyrolab.compensation.apply import (
+    compensate_offline,
+    effective_bandwidth,
+    streaming_block_means,
+    streaming_compensate,
+)
+from gyrolab.compensation.config import PipelineConfig
+from gyrolab.compensation.evaluate import evaluate
+from gyrolab.compensation.fit import CompensationModel, Decomposition, fit
+from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, load_model, save_model
+from gyrolab.compensation.prepare import (
+    PreparedRun,
+    causal_temperature,
+    features,
+    prepare_file,
+    prepare_run,
+)
 from gyrolab.errors import InputError
+from gyrolab.numerics.averaging import BlockAverager, block_average
 from gyrolab.record.recording import RecordingWriter, read_recording
 
 torch.set_num_threads(1)
 
 # small and fast, fixed (K, alpha): the GPSO search is exercised by the CLI test
-SMALL = pl.PipelineConfig(
+SMALL = PipelineConfig(
     vmd_K=5,
     vmd_alpha=2000.0,
     ga_population=12,
@@ -69,8 +85,8 @@ def write_run(
     return path
 
 
-def load(path: Path, cfg: pl.PipelineConfig = SMALL) -> pl.PreparedRun:
-    return pl.prepare_run(read_recording(path), cfg)
+def load(path: Path, cfg: PipelineConfig = SMALL) -> PreparedRun:
+    return prepare_run(read_recording(path), cfg)
 
 
 @pytest.fixture(scope="module")
@@ -84,8 +100,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 
 @pytest.fixture(scope="module")
-def fitted(runs: dict[str, Path]) -> tuple[pl.CompensationModel, pl.Decomposition]:
-    return pl.fit(load(runs["cal"]), SMALL, seed=0)
+def fitted(runs: dict[str, Path]) -> tuple[CompensationModel, Decomposition]:
+    return fit(load(runs["cal"]), SMALL, seed=0)
 
 
 # ------------------------------------------------------------------ building blocks
@@ -95,13 +111,13 @@ def test_block_average_means_gaps_and_partial_tail() -> None:
     fs, block = 10.0, 3.6
     t = np.arange(1000) / fs  # 100 s: 27 full blocks of 36 samples + 28 samples
     x = np.arange(1000, dtype=float)
-    tb, xb, filled = pl.block_average(t, x, block, 1 / fs)
+    tb, xb, filled = block_average(t, x, block, 1 / fs)
     assert tb.size == 27 and filled == 0
     np.testing.assert_allclose(xb, x[: 27 * 36].reshape(27, 36).mean(axis=1))
     np.testing.assert_allclose(tb, (np.arange(27) + 0.5) * block)
     # drop the samples of block 5: it is filled by interpolation and counted
     keep = (t < 5 * block) | (t >= 6 * block)
-    tb2, xb2, filled2 = pl.block_average(t[keep], x[keep], block, 1 / fs)
+    tb2, xb2, filled2 = block_average(t[keep], x[keep], block, 1 / fs)
     assert filled2 == 1 and tb2.size == 27
     assert xb2[5] == pytest.approx(0.5 * (xb2[4] + xb2[6]))
 
@@ -111,10 +127,10 @@ def test_features_are_causal() -> None:
     pt_c = 20.0 + 0.01 * pt_t
     cfg = replace(SMALL, use_dtdt=True, dtdt_window_s=60.0)
     t = np.linspace(0, 599, 2000)
-    X = pl.features(t, pt_t, pt_c, cfg)
+    X = features(t, pt_t, pt_c, cfg)
     changed = pt_c.copy()
     changed[300:] += 50.0  # the future after t = 300 s changes
-    X2 = pl.features(t, pt_t, changed, cfg)
+    X2 = features(t, pt_t, changed, cfg)
     before = t < 300.0
     np.testing.assert_array_equal(X[before], X2[before])
     assert not np.allclose(X[~before], X2[~before])
@@ -129,7 +145,7 @@ def test_effective_bandwidth_of_a_known_filter() -> None:
     block = 3.6
     k = 20  # moving average: ENBW = fs / (2 k) one-sided
     y = np.convolve(x, np.ones(k) / k, mode="same")
-    bw = pl.effective_bandwidth(x, y, block)
+    bw = effective_bandwidth(x, y, block)
     fs = 1 / block
     assert bw["enbw_hz"] == pytest.approx(fs / (2 * k), rel=0.1)
     # first -3 dB point of a k-point moving average is ≈ 0.443 fs / k
@@ -141,15 +157,15 @@ def test_effective_bandwidth_of_a_known_filter() -> None:
 
 
 def test_fit_and_held_out_compensation(
-    runs: dict[str, Path], fitted: tuple[pl.CompensationModel, pl.Decomposition]
+    runs: dict[str, Path], fitted: tuple[CompensationModel, Decomposition]
 ) -> None:
     model, dec = fitted
     assert model.K == 5 and sorted(sum(dec.classes.values(), [])) == list(range(5))
     assert dec.classes["drift"], "the drift must be found"
     for key in ("cal", "val"):
         run = load(runs[key])
-        app = pl.compensate_offline(model, run)
-        m = pl.evaluate(model, app, run, held_out=key != "cal")
+        app = compensate_offline(model, run)
+        m = evaluate(model, app, run, held_out=key != "cal")
         raw, comp = m["raw"], m["compensated"]
         assert m["held_out"] is (key != "cal")
         # the drift is ~0.03 °/s peak to peak; compensation must remove nearly all of it
@@ -172,68 +188,68 @@ def test_fit_and_held_out_compensation(
 
 
 def test_streaming_path_is_causal_and_matches_the_drift_model(
-    runs: dict[str, Path], fitted: tuple[pl.CompensationModel, pl.Decomposition]
+    runs: dict[str, Path], fitted: tuple[CompensationModel, Decomposition]
 ) -> None:
     model, _ = fitted
     run = load(runs["heat"])
-    y = pl.streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
-    T = pl.causal_temperature(run.raw_t, run.pt_t, run.pt_c)
+    y = streaming_compensate(model, run.raw_t, run.raw_rate, run.pt_t, run.pt_c)
+    T = causal_temperature(run.raw_t, run.pt_t, run.pt_c)
     np.testing.assert_allclose(y, run.raw_rate - model.drift.predict(T[:, None]), atol=1e-15)
     cut = run.raw_t.size // 2
     pt_future = run.pt_c.copy()
     pt_future[run.pt_t > run.raw_t[cut]] += 30.0
     rate_future = run.raw_rate.copy()
     rate_future[cut + 1 :] = 0.0
-    y2 = pl.streaming_compensate(model, run.raw_t, rate_future, run.pt_t, pt_future)
+    y2 = streaming_compensate(model, run.raw_t, rate_future, run.pt_t, pt_future)
     np.testing.assert_array_equal(y[: cut + 1], y2[: cut + 1])
 
 
 def test_heating_run_is_compensated_by_a_cooling_fit(
-    runs: dict[str, Path], fitted: tuple[pl.CompensationModel, pl.Decomposition]
+    runs: dict[str, Path], fitted: tuple[CompensationModel, Decomposition]
 ) -> None:
     model, _ = fitted
     run = load(runs["heat"])
-    m = pl.evaluate(model, pl.compensate_offline(model, run), run, held_out=True)
+    m = evaluate(model, compensate_offline(model, run), run, held_out=True)
     assert m["compensated"]["drift_pp_deg_per_s"] < 0.15 * m["raw"]["drift_pp_deg_per_s"]
     assert 0.0 <= m["temperature"]["fraction_outside_calibration"] < 0.05
 
 
 def test_model_dir_round_trip(
-    tmp_path: Path, runs: dict[str, Path], fitted: tuple[pl.CompensationModel, pl.Decomposition]
+    tmp_path: Path, runs: dict[str, Path], fitted: tuple[CompensationModel, Decomposition]
 ) -> None:
     model, _ = fitted
     d = tmp_path / "model"
     d.mkdir()
-    pl.save_model(model, str(d))
+    save_model(model, str(d))
     meta = json.loads((d / "model.json").read_text())
     assert meta["format_version"] == MODEL_FORMAT_VERSION and meta["software_version"]
     with np.load(d / "arrays.npz", allow_pickle=False) as z:
         assert "calib_modes" in z.files and z["calib_modes"].shape[0] == model.K
     sd = torch.load(d / "drift_gabp.pt", weights_only=True)
     assert sd["0.weight"].shape == (model.drift.hidden, model.drift.n_in)
-    back = pl.load_model(str(d))
+    back = load_model(str(d))
     assert back.config == model.config and (back.K, back.alpha) == (model.K, model.alpha)
     run = load(runs["val"])
-    a1 = pl.compensate_offline(model, run)
-    a2 = pl.compensate_offline(back, run)
+    a1 = compensate_offline(model, run)
+    a2 = compensate_offline(back, run)
     for k in ("compensated", "compensated_drift_only", "baselines.poly", "baselines.bp"):
         np.testing.assert_array_equal(a1.series[k], a2.series[k])
 
 
 def test_model_from_another_format_version_is_refused(
-    tmp_path: Path, fitted: tuple[pl.CompensationModel, pl.Decomposition]
+    tmp_path: Path, fitted: tuple[CompensationModel, Decomposition]
 ) -> None:
     d = tmp_path / "model"
     d.mkdir()
-    pl.save_model(fitted[0], str(d))
+    save_model(fitted[0], str(d))
     meta = json.loads((d / "model.json").read_text())
     meta["format_version"] = MODEL_FORMAT_VERSION + 1
     (d / "model.json").write_text(json.dumps(meta))
     with pytest.raises(InputError, match="format version"):
-        pl.load_model(str(d))
+        load_model(str(d))
     (d / "model.json").write_text("{not json")
     with pytest.raises(InputError, match="damaged"):
-        pl.load_model(str(d))
+        load_model(str(d))
 
 
 def test_constant_temperature_cannot_be_fitted(tmp_path: Path) -> None:
@@ -244,7 +260,7 @@ def test_constant_temperature_cannot_be_fitted(tmp_path: Path) -> None:
             w.write_rate_block(float(s), 0.1, 10 * s, rng.normal(0, 1e-3, 10).astype(np.float32))
             w.write_pt100(float(s), 100.0, 25.0)
     with pytest.raises(InputError, match="temperature spans only"):
-        pl.fit(load(p), SMALL)
+        fit(load(p), SMALL)
 
 
 def test_dtdt_input_learns_a_thermal_rate_term(tmp_path: Path) -> None:
@@ -265,8 +281,8 @@ def test_dtdt_input_learns_a_thermal_rate_term(tmp_path: Path) -> None:
     for use in (False, True):
         cfg = replace(SMALL, use_dtdt=use, dtdt_window_s=30.0)
         run = load(p, cfg)
-        model, dec = pl.fit(run, cfg)
-        app = pl.compensate_offline(model, run, dec)
+        model, dec = fit(run, cfg)
+        app = compensate_offline(model, run, dec)
         res[use] = np.std(app.series["compensated_drift_only"])
     assert res[True] < 0.3 * res[False]
 
@@ -274,12 +290,12 @@ def test_dtdt_input_learns_a_thermal_rate_term(tmp_path: Path) -> None:
 def test_streamed_preparation_equals_in_memory(runs: dict[str, Path]) -> None:
     """prepare_file (block by block, bounded memory) == prepare_run (whole arrays)."""
     a = load(runs["cal"])
-    b = pl.prepare_file(str(runs["cal"]), SMALL)
+    b = prepare_file(str(runs["cal"]), SMALL)
     for k in ("t", "rate", "temp", "X"):
         np.testing.assert_allclose(getattr(b, k), getattr(a, k), rtol=1e-12, atol=1e-15)
     assert b.raw_rate is None and b.raw_period == pytest.approx(a.raw_period)
     # chunked accumulation, including chunks that split a block, equals one shot
-    acc = pl.BlockAverager(3.6)
+    acc = BlockAverager(3.6)
     for s in range(0, a.raw_t.size, 977):
         acc.add(a.raw_t[s : s + 977], a.raw_rate[s : s + 977], a.raw_period)
     tb, xb, _ = acc.result()
@@ -288,11 +304,11 @@ def test_streamed_preparation_equals_in_memory(runs: dict[str, Path]) -> None:
 
 
 def test_streaming_block_means_from_file_and_memory_agree(
-    runs: dict[str, Path], fitted: tuple[pl.CompensationModel, pl.Decomposition]
+    runs: dict[str, Path], fitted: tuple[CompensationModel, Decomposition]
 ) -> None:
     model, _ = fitted
     a = load(runs["val"])
-    b = pl.prepare_file(str(runs["val"]), SMALL)
+    b = prepare_file(str(runs["val"]), SMALL)
     np.testing.assert_allclose(
-        pl.streaming_block_means(model, b), pl.streaming_block_means(model, a), rtol=1e-12
+        streaming_block_means(model, b), streaming_block_means(model, a), rtol=1e-12
     )

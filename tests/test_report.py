@@ -59,14 +59,6 @@ def _external_refs(html: str) -> list[str]:
     return [r for r in refs if not r.startswith(("data:", "#"))]
 
 
-def test_block_average_by_time_keeps_gaps_local() -> None:
-    t = np.concatenate([np.arange(0, 10, 0.5), np.arange(20, 30, 0.5)])
-    x = np.where(t < 15, 1.0, 3.0)
-    tm, xm = F.block_average(t, x, 5.0)
-    np.testing.assert_allclose(xm, [1, 1, 3, 3])
-    np.testing.assert_allclose(tm, [2.25, 7.25, 22.25, 27.25])
-
-
 def test_formatting_helpers() -> None:
     assert fmt(float("nan")) == "—" and fmt(None) == "—"
     assert fmt(0.052345678) == "0.05235" and fmt(7) == "7"

@@ -1,7 +1,7 @@
 """Per-axis compensation of 1–3-axis units: one single-axis model per axis, one directory.
 
-The single-axis pipeline (:mod:`.pipeline`) is unchanged; a unit with several axes is a
-loop over it. A multi-axis model directory holds one complete single-axis model directory
+The single-axis model (:mod:`.fit`, :mod:`.apply`) is unchanged; a unit with several axes
+is a loop over it. A multi-axis model directory holds one complete single-axis model directory
 per axis and a head ``model.json`` naming them::
 
     MODEL_DIR/
@@ -25,8 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from gyrolab import __version__
+from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.firmware import Poly3
 from gyrolab.compensation.model_dir import MODEL_FORMAT, MODEL_FORMAT_VERSION, write_json
+from gyrolab.compensation.prepare import PreparedRun, prepare_file, prepare_run
 from gyrolab.errors import InputError
 from gyrolab.record.recording import AXIS_NAMES
 
@@ -37,21 +39,20 @@ def axis_dir_name(k: int) -> str:
     return f"axis_{AXIS_NAMES[k]}"
 
 
-def load_runs(path: str, cfg: Any, **log_options: Any) -> list[Any]:
-    """One :class:`~.pipeline.PreparedRun` per axis of the run at ``path``.
+def load_runs(path: str, cfg: PipelineConfig, **log_options: Any) -> list[PreparedRun]:
+    """One :class:`~.prepare.PreparedRun` per axis of the run at ``path``.
 
-    A single-axis gyrolab MCAP is streamed from the file (:func:`.pipeline.prepare_file`,
+    A single-axis gyrolab MCAP is streamed from the file (:func:`.prepare.prepare_file`,
     bounded memory, exactly as before); a multi-axis recording or a foreign log (ROS 2
     MCAP, PX4 ULog, ArduPilot DataFlash: :func:`gyrolab.logs.read_log` with
     ``log_options``) is read into memory and prepared axis by axis
-    (:func:`.pipeline.prepare_run`)."""
-    from gyrolab.compensation import pipeline as pl
+    (:func:`.prepare.prepare_run`)."""
     from gyrolab.logs import read_log, single_axis_gyrolab
 
     if single_axis_gyrolab(path):
-        return [pl.prepare_file(path, cfg)]
+        return [prepare_file(path, cfg)]
     rec = read_log(path, **log_options)
-    return [pl.prepare_run(rec.axis(k), cfg) for k in range(rec.axes)]
+    return [prepare_run(rec.axis(k), cfg) for k in range(rec.axes)]
 
 
 def write_head(directory: Path, n_axes: int, axis_metrics: list[dict[str, Any]]) -> None:

@@ -1,7 +1,7 @@
 """``gyrolab compensate`` and ``gyrolab apply`` (the contract in docs/cli.md).
 
 ``gyrolab compensate RUN.mcap --out MODEL_DIR [--validate OTHER.mcap]`` fits the hybrid
-model of :mod:`gyrolab.compensation.pipeline` on RUN and writes MODEL_DIR (layout in
+model of :mod:`gyrolab.compensation.fit` on RUN and writes MODEL_DIR (layout in
 :mod:`gyrolab.compensation.model_dir`) with ``metrics.json``. With ``--validate`` the
 top-level metrics are those of OTHER (``"held_out": true``) and the calibration run's own
 metrics sit under ``"calibration"``; without it they are RUN's (``"held_out": false``).
@@ -35,6 +35,22 @@ from typing import Any
 import numpy as np
 
 from gyrolab import __version__
+from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
+from gyrolab.compensation.axes import (
+    FIRMWARE_JSON,
+    axis_dir_name,
+    axis_dirs,
+    load_runs,
+    write_head,
+)
+from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
+from gyrolab.compensation.evaluate import evaluate
+from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
+from gyrolab.compensation.fit import fit
+from gyrolab.compensation.guards import check_not_calibration, range_check, warn_outside
+from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, load_model, save_model, write_json
+from gyrolab.compensation.oracle import add_oracle
+from gyrolab.compensation.prepare import PreparedRun, prepare_file
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
 from gyrolab.record.recording import (
@@ -62,9 +78,7 @@ def _named(path: str) -> Iterator[None]:
         raise
 
 
-def _load_run(path: str, cfg: Any, unit: str | None = None) -> Any:
-    from gyrolab.compensation.pipeline import prepare_file
-
+def _load_run(path: str, cfg: PipelineConfig, unit: str | None = None) -> PreparedRun:
     return prepare_file(path, cfg, unit=unit)
 
 
@@ -125,17 +139,12 @@ def compensate(args: argparse.Namespace) -> int:
 
     A run with several axes (or a foreign log, :mod:`gyrolab.logs`) gets one model per axis
     in one directory (:mod:`gyrolab.compensation.axes`)."""
-    from gyrolab.compensation import pipeline as pl
-    from gyrolab.compensation.axes import axis_dir_name, load_runs, write_head
-    from gyrolab.compensation.config import resolve_config
-    from gyrolab.compensation.guards import check_not_calibration
-
     t_start = time.perf_counter()
     inputs = (args.run, args.validate, getattr(args, "config", None))
     check_output(args.out, args.force, inputs=inputs, kind="dir")
     cfg, seed = resolve_config(
         getattr(args, "config", None),
-        getattr(args, "pipeline_config", None) or pl.DEFAULT_CONFIG,  # batch passes its own
+        getattr(args, "pipeline_config", None) or DEFAULT_CONFIG,  # batch passes its own
         getattr(args, "seed", None),
     )
     unit_arg = getattr(args, "unit", None)
@@ -149,11 +158,11 @@ def compensate(args: argparse.Namespace) -> int:
     if args.validate and unit is not None:  # the same unit of a multi-unit held-out run
         vunit = select_unit(args.validate, unit if _units(args.validate) else None)
     if unit is not None:  # one unit of a multi-unit recording (single-axis units)
-        runs = [pl.prepare_file(args.run, cfg, unit=unit)]
+        runs = [prepare_file(args.run, cfg, unit=unit)]
     else:
         runs = load_runs(args.run, cfg, **opts)
     if vunit is not None:
-        vals = [pl.prepare_file(args.validate, cfg, unit=vunit)]
+        vals = [prepare_file(args.validate, cfg, unit=vunit)]
     else:
         vals = load_runs(args.validate, cfg, **opts) if args.validate else None
     if vals is not None and len(vals) != len(runs):
@@ -178,8 +187,6 @@ def compensate(args: argparse.Namespace) -> int:
             if vals is None or vunit is not None:  # held out on the same serial
                 metrics["unit"] = unit if vals is None else vunit
     if len(runs) == 1:
-        from gyrolab.compensation.oracle import add_oracle
-
         # the floor beside the headline, where the truth is known (gyrolab simulate runs)
         _model, metrics, metrics_cal = fitted[0]
         add_oracle(metrics, args.validate or args.run, cfg.block_s, vunit if vals else unit)
@@ -206,22 +213,22 @@ def compensate(args: argparse.Namespace) -> int:
 
 
 def _fit_axis(
-    args: argparse.Namespace, cfg: Any, run: Any, val: Any, seed: int = 0
+    args: argparse.Namespace,
+    cfg: PipelineConfig,
+    run: PreparedRun,
+    val: PreparedRun | None,
+    seed: int = 0,
 ) -> tuple[Any, ...]:
     """Fit one axis; its metrics (held-out when ``val``) with the firmware cubic's cost."""
-    from gyrolab.compensation import pipeline as pl
-    from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
-    from gyrolab.compensation.guards import warn_outside
-
     with _named(run.path):
-        model, dec = pl.fit(run, cfg, seed=seed)
-        app = pl.compensate_offline(model, run, dec)
-        metrics_cal = pl.evaluate(model, app, run, held_out=False)
+        model, dec = fit(run, cfg, seed=seed)
+        app = compensate_offline(model, run, dec)
+        metrics_cal = evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
         metrics_cal["firmware_poly3"] = poly3_metrics(p3, run, cfg.block_s, metrics_cal)
     if val is not None:
         with _named(val.path):
-            metrics = pl.evaluate(model, pl.compensate_offline(model, val), val, held_out=True)
+            metrics = evaluate(model, compensate_offline(model, val), val, held_out=True)
             metrics["firmware_poly3"] = poly3_metrics(p3, val, cfg.block_s, metrics)
         metrics["calibration"] = metrics_cal
         warn_outside(args.validate, metrics.get("temperature", {}))
@@ -232,11 +239,7 @@ def _fit_axis(
 
 
 def _write_axis(directory: Path, model: Any, metrics: dict[str, Any], _cal: Any) -> None:
-    from gyrolab.compensation import pipeline as pl
-    from gyrolab.compensation.axes import FIRMWARE_JSON
-    from gyrolab.compensation.model_dir import write_json
-
-    pl.save_model(model, str(directory))
+    save_model(model, str(directory))
     write_json(directory / "metrics.json", metrics)
     write_json(directory / FIRMWARE_JSON, {"poly3": model.firmware_poly3.to_dict()})
 
@@ -250,7 +253,7 @@ def _units(path: str) -> list[str]:
         return []
 
 
-def compensate_units(args: argparse.Namespace, cfg: Any, seed: int = 0) -> int:
+def compensate_units(args: argparse.Namespace, cfg: PipelineConfig, seed: int = 0) -> int:
     """``gyrolab compensate MULTI.mcap --out DIR``: one model directory per unit,
     ``DIR/<serial>``, fitted in parallel by :func:`gyrolab.batch.run_items` (a Dask
     LocalCluster of ``--workers``). DIR appears atomically with the units that were fitted;
@@ -281,11 +284,6 @@ def compensate_units(args: argparse.Namespace, cfg: Any, seed: int = 0) -> int:
 
 def apply(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
-    from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.compensation.guards import range_check, warn_outside
-    from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
-    from gyrolab.compensation.pipeline import StreamingCompensator, compensate_offline, load_model
-
     inputs = (args.model, args.run)
     check_output(args.out, args.force, inputs=inputs, kind="file")
     if len(axis_dirs(args.model)) > 1:
@@ -336,9 +334,6 @@ def apply(args: argparse.Namespace) -> int:
 def _apply_axes(args: argparse.Namespace) -> int:
     """``apply`` for a multi-axis model: every axis of the recording compensated by its own
     model, block by block (the rate blocks keep their (n, axes) layout)."""
-    from gyrolab.compensation.axes import axis_dirs, load_runs
-    from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION
-    from gyrolab.compensation.pipeline import StreamingCompensator, compensate_offline, load_model
     from gyrolab.logs import detect_format
 
     models = [load_model(str(d)) for _a, d in axis_dirs(args.model)]
@@ -349,8 +344,6 @@ def _apply_axes(args: argparse.Namespace) -> int:
     runs = load_runs(args.run, models[0].config)
     if len(runs) != len(models):
         raise InputError(args.run, f"has {len(runs)} axes, the model {len(models)}")
-    from gyrolab.compensation.guards import range_check, warn_outside
-
     comps, y_off, ranges = [], [], []
     for k, (m, r) in enumerate(zip(models, runs, strict=True)):
         ranges.append(range_check(m.calibration, r))
@@ -396,7 +389,7 @@ def _write_compensated(
 ) -> None:
     """Copy ``src`` to ``dst`` record by record (schemas, channels, messages with their
     times and sequence numbers, metadata), with ``/gyro/rate`` compensated block by block
-    by ``comp`` (a :class:`~gyrolab.compensation.pipeline.StreamingCompensator`) and the two
+    by ``comp`` (a :class:`~gyrolab.compensation.apply.StreamingCompensator`) and the two
     extra rate channels added (module docstring). Memory: one block at a time."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer

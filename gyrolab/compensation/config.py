@@ -1,10 +1,13 @@
-"""``gyrolab compensate --config FILE.toml``: the model settings from a TOML file.
+"""The settings of the compensation model: :class:`PipelineConfig` and its TOML file.
 
-Every field of :class:`~gyrolab.compensation.pipeline.PipelineConfig` is a top-level key of
-the same name (documented in docs/compensation.md, "Configuration file"), plus ``seed``.
-Values are checked against the field's type (TOML arrays for tuples, integers accepted where
-a float is expected), against the allowed names of the keys that choose a method
-(:data:`CHOICES`) and against positivity where a count or a duration is meant
+:class:`PipelineConfig` holds every setting of fit and apply (defaults follow the paper
+where it says); :data:`DEFAULT_CONFIG` is what ``gyrolab compensate`` uses.
+
+``gyrolab compensate --config FILE.toml``: every field of :class:`PipelineConfig` is a
+top-level key of the same name (documented in docs/compensation.md, "Configuration file"),
+plus ``seed``. Values are checked against the field's type (TOML arrays for tuples, integers
+accepted where a float is expected), against the allowed names of the keys that choose a
+method (:data:`CHOICES`) and against positivity where a count or a duration is meant
 (:data:`POSITIVE`). An unknown key, a wrong type or a bad value is an
 :class:`~gyrolab.errors.InputError` naming the file and the key (one line, exit 2). A key
 added to ``PipelineConfig`` is a config key at once; only a constraint on its values needs
@@ -18,27 +21,93 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from gyrolab.compensation.fitness import CRITERIA
+from gyrolab.compensation.gabp import OPTIMIZERS, BPConfig, GAConfig
 from gyrolab.errors import InputError
+from gyrolab.numerics.averaging import PAPER_BLOCK_S
+from gyrolab.tomlfile import read_toml
+
+DRIFT_MODELS = ("gabp", "bp", "poly")  # the drift model f(T) of PipelineConfig.drift_model
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Settings of the hybrid model; defaults follow the paper where it says."""
+
+    block_s: float = PAPER_BLOCK_S
+    use_dtdt: bool = False  # paper: temperature only
+    dtdt_window_s: float = 300.0
+    hidden: int = 8
+    drift_model: str = "gabp"  # the drift model f(T): "gabp" (paper), "bp", "poly"
+    ga_population: int = 40
+    ga_generations: int = 40
+    bp_optimizer: str = "lbfgs"  # "lbfgs" or the paper's plain gradient descent "gd"
+    bp_max_iter: int = 400
+    bp_learning_rate: float = 0.01  # gd only (paper prints none: traingd's default)
+    bp_epochs: int = 1000  # gd only
+    vmd_fitness: str = "drift_separation"  # GPSO criterion, fitness.CRITERIA
+    k_range: tuple[int, int] = (3, 11)  # paper §4.2
+    alpha_range: tuple[float, float] = (50.0, 5000.0)  # paper §4.2
+    gpso_population: int = 50  # paper §4.2
+    gpso_generations: int = 30
+    mpe_scale: int = 12  # paper §4.2
+    mpe_order: int = 4
+    mpe_delay: int = 1
+    mpe_noise_min: float = 0.85  # mpe.DEFAULT_NOISE_MIN
+    mpe_drift_max: float = 0.5  # mpe.DEFAULT_DRIFT_MAX
+    vmd_K: int | None = None  # fixed (K, alpha): skip the GPSO search
+    vmd_alpha: float | None = None
+    flp_max_order: int = 32
+    flp_criterion: str = "aic"
+    min_blocks: int = 256
+    min_temp_span_c: float = 2.0
+    baselines: tuple[str, ...] = ("poly", "bp")
+    # causal drift-model families compared by CV inside the calibration run (causal.py)
+    causal_families: tuple[str, ...] = ("poly", "structured", "bp", "gabp")
+
+    def ga(self) -> GAConfig:
+        return GAConfig(population=self.ga_population, generations=self.ga_generations)
+
+    def bp(self) -> BPConfig:
+        return BPConfig(
+            hidden=self.hidden,
+            max_iter=self.bp_max_iter,
+            optimizer=self.bp_optimizer,
+            learning_rate=self.bp_learning_rate,
+            epochs=self.bp_epochs,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PipelineConfig:
+        known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}
+        for k in ("k_range", "alpha_range", "baselines", "causal_families"):
+            if k in known:
+                known[k] = tuple(known[k])
+        return cls(**known)
+
+
+DEFAULT_CONFIG = PipelineConfig()  # what `gyrolab compensate` uses
+
 
 #: Keys that are not PipelineConfig fields.
 EXTRA_KEYS = ("seed",)
 
 
-def _choices() -> dict[str, tuple[str, ...]]:
-    from gyrolab.compensation.fitness import CRITERIA
-    from gyrolab.compensation.gabp import OPTIMIZERS
-    from gyrolab.compensation.pipeline import DRIFT_MODELS
-
-    return {
-        "drift_model": DRIFT_MODELS,
-        "bp_optimizer": OPTIMIZERS,
-        "vmd_fitness": tuple(CRITERIA),
-        "flp_criterion": ("aic", "mdl"),
-        "baselines": ("poly", "bp"),  # each element
-    }
+#: Allowed values of the keys that choose a method (each element for tuples).
+CHOICES: dict[str, tuple[str, ...]] = {
+    "drift_model": DRIFT_MODELS,
+    "bp_optimizer": OPTIMIZERS,
+    "vmd_fitness": tuple(CRITERIA),
+    "flp_criterion": ("aic", "mdl"),
+    "baselines": ("poly", "bp"),  # each element
+}
 
 
 #: Keys whose value (each element for tuples) must be > 0.
@@ -110,7 +179,7 @@ def _coerce(path: str, key: str, value: Any, tp: Any) -> Any:
 
 
 def _check_value(path: str, key: str, value: Any) -> None:
-    choices = _choices().get(key)
+    choices = CHOICES.get(key)
     items = value if isinstance(value, tuple) else (value,)
     if choices is not None:
         for v in items:
@@ -123,12 +192,10 @@ def _check_value(path: str, key: str, value: Any) -> None:
 
 
 def config_from_dict(
-    data: dict[str, Any], base: Any = None, path: str = "config"
-) -> tuple[Any, int | None]:
+    data: dict[str, Any], base: PipelineConfig | None = None, path: str = "config"
+) -> tuple[PipelineConfig, int | None]:
     """``(PipelineConfig, seed or None)`` from a parsed TOML table, starting from ``base``
-    (default: the pipeline's defaults). Errors name ``path``."""
-    from gyrolab.compensation.pipeline import PipelineConfig
-
+    (default: :class:`PipelineConfig`'s defaults). Errors name ``path``."""
     base = PipelineConfig() if base is None else base
     hints = typing.get_type_hints(PipelineConfig)
     fields = {f.name for f in dataclasses.fields(PipelineConfig)}
@@ -155,16 +222,18 @@ def config_from_dict(
     return cfg, seed
 
 
-def load_config(path: str | Path, base: Any = None) -> tuple[Any, int | None]:
+def load_config(
+    path: str | Path, base: PipelineConfig | None = None
+) -> tuple[PipelineConfig, int | None]:
     """Read FILE.toml → ``(PipelineConfig, seed or None)`` (see :func:`config_from_dict`)."""
-    from gyrolab.tomlfile import read_toml
-
     return config_from_dict(read_toml(path, "config file"), base, str(path))
 
 
-def resolve_config(path: str | None, base: Any, cli_seed: int | None) -> tuple[Any, int]:
-    """The configuration and seed ``gyrolab compensate`` runs with: ``base`` (the
-    pipeline's defaults) overridden by the file, the file's seed by ``--seed``."""
+def resolve_config(
+    path: str | None, base: PipelineConfig, cli_seed: int | None
+) -> tuple[PipelineConfig, int]:
+    """The configuration and seed ``gyrolab compensate`` runs with: ``base`` (e.g.
+    :data:`DEFAULT_CONFIG`) overridden by the file, the file's seed by ``--seed``."""
     cfg, seed = (base, None) if path is None else load_config(path, base)
     if cli_seed is not None:
         seed = cli_seed

@@ -22,13 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.compensation.pipeline import (
-    BlockAverager,
-    PreparedRun,
-    causal_temperature,
-    iter_rate_batches,
-    series_metrics,
-)
+from gyrolab.compensation.evaluate import series_metrics
+from gyrolab.compensation.prepare import PreparedRun, causal_temperature, iter_rate_batches
+from gyrolab.numerics.averaging import BlockAverager
 
 DEG2RAD = float(np.pi / 180.0)
 
@@ -103,7 +99,7 @@ def poly3_block_means(p3: Poly3, run: PreparedRun, block_s: float) -> np.ndarray
 
 def chosen_key(metrics: dict[str, Any]) -> str:
     """The metrics key of the chosen causal output: ``causal`` (the causal headline model)
-    when the pipeline fitted one, else ``compensated_streaming`` (GA-BP on T, causal)."""
+    when the model has one, else ``compensated_streaming`` (GA-BP on T, causal)."""
     return "causal" if "causal" in metrics else "compensated_streaming"
 
 

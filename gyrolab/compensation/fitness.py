@@ -42,7 +42,7 @@ import numpy as np
 import scipy.signal
 
 from gyrolab.compensation.gpso import GPSOResult, gpso
-from gyrolab.compensation.vmd import _BATCH_BYTES, VMDResult, _pick_backend, vmd_batch
+from gyrolab.compensation.vmd import BATCH_BYTES, VMDResult, pick_backend, vmd_batch
 
 __all__ = [
     "CRITERIA",
@@ -172,11 +172,11 @@ class VMDFitness:
         kw = dict(self.vmd_kwargs or {})
         # score a slice of candidates at a time so only that slice's modes are ever held
         # (50 candidates x 11 modes of a 1e6-sample record would be 4.4 GB)
-        backend, _ = _pick_backend(kw.get("backend", "auto"), kw.get("device"))
+        backend, _ = pick_backend(kw.get("backend", "auto"), kw.get("device"))
         default = len(X)
         if backend == "numba":  # as many as fit the numba batch's memory bound: one call
             k_max = max(int(np.rint(X[:, 0]).max()), 1) if len(X) else 1
-            per_call = _BATCH_BYTES // (8 * sig.shape[1] * k_max)
+            per_call = BATCH_BYTES // (8 * sig.shape[1] * k_max)
             default = max(2 * numba.get_num_threads(), per_call)
         step = max(int(kw.pop("fitness_chunk", default)), 1)
         out = np.empty(len(X))

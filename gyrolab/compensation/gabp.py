@@ -217,7 +217,7 @@ def _neuron_mutation(theta: np.ndarray, n_in: int, hidden: int, bound: float, rn
         theta[idx] = rng.uniform(-bound, bound, size=len(idx))
 
 
-def _gd_train(
+def gd_train(
     theta0: np.ndarray, Xs: np.ndarray, ys: np.ndarray, hidden: int, cfg: BPConfig
 ) -> tuple[np.ndarray, list[float]]:
     """Plain full-batch gradient-descent BP (paper §3.3.1): ``θ ← θ − η ∂E/∂θ`` on
@@ -259,10 +259,10 @@ def _bp_train(
 ) -> tuple[np.ndarray, list[float]]:
     """Train from ``theta0`` with ``cfg.optimizer``: full-batch L-BFGS on
     E = ½ Σ (O − Z)² / N (eqs 18/19, mean form), or plain gradient descent
-    (:func:`_gd_train`). Returns the trained flat vector and the loss history (after each
+    (:func:`gd_train`). Returns the trained flat vector and the loss history (after each
     L-BFGS function evaluation / each GD epoch)."""
     if cfg.optimizer == "gd":
-        return _gd_train(theta0, Xs, ys, hidden, cfg)
+        return gd_train(theta0, Xs, ys, hidden, cfg)
     if cfg.optimizer != "lbfgs":
         raise ValueError(f"BP optimizer must be one of {OPTIMIZERS}, not {cfg.optimizer!r}")
     import torch

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrolab.compensation.causal_features import hold
 from gyrolab.errors import InputError
 
 HASH_NAME = "blake2b-160"
@@ -78,11 +79,10 @@ def check_not_calibration(validate_path: str, val_hash: str, cal_hash: str) -> N
 
 def temperature_rate(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, w: float) -> np.ndarray:
     """dT/dt (°C/min) at times ``t``: causal backward difference (T(t) − T(t − w)) / w of the
-    zero-order-held PT100 temperature — the rate input of the pipeline's ``features``."""
-    from gyrolab.compensation.pipeline import causal_temperature
-
-    T = causal_temperature(t, pt_t, pt_c)
-    Tp = causal_temperature(t - w, pt_t, pt_c)
+    zero-order-held PT100 temperature — the rate input of
+    :func:`gyrolab.compensation.prepare.features`."""
+    T = hold(t, pt_t, pt_c)
+    Tp = hold(t - w, pt_t, pt_c)
     return 60.0 * (T - Tp) / w
 
 

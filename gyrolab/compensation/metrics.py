@@ -20,7 +20,8 @@ key                            definition
                                the residual of a static test, bias included)
 =============================  ==========================================================
 
-Windows are rounded to whole samples (at least one); a trailing partial window is dropped.
+Windows are rounded to whole samples (at least one); a trailing partial window is dropped
+(:func:`gyrolab.numerics.averaging.block_means`).
 A 0.0287 deg/s staircase drift gives ~32 deg/h bias stability but well under 1 deg/h bias
 instability: the two names are different quantities (docs/allan.md).
 """
@@ -31,8 +32,9 @@ import numpy as np
 
 from gyrolab.errors import InputError
 from gyrolab.numerics.allan import AllanResult, allan_deviation, noise_terms
+from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means
 
-__all__ = ["METRIC_KEYS", "block_means", "signal_metrics"]
+__all__ = ["METRIC_KEYS", "signal_metrics"]
 
 METRIC_KEYS = (
     "arw_deg_per_sqrt_h",
@@ -41,20 +43,6 @@ METRIC_KEYS = (
     "drift_pp_deg_per_s",
     "rms_deg_per_s",
 )
-PAPER_WINDOW_S = 3.6  # 1000 points per hour
-
-
-def block_means(x: np.ndarray, fs_hz: float, window_s: float) -> np.ndarray:
-    """Means of consecutive non-overlapping windows of round(window_s * fs_hz) >= 1 samples."""
-    if not window_s > 0:
-        raise InputError(None, f"averaging window must be positive, got {window_s} s")
-    w = max(1, int(round(window_s * fs_hz)))
-    n = x.size // w
-    if n < 2:
-        raise InputError(
-            None, f"series of {x.size} samples too short for two {window_s} s averaging windows"
-        )
-    return x[: n * w].reshape(n, w).mean(axis=1)
 
 
 def _num(v: float | None) -> float:
@@ -64,8 +52,8 @@ def _num(v: float | None) -> float:
 def signal_metrics(
     rate_dps: np.ndarray,
     fs_hz: float,
-    stability_window_s: float = PAPER_WINDOW_S,
-    drift_window_s: float = PAPER_WINDOW_S,
+    stability_window_s: float = PAPER_BLOCK_S,
+    drift_window_s: float = PAPER_BLOCK_S,
     allan: AllanResult | None = None,
 ) -> dict[str, float]:
     """The five metrics (docs/cli.md) of a gyro output in deg/s sampled at ``fs_hz``.

@@ -1,4 +1,6 @@
-"""The fitted-model directory: a versioned, code-free on-disk format.
+"""The fitted-model directory: a versioned, code-free on-disk format, and the
+:class:`~gyrolab.compensation.fit.CompensationModel` written to it (:func:`save_model`)
+and read back (:func:`load_model`).
 
 Layout (``MODEL_FORMAT_VERSION`` 1)::
 
@@ -33,6 +35,13 @@ from typing import Any
 import numpy as np
 
 from gyrolab import __version__
+from gyrolab.compensation.baselines import PolyDriftModel
+from gyrolab.compensation.causal import CausalDriftModel
+from gyrolab.compensation.config import PipelineConfig
+from gyrolab.compensation.fit import CompensationModel, DriftModel
+from gyrolab.compensation.flp import ForwardLinearPredictor
+from gyrolab.compensation.gabp import MLPDriftModel
+from gyrolab.compensation.guards import check_finite
 from gyrolab.errors import InputError
 
 MODEL_FORMAT = "gyrolab.compensation-model"
@@ -86,7 +95,7 @@ def save_model_dir(
         clean[k] = a
     np.savez_compressed(d / ARRAYS_NPZ, **clean)
     if torch_states:
-        import torch
+        import torch  # heavy: imported only when a network is written
 
         for name, state in torch_states.items():
             torch.save(state, d / f"{name}.pt")
@@ -134,3 +143,94 @@ def load_model_dir(
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
         raise InputError(npz, f"damaged model arrays ({e.__class__.__name__})") from None
     return meta, arrays
+
+
+def _drift_from_state(
+    meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str
+) -> DriftModel:
+    if meta["kind"] == "mlp":
+        return MLPDriftModel.from_state(meta, arrays, prefix)
+    if meta["kind"] == "poly":
+        return PolyDriftModel.from_state(meta, arrays, prefix)
+    raise ValueError(f"unknown drift model kind {meta['kind']!r}")
+
+
+def save_model(model: CompensationModel, directory: str) -> None:
+    """Write ``model`` into an existing directory (layout in the module docstring)."""
+    arrays: dict[str, np.ndarray] = dict(model.diagnostics)
+    cmeta = None
+    if model.causal is not None:
+        cmeta, carr = model.causal.to_state("causal.")
+        arrays.update(carr)
+    dmeta, darr = model.drift.to_state("drift.")
+    arrays.update(darr)
+    bmeta: dict[str, Any] = {}
+    for name, m in model.baselines.items():
+        meta, arr = m.to_state(f"baseline.{name}.")
+        bmeta[name] = meta
+        arrays.update(arr)
+    meta = {
+        "seed": model.seed,
+        "config": model.config.to_dict(),
+        "vmd": {"K": model.K, "alpha": model.alpha},
+        "decomposition": model.decomposition_info,
+        "drift_model": dmeta,
+        "baselines": bmeta,
+        "calibration": model.calibration,
+        "flp": {
+            "mixed": None if model.flp_mixed is None else model.flp_mixed.to_dict(),
+            "stream": None if model.flp_stream is None else model.flp_stream.to_dict(),
+        },
+        "causal_model": cmeta,
+        "streaming": {
+            "temperature": "zero-order hold of the last PT100 reading",
+            "dtdt": "backward difference over config.dtdt_window_s"
+            if model.config.use_dtdt
+            else None,
+        },
+    }
+    torch_states = {}
+    if isinstance(model.drift, MLPDriftModel):
+        torch_states["drift_gabp"] = model.drift.torch_state_dict()
+    bp = model.baselines.get("bp")
+    if isinstance(bp, MLPDriftModel):
+        torch_states["baseline_bp"] = bp.torch_state_dict()
+    save_model_dir(directory, meta, arrays, torch_states)
+
+
+def load_model(directory: str) -> CompensationModel:
+    """Read a model directory written by :func:`save_model` (format checked)."""
+    meta, arrays = load_model_dir(directory)
+    try:
+        check_finite(directory, meta, arrays)
+        flp = meta.get("flp") or {}
+        flp_mixed = flp.get("mixed")
+        flp_stream = flp.get("stream")
+        cfg = PipelineConfig.from_dict(meta["config"])
+        drift = _drift_from_state(meta["drift_model"], arrays, "drift.")
+        baselines = {
+            name: _drift_from_state(bm, arrays, f"baseline.{name}.")
+            for name, bm in meta.get("baselines", {}).items()
+        }
+        diagnostics = {
+            k: v for k, v in arrays.items() if not k.startswith(("drift.", "baseline.", "causal."))
+        }
+        cmeta = meta.get("causal_model")
+        causal = None if cmeta is None else CausalDriftModel.from_state(cmeta, arrays, "causal.")
+        return CompensationModel(
+            config=cfg,
+            drift=drift,
+            baselines=baselines,
+            K=int(meta["vmd"]["K"]),
+            alpha=float(meta["vmd"]["alpha"]),
+            calibration=dict(meta.get("calibration", {})),
+            flp_mixed=None if flp_mixed is None else ForwardLinearPredictor.from_dict(flp_mixed),
+            flp_stream=None if flp_stream is None else ForwardLinearPredictor.from_dict(flp_stream),
+            diagnostics=diagnostics,
+            decomposition_info=dict(meta.get("decomposition", {})),
+            timing_s=dict(meta.get("timing_s", {})),
+            causal=causal,
+            seed=None if meta.get("seed") is None else int(meta["seed"]),
+        )
+    except (KeyError, TypeError, ValueError) as e:
+        raise InputError(directory, f"incomplete or damaged model ({e!r})") from None

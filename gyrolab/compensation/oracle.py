@@ -23,6 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from gyrolab.compensation.evaluate import drift_pp_table, series_metrics
+from gyrolab.errors import InputError
+from gyrolab.numerics.averaging import block_average
+from gyrolab.record.recording import TOPIC_EVENT, TOPIC_RATE, read_recording
+
 STOCHASTIC = ("arw", "bias_instability", "rate_random_walk", "outliers", "quantization")
 
 
@@ -83,8 +88,6 @@ def oracle_rate(rec: Any) -> np.ndarray | None:
 
 def oracle_block_means(rec: Any, block_s: float) -> np.ndarray | None:
     """:func:`oracle_rate` averaged to the compensation's ``block_s`` grid (or ``None``)."""
-    from gyrolab.compensation.pipeline import block_average
-
     o = oracle_rate(rec)
     if o is None:
         return None
@@ -95,10 +98,6 @@ def oracle_block_means(rec: Any, block_s: float) -> np.ndarray | None:
 def add_oracle(metrics: dict[str, Any], path: str, block_s: float, unit: str | None = None) -> bool:
     """Add ``oracle`` (the five metrics) and its 100 s p-p to ``metrics`` when ``path`` is
     a ``gyrolab simulate`` recording; return whether it was added."""
-    from gyrolab.compensation.pipeline import drift_pp_table, series_metrics
-    from gyrolab.errors import InputError
-    from gyrolab.record.recording import TOPIC_EVENT, TOPIC_RATE, read_recording
-
     try:
         rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_EVENT], unit=unit)
     except InputError:  # a user's log (ROS bag, DataFlash, …): no simulation truth

@@ -464,9 +464,10 @@ def vmd_batch(
     Ks_arr = Ks_arr.astype(np.int64)
     if init not in ("uniform", "zero"):
         raise ValueError("vmd_batch: init must be 'uniform' or 'zero'")
-    backend, device = _pick_backend(backend, device)
+    backend, device = pick_backend(backend, device)
     args = (xs, units_arr, alphas, Ks_arr, tau, tol, max_iter, init, dc)
     if backend == "triton":
+        # optional GPU extra (Triton), and vmd_triton imports this module: imported here
         from gyrolab.compensation.vmd_triton import vmd_batch_triton
 
         return vmd_batch_triton(*args, device=device, chunk=chunk)
@@ -509,7 +510,10 @@ def _triton_available() -> bool:
     return _HAS_TRITON
 
 
-def _pick_backend(backend: str, device: str | None) -> tuple[str, str | None]:
+def pick_backend(backend: str, device: str | None) -> tuple[str, str | None]:
+    """The backend (``numba``, ``torch``, ``triton``) and device that :func:`vmd_batch` runs
+    a ``backend``/``device`` request on: ``auto`` takes CUDA (Triton, else torch) when
+    torch sees a GPU, else numba on the CPU."""
     if backend not in ("auto", "numba", "torch", "triton"):
         raise ValueError(f"vmd_batch: unknown backend {backend!r}")
     if backend == "numba":
@@ -543,7 +547,7 @@ def _cost_order(Ks: np.ndarray, alphas: np.ndarray, units: np.ndarray) -> np.nda
     return np.lexsort((units, alphas, -Ks))
 
 
-_BATCH_BYTES = 256 * 2**20  # default bound on the modes held by one numba chunk
+BATCH_BYTES = 256 * 2**20  # default bound on the modes held by one numba chunk
 
 
 def _vmd_batch_numba(xs, units, alphas, Ks, tau, tol, max_iter, init, dc, chunk):
@@ -552,7 +556,7 @@ def _vmd_batch_numba(xs, units, alphas, Ks, tau, tol, max_iter, init, dc, chunk)
     B = alphas.size
     threads = numba.get_num_threads()
     if chunk is None:
-        chunk = max(2 * threads, _BATCH_BYTES // (8 * n * int(Ks.max())))
+        chunk = max(2 * threads, BATCH_BYTES // (8 * n * int(Ks.max())))
     order = _cost_order(Ks, alphas, units)
     results: list[VMDResult | None] = [None] * B
     for start in range(0, B, int(chunk)):

@@ -62,7 +62,7 @@ _EPS = float(np.spacing(1.0))
 _ADD = tl.standard._sum_combine if tl is not None else None
 
 
-def _admm_step(
+def admm_step(
     fd_ptr, unit_ptr, k_ptr, alpha_ptr, row_ptr, cand_ptr,
     u_ptr, s_ptr, lam_ptr, pnum_ptr, pden_ptr, pdiff_ptr, omega_ptr, done_ptr, niter_ptr,
     par_ptr, L, B, M, NB, max_iter,
@@ -171,7 +171,7 @@ def _kernel(interpret: bool):
         raise RuntimeError("TRITON_INTERPRET=1 is set: the triton backend runs on the CPU only")
     if _KERNEL is None:
         # L changes every launch: no specialisation on its value (one compiled variant)
-        _KERNEL = triton.jit(_admm_step, do_not_specialize=["L"])
+        _KERNEL = triton.jit(admm_step, do_not_specialize=["L"])
     return _KERNEL
 
 
@@ -233,7 +233,7 @@ def vmd_batch_triton(
     sync_every: int = 8,
     timings: dict | None = None,
 ) -> list[VMDResult]:
-    """Run the batch through :func:`_admm_step`; arguments as validated by ``vmd_batch``.
+    """Run the batch through :func:`admm_step`; arguments as validated by ``vmd_batch``.
 
     Parameters
     ----------

@@ -42,8 +42,9 @@ def _header(args: argparse.Namespace) -> str:
 
 def kalibr_text(args: argparse.Namespace) -> str:
     """``imu.yaml`` for ``args.model`` applied to ``args.run`` (every axis)."""
+    from gyrolab.compensation.apply import streaming_compensate
     from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.compensation.pipeline import load_model, streaming_compensate
+    from gyrolab.compensation.model_dir import load_model
     from gyrolab.export.kalibr import axis_noise, imu_yaml
     from gyrolab.logs import log_options, read_log
 

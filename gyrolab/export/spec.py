@@ -132,7 +132,7 @@ def model_spec(model_dir: Path, kind: str = "chosen") -> dict[str, Any]:
     from gyrolab.compensation.axes import load_poly3
     from gyrolab.compensation.baselines import PolyDriftModel
     from gyrolab.compensation.gabp import MLPDriftModel
-    from gyrolab.compensation.pipeline import load_model
+    from gyrolab.compensation.model_dir import load_model
 
     if kind == "poly3":
         p3 = load_poly3(model_dir)
@@ -166,7 +166,7 @@ def model_spec(model_dir: Path, kind: str = "chosen") -> dict[str, Any]:
 def export_spec(model_dir: str | Path, kind: str = "chosen") -> dict[str, Any]:
     """The whole JSON document for every axis of ``model_dir``."""
     from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.compensation.pipeline import load_model
+    from gyrolab.compensation.model_dir import load_model
 
     axes = []
     for name, d in axis_dirs(model_dir):

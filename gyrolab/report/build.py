@@ -237,7 +237,7 @@ def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
 
 def raw_metrics(tb: np.ndarray, xb: np.ndarray, block_s: float) -> dict[str, Any]:
     """The five metrics (docs/cli.md) of the averaged raw output (NaN when too short)."""
-    from gyrolab.compensation.pipeline import series_metrics
+    from gyrolab.compensation.evaluate import series_metrics
 
     try:
         return series_metrics(xb, block_s)
@@ -436,7 +436,7 @@ def build_report(
     spec_obj = load_spec(spec) if spec is not None else None
     model = None
     if model_dir is not None:
-        from gyrolab.compensation.pipeline import load_model
+        from gyrolab.compensation.model_dir import load_model
 
         step("load model")
         model = load_model(str(model_dir))
@@ -446,7 +446,7 @@ def build_report(
         rec = rec.axis(axis)
     rate = rec.rate
     assert rate is not None
-    from gyrolab.compensation.pipeline import PAPER_BLOCK_S, block_average
+    from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_average
 
     block_s = model.config.block_s if model is not None else PAPER_BLOCK_S
     x = np.asarray(rate.values, dtype=float)
@@ -460,7 +460,9 @@ def build_report(
     app = run = None
     held_out: bool | None = None
     if model is not None:
-        from gyrolab.compensation.pipeline import compensate_offline, evaluate, prepare_run
+        from gyrolab.compensation.apply import compensate_offline
+        from gyrolab.compensation.evaluate import evaluate
+        from gyrolab.compensation.prepare import prepare_run
 
         step("apply model")
         run = prepare_run(rec, model.config)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means
 from gyrolab.report import figures as F
 from gyrolab.report.document import FigureBlock, Section, TableBlock, TextBlock
 
@@ -31,13 +32,17 @@ def _fmt(x: Any) -> str:
 
 def headline_figure(t: np.ndarray, series: list[tuple[str, np.ndarray, str]]) -> Figure:
     """Raw output (top) and the residual of every method (bottom), all as 100 s averages."""
+    from gyrolab.compensation.evaluate import DRIFT_PP_WINDOW_S
+
     fig = Figure(figsize=(9.0, 5.0), layout="constrained")
     top, bot = fig.subplots(2, 1, sharex=True, height_ratios=[1, 1.4])
-    w = 28  # 3.6 s blocks per 100.8 s
-    n = t.size // w
-    th = t[: n * w].reshape(n, w).mean(axis=1) / 3600.0
+
+    def means(x: np.ndarray) -> np.ndarray:  # of the 3.6 s series: 28 blocks, 100.8 s
+        return block_means(np.asarray(x[: t.size], float), 1.0 / PAPER_BLOCK_S, DRIFT_PP_WINDOW_S)
+
+    th = means(t) / 3600.0
     for label, x, color in series:
-        xm = np.asarray(x[: n * w], float).reshape(n, w).mean(axis=1)
+        xm = means(x)
         ax = top if label == "raw" else bot
         lw = 1.2 if label.startswith("causal") else 0.8
         ax.plot(th, xm, color=color, lw=lw, label=label)
@@ -56,8 +61,9 @@ def causal_headline_section(
 ) -> Section | None:
     """The headline section (module docstring); ``None`` for a model without a causal
     part (a model directory written before it existed)."""
+    from gyrolab.compensation.apply import streaming_block_means
+    from gyrolab.compensation.evaluate import drift_pp_table, series_metrics
     from gyrolab.compensation.oracle import oracle_block_means
-    from gyrolab.compensation.pipeline import drift_pp_table, series_metrics, streaming_block_means
 
     if getattr(model, "causal", None) is None or "causal" not in metrics:
         return None

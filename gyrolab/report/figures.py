@@ -5,8 +5,9 @@ figures never leak global state, work under any backend and can be saved to PNG 
 report) and to a PDF page alike. Figure numbers in the docstrings refer to the paper in
 ``shared/paper`` (Figs 9-15).
 
-Long series are expected pre-averaged (see :func:`block_average`): a 13 h run at 100 Hz has
-4.7 M samples, far more than a figure can show, and the paper itself plots 1000 points/h.
+Long series are expected pre-averaged (:func:`gyrolab.numerics.averaging.block_average`): a
+13 h run at 100 Hz has 4.7 M samples, far more than a figure can show, and the paper itself
+plots 1000 points/h.
 """
 
 from __future__ import annotations
@@ -22,24 +23,6 @@ from matplotlib.figure import Figure
 CLASS_COLORS: dict[str, str] = {"noise": "#d62728", "mixed": "#ff7f0e", "drift": "#1f77b4"}
 RAW_COLOR = "#7f7f7f"
 COMP_COLOR = "#2ca02c"
-
-
-def block_average(t: np.ndarray, x: np.ndarray, window_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Average ``x`` over consecutive windows of ``window_s`` seconds of ``t``.
-
-    Windows are defined by time, not by sample count, so a gap in the samples shortens one
-    window rather than shifting every later one. Empty windows are dropped.
-    """
-    t = np.asarray(t, dtype=float)
-    x = np.asarray(x, dtype=float)
-    if t.size == 0:
-        return t, x
-    k = np.floor((t - t[0]) / window_s).astype(np.int64)
-    counts = np.bincount(k)
-    keep = counts > 0
-    tm = np.bincount(k, weights=t)[keep] / counts[keep]
-    xm = np.bincount(k, weights=x)[keep] / counts[keep]
-    return tm, xm
 
 
 def to_png(fig: Figure, dpi: int = 110) -> bytes:
@@ -91,8 +74,15 @@ def temperature_profile(
             k = int(np.flatnonzero(s)[0])
             xs = th[max(0, k - 1) :] if k else th[s]
             ys = np.concatenate([sp[max(0, k - 1) : k], sp[s]]) if k else sp[s]
-            ax.step(xs, ys, where="post", color="#d62728", lw=1.4, ls="--",
-                    label="safe state (end of run)")
+            ax.step(
+                xs,
+                ys,
+                where="post",
+                color="#d62728",
+                lw=1.4,
+                ls="--",
+                label="safe state (end of run)",
+            )
             ax.annotate(
                 f"safe state {sp[k]:g} °C",
                 (th[k], sp[k]),
@@ -196,8 +186,14 @@ def mpe_classes(
         if c == "drift" and drift_max is not None and mpe[i] > drift_max:
             b.set_hatch("//")
             b.set_edgecolor("k")
-            ax.annotate("fallback", (idx[i], mpe[i]), xytext=(0, 3),
-                        textcoords="offset points", ha="center", fontsize=7)
+            ax.annotate(
+                "fallback",
+                (idx[i], mpe[i]),
+                xytext=(0, 3),
+                textcoords="offset points",
+                ha="center",
+                fontsize=7,
+            )
     for thr, name in ((drift_max, "drift ≤"), (noise_min, "noise ≥")):
         if thr is not None:
             ax.axhline(thr, color="k", lw=0.8, ls=":")

@@ -106,7 +106,7 @@ def find_model_dirs(paths: list[str]) -> list[Path]:
 
 def _coefficients(model_dir: Path, meta: dict[str, Any]) -> dict[str, float]:
     """The unit's model in numbers comparable across units (module docstring)."""
-    from gyrolab.compensation.pipeline import load_model
+    from gyrolab.compensation.model_dir import load_model
 
     model = load_model(str(model_dir))
     cal = model.calibration

@@ -1,0 +1,246 @@
+"""Fit the paper's hybrid compensation model on a calibration run (:func:`fit`).
+
+The paper's parallel model (§3.5, Fig. 7), as gyrolab runs it:
+
+1. **Decimate** (:mod:`gyrolab.compensation.prepare`). The rate is averaged to the paper's
+   1000 points/h (``block_s`` = 3.6 s); the drift model's input at each block centre is the
+   last PT100 reading (causal). Everything below runs at that rate.
+2. **GPSO-VMD** (§3.1–3.2) chooses (K, α) and decomposes the averaged rate into K modes.
+3. **MPE** (§3.4, scale 12) classifies the modes: high entropy = *noise*, middle = *mixed*,
+   low = *drift* (thresholds of :func:`gyrolab.compensation.mpe.classify_modes`; when no
+   mode falls below the drift threshold, the most regular mode is taken as the drift).
+4. **Noise** modes are dropped; **mixed** modes are filtered by the forward linear
+   predictor (FLP); **drift** modes are summed into the drift target ``d(t)``.
+5. **GA-BP** (§3.3) learns ``d ≈ f(T)`` (optionally ``f(T, dT/dt)``) from the PT100
+   temperature.
+6. Output: ``y = FLP(mixed) + (drift − f(T))`` (the reconstruction of §3.5 step 3,
+   :func:`gyrolab.compensation.apply.compensate_offline`).
+
+Baselines, fitted on the same calibration run and applied the same causal way:
+``poly`` (polynomial in T, order by blocked CV) and ``bp`` (plain BP, random initial
+weights), both fitted directly on the averaged raw output (the classical approach, no
+decomposition). Beside them the causal headline model (:mod:`gyrolab.compensation.causal`,
+:func:`fit_causal_model`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gyrolab.compensation.baselines import PolyDriftModel, fit_plain_bp, fit_poly
+from gyrolab.compensation.causal import CausalCalibration, CausalDriftModel, fit_causal
+from gyrolab.compensation.config import DEFAULT_CONFIG, DRIFT_MODELS, PipelineConfig
+from gyrolab.compensation.fitness import search_vmd_parameters
+from gyrolab.compensation.flp import ForwardLinearPredictor
+from gyrolab.compensation.gabp import MLPDriftModel, fit_gabp
+from gyrolab.compensation.guards import calibration_ranges
+from gyrolab.compensation.mpe import classify_modes, mean_mpe
+from gyrolab.compensation.prepare import PreparedRun
+from gyrolab.compensation.vmd import vmd
+from gyrolab.errors import InputError
+
+
+@dataclass
+class Decomposition:
+    """VMD modes at 1000 points/h with their MPE values and classes."""
+
+    K: int
+    alpha: float
+    modes: np.ndarray  # (K, N), °/s
+    omega: np.ndarray  # (K,), cycles/sample
+    mpe: np.ndarray  # (K,), mean MPE over scales 1..mpe_scale, in [0, 1]
+    classes: dict[str, list[int]]
+    history: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def part(self, name: str) -> np.ndarray:
+        idx = self.classes.get(name, [])
+        if not idx:
+            return np.zeros(self.modes.shape[1])
+        return self.modes[idx].sum(axis=0)
+
+
+def _vmd_fixed(x: np.ndarray, K: int, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    r = vmd(x, alpha=alpha, K=K)
+    return r.modes, r.omega
+
+
+def _gpso_vmd(
+    x: np.ndarray, cfg: PipelineConfig, seed: int
+) -> tuple[int, float, dict[str, np.ndarray]]:
+    """GPSO search of (K, α) in the paper's box (fitness.py's default criterion); returns
+    the choice and the swarm history (every evaluated position and its fitness)."""
+    s = search_vmd_parameters(
+        x,
+        criterion=cfg.vmd_fitness,
+        K_bounds=cfg.k_range,
+        alpha_bounds=cfg.alpha_range,
+        population=cfg.gpso_population,
+        generations=cfg.gpso_generations,
+        seed=seed,
+    )
+    g = s.gpso
+    history = {
+        "best_fitness": g.best_history,
+        "best_position": g.best_position_history,
+        "positions": g.positions,
+        "fitness": g.fitness,
+    }
+    return s.K, s.alpha, history
+
+
+def _classify(modes: np.ndarray, cfg: PipelineConfig) -> tuple[np.ndarray, dict[str, list[int]]]:
+    """Mean MPE over scales 1..``mpe_scale`` per mode and the threshold classes (mpe.py)."""
+    values = mean_mpe(modes, scales=cfg.mpe_scale, order=cfg.mpe_order, delay=cfg.mpe_delay)
+    classes = classify_modes(values, cfg.mpe_noise_min, cfg.mpe_drift_max)
+    if not classes["drift"]:
+        # The temperature drift is always the most regular thing in the run; when the noise
+        # riding on it keeps every mode above drift_max, the most regular mode is the drift.
+        k = int(np.argmin(values))
+        for name in ("noise", "mixed"):
+            if k in classes[name]:
+                classes[name].remove(k)
+        classes["drift"] = [k]
+    return values, classes
+
+
+def fit_flp(x: np.ndarray, cfg: PipelineConfig) -> ForwardLinearPredictor:
+    """Forward linear predictor fitted on ``x`` (Burg, order by ``flp_criterion``)."""
+    return ForwardLinearPredictor(max_order=cfg.flp_max_order, criterion=cfg.flp_criterion).fit(x)
+
+
+def decompose(
+    x: np.ndarray, cfg: PipelineConfig, seed: int, K: int | None = None, alpha: float | None = None
+) -> Decomposition:
+    """GPSO-VMD (or VMD at a given (K, α)) + MPE classes of the averaged rate ``x``."""
+    history: dict[str, np.ndarray] = {}
+    if K is None or alpha is None:
+        K, alpha = cfg.vmd_K, cfg.vmd_alpha
+    if K is None or alpha is None:
+        K, alpha, history = _gpso_vmd(x, cfg, seed)
+    modes, omega = _vmd_fixed(x, int(K), float(alpha))
+    mpe, classes = _classify(modes, cfg)
+    return Decomposition(int(K), float(alpha), modes, omega, mpe, classes, history)
+
+
+# ------------------------------------------------------------------------ the model
+
+
+DriftModel = MLPDriftModel | PolyDriftModel
+
+
+@dataclass
+class CompensationModel:
+    """What ``gyrolab compensate`` fits and ``gyrolab apply`` uses."""
+
+    config: PipelineConfig
+    drift: DriftModel
+    baselines: dict[str, DriftModel]
+    K: int
+    alpha: float
+    calibration: dict[str, Any]
+    flp_mixed: ForwardLinearPredictor | None = None  # the mixed modes (None: no mixed mode)
+    flp_stream: ForwardLinearPredictor | None = None  # the causal drift-compensated series
+    diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
+    decomposition_info: dict[str, Any] = field(default_factory=dict)
+    timing_s: dict[str, float] = field(default_factory=dict)
+    causal: CausalDriftModel | None = None  # the causal headline model (causal.py)
+    seed: int | None = None  # None: a model written before the seed was recorded
+
+
+def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> CausalDriftModel:
+    """The causal drift model (:func:`gyrolab.compensation.causal.fit_causal`): every family
+    of ``cfg.causal_families`` on the causal features, the winner by CV inside ``run``."""
+    cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
+    return fit_causal(cal, families=cfg.causal_families, bp=cfg.bp(), ga=cfg.ga(), seed=seed)
+
+
+def fit_drift_model(X: np.ndarray, drift: np.ndarray, cfg: PipelineConfig, seed: int) -> Any:
+    """The drift model ``f`` of ``cfg.drift_model`` fitted to ``drift ≈ f(X)``: the paper's
+    GA-BP, plain BP (random initial weights) or the polynomial of :mod:`.baselines`."""
+    if cfg.drift_model == "gabp":
+        return fit_gabp(X, drift, ga=cfg.ga(), bp=cfg.bp(), seed=seed)
+    if cfg.drift_model == "bp":
+        return fit_plain_bp(X, drift, bp=cfg.bp(), seed=seed)
+    if cfg.drift_model == "poly":
+        return fit_poly(X, drift)
+    raise ValueError(f"drift_model must be one of {DRIFT_MODELS}, not {cfg.drift_model!r}")
+
+
+def fit(
+    run: PreparedRun, cfg: PipelineConfig = DEFAULT_CONFIG, seed: int = 0
+) -> tuple[CompensationModel, Decomposition]:
+    """Fit the hybrid model (and the baselines) on a prepared calibration run."""
+    import torch  # heavy: imported only when a model is fitted
+
+    span = float(np.ptp(run.temp))
+    if span < cfg.min_temp_span_c:
+        raise InputError(
+            run.path,
+            f"temperature spans only {span:.2f} °C; fitting a temperature model needs a "
+            f"sweep of at least {cfg.min_temp_span_c} °C",
+        )
+    torch.manual_seed(seed)
+    timing: dict[str, float] = {}
+    t0 = time.perf_counter()
+    dec = decompose(run.rate, cfg, seed)
+    timing["gpso_vmd_mpe"] = time.perf_counter() - t0
+    drift = dec.part("drift")
+    if not dec.classes.get("drift"):
+        raise InputError(run.path, "no VMD mode was classified as drift: nothing to model")
+    t1 = time.perf_counter()
+    gabp = fit_drift_model(run.X, drift, cfg, seed)
+    timing["gabp"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    baselines: dict[str, DriftModel] = {}
+    if "poly" in cfg.baselines:
+        baselines["poly"] = fit_poly(run.X, run.rate)
+    if "bp" in cfg.baselines:
+        baselines["bp"] = fit_plain_bp(run.X, run.rate, bp=cfg.bp(), seed=seed)
+    timing["baselines"] = time.perf_counter() - t2
+    t3 = time.perf_counter()
+    causal = fit_causal_model(run, cfg, seed)
+    timing["causal"] = time.perf_counter() - t3
+    mixed = dec.part("mixed")
+    flp_mixed = fit_flp(mixed, cfg) if dec.classes.get("mixed") else None
+    flp_stream = fit_flp(run.rate - gabp.predict(run.X), cfg)
+    diagnostics = {
+        "calib_t": run.t,
+        "calib_rate": run.rate,
+        "calib_temp": run.temp,
+        "calib_X": run.X,
+        "calib_modes": dec.modes,
+        "calib_omega": dec.omega,
+        "calib_mpe": dec.mpe,
+        "drift_target": drift,
+        "drift_fit": gabp.predict(run.X),
+    }
+    for k, v in dec.history.items():
+        diagnostics[f"gpso_{k}"] = np.asarray(v)
+    model = CompensationModel(
+        config=cfg,
+        drift=gabp,
+        baselines=baselines,
+        K=dec.K,
+        alpha=dec.alpha,
+        calibration={
+            "path": run.path,
+            "n_points": int(run.t.size),
+            "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
+            **calibration_ranges(run, cfg.dtdt_window_s),
+            "raw_rate_hz": 1.0 / run.raw_period,
+            "filled_blocks": run.filled_blocks,
+            "content_hash": run.content_hash,
+        },
+        flp_mixed=flp_mixed,
+        flp_stream=flp_stream,
+        diagnostics=diagnostics,
+        decomposition_info={"classes": dec.classes, "mpe": dec.mpe.tolist()},
+        timing_s=timing,
+        causal=causal,
+        seed=int(seed),
+    )
+    return model, dec

@@ -1,0 +1,215 @@
+"""A run reduced to what the compensation model needs (:class:`PreparedRun`).
+
+Step 1 of the model (:mod:`gyrolab.compensation.fit`): the rate is averaged to the
+paper's 1000 points/h (``block_s`` = 3.6 s, :mod:`gyrolab.numerics.averaging`: ≈ 13 000
+points for a 13 h run, the paper's N), after the input checks (finite, not constant, long
+enough; bad input → one-line :class:`~gyrolab.errors.InputError`). The drift model's input
+at each block centre is the last PT100 reading at or before it (:func:`features`): the
+same causal rule as the streaming output of :mod:`gyrolab.compensation.apply`.
+
+Three sources: a :class:`~gyrolab.record.recording.Recording` in memory
+(:func:`prepare_run`), a file streamed block by block in bounded memory
+(:func:`prepare_file`) and plain arrays (:func:`prepare_arrays`: simulations and tests).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyrolab.compensation.causal_features import hold
+from gyrolab.compensation.config import PipelineConfig
+from gyrolab.compensation.guards import RunHasher, content_hash
+from gyrolab.errors import InputError
+from gyrolab.numerics.averaging import BlockAverager
+from gyrolab.record.recording import (
+    TOPIC_PT100,
+    TOPIC_RATE,
+    Recording,
+    iter_blocks,
+    read_recording,
+)
+
+
+@dataclass
+class PreparedRun:
+    """A run reduced to what the model needs.
+
+    ``t``/``rate``/``temp``/``X``: the 1000 points/h series (s, °/s, °C, features);
+    ``raw_t``/``raw_rate``: full-rate samples; ``pt_t``/``pt_c``: PT100 readings."""
+
+    path: str
+    t: np.ndarray
+    rate: np.ndarray
+    temp: np.ndarray
+    X: np.ndarray
+    raw_t: np.ndarray | None  # None when prepared from the file by streaming
+    raw_rate: np.ndarray | None
+    raw_period: float
+    pt_t: np.ndarray
+    pt_c: np.ndarray
+    filled_blocks: int = 0
+    content_hash: str = ""  # guards.RunHasher digest of the rate and PT100 data
+    unit: str | None = None  # the unit of a multi-unit recording (docs/fleet.md)
+
+
+def causal_temperature(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
+    """PT100 temperature (°C) at ``t`` (s): the last reading at or before ``t`` (the first
+    reading before the first one), the zero-order hold of
+    :func:`gyrolab.compensation.causal_features.hold`. Causal."""
+    return hold(t, pt_t, pt_c)
+
+
+def features(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineConfig) -> np.ndarray:
+    """Drift-model inputs at times ``t``: T (°C) and, with ``use_dtdt``, the backward
+    difference ``(T(t) − T(t − w)) / w`` (°C/s, w = ``dtdt_window_s``). Causal, and the same
+    function for fitting, offline and streaming application."""
+    T = causal_temperature(t, pt_t, pt_c)
+    if not cfg.use_dtdt:
+        return T[:, None]
+    w = cfg.dtdt_window_s
+    Tp = causal_temperature(t - w, pt_t, pt_c)
+    return np.column_stack([T, (T - Tp) / w])
+
+
+def _check_temperature(path: str, pt_t: np.ndarray, pt_c: np.ndarray) -> tuple[np.ndarray, ...]:
+    if not np.all(np.isfinite(pt_c)) or not np.all(np.isfinite(pt_t)):
+        raise InputError(path, "/temperature/pt100 has NaN or infinite readings")
+    order = np.argsort(pt_t, kind="stable")
+    return pt_t[order], pt_c[order]
+
+
+def _finish(
+    path: str, acc: BlockAverager, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineConfig
+) -> tuple[np.ndarray, ...]:
+    """Input checks on the accumulated rate, then the 1000 points/h series."""
+    if acc.n_bad:
+        raise InputError(path, f"/gyro/rate has {acc.n_bad} NaN or infinite samples")
+    if acc.t_first is None:
+        raise InputError(path, "recording has no /gyro/rate data")
+    if acc.vmax == acc.vmin:
+        raise InputError(path, "/gyro/rate is constant: nothing to compensate")
+    if not acc.period > 0:
+        raise InputError(path, "/gyro/rate has no valid sample period")
+    span_s = acc.t_last - acc.t_first
+    need_s = cfg.min_blocks * cfg.block_s
+    if span_s < need_s:
+        raise InputError(
+            path,
+            f"run is {span_s:.0f} s long; the compensation model needs at least "
+            f"{need_s:.0f} s ({cfg.min_blocks} points at {cfg.block_s} s)",
+        )
+    tb, xb, filled = acc.result()
+    if not np.all(np.isfinite(xb)):
+        raise InputError(path, "/gyro/rate has too many gaps to average")
+    return tb, xb, np.interp(tb, pt_t, pt_c), features(tb, pt_t, pt_c, cfg), filled
+
+
+def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
+    """Validate a recording read into memory and decimate it (keeps the full-rate samples).
+    Bad input → :class:`InputError` naming it."""
+    rate = rec.require_rate()
+    pt_t, pt_c = _check_temperature(rec.path, *rec.require_temperature())
+    x = np.asarray(rate.values, dtype=float)
+    acc = BlockAverager(cfg.block_s)
+    acc.add(rate.t, x, rate.period)
+    tb, xb, temp, X, filled = _finish(rec.path, acc, pt_t, pt_c, cfg)
+    digest = content_hash(x, pt_t, pt_c)
+    return PreparedRun(
+        path=rec.path,
+        unit=rec.unit,
+        t=tb,
+        rate=xb,
+        temp=temp,
+        X=X,
+        raw_t=rate.t,
+        raw_rate=x,
+        raw_period=float(rate.period),
+        pt_t=pt_t,
+        pt_c=pt_c,
+        filled_blocks=filled,
+        content_hash=digest,
+    )
+
+
+def iter_rate_batches(
+    path: str, min_samples: int = 1 << 20, unit: str | None = None
+) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
+    """``(t, rate, period)`` for runs of consecutive ``/gyro/rate`` messages holding at
+    least ``min_samples`` samples (the last one fewer): per-sample times built for the
+    whole batch at once, so the per-message Python cost is one decode."""
+    t0s: list[float] = []
+    pers: list[float] = []
+    arrs: list[np.ndarray] = []
+    n = 0
+
+    def flush() -> tuple[np.ndarray, np.ndarray, float]:
+        sizes = np.array([a.size for a in arrs])
+        start = np.repeat(np.cumsum(sizes) - sizes, sizes)
+        t = np.repeat(t0s, sizes) + (np.arange(sizes.sum()) - start) * np.repeat(pers, sizes)
+        return t, np.concatenate(arrs).astype(float), float(np.median(pers))
+
+    for t0, period, _first, arr in iter_blocks(path, TOPIC_RATE, unit=unit):
+        t0s.append(t0)
+        pers.append(period)
+        arrs.append(arr)
+        n += arr.size
+        if n >= min_samples:
+            yield flush()
+            t0s, pers, arrs, n = [], [], [], 0
+    if arrs:
+        yield flush()
+
+
+def prepare_arrays(
+    path: str,
+    t: np.ndarray,
+    rate: np.ndarray,
+    period: float,
+    pt_t: np.ndarray,
+    pt_c: np.ndarray,
+    cfg: PipelineConfig,
+) -> PreparedRun:
+    """Like :func:`prepare_run` for a run already in arrays (full-rate samples ``rate`` at
+    times ``t``, PT100 readings ``pt_c`` at ``pt_t``): simulations and tests."""
+    pt_t, pt_c = _check_temperature(path, np.asarray(pt_t, float), np.asarray(pt_c, float))
+    x = np.asarray(rate, dtype=float)
+    acc = BlockAverager(cfg.block_s)
+    acc.add(np.asarray(t, dtype=float), x, period)
+    tb, xb, temp, X, filled = _finish(path, acc, pt_t, pt_c, cfg)
+    return PreparedRun(
+        path, tb, xb, temp, X, np.asarray(t, float), x, float(period), pt_t, pt_c, filled
+    )
+
+
+def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> PreparedRun:
+    """Like :func:`prepare_run`, streaming ``/gyro/rate`` from the file block by block:
+    memory is that of the 1000 points/h series, not of the run (``raw_t``/``raw_rate`` are
+    ``None``; :func:`gyrolab.compensation.apply.streaming_block_means` re-reads the file
+    when it needs the samples)."""
+    rec = read_recording(path, topics=[TOPIC_PT100], unit=unit)
+    pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
+    acc = BlockAverager(cfg.block_s)
+    hasher = RunHasher()
+    for t, x, period in iter_rate_batches(path, unit=unit):
+        acc.add(t, x, period)
+        hasher.add_rate(x)
+    tb, xb, temp, X, filled = _finish(str(path), acc, pt_t, pt_c, cfg)
+    digest = hasher.hexdigest(pt_t, pt_c)
+    return PreparedRun(
+        path=str(path),
+        unit=unit,
+        t=tb,
+        rate=xb,
+        temp=temp,
+        X=X,
+        raw_t=None,
+        raw_rate=None,
+        raw_period=acc.period,
+        pt_t=pt_t,
+        pt_c=pt_c,
+        filled_blocks=filled,
+        content_hash=digest,
+    )
