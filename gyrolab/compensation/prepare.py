@@ -82,9 +82,16 @@ def _check_temperature(path: str, pt_t: np.ndarray, pt_c: np.ndarray) -> tuple[n
 
 
 def _finish(
-    path: str, acc: BlockAverager, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineConfig
-) -> tuple[np.ndarray, ...]:
-    """Input checks on the accumulated rate, then the 1000 points/h series."""
+    path: str,
+    acc: BlockAverager,
+    pt_t: np.ndarray,
+    pt_c: np.ndarray,
+    cfg: PipelineConfig,
+    raw: tuple[np.ndarray, np.ndarray] | None,
+    unit: str | None = None,
+) -> PreparedRun:
+    """Input checks on the accumulated rate, then the run at 1000 points/h; ``raw``: the
+    full-rate ``(t, rate)`` when they are in memory. ``content_hash`` is left to the caller."""
     if acc.n_bad:
         raise InputError(path, f"/gyro/rate has {acc.n_bad} NaN or infinite samples")
     if acc.t_first is None:
@@ -104,7 +111,20 @@ def _finish(
     tb, xb, filled = acc.result()
     if not np.all(np.isfinite(xb)):
         raise InputError(path, "/gyro/rate has too many gaps to average")
-    return tb, xb, np.interp(tb, pt_t, pt_c), features(tb, pt_t, pt_c, cfg), filled
+    return PreparedRun(
+        path=path,
+        unit=unit,
+        t=tb,
+        rate=xb,
+        temp=np.interp(tb, pt_t, pt_c),
+        X=features(tb, pt_t, pt_c, cfg),
+        raw_t=None if raw is None else raw[0],
+        raw_rate=None if raw is None else raw[1],
+        raw_period=acc.period,
+        pt_t=pt_t,
+        pt_c=pt_c,
+        filled_blocks=filled,
+    )
 
 
 def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
@@ -115,23 +135,9 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     x = np.asarray(rate.values, dtype=float)
     acc = BlockAverager(cfg.block_s)
     acc.add(rate.t, x, rate.period)
-    tb, xb, temp, X, filled = _finish(rec.path, acc, pt_t, pt_c, cfg)
-    digest = content_hash(x, pt_t, pt_c)
-    return PreparedRun(
-        path=rec.path,
-        unit=rec.unit,
-        t=tb,
-        rate=xb,
-        temp=temp,
-        X=X,
-        raw_t=rate.t,
-        raw_rate=x,
-        raw_period=float(rate.period),
-        pt_t=pt_t,
-        pt_c=pt_c,
-        filled_blocks=filled,
-        content_hash=digest,
-    )
+    run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit)
+    run.content_hash = content_hash(x, pt_t, pt_c)
+    return run
 
 
 def iter_rate_batches(
@@ -177,11 +183,9 @@ def prepare_arrays(
     pt_t, pt_c = _check_temperature(path, np.asarray(pt_t, float), np.asarray(pt_c, float))
     x = np.asarray(rate, dtype=float)
     acc = BlockAverager(cfg.block_s)
-    acc.add(np.asarray(t, dtype=float), x, period)
-    tb, xb, temp, X, filled = _finish(path, acc, pt_t, pt_c, cfg)
-    return PreparedRun(
-        path, tb, xb, temp, X, np.asarray(t, float), x, float(period), pt_t, pt_c, filled
-    )
+    t = np.asarray(t, dtype=float)
+    acc.add(t, x, period)
+    return _finish(path, acc, pt_t, pt_c, cfg, (t, x))
 
 
 def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> PreparedRun:
@@ -196,20 +200,6 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
     for t, x, period in iter_rate_batches(path, unit=unit):
         acc.add(t, x, period)
         hasher.add_rate(x)
-    tb, xb, temp, X, filled = _finish(str(path), acc, pt_t, pt_c, cfg)
-    digest = hasher.hexdigest(pt_t, pt_c)
-    return PreparedRun(
-        path=str(path),
-        unit=unit,
-        t=tb,
-        rate=xb,
-        temp=temp,
-        X=X,
-        raw_t=None,
-        raw_rate=None,
-        raw_period=acc.period,
-        pt_t=pt_t,
-        pt_c=pt_c,
-        filled_blocks=filled,
-        content_hash=digest,
-    )
+    run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit)
+    run.content_hash = hasher.hexdigest(pt_t, pt_c)
+    return run
