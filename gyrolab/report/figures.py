@@ -74,15 +74,8 @@ def temperature_profile(
             k = int(np.flatnonzero(s)[0])
             xs = th[max(0, k - 1) :] if k else th[s]
             ys = np.concatenate([sp[max(0, k - 1) : k], sp[s]]) if k else sp[s]
-            ax.step(
-                xs,
-                ys,
-                where="post",
-                color="#d62728",
-                lw=1.4,
-                ls="--",
-                label="safe state (end of run)",
-            )
+            ax.step(xs, ys, where="post", color="#d62728", lw=1.4, ls="--",
+                    label="safe state (end of run)")
             ax.annotate(
                 f"safe state {sp[k]:g} °C",
                 (th[k], sp[k]),
@@ -186,14 +179,8 @@ def mpe_classes(
         if c == "drift" and drift_max is not None and mpe[i] > drift_max:
             b.set_hatch("//")
             b.set_edgecolor("k")
-            ax.annotate(
-                "fallback",
-                (idx[i], mpe[i]),
-                xytext=(0, 3),
-                textcoords="offset points",
-                ha="center",
-                fontsize=7,
-            )
+            ax.annotate("fallback", (idx[i], mpe[i]), xytext=(0, 3),
+                        textcoords="offset points", ha="center", fontsize=7)
     for thr, name in ((drift_max, "drift ≤"), (noise_min, "noise ≥")):
         if thr is not None:
             ax.axhline(thr, color="k", lw=0.8, ls=":")
