@@ -1,8 +1,10 @@
 """The ``gyrolab`` command line (the contract in docs/cli.md).
 
-Thin: it parses arguments and hands the namespace to the layer that does the work. Each
+Thin: it parses arguments and hands them to the layer that does the work. Each
 subcommand's handler is ``module:function(args) -> int``, imported only when that
 subcommand runs, so ``gyrolab --help`` stays fast and a broken layer cannot break the rest.
+``acquire``, ``recover`` and ``demo`` are translated here into the typed library calls of
+:mod:`gyrolab.app`.
 
 Errors: a :class:`~gyrolab.errors.GyrolabError` becomes one line on stderr and exit 2;
 SIGINT exits 130. Anything else is a bug and shows its traceback.
@@ -15,19 +17,20 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from gyrolab import __version__
-from gyrolab.errors import GyrolabError, NotYetAvailable
+from gyrolab.errors import GyrolabError
 
 HANDLERS: dict[str, str] = {
     "simulate": "gyrolab.sim.commands:simulate",
-    "acquire": "gyrolab.app.acquire:acquire",
+    "acquire": "gyrolab.cli:acquire",
     "compensate": "gyrolab.compensation.commands:compensate",
     "apply": "gyrolab.compensation.commands:apply",
     "report": "gyrolab.report.commands:report",
     "discrepancy": "gyrolab.sim.discrepancy.commands:discrepancy",
-    "recover": "gyrolab.app.acquire:recover",
-    "demo": "gyrolab.app.demo:demo",
+    "recover": "gyrolab.cli:recover",
+    "demo": "gyrolab.cli:demo",
     "convert": "gyrolab.convert:convert",
     "export": "gyrolab.export.commands:export",
     "batch": "gyrolab.batch:batch",
@@ -235,15 +238,47 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def acquire(args: argparse.Namespace) -> int:
+    """``gyrolab acquire``: :func:`gyrolab.app.acquire.acquire`; the run's exit code."""
+    from gyrolab.app.acquire import AcquireOptions
+    from gyrolab.app.acquire import acquire as run
+
+    opts = AcquireOptions(
+        bench=args.bench,
+        out=Path(args.out),
+        profile=args.profile,
+        speed=args.speed,
+        seed=args.seed,
+        drivers=tuple(args.driver or ()),
+        faults=args.faults,
+        axis_models=tuple(args.axis_model or ()),
+        force=args.force,
+        live_port=args.live,
+        live_host=args.live_host,
+    )
+    return run(opts).exit_code
+
+
+def recover(args: argparse.Namespace) -> int:
+    """``gyrolab recover BROKEN.mcap --out FIXED.mcap``: salvage and report what was lost."""
+    from gyrolab.app.acquire import recover as run
+
+    print(run(args.broken, args.out, force=args.force))
+    return 0
+
+
+def demo(args: argparse.Namespace) -> int:
+    """``gyrolab demo --out DIR``: :func:`gyrolab.app.demo.run_demo`, then its summary."""
+    from gyrolab.app.demo import run_demo, summary
+
+    res = run_demo(args.out, args.profile, args.seed, args.force)
+    print(summary(Path(args.out), res))
+    return 0
+
+
 def _handler(command: str):  # type: ignore[no-untyped-def]
     module, func = HANDLERS[command].split(":")
-    try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as e:
-        if e.name and module.startswith(e.name):
-            raise NotYetAvailable(f"gyrolab {command}: not yet available in this version") from None
-        raise
-    return getattr(mod, func)
+    return getattr(importlib.import_module(module), func)
 
 
 def _input_paths(args: argparse.Namespace) -> list[str]:

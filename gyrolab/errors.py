@@ -18,7 +18,3 @@ class InputError(GyrolabError):
         self.path = None if path is None else str(path)
         self.problem = problem
         super().__init__(problem if self.path is None else f"{self.path}: {problem}")
-
-
-class NotYetAvailable(GyrolabError):
-    """A subcommand whose implementation has not landed yet."""

@@ -181,7 +181,8 @@ def _run_in_process(tmp_path: Path, profile: Path, *, speed: float, faults, limi
     """run_acquisition against a SimBench built here (for faults and ground truth)."""
     from dataclasses import replace
 
-    from gyrolab.app.acquire import run_acquisition, sim_bench_config, start_sim_bench
+    from gyrolab.app.acquire import run_acquisition
+    from gyrolab.app.sim_bench import sim_bench_config, start_sim_bench
     from gyrolab.profiles.profile import load_profile
 
     prof = load_profile(profile)

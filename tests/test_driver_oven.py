@@ -431,7 +431,8 @@ def test_safe_state_off_leaves_the_chamber_switched_off(tmp_path, chamber) -> No
     """``[safe_state] mode = "off"``: at the end of a run the safe setpoint is verified and
     the chamber switched off (F4: its control event output; ESPEC: STANDBY), verified."""
     from gyrolab.acquisition.bench_config import bench_from_dict
-    from gyrolab.app.acquire import run_acquisition, start_sim_bench
+    from gyrolab.app.acquire import run_acquisition
+    from gyrolab.app.sim_bench import start_sim_bench
     from gyrolab.profiles.profile import load_profile
     from gyrolab.record.recording import read_recording
 

@@ -8,7 +8,8 @@ import time
 from pathlib import Path
 
 from gyrolab.acquisition.bench_config import Limits, SafeState
-from gyrolab.acquisition.runner import Acquisition, WallClock
+from gyrolab.acquisition.runner import Acquisition
+from gyrolab.clock import WallClock
 from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
 from gyrolab.instruments.roles import (
     AdcRead,

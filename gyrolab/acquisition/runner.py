@@ -42,6 +42,7 @@ import numpy as np
 
 from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import Limits, SafeState
+from gyrolab.clock import Clock
 from gyrolab.errors import InputError
 from gyrolab.instruments.roles import (  # noqa: F401 - re-exported for compatibility
     Chamber,
@@ -59,25 +60,28 @@ from gyrolab.record.recording import RecordingWriter
 # ------------------------------------------------------------------------ protocols
 
 
-class Clock(Protocol):
-    """The run's time base: seconds on a monotonic timeline shared with the instruments."""
+class SilencePolicy(Protocol):
+    """When an instrument that has said nothing for a while counts as lost (the watchdog).
 
-    def now(self) -> float: ...
+    :class:`RunTimeSilence` is the lab's rule; a simulated bench supplies its own
+    (``gyrolab.app.sim_bench``)."""
 
-    def sleep(self, dt: float) -> None: ...
+    def heard(self, source: str) -> None:
+        """``source`` just answered."""
+
+    def lost(self, source: str, silent_s: float, timeout_s: float) -> bool:
+        """Is ``source``, silent for ``silent_s`` run seconds, lost (limit ``timeout_s``)?"""
+        ...
 
 
-class WallClock:
-    """Real time (the lab)."""
+class RunTimeSilence:
+    """The lab's rule: lost after more than ``comm_timeout_s`` seconds of run time."""
 
-    speed = 1.0
+    def heard(self, source: str) -> None:
+        pass
 
-    def now(self) -> float:
-        return time.monotonic()
-
-    def sleep(self, dt: float) -> None:
-        if dt > 0:
-            time.sleep(dt)
+    def lost(self, source: str, silent_s: float, timeout_s: float) -> bool:
+        return silent_s > timeout_s
 
 
 # The role protocols and the error vocabulary live in roles.py; these names stay here for
@@ -478,7 +482,7 @@ class Acquisition:
         on_status: Callable[[Status], None] | None = None,
         status_every_s: float = 0.5,
         on_samples: Callable[[float], None] | None = None,
-        comm_timeout_min_wall_s: float = 0.0,
+        silence: SilencePolicy | None = None,
         threaded: bool = True,
         turn_s: float = 0.1,
     ) -> None:
@@ -487,7 +491,7 @@ class Acquisition:
         # itself and then sleeps ``turn_s`` on ``clock`` (a fake clock in tests advances).
         self.threaded = threaded
         self.turn_s = turn_s
-        self.comm_timeout_min_wall_s = comm_timeout_min_wall_s
+        self.silence: SilencePolicy = silence or RunTimeSilence()
         self.profile = profile
         self.plan = ProfilePlan(profile)
         self.w = writer
@@ -509,7 +513,6 @@ class Acquisition:
         self._interrupt: str | None = None
         self._fault: str | None = None
         self._last_ok: dict[str, float] = {}
-        self._last_ok_wall: dict[str, float] = {}
         self._down_since: dict[str, float] = {}
         self._down_errors: dict[str, int] = {}
         self._pt_bad = 0
@@ -594,7 +597,7 @@ class Acquisition:
         now = self._t0
         for name in (self.thermo.name, self.oven.name, self.gyro.name):
             self._last_ok[name] = now
-            self._last_ok_wall[name] = time.monotonic()
+            self.silence.heard(name)
         self._do(self.plan.start(0.0))
         threads = [
             _Poller(
@@ -779,7 +782,7 @@ class Acquisition:
 
     def _on_ok(self, source: str, t: float, t_clock: float) -> None:
         self._last_ok[source] = t_clock
-        self._last_ok_wall[source] = time.monotonic()
+        self.silence.heard(source)
         if source in self._down_since:
             since = self._down_since.pop(source)
             n = self._down_errors.pop(source, 0)
@@ -837,17 +840,9 @@ class Acquisition:
 
     def _watchdog(self, t: float) -> None:
         now = self.clock.now()
-        wall = time.monotonic()
         for source, last in self._last_ok.items():
             silent = now - last
-            # A simulated bench shares this process with the drivers: a hiccup of a few
-            # hundred ms wall (a GC, an import, a long physics step) is many simulated
-            # seconds at 200x. ``comm_timeout_min_wall_s`` (0 on real hardware) keeps
-            # such hiccups from passing for a lost instrument.
-            if (
-                silent > self.limits.comm_timeout_s
-                and wall - self._last_ok_wall[source] >= self.comm_timeout_min_wall_s
-            ):
+            if self.silence.lost(source, silent, self.limits.comm_timeout_s):
                 self._fail(
                     "watchdog",
                     f"lost communication with {source}: nothing for {silent:.1f} s "

@@ -1,35 +1,32 @@
-"""``gyrolab acquire`` and ``gyrolab recover``: the lab acquisition entry points.
+"""Acquire one run on a configured bench: typed options in, :class:`RunResult` out.
 
-``acquire --bench BENCH.toml`` opens the three real instruments named in the bench file;
-``acquire --bench sim`` first starts the simulated bench (``gyrolab.sim.bench``: the
-same wire protocols over pseudo-terminals, one simulated clock) and then does exactly the
-same: the drivers, the runner and the recorder cannot tell the difference. The two meet
-only on the wire, which is why this module (and the tests) are the only places that
-import both ``acquisition`` and ``sim``.
+``bench="sim"`` first starts the simulated bench (:mod:`gyrolab.app.sim_bench`: the same
+wire protocols over pseudo-terminals, one simulated clock) and then does exactly the same
+as for a BENCH.toml: the drivers, the run engine and the recorder cannot tell the
+difference. Each role's instrument is opened at an address (``addresses``, keyed by the
+registry's role names), so a bench with more instruments adds addresses, not code paths.
 
-The recording is written directly to ``--out`` (never over an existing file unless
-``--force``), so that a crash leaves a recoverable file at the named path
-(docs/reliability.md); ``gyrolab recover`` repairs it.
+The recording is written directly to ``out`` (never over an existing file unless
+``force``), so that a crash leaves a recoverable file at the named path
+(docs/reliability.md); :func:`recover` repairs it.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import datetime as _dt
 import math
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator
-from dataclasses import replace
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import (
     BenchConfig,
-    RunInfo,
     check_bench_for_profile,
     load_bench,
 )
@@ -37,9 +34,10 @@ from gyrolab.acquisition.runner import (
     Acquisition,
     RunResult,
     Status,
-    WallClock,
     check_profile_limits,
 )
+from gyrolab.app.sim_bench import SimHandle, sim_bench_config, sim_drivers, start_sim_bench
+from gyrolab.clock import Clock, WallClock
 from gyrolab.errors import GyrolabError, InputError
 from gyrolab.instruments import registry
 from gyrolab.instruments.roles import Chamber, RateStream, Thermometer
@@ -47,20 +45,29 @@ from gyrolab.outputs import check_output
 from gyrolab.profiles.profile import Profile, load_profile
 from gyrolab.record.recording import RecordingWriter
 
+
+@dataclass(frozen=True)
+class AcquireOptions:
+    """What ``gyrolab acquire`` is asked to do (docs/cli.md).
+
+    ``bench``: ``"sim"`` or a BENCH.toml; ``profile``: paper | short | FILE.toml (None: the
+    bench's); ``speed``/``seed``/``drivers``/``faults``/``axis_models``: the simulated bench
+    only; ``live_port``: serve the run to Foxglove (0: any free port)."""
+
+    bench: str
+    out: Path
+    profile: str | None = None
+    speed: float | None = None
+    seed: int = 0
+    drivers: tuple[str, ...] = ()
+    faults: str | None = None
+    axis_models: tuple[str, ...] = ()
+    force: bool = False
+    live_port: int | None = None
+    live_host: str = "127.0.0.1"
+
+
 # --------------------------------------------------------------------- instruments
-
-# Driver timeouts never go below this many wall seconds. On the lab path (time_scale 1)
-# it only raises the oven's 0.3 s (bench-config default) to 0.5 s, as it always has.
-LAB_TIMEOUT_FLOOR_S = 0.5
-
-# The simulated bench answers in milliseconds (measured on a 2-core machine with both
-# cores busy with other work, at 200x: Modbus transactions max 35 ms, 34401A readings max
-# 74 ms wall), so its drivers' timeouts may go lower than on the lab path. The floor is
-# still wall time, and at speed X it costs X times as many simulated seconds per timeout:
-# 2.5 s at 10x, where the 0.5 s floor cost 5 s, and an exception reply (shorter than the
-# reply minimalmodbus waits for) costs a full timeout too. A burst of Modbus errors thus
-# stays well inside the 60 s communication timeout.
-SIM_TIMEOUT_FLOOR_S = 0.25
 
 
 class Instruments:
@@ -81,45 +88,47 @@ class Instruments:
         self.closers.clear()
 
 
+def as_configured(timeout_s: float) -> float:
+    """The lab's driver-timeout rule: the configured timeout (docs/bench-config.md)."""
+    return timeout_s
+
+
+def lab_addresses(cfg: BenchConfig) -> dict[str, str]:
+    """Each role's instrument address as BENCH.toml gives it."""
+    return {
+        "thermometer": registry.address(cfg.multimeter, "thermometer"),
+        "chamber": registry.address(cfg.oven, "chamber"),
+        "rate_stream": registry.address(cfg.adc, "rate_stream"),
+    }
+
+
 def connect_instruments(
     cfg: BenchConfig,
+    addresses: Mapping[str, str],
     *,
-    dmm_resource: str,
-    oven_port: str,
-    adc_port: str,
-    time_scale: float = 1.0,
-    timeout_floor_s: float = LAB_TIMEOUT_FLOOR_S,
+    timeout: Callable[[float], float] = as_configured,
     visa_library: Any = "@py",
     clock: Callable[[], float] = time.monotonic,
 ) -> Instruments:
-    """Open and identify the bench's three drivers (``driver`` of each role's table,
-    gyrolab.instruments.registry) at the given addresses; raises InputError naming what
-    failed.
+    """Open and identify the bench's drivers (``driver`` of each role's table,
+    gyrolab.instruments.registry) at ``addresses`` (role → address); raises InputError
+    naming what failed.
 
-    ``time_scale`` divides the drivers' wall-clock timeouts (a simulated bench running
-    X× faster than real time answers X× sooner, and a silent one must be noticed X×
-    sooner too); when sped up it never takes them below ``timeout_floor_s`` wall
-    seconds, which protects against scheduling jitter; in real time the configured
-    timeouts are used as they are (``SIM_TIMEOUT_FLOOR_S`` for the simulated bench).
+    ``timeout`` maps each configured driver timeout to the one used: as configured on a lab
+    bench (the engineer's choice, docs/bench-config.md); the simulated bench supplies its
+    own rule (:func:`gyrolab.app.sim_bench.scaled_timeouts`).
     """
     inst = Instruments()
     src = cfg.source
-
-    def scaled(t: float) -> float:
-        # Real time: the configured timeout is the engineer's choice (docs/bench-config.md);
-        # the floor only guards a sped-up simulated bench against scheduling jitter.
-        if time_scale <= 1.0:
-            return t
-        return max(timeout_floor_s, t / time_scale)
-
     limits = (cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c)
     try:
-        for attr, role, sub, address in (
-            ("thermometer", "thermometer", cfg.multimeter, dmm_resource),
-            ("oven", "chamber", cfg.oven, oven_port),
-            ("gyro", "rate_stream", cfg.adc, adc_port),
+        for attr, role, sub in (
+            ("thermometer", "thermometer", cfg.multimeter),
+            ("oven", "chamber", cfg.oven),
+            ("gyro", "rate_stream", cfg.adc),
         ):
-            ctx = registry.OpenContext(address, scaled, limits, clock, visa_library)
+            address = addresses[role]
+            ctx = registry.OpenContext(address, timeout, limits, clock, visa_library)
             try:
                 dev = registry.open_driver(sub, role, ctx)
             except Exception as e:
@@ -132,198 +141,6 @@ def connect_instruments(
         inst.close()
         raise
     return inst
-
-
-# ------------------------------------------------------------------ simulated bench
-
-
-class SimHandle:
-    """A running simulated bench: its ports, clock and stop function."""
-
-    def __init__(
-        self,
-        *,
-        dmm_resource: str,
-        oven_port: str,
-        adc_port: str,
-        clock: Any,
-        stop: Callable[[], None],
-        time_scale: float,
-        timeout_floor_s: float = LAB_TIMEOUT_FLOOR_S,
-        speed: float | None = None,
-        bench: Any = None,
-        provenance: dict[str, Any] | None = None,
-        axes_provenance: dict[str, Any] | None = None,
-    ) -> None:
-        self.dmm_resource = dmm_resource
-        self.oven_port = oven_port
-        self.adc_port = adc_port
-        self.clock = clock
-        self.stop = stop
-        self.time_scale = time_scale
-        self.timeout_floor_s = timeout_floor_s
-        self.speed = speed
-        self.bench = bench
-        self.provenance = provenance or {}
-        self.axes_provenance = axes_provenance  # as simulate's sim_provenance_axes
-
-
-def sim_bench_config(seed: int) -> BenchConfig:
-    """The bench file ``--bench sim`` stands for: defaults, a simulated operator and unit."""
-    return BenchConfig(
-        name="sim",
-        run=RunInfo(
-            operator="simulated",
-            unit_serial=f"SIM-{seed}",
-            unit_model="simulated MEMS gyro",
-            profile="paper",
-            notes="gyrolab acquire --bench sim",
-        ),
-        source="sim",
-    )
-
-
-def sim_drivers(cfg: BenchConfig, names: list[str]) -> BenchConfig:
-    """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
-    name picks its role; the driver's default settings)."""
-    fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
-    for name in names:
-        spec = next((s for s in registry.drivers() if s.name == name), None)
-        if spec is None:
-            known = ", ".join(s.name for s in registry.drivers())
-            raise GyrolabError(f"--driver {name}: no such driver (registered: {known})")
-        cfg = replace(cfg, **{fields[spec.role]: spec.config()})
-    return cfg
-
-
-def start_sim_bench(
-    cfg: BenchConfig,
-    profile: Profile,
-    *,
-    seed: int,
-    speed: float | None,
-    workdir: Path | None = None,
-    faults: Any = None,
-    keep_truth: bool = False,
-    model: Any = None,
-    axis_models: Any = (),
-) -> tuple[SimHandle, BenchConfig]:
-    """Start the wire-level simulated bench; returns it and the bench config to use.
-
-    The config's ADC calibration is the simulated gyro's (what a lab takes from the
-    unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
-    the same path as ``examples/lab.toml``. ``axis_models`` (0–2 SimModels) make a 2- or
-    3-axis unit exactly as ``gyrolab simulate --axis-model`` does (one ADC, axes interleaved).
-    """
-    from gyrolab.sim.bench import SimBench
-    from gyrolab.sim.model import nominal_model
-    from gyrolab.sim.simulate import axis_physics, provenance
-
-    specs = {
-        "thermometer": registry.get(cfg.multimeter.driver, "thermometer"),
-        "chamber": registry.get(cfg.oven.driver, "chamber"),
-    }
-    for role, spec in specs.items():
-        if not spec.sim_backend:
-            raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
-    try:
-        extra_axes = axis_physics(
-            model or nominal_model(),
-            list(axis_models),
-            cfg.adc.sample_rate_hz,
-            seed,
-            profile.ambient_c,
-        )
-    except ValueError as e:
-        raise InputError("--axis-model", str(e)) from None
-    bench = SimBench(
-        dmm_model=specs["thermometer"].sim_backend,
-        chamber_model=specs["chamber"].sim_backend,
-        oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
-        model=model,
-        axis_physics=extra_axes,
-        seed=seed,
-        adc_rate_hz=cfg.adc.sample_rate_hz,
-        samples_per_frame=cfg.adc.samples_per_frame,
-        ambient_c=profile.ambient_c,
-        workdir=workdir,
-        faults=faults,
-        keep_truth=keep_truth,
-        tcp=specs["thermometer"].sim_address == "dmm_tcp_resource",
-        tick_s=sim_tick_s(speed),
-        # Slow while the drivers connect (imports, port set-up: wall seconds that would be
-        # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
-        # that the change to ``speed`` (run_acquisition) takes effect at once.
-        speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
-    )
-    adc = bench.physics.adc
-    cfg = replace(
-        cfg,
-        adc=replace(
-            cfg.adc,
-            bits=int(adc.bits),
-            vref_v=float(adc.vref_v),
-            gain_v_per_dps=float(adc.gain_v_per_dps),
-            offset_v=float(adc.offset_v),
-            axes=1 + len(axis_models),
-        ),
-    )
-    bench.start()
-    where = bench.resources()
-    handle = SimHandle(
-        dmm_resource=where[specs["thermometer"].sim_address],
-        oven_port=where[specs["chamber"].sim_address],
-        adc_port=bench.adc_port,
-        clock=bench.clock,
-        stop=bench.stop,
-        time_scale=speed if speed is not None else _SIM_FAST_SCALE,
-        timeout_floor_s=SIM_TIMEOUT_FLOOR_S,
-        speed=speed,
-        bench=bench,
-        provenance=provenance(bench.physics.model, seed),
-        axes_provenance=(
-            {"axes": 1 + len(axis_models), "models_toml": [m.to_toml() for m in axis_models]}
-            if axis_models
-            else None
-        ),
-    )
-    return handle, cfg
-
-
-def sim_tick_s(speed: float | None) -> float:
-    """Simulated seconds per bench tick: 0.1 s in real time (a smooth stream), up to 1 s
-    when fast (about 100-300 ticks per wall second: each tick wakes every waiting thread,
-    and fewer wake-ups leave the GIL to the drivers)."""
-    if speed is None:
-        return 1.0
-    return float(min(1.0, max(0.1, speed / 100.0)))
-
-
-# Simulated-bench speed while the drivers connect (see start_sim_bench).
-CONNECT_SPEED = 10.0
-
-# Lost communication with a simulated instrument also needs this much wall time of
-# silence (see Acquisition._watchdog); a real bench runs in real time and needs none.
-SIM_COMM_MIN_WALL_S = 1.0
-
-# Timeouts of a free-running simulated bench are scaled as if it ran this much faster
-# than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
-_SIM_FAST_SCALE = 200.0
-
-
-class _SimClockAdapter:
-    """The simulated bench's clock as the runner's Clock (sleep in simulated seconds)."""
-
-    def __init__(self, clock: Any) -> None:
-        self.c = clock
-
-    def now(self) -> float:
-        return float(self.c.now())
-
-    def sleep(self, dt: float) -> None:
-        if dt > 0:
-            # Bounded wall wait so that a stopped clock cannot hang a thread.
-            self.c.sleep(dt, 1.0)
 
 
 # --------------------------------------------------------------------------- acquire
@@ -396,35 +213,24 @@ def run_acquisition(
     force: bool,
     sim: SimHandle | None,
     seed: int | None = None,
-    speed: float | None = None,
     on_status: Callable[[Status], None] | None = None,
     on_samples: Callable[[float], None] | None = None,
-    acquisition_hook: Callable[[Acquisition], None] | None = None,
     live: Any = None,
 ) -> RunResult:
     """Connect, record one run to ``out`` and end cleanly; returns how it ended.
 
-    ``live``: a :class:`~gyrolab.acquisition.live.LiveServer` fed every recorded message."""
+    ``sim``: the simulated bench to run against (its addresses, clock and policies), or
+    None for the instruments BENCH.toml names, in real time. ``live``: a
+    :class:`~gyrolab.acquisition.live.LiveServer` fed every recorded message."""
     check_profile_limits(profile, cfg.limits, str(cfg.run.profile))
     check_output(out, force)
+    clock: Clock
     if sim is not None:
-        clock: Any = _SimClockAdapter(sim.clock)
-        inst = connect_instruments(
-            cfg,
-            dmm_resource=sim.dmm_resource,
-            oven_port=sim.oven_port,
-            adc_port=sim.adc_port,
-            time_scale=sim.time_scale,
-            timeout_floor_s=sim.timeout_floor_s,
-        )
+        clock = sim.clock
+        inst = connect_instruments(cfg, sim.addresses, timeout=sim.timeout)
     else:
         clock = WallClock()
-        inst = connect_instruments(
-            cfg,
-            dmm_resource=registry.address(cfg.multimeter, "thermometer"),
-            oven_port=registry.address(cfg.oven, "chamber"),
-            adc_port=registry.address(cfg.adc, "rate_stream"),
-        )
+        inst = connect_instruments(cfg, lab_addresses(cfg))
     try:
         run_meta: dict[str, Any] = {
             "operator": cfg.run.operator,
@@ -437,7 +243,7 @@ def run_acquisition(
             "bench_name": cfg.name,
         }
         if sim is not None:
-            run_meta.update(seed=seed, speed=speed if speed is not None else "max")
+            run_meta.update(seed=seed, speed=sim.speed if sim.speed is not None else "max")
         if cfg.adc.axes > 1:
             run_meta["axes"] = cfg.adc.axes  # as simulate writes it (recording-format.md)
         bench_meta: dict[str, Any] = {
@@ -462,10 +268,9 @@ def run_acquisition(
             if live is not None:
                 live.attach(writer)
             try:
-                if sim is not None and sim.provenance:
-                    writer.write_metadata("sim_provenance", sim.provenance)
-                if sim is not None and sim.axes_provenance:
-                    writer.write_metadata("sim_provenance_axes", sim.axes_provenance)
+                for name, record in (sim.metadata if sim is not None else {}).items():
+                    if record:
+                        writer.write_metadata(name, record)
                 fh.flush()  # header + metadata on disk before the first reading
                 assert inst.thermometer and inst.oven and inst.gyro
                 acq = Acquisition(
@@ -482,12 +287,10 @@ def run_acquisition(
                     oven_period_s=cfg.oven.period_s,
                     on_status=on_status,
                     on_samples=on_samples,
-                    comm_timeout_min_wall_s=0.0 if sim is None else SIM_COMM_MIN_WALL_S,
+                    silence=None if sim is None else sim.silence,
                 )
-                if acquisition_hook is not None:
-                    acquisition_hook(acq)
                 if sim is not None:
-                    sim.clock.speed = sim.speed  # connected: now run at the asked speed
+                    sim.go()  # connected: now run at the asked speed
                 interrupts.check()  # a stop signal while connecting: end before the run
                 result = acq.run()
             finally:
@@ -514,50 +317,50 @@ def _start_live(port: int, host: str) -> Any:
 
 
 @interrupts.deferring_stop_signals
-def acquire(args: argparse.Namespace) -> int:
-    """``gyrolab acquire --bench sim|BENCH.toml --out RUN.mcap [--profile] [--speed]``."""
-    out = Path(args.out)
-    if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
-        raise GyrolabError(f"--speed must be a positive number, not {args.speed}")
-    drivers = getattr(args, "driver", None) or []
-    if drivers and args.bench != "sim":
+def acquire(opts: AcquireOptions) -> RunResult:
+    """Check every input, run the bench (starting the simulated one for ``bench="sim"``),
+    record to ``opts.out`` and print the one-line summary on stderr; returns how the run
+    ended (``RunResult.exit_code``). Bad input raises GyrolabError before anything starts."""
+    out = Path(opts.out)
+    sim_only = opts.bench == "sim"
+    if opts.speed is not None and not (opts.speed > 0 and math.isfinite(opts.speed)):
+        raise GyrolabError(f"--speed must be a positive number, not {opts.speed}")
+    if opts.drivers and not sim_only:
         raise GyrolabError("--driver applies to --bench sim only (a bench file names its drivers)")
-    axis_paths = getattr(args, "axis_model", None) or []
-    if axis_paths and args.bench != "sim":
+    if opts.axis_models and not sim_only:
         raise GyrolabError(
             "--axis-model applies to --bench sim only (a bench file sets [adc] axes)"
         )
-    if args.bench == "sim":
-        cfg = sim_drivers(sim_bench_config(args.seed), drivers)
+    if sim_only:
+        cfg = sim_drivers(sim_bench_config(opts.seed), opts.drivers)
     else:
-        cfg = load_bench(args.bench)
-        if args.speed is not None:
+        cfg = load_bench(opts.bench)
+        if opts.speed is not None:
             raise GyrolabError(
                 "--speed applies to --bench sim only (real hardware runs in real time)"
             )
     axis_models = []
-    if axis_paths:
+    if opts.axis_models:
         from gyrolab.sim.model import load_model
 
-        if len(axis_paths) > 2:
+        if len(opts.axis_models) > 2:
             raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
-        axis_models = [load_model(m) for m in axis_paths]
-    faults_path = getattr(args, "faults", None)
+        axis_models = [load_model(m) for m in opts.axis_models]
     faults = None
-    if faults_path is not None:
-        if args.bench != "sim":
+    if opts.faults is not None:
+        if not sim_only:
             raise GyrolabError("--faults applies to --bench sim only (it drives the simulator)")
         from gyrolab.sim.bench.fault_file import load_faults
 
-        faults = load_faults(faults_path)
-    profile_spec = args.profile or cfg.profile_path()
+        faults = load_faults(opts.faults)
+    profile_spec = opts.profile or cfg.profile_path()
     profile = load_profile(profile_spec)
-    if args.profile:
-        cfg = replace(cfg, run=replace(cfg.run, profile=str(args.profile)))
-    check_profile_limits(profile, cfg.limits, str(args.profile or cfg.run.profile))
+    if opts.profile:
+        cfg = replace(cfg, run=replace(cfg.run, profile=str(opts.profile)))
+    check_profile_limits(profile, cfg.limits, str(opts.profile or cfg.run.profile))
     check_bench_for_profile(cfg, profile, str(profile_spec))
-    inputs = (None if args.bench == "sim" else args.bench, profile_spec, faults_path, *axis_paths)
-    check_output(out, args.force, inputs=inputs, kind="file")
+    inputs = (None if sim_only else opts.bench, profile_spec, opts.faults, *opts.axis_models)
+    check_output(out, opts.force, inputs=inputs, kind="file")
 
     sim: SimHandle | None = None
     from gyrolab.acquisition.simdir import sim_workdir
@@ -565,44 +368,39 @@ def acquire(args: argparse.Namespace) -> int:
     interrupts.check()  # a stop signal while the inputs were read: end before the bench
 
     old_switch = sys.getswitchinterval()
-    if args.bench == "sim":
+    if sim_only:
         # The simulated instruments share this process (and its GIL) with the drivers:
         # hand the GIL over sooner so that a waiting driver thread is not held 5 ms per
         # switch by the busy ones (a Modbus transaction needs several switches).
         sys.setswitchinterval(0.0005)
 
     with sim_workdir() as work:
-        if args.bench == "sim":
+        if sim_only:
             sim, cfg = start_sim_bench(
                 cfg,
                 profile,
-                seed=args.seed,
-                speed=args.speed,
+                seed=opts.seed,
+                speed=opts.speed,
                 workdir=Path(work),
                 faults=faults,
                 axis_models=axis_models,
             )
-            if faults is not None:
-                from gyrolab.sim.bench.fault_file import plan_to_dict
-
-                sim.provenance["fault_injection"] = plan_to_dict(faults)
-        speed_note = "" if sim is None else f" ×{args.speed or 'max'}"
+        speed_note = "" if sim is None else f" ×{opts.speed or 'max'}"
         show, bar = _progress(profile, speed_note)
         t0 = time.monotonic()
         live = None
         try:
             interrupts.check()  # a stop signal while the bench started: end here
-            if getattr(args, "live", None) is not None:
-                live = _start_live(args.live, args.live_host)
+            if opts.live_port is not None:
+                live = _start_live(opts.live_port, opts.live_host)
                 show = live.status_hook(show)
             result = run_acquisition(
                 cfg=cfg,
                 profile=profile,
                 out=out,
-                force=args.force,
+                force=opts.force,
                 sim=sim,
-                seed=args.seed,
-                speed=args.speed,
+                seed=opts.seed,
                 on_status=show,
                 on_samples=_trace_writer(),
                 live=live,
@@ -626,16 +424,15 @@ def acquire(args: argparse.Namespace) -> int:
         f"oven safe state {'verified' if result.safe_state_ok else 'NOT verified'}; {out}"
     )
     print(msg, file=sys.stderr)
-    return result.exit_code
+    return result
 
 
 # --------------------------------------------------------------------------- recover
 
 
-def recover(args: argparse.Namespace) -> int:
-    """``gyrolab recover BROKEN.mcap --out FIXED.mcap``: salvage and report what was lost."""
+def recover(broken: str | Path, out: str | Path, force: bool = False) -> str:
+    """Salvage every complete record of ``broken`` into ``out``; returns the summary of
+    what was kept and what was lost."""
     from gyrolab.record.recover import recover_recording
 
-    rep = recover_recording(args.broken, args.out, force=args.force)
-    print(rep.summary())
-    return 0
+    return str(recover_recording(broken, out, force=force).summary())

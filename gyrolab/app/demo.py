@@ -1,66 +1,48 @@
-"""``gyrolab demo --out DIR``: simulated bench → recording → compensation → report.
+"""The demo: simulated bench → recording → compensation → report, in one call.
 
 The README quick start in one command, using only the real pieces (nothing is faked):
 
 1. record two runs of the same profile (default ``paper``: 13 h at 100 Hz): the
-   calibration run with ``gyrolab simulate`` (the forward model, ``--seed``), the held-out
-   run with ``gyrolab acquire --bench sim`` (``--seed + 1``): the lab path — drivers,
-   profile runner and recorder talking to the simulated instruments over their wire
-   protocols — so the report's run log and bench identity are those of a real
-   acquisition. Should that path fail, the held-out run is simulated instead (a warning
-   says so) so the quick start still shows the whole chain;
-2. ``gyrolab compensate`` the calibration run with ``--validate`` on the held-out one;
-3. ``gyrolab report`` the held-out run with the model, so the report's metrics are
-   held out (``"held_out": true``), plus the raw record of the calibration run.
+   calibration run simulated by the forward model (``seed``), the held-out run acquired
+   on the simulated bench (``seed + 1``, :func:`gyrolab.app.acquire.acquire`): the lab
+   path — drivers, run engine and recorder talking to the simulated instruments over
+   their wire protocols — so the report's run log and bench identity are those of a real
+   acquisition. Should that acquisition fail (or end without completing the profile),
+   the demo fails with one line (exit 2) and leaves nothing behind;
+2. fit the compensation model on the calibration run, validated on the held-out one;
+3. report the held-out run with the model, so the report's metrics are held out
+   (``"held_out": true``), plus the raw report of the calibration run.
 
 ``DIR`` ends up holding ``calibration.mcap``, ``heldout.mcap``, ``model/``, ``report/``
-(the compensated report: ``index.html``, ``metrics.json``, ``report.pdf``) and
-``calibration-report/`` (raw). It appears atomically: the work happens in a temporary
-sibling directory, entered so that every path recorded inside the outputs is relative
-to ``DIR`` and stays valid after the rename.
+(the compensated report: ``index.html``, ``metrics.json``, ``report.pdf``),
+``calibration-report/`` (raw) and ``demo.json``. It appears atomically: the work happens
+in a temporary sibling directory renamed into place at the end, and any failure removes
+it. Each stage is a library call (no command line, no change of directory); the paths
+recorded inside the outputs are those the stages wrote (the temporary directory).
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from gyrolab.app.acquire import AcquireOptions, acquire
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
 from gyrolab.progress import progress
 
-
-@contextlib.contextmanager
-def _cwd(path: Path) -> Iterator[None]:
-    old = Path.cwd()
-    os.chdir(path)
-    try:
-        yield
-    finally:
-        os.chdir(old)
-
-
-def _run(argv: list[str]) -> None:
-    """One gyrolab subcommand, in process; a failure stops the demo with its message."""
-    from gyrolab.cli import main
-
-    rc = main(argv)
-    if rc != 0:
-        raise GyrolabError(f"demo: `gyrolab {' '.join(argv)}` failed (exit {rc})")
-
-
 # The held-out run is paced: unpaced, the simulated bench runs as fast as the ADC reader
 # drains it (~1 800x) and the multimeter poller gets a PT100 reading only every ~26 s of
 # run time; at 600x it reads every 1 s (max 3 s) and the paper run takes ~80 s wall.
 DEMO_ACQUIRE_SPEED = 600.0
+
+HELDOUT_SOURCE = "acquire --bench sim"
 
 
 def run_demo(
@@ -71,98 +53,77 @@ def run_demo(
     rate_hz: float = 100.0,
 ) -> dict[str, Any]:
     """Run the whole chain into ``out``; returns the report's metrics and stage timings."""
+    from gyrolab.compensation.commands import compensate
+    from gyrolab.report.commands import write_report
+    from gyrolab.sim.commands import simulate_file
+
     out_p = Path(out)
     check_output(out_p, force, inputs=(profile,), kind="dir")
-    # A bad --profile fails here, before minutes of work (load_profile raises InputError).
+    # A bad profile fails here, before minutes of work (load_profile raises InputError).
     prof_arg = str(Path(profile).resolve()) if Path(profile).is_file() else profile
     load_profile(prof_arg)
     timings: dict[str, float] = {}
     bar = progress(total=5, desc="demo", unit="stage")
     t_all = time.perf_counter()
-    sim = ["--profile", prof_arg, "--rate", f"{rate_hz:g}"]
-    held_source = "acquire --bench sim"
+
+    def stage(name: str) -> float:
+        bar.set_postfix_str(name)
+        return time.perf_counter()
+
+    def done(name: str, t0: float) -> None:
+        timings[name] = time.perf_counter() - t0
+        bar.update(1)
+
     try:
-        with atomic_dir(out_p, force, command="demo", inputs=(profile,)) as tmp, _cwd(tmp):
-            bar.set_postfix_str("simulate calibration run")
-            t0 = time.perf_counter()
-            _run(["simulate", "--out", "calibration.mcap", *sim, "--seed", str(seed)])
-            timings["simulate calibration run"] = time.perf_counter() - t0
-            bar.update(1)
-            bar.set_postfix_str("acquire held-out run (simulated bench)")
-            t0 = time.perf_counter()
-            try:
-                _run(
-                    [
-                        "acquire",
-                        "--bench",
-                        "sim",
-                        "--out",
-                        "heldout.mcap",
-                        "--profile",
-                        prof_arg,
-                        "--seed",
-                        str(seed + 1),
-                        "--speed",
-                        f"{DEMO_ACQUIRE_SPEED:g}",
-                    ]
-                )
-            except GyrolabError as e:
-                print(
-                    f"gyrolab demo: warning: {e}; simulating the held-out run instead",
-                    file=sys.stderr,
-                )
-                Path("heldout.mcap").unlink(missing_ok=True)
-                held_source = "simulate"
-                _run(["simulate", "--out", "heldout.mcap", *sim, "--seed", str(seed + 1)])
-            timings["record held-out run"] = time.perf_counter() - t0
-            bar.update(1)
-            bar.set_postfix_str("compensate (GPSO-VMD, MPE, FLP, GA-BP)")
-            t0 = time.perf_counter()
-            _run(
-                [
-                    "compensate",
-                    "calibration.mcap",
-                    "--out",
-                    "model",
-                    "--validate",
-                    "heldout.mcap",
-                    "--seed",
-                    str(seed),
-                ]
+        with atomic_dir(out_p, force, command="demo", inputs=(profile,)) as tmp:
+            cal, held = tmp / "calibration.mcap", tmp / "heldout.mcap"
+            model, report = tmp / "model", tmp / "report"
+            t0 = stage("simulate calibration run")
+            line = simulate_file(cal, prof_arg, rate_hz=rate_hz, seed=seed)
+            print(line, file=sys.stdout)
+            done("simulate calibration run", t0)
+
+            t0 = stage("acquire held-out run (simulated bench)")
+            opts = AcquireOptions(
+                bench="sim", out=held, profile=prof_arg, seed=seed + 1, speed=DEMO_ACQUIRE_SPEED
             )
-            timings["compensate"] = time.perf_counter() - t0
-            bar.update(1)
-            bar.set_postfix_str("report (held-out run, with model)")
-            t0 = time.perf_counter()
-            _run(["report", "heldout.mcap", "--model", "model", "--out", "report"])
-            timings["report"] = time.perf_counter() - t0
-            bar.update(1)
-            bar.set_postfix_str("report (calibration run, raw)")
-            t0 = time.perf_counter()
-            _run(["report", "calibration.mcap", "--out", "calibration-report"])
-            timings["raw report"] = time.perf_counter() - t0
-            bar.update(1)
-            metrics = json.loads(Path("report/metrics.json").read_text())
+            result = acquire(opts)
+            if result.exit_code != 0:
+                raise GyrolabError(
+                    f"demo: the held-out acquisition ended {result.outcome} ({result.reason})"
+                )
+            done("record held-out run", t0)
+
+            t0 = stage("compensate (GPSO-VMD, MPE, FLP, GA-BP)")
+            compensate(
+                argparse.Namespace(
+                    run=str(cal), out=str(model), validate=str(held), seed=seed, force=False
+                )
+            )
+            done("compensate", t0)
+
+            t0 = stage("report (held-out run, with model)")
+            metrics = write_report(held, report, model)
+            done("report", t0)
+
+            t0 = stage("report (calibration run, raw)")
+            write_report(cal, tmp / "calibration-report")
+            done("raw report", t0)
             timings["total"] = time.perf_counter() - t_all
-            Path("demo.json").write_text(
-                json.dumps(
-                    {
-                        "profile": profile,
-                        "seed": seed,
-                        "rate_hz": rate_hz,
-                        "heldout_source": held_source,
-                        "timing_s": timings,
-                    },
-                    indent=2,
-                )
-                + "\n"
-            )
+            info = {
+                "profile": profile,
+                "seed": seed,
+                "rate_hz": rate_hz,
+                "heldout_source": HELDOUT_SOURCE,
+                "timing_s": timings,
+            }
+            (tmp / "demo.json").write_text(json.dumps(info, indent=2) + "\n")
     finally:
         bar.close()
-    return {"metrics": metrics, "timing_s": timings, "heldout_source": held_source}
+    return {"metrics": metrics, "timing_s": timings, "heldout_source": HELDOUT_SOURCE}
 
 
-def _summary(out: Path, res: dict[str, Any]) -> str:
+def summary(out: Path, res: dict[str, Any]) -> str:
     """The causal headline first, the baselines, the paper's offline method and (where the
     truth is known) the oracle beside it, on the same averages."""
     m = res["metrics"]
@@ -200,10 +161,3 @@ def _summary(out: Path, res: dict[str, Any]) -> str:
         lines.append("  (no oracle: the true drift of an acquired run is not known)")
     lines.append(f"report: {out / 'report' / 'index.html'} (PDF: report.pdf beside it)")
     return "\n".join(lines)
-
-
-def demo(args: argparse.Namespace) -> int:
-    """The ``gyrolab demo`` handler."""
-    res = run_demo(args.out, args.profile, args.seed, args.force)
-    print(_summary(Path(args.out), res))
-    return 0

@@ -1,9 +1,10 @@
-"""The ``gyrolab simulate`` command handler."""
+"""``gyrolab simulate``: the handler and the library call it translates to."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 
 from gyrolab.errors import InputError
@@ -18,51 +19,76 @@ MAX_UNITS = 256
 
 
 def simulate(args: argparse.Namespace) -> int:
-    """``gyrolab simulate --out RUN.mcap [--profile] [--model] [--rate] [--seed] [--effect]``.
+    """``gyrolab simulate --out RUN.mcap [--profile] [--model] [--rate] [--seed] [--effect]``."""
+    line = simulate_file(
+        args.out,
+        args.profile,
+        model_path=args.model,
+        axis_model_paths=tuple(getattr(args, "axis_model", None) or ()),
+        rate_hz=args.rate,
+        seed=args.seed,
+        units=int(getattr(args, "units", 1) or 1),
+        effects=tuple(args.effect or ()),
+        force=args.force,
+    )
+    print(line, file=sys.stdout)
+    return 0
 
-    Everything is validated before anything is written; the recording appears atomically.
-    """
-    inputs = (args.profile, args.model, *(getattr(args, "axis_model", None) or []))
-    check_output(args.out, args.force, inputs=inputs, kind="file")
-    if not (math.isfinite(args.rate) and 0 < args.rate <= MAX_RATE_HZ):
-        raise InputError("--rate", f"must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
-    n_units = int(getattr(args, "units", 1) or 1)
+
+def simulate_file(
+    out: str | os.PathLike[str],
+    profile_spec: str,
+    *,
+    model_path: str | None = None,
+    axis_model_paths: tuple[str, ...] = (),
+    rate_hz: float = 100.0,
+    seed: int = 0,
+    units: int = 1,
+    effects: tuple[str, ...] = (),
+    force: bool = False,
+) -> str:
+    """Simulate a run of ``profile_spec`` (paper | short | FILE.toml) into ``out``; returns
+    the one-line summary. Everything is validated before anything is written; the
+    recording appears atomically."""
+    inputs = (profile_spec, model_path, *axis_model_paths)
+    check_output(out, force, inputs=inputs, kind="file")
+    if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
+        raise InputError("--rate", f"must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
+    n_units = units
     if not 1 <= n_units <= MAX_UNITS:
         raise InputError("--units", f"must be 1..{MAX_UNITS}, got {n_units}")
-    profile = load_profile(args.profile)
-    model = load_model(args.model) if args.model else nominal_model()
+    profile = load_profile(profile_spec)
+    model = load_model(model_path) if model_path else nominal_model()
     try:
-        model = apply_effect_args(model, list(args.effect or []))
+        model = apply_effect_args(model, list(effects))
     except (ValueError, TypeError) as e:
         raise InputError("--effect", str(e)) from None
-    axis_models = [load_model(m) for m in getattr(args, "axis_model", None) or []]
+    axis_models = [load_model(m) for m in axis_model_paths]
     if len(axis_models) > 2:
         raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
     try:
-        axis_physics(model, axis_models, args.rate, args.seed, profile.ambient_c)
+        axis_physics(model, axis_models, rate_hz, seed, profile.ambient_c)
     except ValueError as e:
         raise InputError("--axis-model", str(e)) from None
     if axis_models and n_units > 1:
         raise InputError(
             "--units", "multi-axis units (--axis-model) in a multi-unit run are not supported yet"
         )
-    units = unit_family(model, n_units, args.seed) if n_units > 1 else None
-    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
+    family = unit_family(model, n_units, seed) if n_units > 1 else None
+    with atomic_file(out, force, inputs=inputs) as tmp:
         summary = simulate_run(
             tmp,
             profile,
             model,
-            rate_hz=args.rate,
-            seed=args.seed,
+            rate_hz=rate_hz,
+            seed=seed,
             axis_models=axis_models,
-            units=units,
+            units=family,
         )
-    print(
-        f"wrote {args.out}: profile {profile.name}, {summary.duration_s / 3600:.2f} h, "
-        f"{summary.samples} samples at {args.rate:g} Hz, seed {args.seed}, "
+    return (
+        f"wrote {out}: profile {profile.name}, {summary.duration_s / 3600:.2f} h, "
+        f"{summary.samples} samples at {rate_hz:g} Hz, seed {seed}, "
         f"effects {', '.join(model.effect_names()) or 'none'}"
         + (f", {1 + len(axis_models)} axes" if axis_models else "")
-        + (f", units {', '.join(u.serial for u in units)}" if units else ""),
-        file=sys.stdout,
+        + (f", units {', '.join(u.serial for u in family)}" if family else "")
     )
-    return 0

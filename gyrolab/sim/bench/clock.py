@@ -113,23 +113,3 @@ class SimClock:
     def sleep(self, dt_sim: float, timeout_wall_s: float | None = None) -> bool:
         """Wait ``dt_sim`` simulated seconds (the runner's ``time.sleep``)."""
         return self.wait_until(self._t + dt_sim, timeout_wall_s)
-
-
-class WallClock:
-    """The same interface on the real clock, for the lab (``gyrolab acquire --bench lab``)."""
-
-    speed = 1.0
-    stopped = False
-
-    def __init__(self) -> None:
-        self._t0 = time.monotonic()
-
-    def now(self) -> float:
-        return time.monotonic() - self._t0
-
-    def sleep(self, dt_sim: float, timeout_wall_s: float | None = None) -> bool:
-        time.sleep(max(0.0, dt_sim if timeout_wall_s is None else min(dt_sim, timeout_wall_s)))
-        return True
-
-    def wait_until(self, t_sim: float, timeout_wall_s: float | None = None) -> bool:
-        return self.sleep(t_sim - self.now(), timeout_wall_s)

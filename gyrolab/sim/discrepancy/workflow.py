@@ -76,18 +76,7 @@ MAX_ITER = 6
 LF_WINDOW_S = 100.0
 """Moving-average window of the low-frequency residual (0.01 Hz)."""
 
-TEMP_EFFECTS = ("oven_overshoot", "rtd_self_heating")
-NOISE_EFFECTS = ("rate_random_walk", "outliers", "quantization")
 STOCHASTIC_BASE = ("arw", "bias_instability")
-GAP_KEYS = (
-    "lf_residual_rms_dps",
-    "allan_log_distance",
-    "temperature_rms_c",
-    "oven_rms_c",
-    "pt100_rms_c",
-    "spike_log_ratio",
-    "lattice_tv_distance",
-)
 PRIMARY_GAP = {
     **{n: "lf_residual_rms_dps" for n in GYRO_EFFECTS},
     "oven_overshoot": "temperature_rms_c",

@@ -1,0 +1,261 @@
+"""The simulated bench, composed for a run: ``gyrolab acquire --bench sim``.
+
+Starts the wire-level simulated instruments (``gyrolab.sim.bench``: the same protocols over
+pseudo-terminals and TCP, one simulated clock) and hands the lab path what it needs to run
+against them: the address of each role's instrument, the run clock, the driver-timeout rule
+and the watchdog's silence rule. Those last three are the simulator's policy — a sped-up
+clock shared with the drivers in one process — and live here, so that the lab engine
+(``gyrolab.acquisition.runner``) has no simulator knobs. The two sides meet only on the
+wire, which is why this package (and the tests) are the only places that import both
+``acquisition`` and ``sim``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from gyrolab.acquisition.bench_config import BenchConfig, RunInfo
+from gyrolab.errors import GyrolabError, InputError
+from gyrolab.instruments import registry
+from gyrolab.profiles.profile import Profile
+
+# The simulated bench answers in milliseconds (measured on a 2-core machine with both
+# cores busy with other work, at 200x: Modbus transactions max 35 ms, 34401A readings max
+# 74 ms wall), so its drivers' timeouts may go lower than the configured ones. The floor is
+# still wall time, and at speed X it costs X times as many simulated seconds per timeout:
+# 2.5 s at 10x, where a 0.5 s floor cost 5 s, and an exception reply (shorter than the
+# reply minimalmodbus waits for) costs a full timeout too. A burst of Modbus errors thus
+# stays well inside the 60 s communication timeout.
+SIM_TIMEOUT_FLOOR_S = 0.25
+
+# Simulated-bench speed while the drivers connect (see start_sim_bench).
+CONNECT_SPEED = 10.0
+
+# Lost communication with a simulated instrument also needs this much wall time of
+# silence (see SimSilence); a real bench runs in real time and needs none.
+SIM_COMM_MIN_WALL_S = 1.0
+
+# Timeouts of a free-running simulated bench are scaled as if it ran this much faster
+# than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
+SIM_FAST_SCALE = 200.0
+
+
+class SimRunClock:
+    """The simulated bench's clock as the run engine's Clock (sleep in simulated seconds)."""
+
+    def __init__(self, clock: Any) -> None:
+        self.c = clock
+
+    def now(self) -> float:
+        return float(self.c.now())
+
+    def sleep(self, dt: float) -> None:
+        if dt > 0:
+            # Bounded wall wait so that a stopped clock cannot hang a thread.
+            self.c.sleep(dt, 1.0)
+
+
+class SimSilence:
+    """The watchdog's rule on a simulated bench (runner.SilencePolicy): silent longer than
+    ``comm_timeout_s`` simulated seconds AND ``min_wall_s`` wall seconds.
+
+    The bench shares this process with the drivers: a hiccup of a few hundred ms wall (a
+    GC, an import, a long physics step) is many simulated seconds at 200x, and must not pass
+    for a lost instrument."""
+
+    def __init__(self, min_wall_s: float = SIM_COMM_MIN_WALL_S) -> None:
+        self.min_wall_s = min_wall_s
+        self._heard: dict[str, float] = {}
+
+    def heard(self, source: str) -> None:
+        self._heard[source] = time.monotonic()
+
+    def lost(self, source: str, silent_s: float, timeout_s: float) -> bool:
+        wall = time.monotonic() - self._heard.get(source, -float("inf"))
+        return silent_s > timeout_s and wall >= self.min_wall_s
+
+
+def scaled_timeouts(speed: float | None) -> Callable[[float], float]:
+    """The drivers' timeout rule at ``speed`` (None: free-running): a bench X times faster
+    than real time answers X times sooner and a silent one must be noticed X times sooner,
+    but never below ``SIM_TIMEOUT_FLOOR_S`` wall seconds (scheduling jitter); in real time
+    the configured timeouts are used as they are."""
+    scale = speed if speed is not None else SIM_FAST_SCALE
+
+    def timeout(t: float) -> float:
+        if scale <= 1.0:
+            return t
+        return max(SIM_TIMEOUT_FLOOR_S, t / scale)
+
+    return timeout
+
+
+@dataclass
+class SimHandle:
+    """A running simulated bench, as the lab path sees it.
+
+    ``addresses``: the address of each role's instrument (``registry`` role names);
+    ``clock``/``silence``/``timeout``: the run clock, the watchdog's silence rule and the
+    drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict)."""
+
+    addresses: dict[str, str]
+    clock: SimRunClock
+    silence: SimSilence
+    timeout: Callable[[float], float]
+    speed: float | None
+    bench: Any
+    stop: Callable[[], None]
+    metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @property
+    def provenance(self) -> dict[str, Any]:
+        """The ``sim_provenance`` record (model, seed; fault plan when injected)."""
+        return self.metadata.setdefault("sim_provenance", {})
+
+    def go(self) -> None:
+        """Connected: from now on run at the asked speed."""
+        self.bench.clock.speed = self.speed
+
+
+def sim_bench_config(seed: int) -> BenchConfig:
+    """The bench file ``--bench sim`` stands for: defaults, a simulated operator and unit."""
+    return BenchConfig(
+        name="sim",
+        run=RunInfo(
+            operator="simulated",
+            unit_serial=f"SIM-{seed}",
+            unit_model="simulated MEMS gyro",
+            profile="paper",
+            notes="gyrolab acquire --bench sim",
+        ),
+        source="sim",
+    )
+
+
+def sim_drivers(cfg: BenchConfig, names: list[str] | tuple[str, ...]) -> BenchConfig:
+    """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
+    name picks its role; the driver's default settings)."""
+    fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
+    for name in names:
+        spec = next((s for s in registry.drivers() if s.name == name), None)
+        if spec is None:
+            known = ", ".join(s.name for s in registry.drivers())
+            raise GyrolabError(f"--driver {name}: no such driver (registered: {known})")
+        cfg = replace(cfg, **{fields[spec.role]: spec.config()})
+    return cfg
+
+
+def sim_tick_s(speed: float | None) -> float:
+    """Simulated seconds per bench tick: 0.1 s in real time (a smooth stream), up to 1 s
+    when fast (about 100-300 ticks per wall second: each tick wakes every waiting thread,
+    and fewer wake-ups leave the GIL to the drivers)."""
+    if speed is None:
+        return 1.0
+    return float(min(1.0, max(0.1, speed / 100.0)))
+
+
+def start_sim_bench(
+    cfg: BenchConfig,
+    profile: Profile,
+    *,
+    seed: int,
+    speed: float | None,
+    workdir: Path | None = None,
+    faults: Any = None,
+    keep_truth: bool = False,
+    model: Any = None,
+    axis_models: Any = (),
+) -> tuple[SimHandle, BenchConfig]:
+    """Start the wire-level simulated bench; returns it and the bench config to use.
+
+    The config's ADC calibration is the simulated gyro's (what a lab takes from the
+    unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
+    the same path as ``examples/lab.toml``. ``axis_models`` (0–2 SimModels) make a 2- or
+    3-axis unit exactly as ``gyrolab simulate --axis-model`` does (one ADC, axes interleaved).
+    ``faults`` (a FaultPlan) is injected and recorded in the provenance.
+    """
+    from gyrolab.sim.bench import SimBench
+    from gyrolab.sim.bench.fault_file import plan_to_dict
+    from gyrolab.sim.model import nominal_model
+    from gyrolab.sim.simulate import axis_physics, provenance
+
+    specs = {
+        "thermometer": registry.get(cfg.multimeter.driver, "thermometer"),
+        "chamber": registry.get(cfg.oven.driver, "chamber"),
+    }
+    for role, spec in specs.items():
+        if not spec.sim_backend:
+            raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
+    try:
+        extra_axes = axis_physics(
+            model or nominal_model(),
+            list(axis_models),
+            cfg.adc.sample_rate_hz,
+            seed,
+            profile.ambient_c,
+        )
+    except ValueError as e:
+        raise InputError("--axis-model", str(e)) from None
+    bench = SimBench(
+        dmm_model=specs["thermometer"].sim_backend,
+        chamber_model=specs["chamber"].sim_backend,
+        oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
+        model=model,
+        axis_physics=extra_axes,
+        seed=seed,
+        adc_rate_hz=cfg.adc.sample_rate_hz,
+        samples_per_frame=cfg.adc.samples_per_frame,
+        ambient_c=profile.ambient_c,
+        workdir=workdir,
+        faults=faults,
+        keep_truth=keep_truth,
+        tcp=specs["thermometer"].sim_address == "dmm_tcp_resource",
+        tick_s=sim_tick_s(speed),
+        # Slow while the drivers connect (imports, port set-up: wall seconds that would be
+        # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
+        # that the change to ``speed`` (SimHandle.go) takes effect at once.
+        speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
+    )
+    adc = bench.physics.adc
+    cfg = replace(
+        cfg,
+        adc=replace(
+            cfg.adc,
+            bits=int(adc.bits),
+            vref_v=float(adc.vref_v),
+            gain_v_per_dps=float(adc.gain_v_per_dps),
+            offset_v=float(adc.offset_v),
+            axes=1 + len(axis_models),
+        ),
+    )
+    bench.start()
+    where = bench.resources()
+    metadata: dict[str, dict[str, Any]] = {
+        "sim_provenance": provenance(bench.physics.model, seed)
+    }
+    if faults is not None:
+        metadata["sim_provenance"]["fault_injection"] = plan_to_dict(faults)
+    if axis_models:  # as simulate's sim_provenance_axes
+        metadata["sim_provenance_axes"] = {
+            "axes": 1 + len(axis_models),
+            "models_toml": [m.to_toml() for m in axis_models],
+        }
+    handle = SimHandle(
+        addresses={
+            "thermometer": where[specs["thermometer"].sim_address],
+            "chamber": where[specs["chamber"].sim_address],
+            "rate_stream": bench.adc_port,
+        },
+        clock=SimRunClock(bench.clock),
+        silence=SimSilence(),
+        timeout=scaled_timeouts(speed),
+        speed=speed,
+        bench=bench,
+        stop=bench.stop,
+        metadata=metadata,
+    )
+    return handle, cfg
