@@ -31,7 +31,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -181,12 +181,26 @@ def _namespace(task: str, item: Item, opt: BatchOptions) -> argparse.Namespace:
     return argparse.Namespace(**common, model=opt.sim_model, **opt.extra)
 
 
+def _task_handler(task: str) -> Callable[[argparse.Namespace], int]:
+    """The single-run command a batch task runs (imported in the worker that runs it)."""
+    if task == "compensate":
+        from gyrolab.compensation.commands import compensate
+
+        return compensate
+    if task == "report":
+        from gyrolab.report.commands import report
+
+        return report
+    from gyrolab.sim.discrepancy.commands import discrepancy
+
+    return discrepancy
+
+
 def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
     """Run one item (in a worker): the single-run command's handler, output silenced.
 
     Never raises for a problem with the item: it comes back as ``status="failed"`` with
     one line naming the file and the problem."""
-    from gyrolab.cli import HANDLERS
     from gyrolab.outputs import command_inputs
 
     run, out = item.run, item.out
@@ -202,8 +216,7 @@ def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
         res.status = "skipped"
         return res
     bound_threads(opt.threads)
-    module, func = HANDLERS[task].split(":")
-    handler = getattr(__import__(module, fromlist=[func]), func)
+    handler = _task_handler(task)
     args = _namespace(task, item, opt)
     sink = io.StringIO()
     try:

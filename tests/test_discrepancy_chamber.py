@@ -13,7 +13,7 @@ import pytest
 
 from gyrolab.profiles.profile import Profile, Step
 from gyrolab.sim.discrepancy.synth import simulate_bench
-from gyrolab.sim.discrepancy.thermal_fit import _air_model, _lowpass, fit_oven
+from gyrolab.sim.discrepancy.thermal_fit import air_model, fit_oven, lowpass
 from gyrolab.sim.discrepancy.workflow import Structure, Workflow
 from gyrolab.sim.model import nominal_model
 
@@ -39,12 +39,12 @@ def smooth_chamber(d, overshoot=None, seed=3):
     th = nominal_model().thermal
     rng = np.random.default_rng(seed)
     a0 = float(d.oven_pv[0])
-    air = _air_model(d.oven_t, d.oven_t, d.oven_sp, a0, SMOOTH, overshoot, "smooth")
+    air = air_model(d.oven_t, d.oven_t, d.oven_sp, a0, SMOOTH, overshoot, "smooth")
     pv = air + 0.002 * rng.standard_normal(air.size)
     grid = np.arange(d.oven_t[0], d.oven_t[-1] + 1.0, 1.0)
     diff = np.interp(grid, d.oven_t, air - d.oven_pv)
     dmid = np.concatenate([0.5 * (diff[:-1] + diff[1:]), [diff[-1]]])
-    dcase = _lowpass(dmid, 1.0 - math.exp(-1.0 / th.case_tau_s), 0.0)
+    dcase = lowpass(dmid, 1.0 - math.exp(-1.0 / th.case_tau_s), 0.0)
     return replace(d, oven_pv=pv, pt100_c=d.pt100_c + np.interp(d.pt100_t, grid, dcase))
 
 

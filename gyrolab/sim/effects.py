@@ -157,7 +157,7 @@ class ThermalLag(Effect):
 
 
 @numba.njit(cache=True, nogil=True)
-def _play(temp: np.ndarray, p0: float, half: float, out: np.ndarray) -> float:  # pragma: no cover
+def play(temp: np.ndarray, p0: float, half: float, out: np.ndarray) -> float:  # pragma: no cover
     """Play (backlash) operator of half-width ``half``: out_i = (T_i − p_i)/half ∈ [−1, 1]."""
     p = p0
     for i in range(temp.size):
@@ -171,10 +171,10 @@ def _play(temp: np.ndarray, p0: float, half: float, out: np.ndarray) -> float:  
 
 
 @numba.njit(cache=True, nogil=True)
-def _play_var(
+def play_var(
     temp: np.ndarray, p0: float, half: np.ndarray, out: np.ndarray
 ) -> float:  # pragma: no cover
-    """Play operator whose half-width varies per sample (``half[i]`` > 0), as :func:`_play`."""
+    """Play operator whose half-width varies per sample (``half[i]`` > 0), as :func:`play`."""
     p = p0
     for i in range(temp.size):
         x = temp[i]
@@ -225,10 +225,10 @@ class Hysteresis(Effect):
             self._p = float(ctx.temp_c[0]) if ctx.n else 0.0
         s = np.empty(ctx.n)
         if self.p["width_tc"] == 0.0:
-            self._p = _play(ctx.temp_c, self._p, 0.5 * self.p["width_c"], s)
+            self._p = play(ctx.temp_c, self._p, 0.5 * self.p["width_c"], s)
         else:
             half = 0.5 * hysteresis_width(ctx.temp_c, self.p["width_c"], self.p["width_tc"])
-            self._p = _play_var(
+            self._p = play_var(
                 np.ascontiguousarray(ctx.temp_c, dtype=np.float64), self._p, half, s
             )
         return 0.5 * self.p["h"] * s

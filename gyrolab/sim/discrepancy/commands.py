@@ -24,7 +24,7 @@ from typing import Any
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.sim.discrepancy.axes import run_discrepancy_axes
 from gyrolab.sim.discrepancy.data import load_recording_axes
-from gyrolab.sim.discrepancy.report import _json_default, render
+from gyrolab.sim.discrepancy.report import json_default, render
 from gyrolab.sim.discrepancy.workflow import run_discrepancy
 from gyrolab.sim.model import load_model, nominal_model
 
@@ -47,7 +47,7 @@ def discrepancy(args: argparse.Namespace) -> int:
     res = run_discrepancy(data, model, log=log)
     with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
-            json.dumps(res.to_json(), indent=1, default=_json_default), encoding="utf-8"
+            json.dumps(res.to_json(), indent=1, default=json_default), encoding="utf-8"
         )
         (tmp / "model.toml").write_text(res.model.to_toml(), encoding="utf-8")
         (tmp / "index.html").write_text(render(res, str(args.run)), encoding="utf-8")
@@ -84,7 +84,7 @@ def _discrepancy_axes(
     )
     with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
-            json.dumps(res.to_json(), indent=1, default=_json_default), encoding="utf-8"
+            json.dumps(res.to_json(), indent=1, default=json_default), encoding="utf-8"
         )
         for k, r in enumerate(res.axes):
             (tmp / f"model_axis{k}.toml").write_text(r.model.to_toml(), encoding="utf-8")

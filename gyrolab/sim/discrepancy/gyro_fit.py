@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from gyrolab.sim.discrepancy.gls import GlsResult, ar_whiten, gls_ar, gls_cov
-from gyrolab.sim.effects import _play, _play_var, hysteresis_width
+from gyrolab.sim.effects import hysteresis_width, play, play_var
 
 AR_ORDER = 8
 GYRO_EFFECTS = (
@@ -123,9 +123,9 @@ def _temps(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, np.ndar
     if "thermal_lag" in struct.names:
         tau = struct.theta["thermal_lag"]
         alpha = 1.0 - math.exp(-1.0 / tau)
-        from gyrolab.sim.discrepancy.thermal_fit import _lowpass
+        from gyrolab.sim.discrepancy.thermal_fit import lowpass
 
-        die = _lowpass(ctx.case_c, alpha, float(ctx.case_c[0]))
+        die = lowpass(ctx.case_c, alpha, float(ctx.case_c[0]))
         return die, (ctx.case_c - die) / tau
     return ctx.case_c, ctx.dcase
 
@@ -152,11 +152,11 @@ def design(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, list[st
             s = np.empty(temp_g.size)
             tc = struct.theta.get(HYST_TC, 0.0)
             if tc == 0.0:
-                _play(temp_g, float(temp_g[0]), 0.5 * struct.theta["hysteresis"], s)
+                play(temp_g, float(temp_g[0]), 0.5 * struct.theta["hysteresis"], s)
             else:
                 half = 0.5 * hysteresis_width(temp_g, struct.theta["hysteresis"], tc)
                 tg = np.ascontiguousarray(temp_g, dtype=np.float64)
-                _play_var(tg, float(temp_g[0]), half, s)
+                play_var(tg, float(temp_g[0]), half, s)
             cols.append(0.5 * np.interp(ctx.t, ctx.grid_t, s))
             names.append("hysteresis.h")
         elif name == "warmup":

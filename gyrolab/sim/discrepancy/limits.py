@@ -33,7 +33,7 @@ import numpy as np
 
 from gyrolab.sim.discrepancy import noise_fit as nf
 from gyrolab.sim.discrepancy.gyro_fit import GyroStructure, design
-from gyrolab.sim.discrepancy.thermal_fit import OVEN_FLOOR_C, _air_model, effective_n
+from gyrolab.sim.discrepancy.thermal_fit import OVEN_FLOOR_C, air_model, effective_n
 
 if TYPE_CHECKING:  # pragma: no cover
     from gyrolab.sim.discrepancy.workflow import Fitted, Workflow
@@ -163,7 +163,7 @@ def overshoot_limit(
     ne = effective_n(r1, floor=OVEN_FLOOR_C)
 
     def passes(o: float) -> bool:
-        sig = _air_model(d.oven_t, d.oven_t, d.oven_sp, a0, x, (o, period_s), cur.oven.form) - plain
+        sig = air_model(d.oven_t, d.oven_t, d.oven_sp, a0, x, (o, period_s), cur.oven.form) - plain
         v0 = v1 + float(np.mean(sig**2))
         dbic = ne * math.log(v0 / v1) - 2.0 * math.log(ne)
         return dbic > threshold and 1.0 - math.sqrt(v1 / v0) > min_gain

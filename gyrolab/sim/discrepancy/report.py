@@ -215,12 +215,12 @@ font-size:13px}}th{{background:#eee}}img{{max-width:100%}}code{{background:#f4f4
 <h2>Figures</h2>{imgs}
 <h2>Updated model</h2><pre>{html.escape(res.model.to_toml())}</pre>
 <details><summary>discrepancy.json</summary><pre>{
-        html.escape(json.dumps(res.to_json(), indent=1, default=_json_default))
+        html.escape(json.dumps(res.to_json(), indent=1, default=json_default))
     }</pre></details>
 </body></html>"""
 
 
-def _json_default(o: Any) -> Any:
+def json_default(o: Any) -> Any:
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

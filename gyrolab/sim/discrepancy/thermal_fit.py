@@ -60,7 +60,7 @@ class OvenFit:
     (:func:`_air_kernel_smooth`); ``params`` always hold the knee form (what a
     ``model.toml`` can express), ``smooth`` the smooth form's when it was chosen."""
     x: np.ndarray | None = None
-    """The fitted vector of :func:`_air_model` for ``form``."""
+    """The fitted vector of :func:`air_model` for ``form``."""
     smooth: dict[str, float] | None = None
 
     @property
@@ -96,7 +96,7 @@ def _air_kernel_smooth(
     state[0], state[1] = a, v
 
 
-def _air_model(
+def air_model(
     t_obs: np.ndarray,
     sp_t: np.ndarray,
     sp: np.ndarray,
@@ -293,7 +293,7 @@ def _fit_oven_form(
     if not with_overshoot:
 
         def res1(x: np.ndarray) -> np.ndarray:
-            return _air_model(to, t, sp, a0, x, None, form) - pvo
+            return air_model(to, t, sp, a0, x, None, form) - pvo
 
         r = least_squares(res1, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale="jac", max_nfev=40)
         x, os_ = r.x, None
@@ -303,7 +303,7 @@ def _fit_oven_form(
         starts += [(o, p) for o in (0.05, 0.15, 0.35) for p in (400.0, 1200.0, 3000.0)]
         best = None
         for o, p in starts:
-            e = _air_model(to, t, sp, a0, x0, (o, p), form) - pvo
+            e = air_model(to, t, sp, a0, x0, (o, p), form) - pvo
             c = float(e @ e)
             if best is None or c < best[0]:
                 best = (c, o, p)
@@ -312,12 +312,12 @@ def _fit_oven_form(
         hi7 = np.concatenate([hi, [0.95, 2e4]])
 
         def res2(x: np.ndarray) -> np.ndarray:
-            return _air_model(to, t, sp, a0, x[:5], (x[5], x[6]), form) - pvo
+            return air_model(to, t, sp, a0, x[:5], (x[5], x[6]), form) - pvo
 
         x7 = np.clip(np.concatenate([x0, [best[1], best[2]]]), lo7, hi7)
         r = least_squares(res2, x7, bounds=(lo7, hi7), x_scale="jac", max_nfev=60)
         x, os_ = r.x[:5], (float(r.x[5]), float(r.x[6]))
-    pred = _air_model(t, t, sp, a0, x, os_, form)
+    pred = air_model(t, t, sp, a0, x, os_, form)
     if form == "smooth":
         sm = {"air_tau_s": float(x[0]), "heat_rate_c_per_s": float(x[1])}
         sm |= {"cool_rate_c_per_s": float(x[2]), "cool_floor_c": float(x[3])}
@@ -371,7 +371,7 @@ class CaseFit:
         return 4 + int(self.with_offset)
 
 
-def _lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
+def lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
     """``c_{k+1} = c_k + α (u_k − c_k)``, ``c_0 = c0``."""
     c = np.empty(u.size)
     c[0] = c0
@@ -408,8 +408,8 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     def solve(log_tau: float, shift: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         tau = math.exp(log_tau)
         alpha = 1.0 - math.exp(-1.0 / tau)
-        f = _lowpass(a_mid, alpha, init.value)
-        g = _lowpass(np.ones_like(a_mid), alpha, 0.0)
+        f = lowpass(a_mid, alpha, init.value)
+        g = lowpass(np.ones_like(a_mid), alpha, 0.0)
         e0 = (1.0 - alpha) ** np.arange(a_mid.size)  # response to the initial case state
         pt_t = d.pt100_t + shift
         cols = [np.interp(pt_t, grid, g), np.interp(pt_t, grid, e0)]
