@@ -29,8 +29,6 @@ from gyrolab.record.recording import RecordingWriter, read_recording
 class FakeClock:
     """Run time that moves only when someone sleeps on it."""
 
-    speed = 1.0
-
     def __init__(self) -> None:
         self.t = 1000.0
 
@@ -118,7 +116,9 @@ class Stream:
         return {"frames_ok": self.next // 10, "frames_bad": 0, "frames_lost": 0}
 
 
-def _run(tmp_path: Path, *, therm_faults=(), silent_from=math.inf, comm_timeout_s=20.0):
+def _run(
+    tmp_path: Path, *, therm_faults=(), silent_from=math.inf, comm_timeout_s=20.0, silence=None
+):
     clock = FakeClock()
     chamber = Chamber(clock, silent_from)
     prof = Profile("t", (Step(25.0, 60.0, "soak"), Step(40.0, 120.0)))
@@ -136,6 +136,7 @@ def _run(tmp_path: Path, *, therm_faults=(), silent_from=math.inf, comm_timeout_
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,
         oven_period_s=2.0,
+        silence=silence,
         threaded=False,
         turn_s=0.125,  # exact in binary: the scripted times are hit exactly
     )
@@ -181,3 +182,43 @@ def test_lost_chamber_ends_the_run_and_the_safe_state_is_reported_failed(tmp_pat
     assert not res.safe_state_ok and res.t_end == pytest.approx(68.125 + 0.6, abs=1e-9)
     (ev,) = [e for e in rec.events if e["event"] == "safe_state"]
     assert ev["detail"].startswith("FAILED")
+
+
+class PatientSilence:
+    """A silence rule of a bench's own (as the simulated bench supplies one): lost only
+    ``extra_s`` run seconds after the configured timeout; counts who was heard."""
+
+    def __init__(self, extra_s: float) -> None:
+        self.extra_s = extra_s
+        self.heard_from: dict[str, int] = {}
+
+    def heard(self, source: str) -> None:
+        self.heard_from[source] = self.heard_from.get(source, 0) + 1
+
+    def lost(self, source: str, silent_s: float, timeout_s: float) -> bool:
+        return silent_s > timeout_s + self.extra_s
+
+
+def test_the_bench_s_silence_rule_decides_when_an_instrument_is_lost(tmp_path: Path) -> None:
+    """The engine has no simulator knobs: the watchdog asks the SilencePolicy it is given."""
+    patient = PatientSilence(extra_s=10.0)
+    res, rec, _ = _run(tmp_path, silent_from=50.0, comm_timeout_s=20.0, silence=patient)
+    assert res.outcome == "fault" and "lost communication with oven" in res.reason
+    (ab,) = [e for e in rec.events if e["event"] == "aborted"]
+    assert ab["t"] == pytest.approx(78.125, abs=1e-9)  # 10 s later than the lab rule
+    # every instrument at the start, then each good exchange (oven every 2 s up to 48 s)
+    assert patient.heard_from["oven"] == 1 + 25 and patient.heard_from["multimeter"] > 60
+
+
+def test_the_simulated_bench_s_silence_rule_needs_wall_time_too() -> None:
+    """SimSilence: silent past the run-time limit AND for min_wall_s wall seconds."""
+    from gyrolab.app.sim_bench import SimSilence
+
+    never_heard = SimSilence(min_wall_s=3600.0)
+    assert never_heard.lost("oven", 61.0, 60.0)  # nothing heard yet: the run time decides
+    strict = SimSilence(min_wall_s=3600.0)
+    strict.heard("oven")
+    assert not strict.lost("oven", 1e6, 60.0)  # a sped-up clock alone does not lose it
+    lab_like = SimSilence(min_wall_s=0.0)
+    lab_like.heard("oven")
+    assert lab_like.lost("oven", 61.0, 60.0) and not lab_like.lost("oven", 59.0, 60.0)

@@ -234,9 +234,7 @@ def start_sim_bench(
     )
     bench.start()
     where = bench.resources()
-    metadata: dict[str, dict[str, Any]] = {
-        "sim_provenance": provenance(bench.physics.model, seed)
-    }
+    metadata: dict[str, dict[str, Any]] = {"sim_provenance": provenance(bench.physics.model, seed)}
     if faults is not None:
         metadata["sim_provenance"]["fault_injection"] = plan_to_dict(faults)
     if axis_models:  # as simulate's sim_provenance_axes
