@@ -206,8 +206,8 @@ def test_the_bench_s_silence_rule_decides_when_an_instrument_is_lost(tmp_path: P
     assert res.outcome == "fault" and "lost communication with oven" in res.reason
     (ab,) = [e for e in rec.events if e["event"] == "aborted"]
     assert ab["t"] == pytest.approx(78.125, abs=1e-9)  # 10 s later than the lab rule
-    # every instrument at the start, then each good exchange (oven every 2 s up to 48 s)
-    assert patient.heard_from["oven"] == 1 + 25 and patient.heard_from["multimeter"] > 60
+    # the oven: at the start, the soak's setpoint command, its reads every 2 s up to 48 s
+    assert patient.heard_from["oven"] == 1 + 1 + 25 and patient.heard_from["multimeter"] > 60
 
 
 def test_the_simulated_bench_s_silence_rule_needs_wall_time_too() -> None:

@@ -88,6 +88,8 @@ def run_demo(
                 bench="sim", out=held, profile=prof_arg, seed=seed + 1, speed=DEMO_ACQUIRE_SPEED
             )
             result = acquire(opts)
+            if result.outcome == "interrupted":
+                raise KeyboardInterrupt  # the demo ends as an interrupted command (130)
             if result.exit_code != 0:
                 raise GyrolabError(
                     f"demo: the held-out acquisition ended {result.outcome} ({result.reason})"
