@@ -148,3 +148,20 @@ def test_demo_report_has_noise_per_temperature_plateau(demo_run: Path) -> None:
     for p in rows:
         assert f'<td class="num">{fmt(p.arw_deg_per_sqrt_h)}</td>' in html
         assert 0.02 < p.arw_deg_per_sqrt_h < 0.1  # the simulated unit: 0.0523 deg/sqrt(h)
+
+
+def test_a_failed_acquisition_fails_the_demo_and_leaves_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No silent fallback: the held-out acquisition refuses a setpoint above the bench's
+    limits (after the calibration run was simulated), and the demo ends with that one line,
+    exit 2, and no DIR nor temporary sibling left behind."""
+    prof = tmp_path / "hot.toml"
+    prof.write_text('name = "hot"\n[[step]]\nsetpoint_c = 150\nduration_s = 60\n')
+    out = tmp_path / "d"
+    assert main(["demo", "--out", str(out), "--profile", str(prof)]) == 2
+    captured = capsys.readouterr()
+    assert "wrote " in captured.out  # the calibration run was simulated first
+    errors = [x for x in captured.err.splitlines() if x.startswith("gyrolab: error")]
+    assert len(errors) == 1 and "150" in errors[0], captured.err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hot.toml"]
