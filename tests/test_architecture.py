@@ -51,10 +51,6 @@ FORBIDDEN = {("sim", "acquisition"), ("sim", "instruments")}
 # Violations left in other helpers' areas (issue 13, worked on in parallel), by importer
 # module and imported name; the merge removes each entry with its fix.
 ALLOWED: set[tuple[str, str]] = {
-    # instruments helper: the driver config dataclasses live in acquisition.bench_config
-    ("gyrolab.instruments.drivers.agilent34401a", "gyrolab.acquisition.bench_config"),
-    ("gyrolab.instruments.drivers.watlowf4", "gyrolab.acquisition.bench_config"),
-    ("gyrolab.instruments.drivers.gyroadc", "gyrolab.acquisition.bench_config"),
     # compensation split: multi-unit compensate fans out through gyrolab.batch
     ("gyrolab.compensation.commands", "gyrolab.batch"),
     # compensation split: vmd's private batch size and backend picker used by fitness
