@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from gyrolab.acquisition.bench_config import load_bench
-from gyrolab.app.acquire import connect_instruments
+from gyrolab.app.acquire import connect_instruments, lab_addresses
 from gyrolab.errors import InputError
 from gyrolab.instruments import registry
 from gyrolab.instruments.registry import DriverSpec, OpenContext, connected
@@ -132,13 +132,7 @@ def _bench_file(tmp_path: Path, oven_port: str, adc_port: str) -> Path:
 
 def _connect(cfg: Any, rm: ExpectedResourceManager) -> Any:
     # As run_acquisition does on the lab path, with the harness as the VISA library.
-    return connect_instruments(
-        cfg,
-        dmm_resource=registry.address(cfg.multimeter, "thermometer"),
-        oven_port=registry.address(cfg.oven, "chamber"),
-        adc_port=registry.address(cfg.adc, "rate_stream"),
-        visa_library=rm,
-    )
+    return connect_instruments(cfg, lab_addresses(cfg), visa_library=rm)
 
 
 def test_a_driver_defined_in_its_test_opens_from_a_bench_file(tmp_path, pt104) -> None:
