@@ -53,9 +53,6 @@ FORBIDDEN = {("sim", "acquisition"), ("sim", "instruments")}
 ALLOWED: set[tuple[str, str]] = {
     # compensation split: multi-unit compensate fans out through gyrolab.batch
     ("gyrolab.compensation.commands", "gyrolab.batch"),
-    # compensation split: vmd's private batch size and backend picker used by fitness
-    ("gyrolab.compensation.fitness", "gyrolab.compensation.vmd._BATCH_BYTES"),
-    ("gyrolab.compensation.fitness", "gyrolab.compensation.vmd._pick_backend"),
     # numerics helper: the Allan phase helpers used by the deviations
     ("gyrolab.numerics.deviations", "gyrolab.numerics.allan._phase_detrended"),
     ("gyrolab.numerics.deviations", "gyrolab.numerics.allan._phase_from_rate"),
