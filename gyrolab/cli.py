@@ -25,7 +25,7 @@ from gyrolab.errors import GyrolabError
 HANDLERS: dict[str, str] = {
     "simulate": "gyrolab.sim.commands:simulate",
     "acquire": "gyrolab.cli:acquire",
-    "compensate": "gyrolab.compensation.commands:compensate",
+    "compensate": "gyrolab.app.compensate:compensate",
     "apply": "gyrolab.compensation.commands:apply",
     "report": "gyrolab.report.commands:report",
     "discrepancy": "gyrolab.sim.discrepancy.commands:discrepancy",

@@ -149,7 +149,11 @@ def compensate(args: argparse.Namespace) -> int:
     )
     unit_arg = getattr(args, "unit", None)
     if unit_arg is None and _units(args.run):
-        return compensate_units(args, cfg, seed)  # a multi-unit run: every unit (docs/fleet.md)
+        # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
+        # this layer: it runs this handler once per unit through gyrolab.batch)
+        raise InputError(
+            args.run, f"holds units {', '.join(_units(args.run))}: choose one with --unit"
+        )
     from gyrolab.logs import log_options
 
     opts = log_options(args)
@@ -251,35 +255,6 @@ def _units(path: str) -> list[str]:
         return list_units(path)
     except InputError:
         return []
-
-
-def compensate_units(args: argparse.Namespace, cfg: PipelineConfig, seed: int = 0) -> int:
-    """``gyrolab compensate MULTI.mcap --out DIR``: one model directory per unit,
-    ``DIR/<serial>``, fitted in parallel by :func:`gyrolab.batch.run_items` (a Dask
-    LocalCluster of ``--workers``). DIR appears atomically with the units that were fitted;
-    a unit that fails is named on stderr and the exit code is 1 (all failed: exit 2)."""
-    from gyrolab.batch import BatchOptions, Item, run_items
-
-    inputs = (args.run, args.validate, getattr(args, "config", None))
-    units = list_units(args.run)
-    opt = BatchOptions(seed=seed, validate=args.validate, config=cfg)
-    with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
-        items = [Item(Path(args.run), Path(tmp) / u, u) for u in units]
-        results = run_items("compensate", items, opt, workers=getattr(args, "workers", None))
-        if not any(r.status == "done" for r in results):
-            raise InputError(
-                args.run, "no unit could be fitted: " + "; ".join(r.error for r in results)
-            )
-    for r in results:
-        where = Path(args.out) / str(r.unit)
-        print(f"{r.unit}: {r.status} {where if r.status == 'done' else r.error}")
-    failed = [r.unit for r in results if r.status == "failed"]
-    print(
-        f"{len(units) - len(failed)} of {len(units)} unit models written to {args.out}"
-        + (f"; failed: {', '.join(map(str, failed))}" if failed else ""),
-        file=sys.stderr,
-    )
-    return 1 if failed else 0
 
 
 def apply(args: argparse.Namespace) -> int:
