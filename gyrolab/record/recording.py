@@ -414,6 +414,12 @@ class RecordingWriter:
     what a power cut can lose: a flush fsyncs when that much wall time has passed since the
     last fsync (``fsync=True`` fsyncs on every flush). :meth:`maybe_flush` lets a caller
     whose streams went quiet apply the same rule on its own clock.
+
+    Multi-unit layout (``units``): every chunk holds one unit's messages, or only the shared
+    topics', so that reading one unit decompresses only its own chunks (not all U units'
+    data, which made a fleet cost O(U²) to read). Each group's messages are buffered up to
+    ``chunk_size`` and written as one chunk; chunks of different groups overlap in time.
+    A flush writes every group's buffer, so the crash-loss bound above holds for all.
     """
 
     def __init__(
@@ -439,7 +445,10 @@ class RecordingWriter:
             "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE,
         }
-        self._w = Writer(self._fh, chunk_size=chunk_size, compression=comp[compression])
+        # Multi-unit: this class closes every chunk (one group's buffer each), never mcap's
+        # Writer, whose size rule would mix groups; single-unit: mcap's rule, as always.
+        inner_size = chunk_size if units is None else 1 << 62
+        self._w = Writer(self._fh, chunk_size=inner_size, compression=comp[compression])
         self._w.start(profile=PROFILE, library=f"gyrolab {_version()}")
         self.start_time_ns = int(start_time_ns)
         self.flush_every_s = flush_every_s
@@ -451,6 +460,12 @@ class RecordingWriter:
         self.fsync_count = 0
         self._seq: dict[str, int] = {}
         self._chan: dict[str, int] = {}
+        self.chunk_size = chunk_size
+        # multi-unit chunk groups: topic -> group (a serial, or None for the shared topics);
+        # per group the buffered (channel, log_time, data, sequence) and their record bytes
+        self._group: dict[str, str | None] = {}
+        self._buf: dict[str | None, list[tuple[int, int, bytes, int]]] = {}
+        self._buf_bytes: dict[str | None, int] = {}
         self._closed = False
         #: ``tap(topic, log_time_ns, data)`` sees every message after it is recorded (the
         #: live view, gyrolab/acquisition/live.py); must not block. Its errors are ignored:
@@ -461,6 +476,9 @@ class RecordingWriter:
         if self.units is not None and (not self.units or len(set(self.units)) != len(units)):
             raise ValueError(f"units must be distinct serials, got {units}")
         serials: list[str | None] = [None] if self.units is None else list(self.units)
+        if self.units is not None:
+            for g in [*self.units, None]:
+                self._buf[g], self._buf_bytes[g] = [], 0
         fds = _file_descriptor_set()
         adc_schema = self._w.register_schema(ADC_MESSAGE, "protobuf", fds)
         rate_schema = self._w.register_schema(RATE_MESSAGE, "protobuf", fds)
@@ -468,6 +486,7 @@ class RecordingWriter:
             for topic, sch in ((TOPIC_ADC, adc_schema), (TOPIC_RATE, rate_schema)):
                 name = unit_topic(topic, u)
                 self._chan[name] = self._w.register_channel(name, "protobuf", sch)
+                self._group[name] = u
         for topic, schema in JSON_SCHEMAS.items():
             sid = self._w.register_schema(
                 schema["title"], "jsonschema", json.dumps(schema, sort_keys=True).encode()
@@ -475,6 +494,7 @@ class RecordingWriter:
             for u in serials if is_per_unit(topic) else [None]:
                 name = unit_topic(topic, u)
                 self._chan[name] = self._w.register_channel(name, "json", sid)
+                self._group[name] = u
         meta_run = {"format_version": FORMAT_VERSION, "software_version": _version()}
         if self.units is not None:
             meta_run["units"] = list(self.units)
@@ -489,9 +509,17 @@ class RecordingWriter:
         seq = self._seq.get(topic, 0)
         self._seq[topic] = seq + 1
         ts = self.start_time_ns + int(round(t * 1e9))
-        self._w.add_message(
-            self._chan[topic], log_time=ts, data=data, publish_time=ts, sequence=seq
-        )
+        if self.units is None:
+            self._w.add_message(
+                self._chan[topic], log_time=ts, data=data, publish_time=ts, sequence=seq
+            )
+        else:
+            g = self._group[topic]
+            self._buf[g].append((self._chan[topic], ts, data, seq))
+            # a Message record: opcode 1 + length 8 + channel 2 + sequence 4 + 2 times 16
+            self._buf_bytes[g] += 31 + len(data)
+            if self._buf_bytes[g] > self.chunk_size:
+                self._write_group(g)
         if self.tap is not None:
             try:
                 self.tap(topic, ts, data)
@@ -520,8 +548,20 @@ class RecordingWriter:
         ns = self.start_time_ns + int(round(t * 1e9))
         return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
+    def _write_group(self, g: str | None) -> None:
+        """Write group ``g``'s buffered messages as one chunk of their own (multi-unit)."""
+        buf = self._buf[g]
+        if not buf:
+            return
+        for chan, ts, data, seq in buf:
+            self._w.add_message(chan, log_time=ts, data=data, publish_time=ts, sequence=seq)
+        self._w.flush()  # closes the chunk: it holds this group's messages only
+        self._buf[g], self._buf_bytes[g] = [], 0
+
     def flush(self) -> None:
-        """Close the open chunk and push it to the OS (and to disk when ``fsync``)."""
+        """Close the open chunk(s) and push them to the OS (and to disk when ``fsync``)."""
+        for g in self._buf:  # multi-unit: every unit's buffer, then the shared topics'
+            self._write_group(g)
         self._w.flush()
         self._fh.flush()
         self.flush_count += 1
@@ -671,6 +711,8 @@ class RecordingWriter:
         if self._closed:
             return
         self._closed = True
+        for g in self._buf:
+            self._write_group(g)
         self._w.finish()
         self._fh.flush()
         if self.fsync or self.fsync_every_s is not None:
