@@ -16,9 +16,9 @@ import argparse
 import os
 import time
 
+from gyrolab.compensation.pipeline import iter_rate_batches
 from mcap.reader import make_reader
 
-from gyrolab.compensation.pipeline import iter_rate_batches
 from gyrolab.record.recording import (
     TOPIC_PT100,
     TOPIC_RATE,
