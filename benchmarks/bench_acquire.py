@@ -1,6 +1,6 @@
 """Acquisition through the wire-level simulated bench: speed, and crash loss under kill -9.
 
-    python benchmarks/bench_acquire.py speed [--profile paper] [--speed 300]
+    python benchmarks/bench_acquire.py speed [--profile paper] [--speed 300] [--units 8]
     python benchmarks/bench_acquire.py kill [--trials 20] [--profile short] [--speed 100]
 
 ``speed`` runs ``gyrolab acquire --bench sim`` (the real drivers over real pseudo-
@@ -8,6 +8,9 @@ terminals, the simulated 34401A, Watlow F4 and gyro ADC behind them) as a separa
 process and reports the wall time, the speed-up over real time and what the recording
 holds (samples, gaps, PT100 and oven cadence). There is no reference peer to run beside
 it: the figure to meet is ≥ 250× real time (the 13-h ``paper`` profile in ≤ 3 min).
+With ``--units N`` it runs ``--bench sim --units N`` (N units, one ADC pty each, the
+simulated 34970A scanner) and reports, per unit, the sample-index gaps, and the acquire
+process's CPU time per unit and run hour.
 
 ``kill`` starts the same run, lets it record for a random time, sends it SIGKILL, runs
 ``gyrolab recover`` on what is left, and measures the data lost: the run time up to which
@@ -21,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import select
 import signal
 import subprocess
@@ -32,7 +36,15 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.record.recording import read_recording
+from gyrolab.record.recording import (
+    TOPIC_EVENT,
+    TOPIC_LOG,
+    TOPIC_OVEN,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    list_units,
+    read_recording,
+)
 from gyrolab.record.recover import recover_recording
 
 
@@ -76,6 +88,61 @@ def speed_run(out: Path, profile: str = "paper", speed: float | None = 300.0, se
         "pt100_range_c": [round(float(rec.pt100_c.min()), 2), round(float(rec.pt100_c.max()), 2)],
         "file_mb": round(out.stat().st_size / 1e6, 1),
         "faults_logged": sum(1 for m in rec.logs if m.get("kind") == "fault"),
+        "stderr_tail": p.stderr.strip().splitlines()[-1:],
+    }
+
+
+def units_run(
+    out: Path, units: int = 8, profile: str = "paper", speed: float | None = 300.0, seed: int = 0
+) -> dict[str, Any]:
+    """``gyrolab acquire --bench sim --units N``: wall time, the process's CPU time per unit
+    and run hour (``RUSAGE_CHILDREN``: the whole acquire process, simulated instruments
+    included), and every unit's stream checked for gaps by its sample indices."""
+    cmd = _acquire_cmd(out, profile, speed, seed) + ["--units", str(units)]
+    env = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.monotonic()
+    p = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall = time.monotonic() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode != 0:
+        raise RuntimeError(f"acquire failed ({p.returncode}): {p.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    serials = list_units(out)
+    shared = read_recording(out, topics=[TOPIC_EVENT, TOPIC_LOG, TOPIC_OVEN], unit=serials[0])
+    run_s = float(shared.events[-1]["t"])
+    per_unit = []
+    for s in serials:
+        rec = read_recording(out, topics=[TOPIC_RATE, TOPIC_PT100], unit=s)
+        rate = rec.require_rate()
+        dpt = np.diff(rec.pt100_t)
+        per_unit.append(
+            {
+                "unit": s,
+                "samples": int(rate.index.size),
+                "index_gaps": len(rate.gaps()),
+                "samples_missing": int(sum(n for _, n in rate.gaps())),
+                "pt100_interval_s_median_p99_max": [
+                    round(float(x), 1) for x in np.percentile(dpt, [50, 99, 100])
+                ],
+            }
+        )
+    return {
+        "profile": profile,
+        "units": len(serials),
+        "speed_asked": speed if speed is not None else "max",
+        "wall_s": round(wall, 1),
+        "run_s": round(run_s, 1),
+        "speedup": round(run_s / wall, 1),
+        "cpu_s": round(cpu, 1),
+        "cpu_s_per_unit_per_run_hour": round(cpu / len(serials) / (run_s / 3600.0), 2),
+        "gaps_total": sum(u["index_gaps"] for u in per_unit),
+        "gap_logs": sum(1 for m in shared.logs if m.get("kind") == "gap"),
+        "units_dropped": [
+            m["data"]["unit"] for m in shared.logs if m.get("kind") == "unit_dropped"
+        ],
+        "file_mb": round(out.stat().st_size / 1e6, 1),
+        "per_unit": per_unit,
         "stderr_tail": p.stderr.strip().splitlines()[-1:],
     }
 
@@ -175,6 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--profile", default="paper")
     s.add_argument("--speed", type=float, default=300.0, help="0 = as fast as it goes")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--units", type=int, default=0, help="N > 0: --bench sim --units N")
     k = sub.add_parser("kill")
     k.add_argument("--trials", type=int, default=20)
     k.add_argument("--profile", default="short")
@@ -185,7 +253,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"# {time.strftime('%Y-%m-%d %H:%M')} {os.cpu_count()} CPUs, load {os.getloadavg()}")
     if a.cmd == "speed":
         with tempfile.TemporaryDirectory() as tmp:
-            res = speed_run(Path(tmp) / "run.mcap", a.profile, a.speed or None, a.seed)
+            if a.units:
+                res = units_run(Path(tmp) / "run.mcap", a.units, a.profile, a.speed or None, a.seed)
+            else:
+                res = speed_run(Path(tmp) / "run.mcap", a.profile, a.speed or None, a.seed)
         print(json.dumps(res, indent=1))
     else:
         rows = kill_campaign(

@@ -113,6 +113,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
     a.add_argument(
+        "--units",
+        type=int,
+        default=None,
+        metavar="N",
+        help="--bench sim only: N units of a seeded family in the chamber, read by a scanner "
+        "(1-10; docs/fleet.md)",
+    )
+    a.add_argument(
         "--driver",
         action="append",
         metavar="NAME",
@@ -252,6 +260,7 @@ def acquire(args: argparse.Namespace) -> int:
         drivers=tuple(args.driver or ()),
         faults=args.faults,
         axis_models=tuple(args.axis_model or ()),
+        units=args.units or 0,
         force=args.force,
         live_port=args.live,
         live_host=args.live_host,

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,18 @@ class RunInfo:
     unit_model: str = ""
     profile: str = "paper"  # built-in name or a profile TOML (relative to the bench file)
     notes: str = ""
+
+
+@dataclass(frozen=True)
+class UnitConfig:
+    """One unit of a multi-unit bench (``[[unit]]``, docs/bench-config.md): its ``serial``
+    (the recording's /unit/<serial>/… topics), its rate stream (``adc``: the rate-stream
+    driver's config, the bench's ``[adc]`` table with this unit's ``driver``, ``port`` and
+    overrides) and ``temperature_channel``, the scanner channel of its PT100."""
+
+    serial: str
+    adc: Any
+    temperature_channel: int
 
 
 @dataclass(frozen=True)
@@ -85,11 +97,22 @@ class BenchConfig:
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
+    # A multi-unit bench: its units (``[[unit]]``) and the scanning multimeter that reads
+    # their PT100s (``[scanner]``); none on a single-unit bench.
+    units: tuple[UnitConfig, ...] = ()
+    scanner: Any = None
     source: str = "<defaults>"
 
     def to_dict(self) -> dict[str, Any]:
+        """The TOML layout (``bench_from_dict`` reads it back); a multi-unit bench's units
+        as ``unit`` tables, its scanner without the channel list they give it."""
         d = asdict(self)
         d.pop("source")
+        units, scanner = d.pop("units"), d.pop("scanner")
+        if units:
+            d["unit"] = list(units)
+            del d["multimeter"]  # a multi-unit bench has no [thermometer]
+            d["scanner"] = {k: v for k, v in scanner.items() if k != "channels"}
         return d
 
     def profile_path(self) -> str:
@@ -172,7 +195,7 @@ def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source:
 def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     """Build and check a :class:`BenchConfig` from the TOML layout."""
     tables = {t for _, _, names in _ROLE_TABLES for t in names}
-    unknown = sorted(set(d) - set(_SECTIONS) - tables - {"name"})
+    unknown = sorted(set(d) - set(_SECTIONS) - tables - {"name", "scanner", "unit"})
     if unknown:
         raise InputError(source, f"unknown table(s) or key(s) {unknown}")
     kw: dict[str, Any] = {
@@ -180,9 +203,68 @@ def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     }
     for fname, role, names in _ROLE_TABLES:
         kw[fname] = _role_section(d, role, names, source)
+    if "unit" in d or "scanner" in d:
+        kw["units"], kw["scanner"] = _multi_unit(d, source)
     cfg = BenchConfig(name=str(d.get("name", Path(source).stem)), source=source, **kw)
     validate(cfg)
     return cfg
+
+
+_UNIT_KEYS = ("serial", "driver", "port", "temperature_channel", "adc")
+
+
+def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...], Any]:
+    """``[[unit]]`` and ``[scanner]``: the units (each one's rate-stream config is the
+    ``[adc]`` table with the unit's ``driver``, ``port`` and ``adc`` overrides) and the
+    scanner's config, its channel list taken from the units."""
+    from gyrolab.record.recording import check_serial
+
+    raw_units = d.get("unit")
+    if not isinstance(raw_units, list) or not raw_units:
+        raise InputError(source, "[scanner] needs the units it reads: one [[unit]] table each")
+    if not all(isinstance(u, dict) for u in raw_units):
+        raise InputError(source, "unit must be an array of tables ([[unit]])")
+    for t in ("thermometer", "multimeter"):
+        if t in d:
+            raise InputError(
+                source, f"[{t}]: a multi-unit bench reads each unit's PT100 with [scanner]"
+            )
+    raw_scanner = d.get("scanner")
+    if not isinstance(raw_scanner, dict):
+        raise InputError(source, "[[unit]] needs [scanner], the multimeter reading their PT100s")
+    if "channels" in raw_scanner:
+        raise InputError(source, "[scanner] channels: set by each [[unit]] temperature_channel")
+    adc_raw = d.get("adc", {})
+    units = []
+    for i, u in enumerate(raw_units, start=1):
+        where = f"[[unit]] {i}"
+        unknown = sorted(set(u) - set(_UNIT_KEYS))
+        if unknown:
+            raise InputError(source, f"{where}: unknown key(s) {unknown}")
+        try:
+            serial = check_serial(u.get("serial"))  # type: ignore[arg-type]
+        except ValueError as e:
+            raise InputError(source, f"{where} serial: {e}") from None
+        where = f"[[unit]] {serial}"
+        ch = u.get("temperature_channel")
+        if isinstance(ch, bool) or not isinstance(ch, int):
+            raise InputError(
+                source, f"{where}: temperature_channel = {ch!r}: the scanner channel of its "
+                "PT100, an integer such as 101"
+            )
+        over = u.get("adc", {})
+        if not isinstance(over, dict):
+            raise InputError(source, f"{where}: adc must be a table of [adc] keys")
+        raw = {**adc_raw, **over, **{k: u[k] for k in ("driver", "port") if k in u}}
+        name = raw.get("driver", registry.DEFAULT_DRIVER["rate_stream"])
+        try:
+            spec = registry.get(str(name), "rate_stream")
+        except KeyError as e:
+            raise InputError(source, f"{where} driver = {name!r}: {e.args[0]}") from None
+        units.append(UnitConfig(serial, _section(spec.config, raw, f"{where} adc", source), ch))
+    scanner = _role_section(d, "multi_thermometer", ("scanner",), source)
+    scanner = replace(scanner, channels=tuple(u.temperature_channel for u in units))
+    return tuple(units), scanner
 
 
 # Physical bounds a limit must lie within (docs/bench-config.md, "Limits"): beyond them a
@@ -235,20 +317,51 @@ def validate(cfg: BenchConfig) -> None:
                 check(ss.mode)
             except ValueError as e:
                 raise InputError(s, f"[{names[0]}] {sub.driver}: {e}") from None
-    for name, period in (("multimeter", cfg.multimeter.period_s), ("oven", cfg.oven.period_s)):
+    # A multi-unit bench: the scanner's and every unit's stream's own checks too.
+    extra = [(f"[[unit]] {u.serial} adc", u.adc) for u in cfg.units]
+    if cfg.scanner is not None:
+        extra.append(("[scanner]", cfg.scanner))
+    for where, sub in extra:
+        check = getattr(sub, "check", None)
+        if check is not None:
+            try:
+                check(ss.mode)
+            except ValueError as e:
+                raise InputError(s, f"{where} {sub.driver}: {e}") from None
+    periods = [("multimeter", cfg.multimeter.period_s), ("oven", cfg.oven.period_s)]
+    if cfg.scanner is not None:
+        periods.append(("scanner", cfg.scanner.period_s))
+    for name, period in periods:
         if not period > 0:
             raise InputError(s, f"[{name}] period_s must be > 0")
-    a = cfg.adc
-    if not (a.sample_rate_hz > 0 and a.block_s > 0):
-        raise InputError(s, "[adc] sample_rate_hz and block_s must be > 0")
+    streams = [("[adc]", cfg.adc)] + [(f"[[unit]] {u.serial} adc", u.adc) for u in cfg.units]
+    for where, a in streams:
+        if not (a.sample_rate_hz > 0 and a.block_s > 0):
+            raise InputError(s, f"{where} sample_rate_hz and block_s must be > 0")
+    _check_units(cfg)
     r = cfg.recorder
     if not (0 < r.flush_every_s <= 1.5):
         # The 2 s crash-loss promise needs flush period + one ADC block below 2 s.
         raise InputError(s, "[recorder] flush_every_s must be in (0, 1.5] s")
-    if r.flush_every_s + a.block_s > 2.0:
-        raise InputError(s, "[recorder] flush_every_s + [adc] block_s must not exceed 2 s")
+    for where, a in streams:
+        if r.flush_every_s + a.block_s > 2.0:
+            raise InputError(s, f"[recorder] flush_every_s + {where} block_s must not exceed 2 s")
     if not r.fsync_every_s > 0 or r.chunk_size < 1024:
         raise InputError(s, "[recorder] fsync_every_s must be > 0 and chunk_size >= 1024")
+
+
+def _check_units(cfg: BenchConfig) -> None:
+    """Units: distinct serials and scanner channels; multi-axis units are not supported on a
+    multi-unit bench (yet)."""
+    s = cfg.source
+    channels = list(cfg.scanner.channels) if cfg.scanner is not None else []
+    for what, values in (("serial", [u.serial for u in cfg.units]), ("channel", channels)):
+        dup = sorted({v for v in values if values.count(v) > 1}, key=str)
+        if dup:
+            raise InputError(s, f"[[unit]] {what} {dup[0]} is given to more than one unit")
+    for u in cfg.units:
+        if getattr(u.adc, "axes", 1) != 1:
+            raise InputError(s, f"[[unit]] {u.serial}: multi-axis units are single-unit only")
 
 
 def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str) -> None:
@@ -274,10 +387,19 @@ def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     p = Path(path)
     d = read_toml(p, "bench file")
     cfg = bench_from_dict(d, str(p))
+    # Where each instrument is: a multi-unit bench reaches the chamber, the scanner and
+    # every unit's rate stream (its [thermometer] and [adc] port are not used).
+    needed: list[tuple[str, str, Any]] = []
     for fname, role, names in _ROLE_TABLES:
-        sub = getattr(cfg, fname)
+        if cfg.units and role != "chamber":
+            continue
+        table = next((t for t in names if t in d), names[0])
+        needed.append((f"[{table}]", role, getattr(cfg, fname)))
+    if cfg.units:
+        needed.append(("[scanner]", "multi_thermometer", cfg.scanner))
+        needed += [(f"[[unit]] {u.serial}", "rate_stream", u.adc) for u in cfg.units]
+    for where, role, sub in needed:
         key = registry.get(sub.driver, role).address_key
         if not getattr(sub, key):
-            where = next((t for t in names if t in d), names[0])
-            raise InputError(p, f"[{where}] {key} is required for a real bench")
+            raise InputError(p, f"{where} {key} is required for a real bench")
     return cfg

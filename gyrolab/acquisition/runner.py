@@ -42,12 +42,14 @@ import numpy as np
 
 from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import Limits, SafeState
+from gyrolab.acquisition.streams import RateRecorder
 from gyrolab.clock import Clock
 from gyrolab.errors import InputError
 from gyrolab.instruments.roles import (  # noqa: F401 - re-exported for compatibility
     Chamber,
     ChamberReading,
     InstrumentFault,
+    MultiThermometer,
     RateStream,
     RateStreamConfig,
     Thermometer,
@@ -90,22 +92,6 @@ Oven = Chamber
 GyroStream = RateStream
 
 
-class AdcBlockLike(Protocol):
-    """Gap-free run of samples: device index of the first, its time on the ADC clock (s)."""
-
-    first_index: int
-    t0: float
-    counts: np.ndarray
-
-
-class AdcReadLike(Protocol):
-    """What one read of the stream gave: blocks in order, gaps, and port events."""
-
-    blocks: list[Any]  # AdcBlockLike
-    gaps: list[Any]  # with first_seq, frames, cause
-    events: list[Any]  # with kind, message, data
-
-
 # ------------------------------------------------------------------------------ plan
 
 
@@ -133,12 +119,6 @@ class Log:
 
 
 Action = SetSetpoint | Event | Log
-
-# A stopped ADC stream (Acquisition._record_tail_gap): a tail longer than this many times
-# the stream's median arrival lag, and than TAIL_MIN_S run seconds, is a gap.
-TAIL_LATENCY_FACTOR = 4.0
-TAIL_MIN_S = 2.0
-
 
 def check_profile_limits(profile: Profile, limits: Limits, source: str = "profile") -> None:
     """Refuse a profile whose setpoints are outside the bench's limits (before any I/O)."""
@@ -323,10 +303,23 @@ class RunResult:
     faults: int
     safe_state_ok: bool
     first_device_index: int | None = None
+    units_dropped: list[str] = field(default_factory=list)  # multi-unit: streams given up
 
     @property
     def exit_code(self) -> int:
         return {"completed": 0, "interrupted": 130}.get(self.outcome, 1)
+
+
+@dataclass(frozen=True)
+class UnitDevices:
+    """One unit of a multi-unit run: its ``serial``, its connected rate ``stream`` (whose
+    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``adc`` and the
+    scanner ``channel`` of its PT100."""
+
+    serial: str
+    stream: RateStream
+    adc: Any
+    channel: int
 
 
 class _Poller(threading.Thread):
@@ -463,6 +456,15 @@ class Acquisition:
     (or :meth:`request_stop`) interrupts it; the oven is then left in the safe state and
     the recording closed. ``on_status`` is called (from the main thread) with a
     :class:`Status` at most every ``status_every_s`` wall seconds.
+
+    A single-unit bench gives ``thermometer``, ``gyro`` and ``adc``. A multi-unit bench
+    gives ``units`` (one :class:`UnitDevices` each) and, as ``thermometer``, the scanner
+    (a :class:`~gyrolab.instruments.roles.MultiThermometer`) that reads every unit's
+    PT100; the writer must then be a multi-unit one (``RecordingWriter(units=…)``). The
+    profile's stability rule watches the first unit's PT100 (as ``gyrolab simulate
+    --units`` does); the over/under-temperature watchdog watches every unit's. A unit whose
+    stream fails (a fatal error, or silent longer than ``comm_timeout_s``) is logged and
+    dropped; the run goes on with the others (docs/bench-config.md, "Several units").
     """
 
     def __init__(
@@ -471,12 +473,13 @@ class Acquisition:
         profile: Profile,
         writer: RecordingWriter,
         clock: Clock,
-        thermometer: Thermometer,
+        thermometer: Thermometer | MultiThermometer,
         oven: Oven,
-        gyro: GyroStream,
-        adc: RateStreamConfig,
+        gyro: GyroStream | None = None,
+        adc: RateStreamConfig | None = None,
         limits: Limits,
         safe_state: SafeState,
+        units: list[UnitDevices] | None = None,
         pt100_period_s: float = 1.0,
         oven_period_s: float = 2.0,
         on_status: Callable[[Status], None] | None = None,
@@ -487,6 +490,8 @@ class Acquisition:
         turn_s: float = 0.1,
     ) -> None:
         check_profile_limits(profile, limits)
+        if (units is None) == (gyro is None) or (units is None) == (adc is None):
+            raise ValueError("give gyro and adc (one unit) or units (several), not both")
         # threaded=False: no threads; every turn of the main loop polls the instruments
         # itself and then sleeps ``turn_s`` on ``clock`` (a fake clock in tests advances).
         self.threaded = threaded
@@ -496,15 +501,14 @@ class Acquisition:
         self.plan = ProfilePlan(profile)
         self.w = writer
         self.clock = clock
-        self.thermo, self.oven, self.gyro = thermometer, oven, gyro
-        self.adc = adc
+        self.thermo, self.oven = thermometer, oven
+        self.units = units
         self.limits = limits
         self.safe = safe_state
         self.pt100_period_s = pt100_period_s
         self.oven_period_s = oven_period_s
         self.on_status = on_status
         self.status_every_s = status_every_s
-        self.on_samples = on_samples
         self.q: queue.Queue[tuple[Any, ...]] = queue.Queue()
         self.stop_ev = threading.Event()
         self.oven_cmds: queue.Queue[Callable[[], Any]] = queue.Queue()
@@ -515,28 +519,35 @@ class Acquisition:
         self._last_ok: dict[str, float] = {}
         self._down_since: dict[str, float] = {}
         self._down_errors: dict[str, int] = {}
-        self._pt_bad = 0
+        self._pt_bad: dict[str | None, int] = {}  # consecutive out-of-limit readings per unit
+        self._pt_missing: set[str] = set()  # units whose PT100 reading was lost (logged once)
         self._faults = 0
         self._setpoint_pending: float | None = None
-        # ADC bookkeeping: device index of run sample 0, next expected index, block buffer.
-        self._idx0: int | None = None
-        self._adc_offset = 0.0  # ADC clock minus run time
-        self._blk_t0 = 0.0
-        self._next_idx: int | None = None
-        self._blk: list[np.ndarray] = []
-        self._blk_first = 0
-        self._blk_n = 0
-        self._block_len = max(1, int(round(adc.block_s * adc.sample_rate_hz)))
-        self._period = 1.0 / adc.sample_rate_hz
-        self._samples = 0
-        self._received_to = -math.inf  # run time up to which ADC samples have arrived
-        self._gaps = 0
-        self._missing = 0
-        self._dups = 0
-        self._counters_seen: dict[str, int] = {}
-        # Arrival lag (arrival run time - end of the samples that arrived) of recent ADC
-        # blocks: the stream's normal latency, against which a stopped stream is judged.
-        self._adc_lags: deque[float] = deque(maxlen=200)
+        # One recorder per rate stream, by its source name in /log.
+        if units is None:
+            assert gyro is not None and adc is not None
+            recs = [RateRecorder(gyro, adc, writer, self.log, on_samples=on_samples)]
+        else:
+            recs = [
+                RateRecorder(
+                    u.stream,
+                    u.adc,
+                    writer,
+                    self.log,
+                    unit=u.serial,
+                    on_samples=on_samples if k == 0 else None,
+                )
+                for k, u in enumerate(units)
+            ]
+        self.streams: dict[str, RateRecorder] = {r.name: r for r in recs}
+        if len(self.streams) != len(recs):
+            raise ValueError("every unit's rate stream needs its own name")
+        self._readers: dict[str, _AdcThread] = {}
+
+    @property
+    def gyro(self) -> GyroStream:
+        """The (first) unit's rate stream."""
+        return next(iter(self.streams.values())).dev
 
     # -- helpers
     def t(self) -> float:
@@ -582,24 +593,29 @@ class Acquisition:
     def _run(self) -> RunResult:
         # Samples that arrived before the run started are not part of it: drop them so
         # that sample 0 is the first one after t = 0.
-        stale = self.gyro.read(0.0)
-        n_stale = sum(int(b.counts.size) for b in stale.blocks)
+        stale = {name: rec.dev.read(0.0) for name, rec in self.streams.items()}
         self._t0 = self.clock.now()
-        if n_stale:
-            self.log(
-                "info",
-                self.gyro.name,
-                f"discarded {n_stale} ADC samples received before the run started",
-                "startup",
-                {"samples": n_stale},
-                0.0,
-            )
+        for name, got in stale.items():
+            n_stale = sum(int(b.counts.size) for b in got.blocks)
+            if n_stale:
+                self.log(
+                    "info",
+                    name,
+                    f"discarded {n_stale} ADC samples received before the run started",
+                    "startup",
+                    {"samples": n_stale},
+                    0.0,
+                )
         now = self._t0
-        for name in (self.thermo.name, self.oven.name, self.gyro.name):
+        for name in (self.thermo.name, self.oven.name, *self.streams):
             self._last_ok[name] = now
             self.silence.heard(name)
         self._do(self.plan.start(0.0))
-        threads = [
+        self._readers = {
+            name: _AdcThread(rec.dev, self.q.put, self.stop_ev, self.clock)
+            for name, rec in self.streams.items()
+        }
+        threads: list[Any] = [
             _Poller(
                 self.thermo.name,
                 self.thermo.read,
@@ -619,7 +635,7 @@ class Acquisition:
                 self.oven_cmds,
                 reports=getattr(self.oven, "reports", None),
             ),
-            _AdcThread(self.gyro, self.q.put, self.stop_ev, self.clock),
+            *self._readers.values(),
         ]
         if self.threaded:
             for th in threads:
@@ -671,17 +687,20 @@ class Acquisition:
         if self.on_status:
             self._update_status(self.t())
             self.on_status(self.status)
+        recs = list(self.streams.values())
+        first = recs[0]
         return RunResult(
             outcome=outcome,
             reason=reason,
             t_end=self.t(),
-            samples=self._samples,
-            gaps=self._gaps,
-            samples_missing=self._missing,
-            duplicates_dropped=self._dups,
-            faults=self._faults,
+            samples=sum(r.samples for r in recs),
+            gaps=sum(r.gaps for r in recs),
+            samples_missing=sum(r.missing for r in recs),
+            duplicates_dropped=sum(r.dups for r in recs),
+            faults=self._faults + sum(r.faults for r in recs),
             safe_state_ok=safe_ok,
-            first_device_index=self._idx0,
+            first_device_index=first.idx0,
+            units_dropped=[r.unit for r in recs if r.dropped and r.unit is not None],
         )
 
     def _drain_adc_to(self, t_end: float, wall_s: float = 1.0) -> None:
@@ -691,8 +710,7 @@ class Acquisition:
         that went quiet at the very end must not hold the oven; its gap stays visible)."""
         deadline = time.monotonic() + wall_s
         while (
-            self._idx0 is not None
-            and self._received_to < t_end - 0.5 * self._period
+            any(r.behind(t_end) for r in self.streams.values())
             and time.monotonic() < deadline
             and not self._interrupt
         ):
@@ -708,10 +726,12 @@ class Acquisition:
         st.step = self.plan.step_index
         st.setpoint_c = self.plan.step.setpoint_c if self.plan.step else math.nan
         st.remaining_s = self.plan.remaining_s(t)
-        c = self.gyro.counters()
-        st.frames_lost = int(c.get("frames_lost", 0))
-        st.frames_bad = int(c.get("frames_bad", 0))
-        st.samples = self._samples
+        st.frames_lost = st.frames_bad = st.samples = 0
+        for rec in self.streams.values():
+            c = rec.dev.counters()
+            st.frames_lost += int(c.get("frames_lost", 0))
+            st.frames_bad += int(c.get("frames_bad", 0))
+            st.samples += rec.samples
 
     # -- actions from the plan
     def _do(self, actions: list[Action]) -> None:
@@ -752,7 +772,15 @@ class Acquisition:
             self._on_report(source, t, payload)
             return
         if kind == "adc":
-            self._on_adc_read(payload, t, t_clock)
+            rec = self.streams[source]
+
+            def ok() -> None:
+                # What a dropped stream had delivered is still written, but says nothing
+                # about whether it is alive.
+                if not rec.dropped:
+                    self._on_ok(source, t, t_clock)
+
+            rec.on_read(payload, t, ok)
             return
         self._on_ok(source, t, t_clock)
         if kind == "command":
@@ -768,6 +796,8 @@ class Acquisition:
                     {"setpoint_c": value},
                     t,
                 )
+        elif source == self.thermo.name and self.units is not None:
+            self._on_scan(t, payload)
         elif source == self.thermo.name:
             ohm, c = payload
             self.w.write_pt100(t, ohm, c)
@@ -779,6 +809,61 @@ class Acquisition:
             self.status.chamber_c = pv
             mode = "run" if self.plan.state == "step" else "hold"
             self.w.write_oven(t, sp, pv, mode)
+
+    def _on_scan(self, t: float, readings: dict[int, Any]) -> None:
+        """A sweep of the scanner: every unit's PT100 to its topic and the watchdog; the
+        first unit's to the plan's stability rule."""
+        assert self.units is not None
+        plan_c: float | None = None
+        for k, u in enumerate(self.units):
+            r = readings.get(u.channel)
+            if r is None or not math.isfinite(r[1]):
+                if u.serial not in self._pt_missing:
+                    self._pt_missing.add(u.serial)
+                    self.log(
+                        "warning",
+                        self.thermo.name,
+                        f"unit {u.serial}: no PT100 reading on channel {u.channel} "
+                        "(overload: sensor open or unplugged)",
+                        "fault",
+                        {"unit": u.serial, "channel": u.channel},
+                        t,
+                    )
+                continue
+            ohm, c = r
+            self.w.write_pt100(t, ohm, c, unit=u.serial)
+            self._pt100_watch(t, c, u.serial)
+            if k == 0:
+                plan_c = c
+        if plan_c is not None:
+            self.status.pt100_c = plan_c
+        self._do(self.plan.update(t, plan_c))
+
+    def _drop_unit(self, source: str, t: float, reason: str) -> None:
+        """Give up on a unit's rate stream: log it, stop reading it, carry on with the
+        others (the run ends only when none is left)."""
+        rec = self.streams[source]
+        if rec.dropped:
+            return
+        rec.dropped = True
+        self._faults += 1
+        reader = self._readers.get(source)
+        if reader is not None:
+            reader.failed = True  # its thread (or turn) stops reading
+        for d in (self._last_ok, self._down_since, self._down_errors):
+            d.pop(source, None)
+        rec.emit_block()
+        left = sum(not r.dropped for r in self.streams.values())
+        self.log(
+            "fault",
+            source,
+            f"unit {rec.unit} dropped: {reason}; the run goes on with {left} unit(s)",
+            "unit_dropped",
+            {"unit": rec.unit, "units_left": left},
+            t,
+        )
+        if not left:
+            self._fail("runner", "every unit's rate stream failed", t)
 
     def _on_ok(self, source: str, t: float, t_clock: float) -> None:
         self._last_ok[source] = t_clock
@@ -796,6 +881,9 @@ class Acquisition:
             )
 
     def _on_error(self, source: str, t: float, message: str, fatal: bool) -> None:
+        if fatal and self.units is not None and source in self.streams:
+            self._drop_unit(source, t, message)
+            return
         if fatal:
             self._fail(source, message, t)
             return
@@ -822,165 +910,37 @@ class Acquisition:
             self._fault = f"{source}: {message}"
             self.log("fault", source, message, "fault", None, t)
 
-    def _pt100_watch(self, t: float, c: float) -> None:
+    def _pt100_watch(self, t: float, c: float, unit: str | None = None) -> None:
         lim = self.limits
         if lim.pt100_min_c <= c <= lim.pt100_max_c:
-            self._pt_bad = 0
+            self._pt_bad[unit] = 0
             return
-        self._pt_bad += 1
-        if self._pt_bad >= lim.watchdog_samples:
+        n = self._pt_bad[unit] = self._pt_bad.get(unit, 0) + 1
+        if n >= lim.watchdog_samples:
             which = "over" if c > lim.pt100_max_c else "under"
+            whose = "PT100" if unit is None else f"unit {unit} PT100"
             self._fail(
                 "watchdog",
-                f"PT100 {which}-temperature: {c:.2f} °C outside "
+                f"{whose} {which}-temperature: {c:.2f} °C outside "
                 f"[{lim.pt100_min_c:g}, {lim.pt100_max_c:g}] °C "
-                f"for {self._pt_bad} readings",
+                f"for {n} readings",
                 t,
             )
 
     def _watchdog(self, t: float) -> None:
         now = self.clock.now()
-        for source, last in self._last_ok.items():
+        for source, last in list(self._last_ok.items()):
             silent = now - last
             if self.silence.lost(source, silent, self.limits.comm_timeout_s):
-                self._fail(
-                    "watchdog",
+                message = (
                     f"lost communication with {source}: nothing for {silent:.1f} s "
-                    f"(> comm_timeout_s {self.limits.comm_timeout_s:g} s)",
-                    t,
+                    f"(> comm_timeout_s {self.limits.comm_timeout_s:g} s)"
                 )
+                if self.units is not None and source in self.streams:
+                    self._drop_unit(source, t, message)  # one unit lost, not the run
+                    continue
+                self._fail("watchdog", message, t)
                 return
-
-    # -- ADC blocks
-    def _on_adc_read(self, got: AdcReadLike, t: float, t_clock: float) -> None:
-        for ev in got.events:
-            kind = getattr(ev, "kind", "event")
-            if kind == "gap":
-                continue  # logged below from the sample indices, with the cause
-            level, tag = {
-                "disconnect": ("warning", "fault"),
-                "open_failed": ("warning", "fault"),
-                "reconnect": ("info", "recovery"),
-            }.get(kind, ("info", kind))
-            if tag == "fault":
-                self._faults += 1
-            self.log(
-                level,
-                self.gyro.name,
-                f"ADC port {kind}: {ev.message}",
-                tag,
-                dict(getattr(ev, "data", {}) or {}),
-                t,
-            )
-        if got.blocks:
-            self._on_ok(self.gyro.name, t, t_clock)
-            causes = sorted({str(getattr(g, "cause", "lost")) for g in got.gaps})
-            for blk in got.blocks:
-                self._on_adc_block(blk, t, causes)
-        self._log_counter_changes(t)
-
-    def _on_adc_block(self, blk: AdcBlockLike, t_arrival: float, causes: list[str]) -> None:
-        counts = np.asarray(blk.counts, dtype=np.int32)  # (n,) or (n, axes)
-        idx = int(blk.first_index)
-        n = int(len(counts))
-        if n == 0:
-            return
-        if self._idx0 is None:
-            self._idx0 = idx
-            self._next_idx = idx
-            self._blk_first = 0
-            self.log(
-                "info",
-                self.gyro.name,
-                f"ADC stream: run sample 0 is device sample {idx}",
-                "startup",
-                {"device_index": idx},
-                t_arrival,
-            )
-            # Run time of sample 0: its block's arrival less the block's length; from then
-            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
-            self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self._period)
-        assert self._next_idx is not None
-        if idx < self._next_idx:
-            # Some or all of these samples were written already: never write one twice.
-            dup = min(n, self._next_idx - idx)
-            self._dups += 1
-            self.log(
-                "warning",
-                self.gyro.name,
-                f"dropped {dup} repeated ADC sample(s) at index {idx - self._idx0}",
-                "duplicate",
-                {"index": idx - self._idx0, "samples": dup},
-                t_arrival,
-            )
-            if dup == n:
-                return
-            counts = counts[dup:]
-            idx += dup
-            n -= dup
-            t0_dev = float(blk.t0) + dup * self._period
-        else:
-            t0_dev = float(blk.t0)
-        if idx > self._next_idx:
-            missing = idx - self._next_idx
-            self._emit_block()
-            self._gaps += 1
-            self._missing += missing
-            first = self._next_idx - self._idx0
-            self.log(
-                "warning",
-                self.gyro.name,
-                f"ADC gap: {missing} sample(s) missing from index {first}",
-                "gap",
-                {
-                    "first_missing_index": first,
-                    "n_missing": missing,
-                    "t_first_missing": round(t0_dev - self._adc_offset - missing * self._period, 6),
-                    "cause": ",".join(causes) or "lost",
-                },
-                t_arrival,
-            )
-            self._blk_first = idx - self._idx0
-        if not self._blk_n:
-            self._blk_t0 = t0_dev - self._adc_offset
-        self._blk.append(counts)
-        self._blk_n += n
-        self._next_idx = idx + n
-        self._received_to = t0_dev - self._adc_offset + n * self._period
-        self._adc_lags.append(t_arrival - self._received_to)
-        if self.on_samples is not None:
-            # Received, not yet necessarily on disk: what a crash-loss measurement needs.
-            self.on_samples(self._received_to)
-        if self._blk_n >= self._block_len:
-            self._emit_block()
-
-    def _emit_block(self) -> None:
-        if not self._blk_n:
-            return
-        counts = np.concatenate(self._blk) if len(self._blk) > 1 else self._blk[0]
-        t0 = self._blk_t0
-        self.w.write_adc_block(t0, self._period, self._blk_first, counts)
-        self.w.write_rate_block(t0, self._period, self._blk_first, self.adc.to_dps(counts))
-        self._samples += len(counts)
-        self._blk_first += len(counts)
-        self._blk = []
-        self._blk_n = 0
-
-    def _log_counter_changes(self, t: float) -> None:
-        c = self.gyro.counters()
-        bad = int(c.get("frames_bad", 0)) - self._counters_seen.get("frames_bad", 0)
-        if bad > 0:
-            # Damaged frames are dropped by the reader (CRC); say so, with the totals.
-            self.log(
-                "warning",
-                self.gyro.name,
-                f"{bad} damaged ADC frame(s) rejected "
-                "(CRC/framing); their samples are reported as gaps",
-                "corruption",
-                {k: int(v) for k, v in c.items()},
-                t,
-            )
-        self._counters_seen = {k: int(v) for k, v in c.items()}
 
     # -- ending
     def _shutdown(self, outcome: str, reason: str, threads: list[threading.Thread]) -> bool:
@@ -1016,44 +976,13 @@ class Acquisition:
                 self._handle(self.q.get_nowait())
             except queue.Empty:
                 break
-        self._emit_block()
-        self._record_tail_gap(self.plan.ended_at if outcome == "completed" else t_end)
+        t_stop = self.plan.ended_at if outcome == "completed" else t_end
+        for rec in self.streams.values():
+            rec.emit_block()
+            rec.record_tail_gap(t_stop)
         self._record_safe_state(ok, attempts)
         self.w.flush()
         return ok
-
-    def _record_tail_gap(self, t_stop: float) -> None:
-        """A stream that stopped before the run ended: a gap from the sample after the
-        last one received up to ``t_stop`` (the gap count and samples missing say so).
-
-        A tail within the stream's normal latency (``TAIL_LATENCY_FACTOR`` × its median
-        arrival lag, at least ``TAIL_MIN_S``) is samples in flight when the run stopped,
-        not a stopped stream, and is not counted."""
-        start = 0.0 if self._idx0 is None else self._received_to
-        lag = float(np.median(self._adc_lags)) if self._adc_lags else 0.0
-        tail = t_stop - start
-        if not math.isfinite(tail) or tail <= max(TAIL_MIN_S, TAIL_LATENCY_FACTOR * lag):
-            return
-        missing = int(round(tail / self._period))
-        first = 0 if self._idx0 is None or self._next_idx is None else self._next_idx - self._idx0
-        self._gaps += 1
-        self._missing += missing
-        what = "never started" if self._idx0 is None else "stopped"
-        self.log(
-            "warning",
-            self.gyro.name,
-            f"ADC gap: stream {what}; {missing} sample(s) missing from index {first} "
-            f"to the end of the run ({tail:.1f} s)",
-            "gap",
-            {
-                "first_missing_index": first,
-                "n_missing": missing,
-                "t_first_missing": round(start, 6),
-                "t_end": round(t_stop, 6),
-                "cause": f"stream {what}",
-            },
-            t_stop,
-        )
 
     def _command_safe_state(self) -> tuple[bool, list[tuple[float, str, Any]]]:
         """Command the safe setpoint and verify it by reading it back (three attempts).

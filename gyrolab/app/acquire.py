@@ -34,13 +34,14 @@ from gyrolab.acquisition.runner import (
     Acquisition,
     RunResult,
     Status,
+    UnitDevices,
     check_profile_limits,
 )
 from gyrolab.app.sim_bench import SimHandle, sim_bench_config, sim_drivers, start_sim_bench
 from gyrolab.clock import Clock, WallClock
 from gyrolab.errors import GyrolabError, InputError
 from gyrolab.instruments import registry
-from gyrolab.instruments.roles import Chamber, RateStream, Thermometer
+from gyrolab.instruments.roles import Chamber, MultiThermometer, RateStream, Thermometer
 from gyrolab.outputs import check_output
 from gyrolab.profiles.profile import Profile, load_profile
 from gyrolab.record.recording import RecordingWriter
@@ -65,6 +66,7 @@ class AcquireOptions:
     force: bool = False
     live_port: int | None = None
     live_host: str = "127.0.0.1"
+    units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
 
 
 # --------------------------------------------------------------------- instruments
@@ -80,6 +82,9 @@ class Instruments:
         self.thermometer: Thermometer | None = None
         self.oven: Chamber | None = None
         self.gyro: RateStream | None = None
+        # A multi-unit bench: the scanner and (serial, stream) per unit, in bench order.
+        self.scanner: MultiThermometer | None = None
+        self.units: list[tuple[str, RateStream]] = []
 
     def close(self) -> None:
         for c in reversed(self.closers):
@@ -94,7 +99,15 @@ def as_configured(timeout_s: float) -> float:
 
 
 def lab_addresses(cfg: BenchConfig) -> dict[str, str]:
-    """Each role's instrument address as BENCH.toml gives it."""
+    """Each role's instrument address as BENCH.toml gives it; on a multi-unit bench the
+    chamber's, the scanner's (``multi_thermometer``) and each unit's stream's
+    (``unit/<serial>``)."""
+    if cfg.units:
+        return {
+            "chamber": registry.address(cfg.oven, "chamber"),
+            "multi_thermometer": registry.address(cfg.scanner, "multi_thermometer"),
+            **{f"unit/{u.serial}": registry.address(u.adc, "rate_stream") for u in cfg.units},
+        }
     return {
         "thermometer": registry.address(cfg.multimeter, "thermometer"),
         "chamber": registry.address(cfg.oven, "chamber"),
@@ -116,27 +129,48 @@ def connect_instruments(
 
     ``timeout`` maps each configured driver timeout to the one used: as configured on a lab
     bench (the engineer's choice, docs/bench-config.md); the simulated bench supplies its
-    own rule (:func:`gyrolab.app.sim_bench.scaled_timeouts`).
+    own rule (:func:`gyrolab.app.sim_bench.scaled_timeouts`). A multi-unit bench
+    (``cfg.units``) opens the chamber, the scanner and every unit's rate stream, each
+    stream named ``unit/<serial>`` in the recording (its address ``addresses["unit/<serial>"]``).
     """
     inst = Instruments()
     src = cfg.source
     limits = (cfg.limits.setpoint_min_c, cfg.limits.setpoint_max_c)
+    # (attribute, role, driver config, address key, table in BENCH.toml)
+    opening: list[tuple[str, str, Any, str, str]]
+    if cfg.units:
+        opening = [
+            ("oven", "chamber", cfg.oven, "chamber", "[chamber]"),
+            ("scanner", "multi_thermometer", cfg.scanner, "multi_thermometer", "[scanner]"),
+        ] + [
+            ("units", "rate_stream", u.adc, f"unit/{u.serial}", f"[[unit]] {u.serial}")
+            for u in cfg.units
+        ]
+    else:
+        opening = [
+            ("thermometer", "thermometer", cfg.multimeter, "thermometer", "[thermometer]"),
+            ("oven", "chamber", cfg.oven, "chamber", "[chamber]"),
+            ("gyro", "rate_stream", cfg.adc, "rate_stream", "[adc]"),
+        ]
     try:
-        for attr, role, sub in (
-            ("thermometer", "thermometer", cfg.multimeter),
-            ("oven", "chamber", cfg.oven),
-            ("gyro", "rate_stream", cfg.adc),
-        ):
-            address = addresses[role]
+        for attr, role, sub, key, table in opening:
+            address = addresses[key]
             ctx = registry.OpenContext(address, timeout, limits, clock, visa_library)
             try:
                 dev = registry.open_driver(sub, role, ctx)
             except Exception as e:
-                table = "adc" if role == "rate_stream" else role
-                raise InputError(src, f"[{table}] {sub.driver} at {address}: {e}") from None
+                raise InputError(src, f"{table} {sub.driver} at {address}: {e}") from None
             inst.closers.append(dev.close)
+            if attr == "units":
+                dev.name = key  # unit/<serial>: a unit's stream, named for its unit
+                serial = key.split("/", 1)[1]
+                inst.units.append((serial, dev))
+                inst.identity.setdefault("units", {})[serial] = {"adc": dev.describe()}
+                continue
             setattr(inst, attr, dev)
             inst.identity[dev.name] = dev.describe()
+        for u in cfg.units:
+            inst.identity["units"][u.serial]["temperature_channel"] = u.temperature_channel
     except BaseException:
         inst.close()
         raise
@@ -264,6 +298,7 @@ def run_acquisition(
                 chunk_size=r.chunk_size,
                 flush_every_s=r.flush_every_s,
                 fsync_every_s=r.fsync_every_s,
+                units=[u.serial for u in cfg.units] if cfg.units else None,
             )
             if live is not None:
                 live.attach(writer)
@@ -272,18 +307,34 @@ def run_acquisition(
                     if record:
                         writer.write_metadata(name, record)
                 fh.flush()  # header + metadata on disk before the first reading
-                assert inst.thermometer and inst.oven and inst.gyro
+                assert inst.oven is not None
+                devices: dict[str, Any]
+                if cfg.units:  # the scanner reads every unit's PT100
+                    assert inst.scanner is not None
+                    devices = {
+                        "thermometer": inst.scanner,
+                        "units": [
+                            UnitDevices(u.serial, stream, u.adc, u.temperature_channel)
+                            for u, (_, stream) in zip(cfg.units, inst.units, strict=True)
+                        ],
+                        "pt100_period_s": cfg.scanner.period_s,
+                    }
+                else:
+                    assert inst.thermometer and inst.gyro
+                    devices = {
+                        "thermometer": inst.thermometer,
+                        "gyro": inst.gyro,
+                        "adc": cfg.adc,
+                        "pt100_period_s": cfg.multimeter.period_s,
+                    }
                 acq = Acquisition(
                     profile=profile,
                     writer=writer,
                     clock=clock,
-                    thermometer=inst.thermometer,
                     oven=inst.oven,
-                    gyro=inst.gyro,
-                    adc=cfg.adc,
                     limits=cfg.limits,
                     safe_state=cfg.safe_state,
-                    pt100_period_s=cfg.multimeter.period_s,
+                    **devices,
                     oven_period_s=cfg.oven.period_s,
                     on_status=on_status,
                     on_samples=on_samples,
@@ -331,8 +382,10 @@ def acquire(opts: AcquireOptions) -> RunResult:
         raise GyrolabError(
             "--axis-model applies to --bench sim only (a bench file sets [adc] axes)"
         )
+    if opts.units and not sim_only:
+        raise GyrolabError("--units applies to --bench sim only (a bench file lists [[unit]]s)")
     if sim_only:
-        cfg = sim_drivers(sim_bench_config(opts.seed), opts.drivers)
+        cfg = sim_drivers(sim_bench_config(opts.seed, opts.units), opts.drivers)
     else:
         cfg = load_bench(opts.bench)
         if opts.speed is not None:
@@ -423,6 +476,9 @@ def acquire(opts: AcquireOptions) -> RunResult:
         f"({result.samples_missing} samples missing), {result.faults} fault(s); "
         f"oven safe state {'verified' if result.safe_state_ok else 'NOT verified'}; {out}"
     )
+    if cfg.units:
+        dropped = ", ".join(result.units_dropped) or "none"
+        msg += f" ({len(cfg.units)} units; dropped: {dropped})"
     print(msg, file=sys.stderr)
     return result
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from gyrolab.acquisition.bench_config import BenchConfig, RunInfo
+from gyrolab.acquisition.bench_config import BenchConfig, RunInfo, UnitConfig
 from gyrolab.errors import GyrolabError, InputError
 from gyrolab.instruments import registry
 from gyrolab.profiles.profile import Profile
@@ -121,19 +121,32 @@ class SimHandle:
         self.bench.clock.speed = self.speed
 
 
-def sim_bench_config(seed: int) -> BenchConfig:
-    """The bench file ``--bench sim`` stands for: defaults, a simulated operator and unit."""
-    return BenchConfig(
+def sim_bench_config(seed: int, units: int = 0) -> BenchConfig:
+    """The bench file ``--bench sim`` stands for: defaults, a simulated operator and unit;
+    with ``units`` (``--units N``), N units of the seeded family
+    (:func:`gyrolab.sim.family.unit_family`, serials ``SIM<seed>-01`` …) on one scanner,
+    unit k's PT100 on channel 101 + k (a 34901A holds ten)."""
+    cfg = BenchConfig(
         name="sim",
         run=RunInfo(
             operator="simulated",
-            unit_serial=f"SIM-{seed}",
+            unit_serial=f"SIM-{seed}" if not units else "",
             unit_model="simulated MEMS gyro",
             profile="paper",
-            notes="gyrolab acquire --bench sim",
+            notes="gyrolab acquire --bench sim" + (f" --units {units}" if units else ""),
         ),
         source="sim",
     )
+    if not units:
+        return cfg
+    from gyrolab.sim.family import unit_serial
+
+    if not 1 <= units <= 10:
+        raise InputError("--units", f"the simulated scanner reads 1 to 10 units, not {units}")
+    unit_cfgs = tuple(UnitConfig(unit_serial(seed, k), cfg.adc, 101 + k) for k in range(units))
+    channels = tuple(u.temperature_channel for u in unit_cfgs)
+    scanner = registry.default_config("multi_thermometer")
+    return replace(cfg, units=unit_cfgs, scanner=replace(scanner, channels=channels))
 
 
 def sim_drivers(cfg: BenchConfig, names: list[str] | tuple[str, ...]) -> BenchConfig:
@@ -145,6 +158,11 @@ def sim_drivers(cfg: BenchConfig, names: list[str] | tuple[str, ...]) -> BenchCo
         if spec is None:
             known = ", ".join(s.name for s in registry.drivers())
             raise GyrolabError(f"--driver {name}: no such driver (registered: {known})")
+        if spec.role == "multi_thermometer":
+            if cfg.scanner is None:
+                raise GyrolabError(f"--driver {name}: a scanner is for --units only")
+            cfg = replace(cfg, scanner=replace(spec.config(), channels=cfg.scanner.channels))
+            continue
         cfg = replace(cfg, **{fields[spec.role]: spec.config()})
     return cfg
 
@@ -176,7 +194,10 @@ def start_sim_bench(
     unit's calibration sheet); the multimeter is reached over its simulated RS-232 port,
     the same path as ``examples/lab.toml``. ``axis_models`` (0–2 SimModels) make a 2- or
     3-axis unit exactly as ``gyrolab simulate --axis-model`` does (one ADC, axes interleaved).
-    ``faults`` (a FaultPlan) is injected and recorded in the provenance.
+    ``faults`` (a FaultPlan) is injected and recorded in the provenance. A multi-unit config
+    (``cfg.units``, :func:`sim_bench_config` ``units``) gets one physics per unit of the
+    seeded family drawn around ``model`` (as ``gyrolab simulate --units``), each unit's ADC
+    on its own pty with its own calibration, and the simulated scanner.
     """
     from gyrolab.sim.bench import SimBench
     from gyrolab.sim.bench.fault_file import plan_to_dict
@@ -184,12 +205,18 @@ def start_sim_bench(
     from gyrolab.sim.simulate import axis_physics, provenance
 
     specs = {
-        "thermometer": registry.get(cfg.multimeter.driver, "thermometer"),
         "chamber": registry.get(cfg.oven.driver, "chamber"),
+        **(
+            {"multi_thermometer": registry.get(cfg.scanner.driver, "multi_thermometer")}
+            if cfg.units
+            else {"thermometer": registry.get(cfg.multimeter.driver, "thermometer")}
+        ),
     }
     for role, spec in specs.items():
         if not spec.sim_backend:
             raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
+    if cfg.units and axis_models:
+        raise InputError("--axis-model", "multi-axis units are single-unit only (not --units)")
     try:
         extra_axes = axis_physics(
             model or nominal_model(),
@@ -200,12 +227,15 @@ def start_sim_bench(
         )
     except ValueError as e:
         raise InputError("--axis-model", str(e)) from None
+    family, unit_physics = _sim_units(cfg, profile, seed, model)
+    dmm_spec = specs.get("thermometer")
     bench = SimBench(
-        dmm_model=specs["thermometer"].sim_backend,
+        dmm_model=dmm_spec.sim_backend if dmm_spec is not None else "34401A",
         chamber_model=specs["chamber"].sim_backend,
         oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
         model=model,
         axis_physics=extra_axes,
+        unit_physics=unit_physics,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,
         samples_per_frame=cfg.adc.samples_per_frame,
@@ -213,28 +243,44 @@ def start_sim_bench(
         workdir=workdir,
         faults=faults,
         keep_truth=keep_truth,
-        tcp=specs["thermometer"].sim_address == "dmm_tcp_resource",
+        tcp=dmm_spec is not None and dmm_spec.sim_address == "dmm_tcp_resource",
         tick_s=sim_tick_s(speed),
         # Slow while the drivers connect (imports, port set-up: wall seconds that would be
         # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
         # that the change to ``speed`` (SimHandle.go) takes effect at once.
         speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
     )
-    adc = bench.physics.adc
-    cfg = replace(
-        cfg,
-        adc=replace(
-            cfg.adc,
+
+    def calibrated(a: Any, adc: Any) -> Any:  # the ADC config with the unit's calibration
+        return replace(
+            a,
             bits=int(adc.bits),
             vref_v=float(adc.vref_v),
             gain_v_per_dps=float(adc.gain_v_per_dps),
             offset_v=float(adc.offset_v),
-            axes=1 + len(axis_models),
-        ),
-    )
+        )
+
+    axes = 1 + len(axis_models)
+    cfg = replace(cfg, adc=replace(calibrated(cfg.adc, bench.physics.adc), axes=axes))
+    if cfg.units:
+        cfg = replace(
+            cfg,
+            units=tuple(
+                replace(u, adc=calibrated(u.adc, p.adc))
+                for u, p in zip(cfg.units, bench.unit_physics, strict=True)
+            ),
+        )
     bench.start()
     where = bench.resources()
-    metadata: dict[str, dict[str, Any]] = {"sim_provenance": provenance(bench.physics.model, seed)}
+    metadata: dict[str, dict[str, Any]] = {
+        "sim_provenance": (
+            provenance(bench.physics.model, seed)
+            if not family  # a family: keyed by serial, as simulate --units writes it
+            else {
+                u.serial: {**provenance(u.model, u.seed), "family_seed": int(seed)} for u in family
+            }
+        )
+    }
     if faults is not None:
         metadata["sim_provenance"]["fault_injection"] = plan_to_dict(faults)
     if axis_models:  # as simulate's sim_provenance_axes
@@ -243,11 +289,12 @@ def start_sim_bench(
             "models_toml": [m.to_toml() for m in axis_models],
         }
     handle = SimHandle(
-        addresses={
-            "thermometer": where[specs["thermometer"].sim_address],
-            "chamber": where[specs["chamber"].sim_address],
-            "rate_stream": bench.adc_port,
-        },
+        addresses={role: where[spec.sim_address] for role, spec in specs.items()}
+        | (
+            {f"unit/{u.serial}": p for u, p in zip(cfg.units, bench.unit_adc_ports, strict=True)}
+            if cfg.units
+            else {"rate_stream": bench.adc_port}
+        ),
         clock=SimRunClock(bench.clock),
         silence=SimSilence(),
         timeout=scaled_timeouts(speed),
@@ -257,3 +304,24 @@ def start_sim_bench(
         metadata=metadata,
     )
     return handle, cfg
+
+
+def _sim_units(
+    cfg: BenchConfig, profile: Profile, seed: int, model: Any
+) -> tuple[list[Any], list[Any] | None]:
+    """A multi-unit config's family (as ``gyrolab simulate --units``) and one Physics per
+    unit; ``([], None)`` for a single unit."""
+    if not cfg.units:
+        return [], None
+    from gyrolab.sim.family import unit_family
+    from gyrolab.sim.model import nominal_model
+    from gyrolab.sim.physics import Physics
+
+    family = unit_family(model or nominal_model(), len(cfg.units), seed)
+    if [u.serial for u in family] != [u.serial for u in cfg.units]:
+        raise GyrolabError("the simulated units' serials are SIM<seed>-01 …")
+    physics = [
+        Physics(u.model, rate_hz=cfg.adc.sample_rate_hz, seed=u.seed, ambient_c=profile.ambient_c)
+        for u in family
+    ]
+    return family, physics

@@ -9,7 +9,8 @@ in ``drivers/`` plus its test (docs/instruments.md, "Adding a driver").
 
 Roles and the recording's name for each (the ``source`` of its ``/log`` entries and the key
 of its identity in the ``bench`` metadata): ``thermometer`` → ``multimeter``, ``chamber``
-→ ``oven``, ``rate_stream`` → ``adc`` (the names recordings have always used).
+→ ``oven``, ``rate_stream`` → ``adc`` (the names recordings have always used), and on a
+multi-unit bench ``multi_thermometer`` → ``scanner`` (one PT100 per unit).
 """
 
 from __future__ import annotations
@@ -20,9 +21,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-ROLES = ("thermometer", "chamber", "rate_stream")
-SOURCE_NAME = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
-DEFAULT_DRIVER = {"thermometer": "agilent34401a", "chamber": "watlowf4", "rate_stream": "gyroadc"}
+ROLES = ("thermometer", "chamber", "rate_stream", "multi_thermometer")
+SOURCE_NAME = {
+    "thermometer": "multimeter",
+    "chamber": "oven",
+    "rate_stream": "adc",
+    "multi_thermometer": "scanner",
+}
+DEFAULT_DRIVER = {
+    "thermometer": "agilent34401a",
+    "chamber": "watlowf4",
+    "rate_stream": "gyroadc",
+    "multi_thermometer": "keysight34970a",
+}
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """Instrument roles: what the run engine needs from each instrument, and one error vocabulary.
 
-A bench has three roles (docs/instruments.md, "Roles and drivers"):
+A bench has three roles (docs/instruments.md, "Roles and drivers"), and a multi-unit bench
+a fourth:
 
 * :class:`Thermometer` — the PT100 reader (a 4-wire multimeter): ``read()`` gives a
   :class:`ThermometerReading`.
@@ -9,6 +10,8 @@ A bench has three roles (docs/instruments.md, "Roles and drivers"):
   :class:`ChamberReading`, and where the driver can, ``switch_off()`` (verified).
 * :class:`RateStream` — the gyro's ADC stream: ``read()`` gives an :class:`AdcRead` of
   gap-free :class:`AdcBlock` s; its config satisfies :class:`RateStreamConfig`.
+* :class:`MultiThermometer` — a scanning multimeter reading one PT100 per unit through a
+  multiplexer: ``read()`` gives one :class:`ThermometerReading` per scanned channel.
 
 Every driver registered in :mod:`gyrolab.instruments.registry` implements one role itself
 (no adapters) and says who it is with ``describe()`` (into the recording's ``bench``
@@ -203,6 +206,18 @@ class Chamber(Instrument, Protocol):
 
     # Drivers that can switch the chamber off also have ``switch_off()`` (heater and
     # refrigerator off, verified by read-back), used by ``[safe_state] mode = "off"``.
+
+
+class MultiThermometer(Instrument, Protocol):
+    """A scanning multimeter: one 4-wire PT100 per channel of its scan list."""
+
+    # The scan list: multiplexer channel numbers (slot·100 + channel, e.g. 101), in order.
+    channels: tuple[int, ...]
+
+    def read(self) -> dict[int, ThermometerReading]:
+        """One sweep of the scan list: a reading per channel (NaN where the channel
+        overloaded: an open sensor); raises on a failed sweep (see :func:`is_transient`)."""
+        ...
 
 
 class RateStream(Instrument, Protocol):

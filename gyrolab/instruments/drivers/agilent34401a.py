@@ -80,6 +80,10 @@ class Agilent34401A:
     RANGES_OHM = (100.0, 1e3, 10e3, 100e3, 1e6, 10e6, 100e6)
     NPLC_VALUES = (0.02, 0.2, 1.0, 10.0, 100.0)
     OVERLOAD = 9.0e37  # the meter returns +9.90000000E+37 on overload
+    # RS-232 line (pyvisa constants.StopBits / ControlFlow names): the 34401A's 2 stop
+    # bits and DTR/DSR handshake; a SCPI instrument derived from it may differ.
+    SERIAL_STOP_BITS = "two"
+    SERIAL_FLOW_CONTROL = "dtr_dsr"
 
     def __init__(
         self,
@@ -132,9 +136,9 @@ class Agilent34401A:
             self.inst.baud_rate = baud_rate
             self.inst.data_bits = 8
             self.inst.parity = constants.Parity.none
-            self.inst.stop_bits = constants.StopBits.two
+            self.inst.stop_bits = getattr(constants.StopBits, self.SERIAL_STOP_BITS)
             # The 34401A holds off on DSR; pyvisa-py maps this to pyserial's dsrdtr.
-            self.inst.flow_control = constants.ControlFlow.dtr_dsr
+            self.inst.flow_control = getattr(constants.ControlFlow, self.SERIAL_FLOW_CONTROL)
         except (AttributeError, ImportError):  # a protocol-test stand-in has no such attributes
             pass
 

@@ -33,7 +33,7 @@ E_SYNTAX = '-102,"Syntax error"'
 E_OVERFLOW = '-350,"Too many errors"'
 
 
-def _pattern(spec: str) -> re.Pattern[str]:
+def scpi_re(spec: str) -> re.Pattern[str]:
     """SCPI header spec → regex: ``[SENSe:]FRESistance:NPLCycles?`` matches ``FRES:NPLC?``,
     ``sense:fresistance:nplcycles?`` …; uppercase letters are the short form."""
 
@@ -71,6 +71,7 @@ class Scpi34401A:
     now (Ω); ``clock`` paces readings in simulated time (None: instant)."""
 
     line_frequency_hz = 50.0
+    IDN = IDN
 
     def __init__(self, read_ohm: Callable[[], float], clock: SimClock | None = None) -> None:
         self.read_ohm = read_ohm
@@ -80,24 +81,30 @@ class Scpi34401A:
         self.readings = 0
         self.log: list[str] = []  # every command received, for tests
         self._lock = threading.RLock()
-        self._table: list[tuple[re.Pattern[str], Callable[[str], str | None]]] = [
-            (_pattern("*IDN?"), lambda a: IDN),
-            (_pattern("*RST"), self._rst),
-            (_pattern("*CLS"), self._cls),
-            (_pattern("*OPC?"), lambda a: "1"),
-            (_pattern("SYSTem:ERRor[:NEXT]?"), self._err),
-            (_pattern("SYSTem:REMote"), self._remote(True)),
-            (_pattern("SYSTem:RWLock"), self._remote(True)),
-            (_pattern("SYSTem:LOCal"), self._remote(False)),
-            (_pattern("CONFigure:FRESistance"), self._conf_fres),
-            (_pattern("CONFigure?"), self._conf_q),
-            (_pattern("[SENSe:]FRESistance:NPLCycles"), self._nplc),
-            (_pattern("[SENSe:]FRESistance:NPLCycles?"), lambda a: f"{self.state.nplc:+.8E}"),
-            (_pattern("[SENSe:]FRESistance:RANGe"), self._range),
-            (_pattern("[SENSe:]FRESistance:RANGe?"), lambda a: f"{self.state.range_ohm:+.8E}"),
-            (_pattern("[SENSe:]FUNCtion?"), lambda a: f'"{self.state.function}"'),
-            (_pattern("READ?"), self._read),
-            (_pattern("MEASure:FRESistance?"), self._meas),
+        self._table = self.system_commands() + [
+            (scpi_re("CONFigure:FRESistance"), self._conf_fres),
+            (scpi_re("CONFigure?"), self._conf_q),
+            (scpi_re("[SENSe:]FRESistance:NPLCycles"), self._nplc),
+            (scpi_re("[SENSe:]FRESistance:NPLCycles?"), lambda a: f"{self.state.nplc:+.8E}"),
+            (scpi_re("[SENSe:]FRESistance:RANGe"), self._range),
+            (scpi_re("[SENSe:]FRESistance:RANGe?"), lambda a: f"{self.state.range_ohm:+.8E}"),
+            (scpi_re("[SENSe:]FUNCtion?"), lambda a: f'"{self.state.function}"'),
+            (scpi_re("READ?"), self._read),
+            (scpi_re("MEASure:FRESistance?"), self._meas),
+        ]
+
+    def system_commands(self) -> list[tuple[re.Pattern[str], Callable[[str], str | None]]]:
+        """The IEEE 488.2 common commands and the SYSTem subsystem this meter (and a SCPI
+        instrument derived from it) answers: identity (``IDN``), reset, error queue, remote."""
+        return [
+            (scpi_re("*IDN?"), lambda a: self.IDN),
+            (scpi_re("*RST"), self._rst),
+            (scpi_re("*CLS"), self._cls),
+            (scpi_re("*OPC?"), lambda a: "1"),
+            (scpi_re("SYSTem:ERRor[:NEXT]?"), self._err),
+            (scpi_re("SYSTem:REMote"), self._remote(True)),
+            (scpi_re("SYSTem:RWLock"), self._remote(True)),
+            (scpi_re("SYSTem:LOCal"), self._remote(False)),
         ]
 
     # ---------------------------------------------------------------- faults
@@ -237,10 +244,10 @@ class Scpi34465A(Scpi34401A):
     def __init__(self, read_ohm: Callable[[], float], clock: SimClock | None = None) -> None:
         super().__init__(read_ohm, clock)
         self.ocomp = False
-        self._table[0] = (_pattern("*IDN?"), lambda a: self.IDN)
+        self._table[0] = (scpi_re("*IDN?"), lambda a: self.IDN)
         self._table += [
-            (_pattern("[SENSe:]FRESistance:OCOMpensated"), self._ocomp),
-            (_pattern("[SENSe:]FRESistance:OCOMpensated?"), lambda a: str(int(self.ocomp))),
+            (scpi_re("[SENSe:]FRESistance:OCOMpensated"), self._ocomp),
+            (scpi_re("[SENSe:]FRESistance:OCOMpensated?"), lambda a: str(int(self.ocomp))),
         ]
 
     def _rst(self, arg: str) -> None:

@@ -23,6 +23,7 @@ Layout (every key optional; unknown keys are errors naming the file and the key)
     duration_s = 0.0      # disconnect / stall / outage
     count = 1             # modbus_* : the next `count` replies
     detail = '-310,"System error"'   # scpi_error: the error-queue entry
+    unit = 0              # disconnect / stall on a multi-unit bench: which unit (0-based)
 """
 
 from __future__ import annotations
@@ -52,7 +53,14 @@ _OVEN_KEYS = {
     "exception_code": int,
     "seed": int,
 }
-_EVENT_KEYS = {"kind": str, "t_s": float, "duration_s": float, "count": int, "detail": str}
+_EVENT_KEYS = {
+    "kind": str,
+    "t_s": float,
+    "duration_s": float,
+    "count": int,
+    "detail": str,
+    "unit": int,
+}
 _SCPI_ERROR = re.compile(r'^[+-]?\d+,".*"$')
 
 
@@ -111,8 +119,15 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
             raise InputError(source, f"{where}: kind is required (one of {', '.join(kinds)})")
         if e["kind"] not in kinds:
             raise InputError(source, f"{where}: kind = {e['kind']!r} (one of {', '.join(kinds)})")
-        if e.get("t_s", 0.0) < 0 or e.get("duration_s", 0.0) < 0 or e.get("count", 1) < 1:
-            raise InputError(source, f"{where}: t_s, duration_s must be >= 0 and count >= 1")
+        if (
+            e.get("t_s", 0.0) < 0
+            or e.get("duration_s", 0.0) < 0
+            or e.get("count", 1) < 1
+            or e.get("unit", 0) < 0
+        ):
+            raise InputError(
+                source, f"{where}: t_s, duration_s, unit must be >= 0 and count >= 1"
+            )
         if e["kind"] in ("disconnect", "stall", "outage") and not e.get("duration_s", 0.0) > 0:
             raise InputError(source, f"{where}: {e['kind']} needs duration_s > 0")
         if e["kind"] == "scpi_error" and "detail" in e and not _SCPI_ERROR.match(e["detail"]):
@@ -150,6 +165,7 @@ def plan_to_dict(plan: FaultPlan) -> dict[str, Any]:
                 "duration_s": e.duration_s,
                 "count": e.count,
                 "detail": e.detail,
+                **({"unit": e.unit} if e.unit else {}),
             }
             for e in plan.events
         ],

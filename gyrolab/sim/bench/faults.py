@@ -110,7 +110,8 @@ class FaultEvent:
     ``kind``: ``disconnect`` / ``stall`` (ADC, for ``duration_s``), ``outage`` (DMM
     silent for ``duration_s``), ``scpi_error`` (``detail`` pushed to the DMM error
     queue, e.g. ``-222,"Data out of range"``), ``modbus_exception`` / ``modbus_crc`` /
-    ``modbus_no_reply`` (the next ``count`` oven replies).
+    ``modbus_no_reply`` (the next ``count`` oven replies). ``unit``: on a multi-unit bench,
+    the unit whose ADC a ``disconnect`` or ``stall`` hits (0-based).
     """
 
     kind: str
@@ -118,10 +119,13 @@ class FaultEvent:
     duration_s: float = 0.0
     count: int = 1
     detail: str = ""
+    unit: int = 0  # disconnect / stall: which unit's ADC (0-based; a single-unit bench: 0)
 
     def __post_init__(self) -> None:
         if self.kind not in ADC_KINDS + DMM_KINDS + OVEN_KINDS:
             raise ValueError(f"unknown fault kind {self.kind!r}")
+        if self.unit < 0:
+            raise ValueError(f"unit must be >= 0, got {self.unit}")
 
 
 @dataclass

@@ -10,6 +10,13 @@ tick, streams the frames, and fires scheduled faults. Drivers connect to
 ``bench.clock`` (``now()``, ``sleep()``) as its time base so that it runs at the bench's
 speed.
 
+A multi-unit bench (``unit_physics``: one Physics per unit, e.g. from
+:func:`gyrolab.sim.family.unit_family`) streams every unit's frames on its own pty
+(``bench.unit_adc_ports``, in unit order) and serves a 34970A scanner on TCP
+(``bench.scanner_tcp_resource``) reading unit *k*'s PT100 on channel 101 + *k*. The
+chamber is shared: every unit follows the oven's setpoint, and the controller's process
+value is the first unit's chamber air (a family shares the chamber's parameters).
+
 ``bench.lock`` guards the physics; the instruments' replies take it, so the tick thread
 holds it only for a tick's :meth:`Physics.advance` (well under a millisecond). The costly
 part of advancing — a flicker-noise chunk, 0.1–0.3 s every 3.6 simulated hours — is made
@@ -37,6 +44,7 @@ from gyrolab.sim.bench.dmm_scpi import Scpi34401A, Scpi34465A, ScpiSerialServer,
 from gyrolab.sim.bench.espec_p300 import ChamberHooks, EspecP300
 from gyrolab.sim.bench.faults import FaultEvent, FaultPlan
 from gyrolab.sim.bench.oven_modbus import ModbusRtuServer, OvenHooks, WatlowF4Slave
+from gyrolab.sim.bench.scanner_scpi import Scpi34970A
 from gyrolab.sim.bench.serial_pty import PtyPort
 
 # Simulated seconds of costly physics (flicker-noise chunks) made ahead of the tick thread,
@@ -76,12 +84,20 @@ class SimBench:
         chamber_model: str = "F4",
         oven_control_event: int | None = None,
         axis_physics: list[Any] | None = None,
+        unit_physics: list[Any] | None = None,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
         # model each driver needs (gyrolab.instruments.registry, DriverSpec.sim_backend).
         if dmm_model not in ("34401A", "34465A") or chamber_model not in ("F4", "P300"):
             raise ValueError(f"unknown simulated instrument {dmm_model!r} / {chamber_model!r}")
+        # unit_physics: a multi-unit bench (one Physics per unit, the first one's air being the
+        # chamber's): each unit streams on its own pty and the scanner (a 34970A on TCP)
+        # reads unit k's PT100 on channel 101 + k.
+        if unit_physics is not None:
+            if not unit_physics or axis_physics or physics is not None:
+                raise ValueError("unit_physics: one or more units, single-axis, no physics=")
+            physics = unit_physics[0]
         if physics is None:
             from gyrolab.sim.model import nominal_model
             from gyrolab.sim.physics import Physics
@@ -109,20 +125,30 @@ class SimBench:
         self.workdir = Path(workdir or tempfile.mkdtemp(prefix="gyrolab-bench-"))
         self.workdir.mkdir(parents=True, exist_ok=True)
 
-        self.adc_pty = PtyPort(self.workdir / "adc")
+        self.unit_physics = list(unit_physics or [physics])
+        self.multi_unit = unit_physics is not None
+        # One ADC port and source per unit (a single-unit bench: the one "adc" port).
+        self.unit_ptys = [
+            PtyPort(self.workdir / (f"adc{k + 1}" if self.multi_unit else "adc"))
+            for k in range(len(self.unit_physics))
+        ]
         self.oven_pty = PtyPort(self.workdir / "oven")
         self.dmm_pty = PtyPort(self.workdir / "dmm")
-        self.adc = AdcSource(
-            self.adc_pty,
-            samples_per_frame=self.samples_per_frame,
-            rate_hz=self.rate_hz,
-            axes=1 + len(self.axis_physics),
-            faults=self.faults.adc,
-            keep_truth=keep_truth,
-            # Back-pressure only when running as fast as possible; paced, a slow reader
-            # overruns like a real UART receiver would.
-            write_timeout_s=0.5 if speed is None else 0.05,
-        )
+        self.unit_adcs = [
+            AdcSource(
+                pty,
+                samples_per_frame=self.samples_per_frame,
+                rate_hz=self.rate_hz,
+                axes=1 + len(self.axis_physics),
+                faults=self.faults.adc,
+                keep_truth=keep_truth,
+                # Back-pressure only when running as fast as possible; paced, a slow reader
+                # overruns like a real UART receiver would.
+                write_timeout_s=0.5 if speed is None else 0.05,
+            )
+            for pty in self.unit_ptys
+        ]
+        self.adc_pty, self.adc = self.unit_ptys[0], self.unit_adcs[0]
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
             control_event=oven_control_event,
@@ -141,6 +167,12 @@ class SimBench:
         self.dmm_tcp: ScpiTcpServer | None = ScpiTcpServer(self.dmm) if tcp else None
         if self.dmm_tcp is not None:
             self._servers.append(self.dmm_tcp)
+        self.scanner: Scpi34970A | None = None
+        self.scanner_tcp: ScpiTcpServer | None = None
+        if self.multi_unit:
+            self.scanner = Scpi34970A(self._read_channel_ohm, self.clock)
+            self.scanner_tcp = ScpiTcpServer(self.scanner)
+            self._servers.append(self.scanner_tcp)
         self.espec: EspecP300 | None = None
         self.chamber_tcp: ScpiTcpServer | None = None
         if chamber_model == "P300":
@@ -150,6 +182,10 @@ class SimBench:
             self._servers.append(self.chamber_tcp)
         self._events: list[tuple[float, int, str, FaultEvent]] = []
         self._tie = itertools.count()
+        for ev in self.faults.events:
+            if ev.unit >= len(self.unit_adcs):
+                n_units = len(self.unit_adcs)
+                raise ValueError(f"fault {ev.kind}: no unit {ev.unit} on a {n_units}-unit bench")
         for ev in self.faults.events:  # t_s None here means: at the first tick
             t = self.clock.now() if ev.t_s is None else float(ev.t_s)
             heapq.heappush(self._events, (t, next(self._tie), "start", ev))
@@ -171,7 +207,7 @@ class SimBench:
     def _set_setpoint(self, value_c: float) -> None:
         with self.lock:
             self.physics.set_setpoint(value_c)
-            for p in self.axis_physics:
+            for p in self.axis_physics + self.unit_physics[1:]:
                 p.set_setpoint(value_c)
 
     def _read_ohm(self) -> float:
@@ -179,6 +215,14 @@ class SimBench:
             r = float(self.physics.pt100_ohm())
             self.dmm_truth.append((self.physics.t, float(self.physics.pt100_true_ohm()), r))
             return r
+
+    def _read_channel_ohm(self, channel: int) -> float | None:
+        """The scanner's channel 101 + k: unit k's PT100 (None: nothing wired there)."""
+        k = channel - 101
+        if not 0 <= k < len(self.unit_physics):
+            return None
+        with self.lock:
+            return float(self.unit_physics[k].pt100_ohm())
 
     # ---------------------------------------------------------------- addresses
     @property
@@ -202,6 +246,16 @@ class SimBench:
         return None if self.dmm_tcp is None else self.dmm_tcp.resource
 
     @property
+    def scanner_tcp_resource(self) -> str | None:
+        """VISA resource of the scanner's socket (None unless multi-unit)."""
+        return None if self.scanner_tcp is None else self.scanner_tcp.resource
+
+    @property
+    def unit_adc_ports(self) -> list[str]:
+        """Serial device path of each unit's ADC stream, in unit order."""
+        return [p.path for p in self.unit_ptys]
+
+    @property
     def chamber_tcp_resource(self) -> str | None:
         """VISA resource of the ESPEC chamber's socket (None unless ``chamber_model="P300"``)."""
         return None if self.chamber_tcp is None else self.chamber_tcp.resource
@@ -214,6 +268,8 @@ class SimBench:
             "dmm_tcp_resource": self.dmm_tcp_resource,
             "oven_port": self.oven_port,
             "chamber_tcp_resource": self.chamber_tcp_resource,
+            "scanner_tcp_resource": self.scanner_tcp_resource,
+            "unit_adc_ports": self.unit_adc_ports,
             "adc_port": self.adc_port,
             "adc_rate_hz": self.rate_hz,
             "samples_per_frame": self.samples_per_frame,
@@ -245,20 +301,23 @@ class SimBench:
     def _fire(self, now: float, phase: str, ev: FaultEvent) -> None:
         self.log.append((now, f"{ev.kind}:{phase}", ev.detail))
         end = now + ev.duration_s
+        adc = self.unit_adcs[ev.unit] if ev.kind in ("disconnect", "stall") else None
         if ev.kind == "disconnect":
+            assert adc is not None
             if phase == "start":
-                self.adc.unplug()
+                adc.unplug()
                 with self.lock:
                     heapq.heappush(self._events, (end, next(self._tie), "end", ev))
             else:
-                self.adc.replug()
+                adc.replug()
         elif ev.kind == "stall":
+            assert adc is not None
             if phase == "start":
-                self.adc.start_stall()
+                adc.start_stall()
                 with self.lock:
                     heapq.heappush(self._events, (end, next(self._tie), "end", ev))
             else:
-                self.adc.end_stall()
+                adc.end_stall()
         elif ev.kind == "outage":
             self.dmm.start_outage(end)
         elif ev.kind == "scpi_error":
@@ -272,13 +331,12 @@ class SimBench:
         n = self.frames_per_tick * self.samples_per_frame
         # The first tick's noise chunk now, before anything waits on the lock; the copy
         # below then reuses it.
-        self.physics.prefetch(n)
-        for p in self.axis_physics:
+        for p in (*self.unit_physics, *self.axis_physics):
             p.prefetch(n)
         # Compile the physics' JIT kernels on a throwaway copy first (about 1 s, once per
         # process), so the first tick does not hold the physics lock while responders wait.
         copy.deepcopy(self.physics).advance(n)
-        for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
+        for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):
             p.connect()
         for s in self._servers:
             s.start()
@@ -296,9 +354,8 @@ class SimBench:
         lead = round(PREFETCH_LEAD_S * self.rate_hz)
         try:
             while not self._stop.is_set():
-                self.physics.prefetch(lead)  # no lock: see Physics.prefetch
-                for p in self.axis_physics:
-                    p.prefetch(lead)
+                for p in (*self.unit_physics, *self.axis_physics):
+                    p.prefetch(lead)  # no lock: see Physics.prefetch
                 self._stop.wait(PREFETCH_POLL_S)
         except BaseException as e:  # surfaced like the tick thread's; ticks still work
             self.error = e
@@ -317,7 +374,10 @@ class SimBench:
                     if self.axis_physics:
                         cols = [counts] + [p.advance(n).counts for p in self.axis_physics]
                         counts = np.stack(cols, axis=1)
+                    others = [p.advance(n).counts for p in self.unit_physics[1:]]
                 self.adc.emit(block.first_index, counts)
+                for src, c in zip(self.unit_adcs[1:], others, strict=True):
+                    src.emit(block.first_index, c)
                 self._fire_due()
         except BaseException as e:  # surfaced by stop() / tests; never silent
             self.error = e
@@ -332,7 +392,7 @@ class SimBench:
                 th.join(timeout=5.0)
         for s in self._servers:
             s.stop()
-        for p in (self.adc_pty, self.oven_pty, self.dmm_pty):
+        for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):
             p.disconnect()
         if self._own_dir:
             shutil.rmtree(self.workdir, ignore_errors=True)

@@ -1,0 +1,260 @@
+"""One rate stream's recording: the ADC blocks a :class:`~gyrolab.instruments.roles.RateStream`
+delivers, turned into gap-free ``/gyro/adc`` and ``/gyro/rate`` blocks on the run clock.
+
+:class:`RateRecorder` is the bookkeeping of one stream (one unit): which device sample is
+run sample 0, the next index expected, the block being filled, gaps (logged with their
+cause), repeated samples (dropped, never written twice), damaged frames, and the tail of a
+stream that stopped before the run ended. The run engine
+(:class:`gyrolab.acquisition.runner.Acquisition`) keeps one per unit: the single-unit
+bench's one stream is written to the single-unit topics (``unit=None``), a multi-unit
+bench's to ``/unit/<serial>/…`` (docs/recording-format.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from gyrolab.instruments.roles import AdcBlock, AdcRead, RateStream, RateStreamConfig
+
+# A stopped ADC stream (RateRecorder.record_tail_gap): a tail longer than this many times
+# the stream's median arrival lag, and than TAIL_MIN_S run seconds, is a gap.
+TAIL_LATENCY_FACTOR = 4.0
+TAIL_MIN_S = 2.0
+
+
+# ``log(level, source, message, kind, data, t)``: the engine's /log writer.
+LogFn = Callable[..., None]
+
+
+class RateRecorder:
+    """Records one rate stream (see module doc). ``adc`` is the stream's config (its
+    ``block_s``, ``sample_rate_hz`` and counts → °/s conversion ``to_dps``); ``unit`` the
+    serial of a multi-unit recording's unit (None: the single-unit layout)."""
+
+    def __init__(
+        self,
+        device: RateStream,
+        adc: RateStreamConfig,
+        writer: Any,
+        log: LogFn,
+        *,
+        unit: str | None = None,
+        on_samples: Callable[[float], None] | None = None,
+    ) -> None:
+        self.dev = device
+        self.adc = adc
+        self.w = writer
+        self.log = log
+        self.unit = unit
+        self.on_samples = on_samples
+        self.dropped = False  # a multi-unit run gave up on this stream
+        # Device index of run sample 0, next expected index, block buffer.
+        self.idx0: int | None = None
+        self._adc_offset = 0.0  # ADC clock minus run time
+        self._blk_t0 = 0.0
+        self._next_idx: int | None = None
+        self._blk: list[np.ndarray] = []
+        self._blk_first = 0
+        self._blk_n = 0
+        self._block_len = max(1, int(round(adc.block_s * adc.sample_rate_hz)))
+        self.period = 1.0 / adc.sample_rate_hz
+        self.samples = 0
+        self.received_to = -math.inf  # run time up to which samples have arrived
+        self.gaps = 0
+        self.missing = 0
+        self.dups = 0
+        self.faults = 0  # port faults (disconnects, failed opens)
+        self._counters_seen: dict[str, int] = {}
+        # Arrival lag (arrival run time - end of the samples that arrived) of recent
+        # blocks: the stream's normal latency, against which a stopped stream is judged.
+        self._adc_lags: deque[float] = deque(maxlen=200)
+
+    @property
+    def name(self) -> str:
+        """The stream's source name in /log (``adc``; a multi-unit run's ``unit/<serial>``)."""
+        return self.dev.name
+
+    def behind(self, t_end: float) -> bool:
+        """Whether samples up to run time ``t_end`` are still to arrive."""
+        return (
+            not self.dropped
+            and self.idx0 is not None
+            and self.received_to < t_end - 0.5 * self.period
+        )
+
+    def on_read(self, got: AdcRead, t: float, ok: Callable[[], None]) -> None:
+        """What one read delivered at run time ``t`` (arrival): port events logged, then
+        ``ok()`` if samples came, then the blocks, then damaged-frame counts."""
+        for ev in got.events:
+            kind = getattr(ev, "kind", "event")
+            if kind == "gap":
+                continue  # logged below from the sample indices, with the cause
+            level, tag = {
+                "disconnect": ("warning", "fault"),
+                "open_failed": ("warning", "fault"),
+                "reconnect": ("info", "recovery"),
+            }.get(kind, ("info", kind))
+            if tag == "fault":
+                self.faults += 1
+            self.log(
+                level,
+                self.name,
+                f"ADC port {kind}: {ev.message}",
+                tag,
+                dict(getattr(ev, "data", {}) or {}),
+                t,
+            )
+        if got.blocks:
+            ok()
+            causes = sorted({str(getattr(g, "cause", "lost")) for g in got.gaps})
+            for blk in got.blocks:
+                self._on_block(blk, t, causes)
+        self._log_counter_changes(t)
+
+    def _on_block(self, blk: AdcBlock, t_arrival: float, causes: list[str]) -> None:
+        counts = np.asarray(blk.counts, dtype=np.int32)  # (n,) or (n, axes)
+        idx = int(blk.first_index)
+        n = int(len(counts))
+        if n == 0:
+            return
+        if self.idx0 is None:
+            self.idx0 = idx
+            self._next_idx = idx
+            self._blk_first = 0
+            self.log(
+                "info",
+                self.name,
+                f"ADC stream: run sample 0 is device sample {idx}",
+                "startup",
+                {"device_index": idx},
+                t_arrival,
+            )
+            # Run time of sample 0: its block's arrival less the block's length; from then
+            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
+            self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self.period)
+        assert self._next_idx is not None
+        if idx < self._next_idx:
+            # Some or all of these samples were written already: never write one twice.
+            dup = min(n, self._next_idx - idx)
+            self.dups += 1
+            self.log(
+                "warning",
+                self.name,
+                f"dropped {dup} repeated ADC sample(s) at index {idx - self.idx0}",
+                "duplicate",
+                {"index": idx - self.idx0, "samples": dup},
+                t_arrival,
+            )
+            if dup == n:
+                return
+            counts = counts[dup:]
+            idx += dup
+            n -= dup
+            t0_dev = float(blk.t0) + dup * self.period
+        else:
+            t0_dev = float(blk.t0)
+        if idx > self._next_idx:
+            missing = idx - self._next_idx
+            self.emit_block()
+            self.gaps += 1
+            self.missing += missing
+            first = self._next_idx - self.idx0
+            self.log(
+                "warning",
+                self.name,
+                f"ADC gap: {missing} sample(s) missing from index {first}",
+                "gap",
+                {
+                    "first_missing_index": first,
+                    "n_missing": missing,
+                    "t_first_missing": round(t0_dev - self._adc_offset - missing * self.period, 6),
+                    "cause": ",".join(causes) or "lost",
+                },
+                t_arrival,
+            )
+            self._blk_first = idx - self.idx0
+        if not self._blk_n:
+            self._blk_t0 = t0_dev - self._adc_offset
+        self._blk.append(counts)
+        self._blk_n += n
+        self._next_idx = idx + n
+        self.received_to = t0_dev - self._adc_offset + n * self.period
+        self._adc_lags.append(t_arrival - self.received_to)
+        if self.on_samples is not None:
+            # Received, not yet necessarily on disk: what a crash-loss measurement needs.
+            self.on_samples(self.received_to)
+        if self._blk_n >= self._block_len:
+            self.emit_block()
+
+    def emit_block(self) -> None:
+        """Write the block being filled (``/gyro/adc`` and ``/gyro/rate``)."""
+        if not self._blk_n:
+            return
+        counts = np.concatenate(self._blk) if len(self._blk) > 1 else self._blk[0]
+        t0 = self._blk_t0
+        if self.unit is None:
+            self.w.write_adc_block(t0, self.period, self._blk_first, counts)
+            self.w.write_rate_block(t0, self.period, self._blk_first, self.adc.to_dps(counts))
+        else:
+            u = self.unit
+            self.w.write_adc_block(t0, self.period, self._blk_first, counts, unit=u)
+            dps = self.adc.to_dps(counts)
+            self.w.write_rate_block(t0, self.period, self._blk_first, dps, unit=u)
+        self.samples += len(counts)
+        self._blk_first += len(counts)
+        self._blk = []
+        self._blk_n = 0
+
+    def _log_counter_changes(self, t: float) -> None:
+        c = self.dev.counters()
+        bad = int(c.get("frames_bad", 0)) - self._counters_seen.get("frames_bad", 0)
+        if bad > 0:
+            # Damaged frames are dropped by the reader (CRC); say so, with the totals.
+            self.log(
+                "warning",
+                self.name,
+                f"{bad} damaged ADC frame(s) rejected "
+                "(CRC/framing); their samples are reported as gaps",
+                "corruption",
+                {k: int(v) for k, v in c.items()},
+                t,
+            )
+        self._counters_seen = {k: int(v) for k, v in c.items()}
+
+    def record_tail_gap(self, t_stop: float) -> None:
+        """A stream that stopped before the run ended: a gap from the sample after the
+        last one received up to ``t_stop`` (the gap count and samples missing say so).
+
+        A tail within the stream's normal latency (``TAIL_LATENCY_FACTOR`` × its median
+        arrival lag, at least ``TAIL_MIN_S``) is samples in flight when the run stopped,
+        not a stopped stream, and is not counted."""
+        start = 0.0 if self.idx0 is None else self.received_to
+        lag = float(np.median(self._adc_lags)) if self._adc_lags else 0.0
+        tail = t_stop - start
+        if not math.isfinite(tail) or tail <= max(TAIL_MIN_S, TAIL_LATENCY_FACTOR * lag):
+            return
+        missing = int(round(tail / self.period))
+        first = 0 if self.idx0 is None or self._next_idx is None else self._next_idx - self.idx0
+        self.gaps += 1
+        self.missing += missing
+        what = "never started" if self.idx0 is None else "stopped"
+        self.log(
+            "warning",
+            self.name,
+            f"ADC gap: stream {what}; {missing} sample(s) missing from index {first} "
+            f"to the end of the run ({tail:.1f} s)",
+            "gap",
+            {
+                "first_missing_index": first,
+                "n_missing": missing,
+                "t_first_missing": round(start, 6),
+                "t_end": round(t_stop, 6),
+                "cause": f"stream {what}",
+            },
+            t_stop,
+        )
