@@ -36,15 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.record.recording import (
-    TOPIC_EVENT,
-    TOPIC_LOG,
-    TOPIC_OVEN,
-    TOPIC_PT100,
-    TOPIC_RATE,
-    list_units,
-    read_recording,
-)
+from gyrolab.record.format import TOPIC_EVENT, TOPIC_LOG, TOPIC_OVEN, TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import list_units, read_recording
 from gyrolab.record.recover import recover_recording
 
 

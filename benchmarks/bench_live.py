@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 
 CLIENT = r"""
 import json, struct, sys, time

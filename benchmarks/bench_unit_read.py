@@ -19,13 +19,8 @@ import time
 from gyrolab.compensation.pipeline import iter_rate_batches
 from mcap.reader import make_reader
 
-from gyrolab.record.recording import (
-    TOPIC_PT100,
-    TOPIC_RATE,
-    list_units,
-    read_recording,
-    unit_topic,
-)
+from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE, unit_topic
+from gyrolab.record.reader import list_units, read_recording
 
 
 def chunk_counts(path: str, unit: str | None) -> tuple[int, int]:

@@ -206,7 +206,8 @@ def main() -> int:
     from gyrolab.compensation.evaluate import evaluate
     from gyrolab.compensation.model_dir import load_model
     from gyrolab.compensation.prepare import prepare_run
-    from gyrolab.record.recording import TOPIC_PT100, TOPIC_RATE, read_recording
+    from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
+    from gyrolab.record.reader import read_recording
 
     mdl = load_model(str(model))
     rv = prepare_run(read_recording(runs["rev"][1], [TOPIC_RATE, TOPIC_PT100]), mdl.config)

@@ -105,7 +105,7 @@ class Item:
 def plan(runs: Sequence[Path], out_dir: Path) -> list[Item]:
     """``out_dir/<stem>`` per single-unit run, ``out_dir/<stem>/<serial>`` per unit of a
     multi-unit run; two runs with one stem are an error."""
-    from gyrolab.record.recording import list_units
+    from gyrolab.record.reader import list_units
 
     by_stem: dict[str, Path] = {}
     items = []

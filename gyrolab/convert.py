@@ -39,17 +39,16 @@ import numpy as np
 from gyrolab.errors import GyrolabError, InputError
 from gyrolab.outputs import atomic_file, check_output
 from gyrolab.progress import progress
-from gyrolab.record.recording import (
+from gyrolab.record.blocks import decode_block
+from gyrolab.record.format import (
     TOPIC_ADC,
     TOPIC_EVENT,
     TOPIC_LOG,
     TOPIC_OVEN,
     TOPIC_PT100,
     TOPIC_RATE,
-    decode_block,
-    iter_messages,
-    read_metadata,
 )
+from gyrolab.record.reader import iter_messages, read_metadata
 
 FORMATS = ("csv", "hdf5", "parquet", "netcdf")
 #: rows buffered before one write (a Parquet row group, an HDF5/NetCDF append)

@@ -15,10 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from contract import ADC_KEYS, recording_metadata_keys
 
 from gyrolab.cli import main
 from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
-from gyrolab.record.recording import TOPIC_LOG, read_recording
+from gyrolab.record.format import TOPIC_LOG
+from gyrolab.record.metadata import BenchMetadata, RunMetadata
+from gyrolab.record.reader import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -378,3 +381,40 @@ def test_one_minute_on_a_real_bench(tmp_path: Path) -> None:
     rec = read_recording(out)
     assert rec.adc.index.size > 0 and rec.pt100_t.size >= 30
     assert "verified" in rec.events[-1]["detail"]
+
+
+def _raw_metadata(path: Path) -> dict[str, dict[str, object]]:
+    """The metadata records as the file holds them (no normalisation), JSON decoded."""
+    from mcap.reader import make_reader
+
+    out: dict[str, dict[str, object]] = {}
+    with open(path, "rb") as fh:
+        for m in make_reader(fh).iter_metadata():
+            vals: dict[str, object] = {}
+            for k, v in m.metadata.items():
+                try:
+                    vals[k] = json.loads(v)
+                except ValueError:
+                    vals[k] = v
+            out[m.name] = vals
+    return out
+
+
+def test_simulate_and_acquire_write_the_same_documented_metadata(short_run, simulated) -> None:
+    """Both producers write the one schema (gyrolab/record/metadata.py): the same `run` and
+    `bench` keys, exactly those docs/recording-format.md documents, as written."""
+    acq, sim = _raw_metadata(short_run[0]), _raw_metadata(simulated)
+    for record in ("run", "bench"):
+        keys, layout = recording_metadata_keys(record)
+        assert set(acq[record]) == set(sim[record]) == keys - layout, record
+    assert (acq["run"]["source"], sim["run"]["source"]) == ("acquire", "simulate")
+    for meta in (acq, sim):
+        run, bench = meta["run"], meta["bench"]
+        assert isinstance(run["profile"], dict) and run["profile"]["name"] == "short"
+        assert len(run["profile"]["step"]) == 12
+        assert isinstance(bench["adc"], dict) and ADC_KEYS <= set(bench["adc"])
+        assert bench["adc"]["sample_rate_hz"] == 100.0 and bench["simulated"] is True
+        assert bench["multimeter"]["driver"] and bench["oven"]["driver"]
+        # what was written is already the typed schema's shape: nothing to normalise
+        assert RunMetadata.from_dict(run).to_dict() == run
+        assert BenchMetadata.from_dict(bench).to_dict() == bench

@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 from gyrolab.cli import main
 from gyrolab.instruments.drivers.gyroadc import GyroAdcReader
 from gyrolab.instruments.roles import AdcRead
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 from gyrolab.sim.bench import ByteFaults, FaultPlan, SimBench
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import axis_physics

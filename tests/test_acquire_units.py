@@ -11,15 +11,8 @@ import numpy as np
 import pytest
 
 from gyrolab.cli import main
-from gyrolab.record.recording import (
-    TOPIC_EVENT,
-    TOPIC_LOG,
-    TOPIC_OVEN,
-    TOPIC_PT100,
-    TOPIC_RATE,
-    list_units,
-    read_recording,
-)
+from gyrolab.record.format import TOPIC_EVENT, TOPIC_LOG, TOPIC_OVEN, TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import list_units, read_recording
 
 SERIALS = [f"SIM4-{k:02d}" for k in range(1, 9)]
 # Three steps of 320 s (compensate needs 922 s), about 10 s of wall time at 100x.

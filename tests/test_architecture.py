@@ -54,8 +54,6 @@ ALLOWED: set[tuple[str, str]] = {
     # numerics helper: the Allan phase helpers used by the deviations
     ("gyrolab.numerics.deviations", "gyrolab.numerics.allan._phase_detrended"),
     ("gyrolab.numerics.deviations", "gyrolab.numerics.allan._phase_from_rate"),
-    # record helper: the live view needs the recording's protobuf descriptor set
-    ("gyrolab.acquisition.live", "gyrolab.record.recording._file_descriptor_set"),
 }
 
 

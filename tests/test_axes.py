@@ -11,17 +11,14 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from gyrolab.cli import main
 from gyrolab.framing import FrameDecoder, encode_frame, frame_size
-from gyrolab.record.recording import (
-    RecordingWriter,
-    _file_descriptor_set,
-    decode_block,
-    encode_block,
-    read_recording,
-)
+from gyrolab.record.blocks import decode_block, encode_block
+from gyrolab.record.format import file_descriptor_set
+from gyrolab.record.reader import read_recording
+from gyrolab.record.writer import RecordingWriter
 
 
 def _proto(name: str):
-    fds = descriptor_pb2.FileDescriptorSet.FromString(_file_descriptor_set())
+    fds = descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set())
     pool = descriptor_pool.DescriptorPool()
     for f in fds.file:
         pool.Add(f)
@@ -71,7 +68,8 @@ def test_recording_reads_axes(tmp_path) -> None:
     # the viewer summary keeps axis x in its own fields and lists every axis
     import json
 
-    from gyrolab.record.recording import TOPIC_RATE_SUMMARY, iter_messages
+    from gyrolab.record.format import TOPIC_RATE_SUMMARY
+    from gyrolab.record.reader import iter_messages
 
     s = [json.loads(d) for _t, _ts, d in iter_messages(p, [TOPIC_RATE_SUMMARY])]
     assert [m["n"] for m in s] == [10, 10]

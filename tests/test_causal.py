@@ -141,7 +141,7 @@ def test_oracle_is_the_run_without_its_deterministic_drift(tmp_path) -> None:
     effects and subtracting gives exactly its noise (up to the ADC's step)."""
     from gyrolab.compensation.oracle import oracle_rate
     from gyrolab.profiles.profile import BUILTIN
-    from gyrolab.record.recording import read_recording
+    from gyrolab.record.reader import read_recording
     from gyrolab.sim.model import nominal_model
     from gyrolab.sim.physics import Physics
     from gyrolab.sim.simulate import simulate_run

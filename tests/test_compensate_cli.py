@@ -17,14 +17,9 @@ from gyrolab.cli import main
 from gyrolab.compensation.commands import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
 from gyrolab.compensation.model_dir import load_model
 from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_average
-from gyrolab.record.recording import (
-    TOPIC_PT100,
-    TOPIC_RATE,
-    RecordingWriter,
-    iter_blocks,
-    read_metadata,
-    read_recording,
-)
+from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import iter_blocks, read_metadata, read_recording
+from gyrolab.record.writer import RecordingWriter
 
 torch.set_num_threads(1)
 

@@ -23,7 +23,8 @@ from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.gabp import BPConfig, fit_mlp, gd_train
 from gyrolab.compensation.model_dir import load_model
 from gyrolab.compensation.prepare import prepare_file
-from gyrolab.record.recording import RecordingWriter, read_metadata
+from gyrolab.record.reader import read_metadata
+from gyrolab.record.writer import RecordingWriter
 
 torch.set_num_threads(1)
 REPO = Path(__file__).resolve().parents[1]

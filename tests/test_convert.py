@@ -15,7 +15,8 @@ import pytest
 
 from gyrolab import convert as conv
 from gyrolab.cli import main
-from gyrolab.record.recording import RecordingWriter, read_recording
+from gyrolab.record.reader import read_recording
+from gyrolab.record.writer import RecordingWriter
 
 START_NS = 1_618_876_800_000_000_000
 RATE = 50.0  # Hz

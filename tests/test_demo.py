@@ -138,7 +138,7 @@ def test_demo_report_has_noise_per_temperature_plateau(demo_run: Path) -> None:
     """The held-out (acquired) run's report tabulates ARW and bias instability per soaked
     step, with the figure against temperature."""
     from gyrolab.compensation.plateau_noise import plateau_noise
-    from gyrolab.record.recording import read_recording
+    from gyrolab.record.reader import read_recording
     from gyrolab.report.build import fmt
 
     html = (demo_run / "report" / "index.html").read_text(encoding="utf-8")

@@ -166,7 +166,7 @@ def test_bad_input() -> None:
 def test_plateau_noise_on_a_simulated_run(tmp_path: Path) -> None:
     from gyrolab.cli import main
     from gyrolab.compensation.plateau_noise import plateau_noise
-    from gyrolab.record.recording import read_recording
+    from gyrolab.record.reader import read_recording
 
     f = tmp_path / "short.mcap"
     assert (

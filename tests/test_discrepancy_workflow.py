@@ -103,12 +103,12 @@ def test_cli_reads_only_bench_channels_and_writes_contract(tmp_path, monkeypatch
     # The workflow must never look at metadata records (simulator provenance lives there).
     import mcap.reader
 
-    import gyrolab.record.recording
+    import gyrolab.record.reader
 
     def forbidden(*a, **k):
         raise AssertionError("discrepancy read the recording's metadata")
 
-    monkeypatch.setattr(gyrolab.record.recording, "read_metadata", forbidden)
+    monkeypatch.setattr(gyrolab.record.reader, "read_metadata", forbidden)
     for cls in (mcap.reader.SeekingReader, mcap.reader.NonSeekingReader):
         monkeypatch.setattr(cls, "iter_metadata", forbidden)
 

@@ -119,7 +119,7 @@ def test_acquire_on_the_simulated_bench_with_the_new_drivers(tmp_path, thermomet
     """``acquire --bench sim --driver …``: any combination runs, and the recording names
     the drivers that took it."""
     from gyrolab.cli import main
-    from gyrolab.record.recording import read_recording
+    from gyrolab.record.reader import read_recording
 
     prof = tmp_path / "p.toml"
     prof.write_text(

@@ -434,7 +434,7 @@ def test_safe_state_off_leaves_the_chamber_switched_off(tmp_path, chamber) -> No
     from gyrolab.app.acquire import run_acquisition
     from gyrolab.app.sim_bench import start_sim_bench
     from gyrolab.profiles.profile import load_profile
-    from gyrolab.record.recording import read_recording
+    from gyrolab.record.reader import read_recording
 
     prof_file = tmp_path / "p.toml"
     prof_file.write_text('name = "t"\n[[step]]\nsetpoint_c = 30\nduration_s = 40\n')

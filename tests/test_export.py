@@ -33,7 +33,7 @@ from gyrolab.export.params import (
 from gyrolab.export.spec import evaluate_spec, export_spec
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import simulate_run
 

@@ -24,7 +24,7 @@ from gyrolab.compensation.model_dir import load_model
 from gyrolab.export.spec import evaluate_causal, export_spec
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import simulate_run
 

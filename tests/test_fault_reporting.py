@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from gyrolab.cli import main
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 
 
 def _write(path: Path, text: str) -> Path:

@@ -9,13 +9,10 @@ from gyrolab.cli import HANDLERS, main
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file
 from gyrolab.profiles.profile import load_profile
-from gyrolab.record.recording import (
-    TOPIC_RATE,
-    RecordingWriter,
-    decode_block,
-    encode_block,
-    read_recording,
-)
+from gyrolab.record.blocks import decode_block, encode_block
+from gyrolab.record.format import TOPIC_RATE
+from gyrolab.record.reader import read_recording
+from gyrolab.record.writer import RecordingWriter
 
 
 def test_cli_lists_every_design_subcommand() -> None:

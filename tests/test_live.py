@@ -19,15 +19,10 @@ import pytest
 from websockets.sync.client import connect
 
 from gyrolab.acquisition.live import TOPIC_LIVE_STATUS, LiveServer
-from gyrolab.record.recording import (
-    TOPIC_LOG_FOXGLOVE,
-    TOPIC_PT100,
-    TOPIC_RATE,
-    TOPIC_RATE_SUMMARY,
-    RecordingWriter,
-    decode_block,
-    iter_messages,
-)
+from gyrolab.record.blocks import decode_block
+from gyrolab.record.format import TOPIC_LOG_FOXGLOVE, TOPIC_PT100, TOPIC_RATE, TOPIC_RATE_SUMMARY
+from gyrolab.record.reader import iter_messages
+from gyrolab.record.writer import RecordingWriter
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 START_NS = 1_700_000_000_000_000_000
@@ -184,7 +179,7 @@ def test_offer_never_blocks_when_the_queue_is_full() -> None:
 
 def test_acquire_live_at_300x_with_a_client(tmp_path: Path) -> None:
     from gyrolab.cli import main
-    from gyrolab.record.recording import read_recording
+    from gyrolab.record.reader import read_recording
 
     prof = tmp_path / "p.toml"
     prof.write_text(
@@ -238,7 +233,7 @@ def test_shipped_layout_names_topics_and_fields_that_exist() -> None:
     """Every panel of docs/foxglove/gyrolab-layout.json reads a topic and field that the
     recording or the live server publishes (schema properties), and every panel is placed."""
     from gyrolab.acquisition.live import LIVE_STATUS_SCHEMA
-    from gyrolab.record.recording import JSON_SCHEMAS
+    from gyrolab.record.format import JSON_SCHEMAS
 
     layout = json.loads(
         (

@@ -19,7 +19,7 @@ from gyrolab.compensation.prepare import causal_temperature
 from gyrolab.errors import InputError
 from gyrolab.logs import detect_format, read_log
 from gyrolab.profiles.profile import load_profile
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.simulate import simulate_run
 

@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 from jscheck import js_script, run_js
 
-from gyrolab.record.recording import ALL_TOPICS, RecordingWriter, read_recording
+from gyrolab.record.format import ALL_TOPICS
+from gyrolab.record.reader import read_recording
 from gyrolab.record.recover import recover_recording
+from gyrolab.record.writer import RecordingWriter
 
 PACKAGES = ["@mcap/core@2.2.2", "fzstd@0.1.1"]
 

@@ -15,15 +15,9 @@ from test_pipeline import SMALL
 from gyrolab.cli import main
 from gyrolab.errors import InputError
 from gyrolab.outputs import MARKER
-from gyrolab.record.recording import (
-    TOPIC_PT100,
-    TOPIC_RATE,
-    RecordingWriter,
-    list_units,
-    read_recording,
-    select_unit,
-    unit_topic,
-)
+from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE, unit_topic
+from gyrolab.record.reader import list_units, read_recording, select_unit
+from gyrolab.record.writer import RecordingWriter
 from gyrolab.sim.family import unit_family
 from gyrolab.sim.model import nominal_model
 

@@ -29,7 +29,8 @@ from gyrolab.compensation.prepare import (
 )
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import BlockAverager, block_average
-from gyrolab.record.recording import RecordingWriter, read_recording
+from gyrolab.record.reader import read_recording
+from gyrolab.record.writer import RecordingWriter
 
 torch.set_num_threads(1)
 

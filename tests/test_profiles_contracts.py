@@ -12,7 +12,7 @@ import pytest
 
 from gyrolab.cli import main
 from gyrolab.profiles.profile import BUILTIN
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
 STEP = "[[step]]\nsetpoint_c = 25\nduration_s = 60\n"
@@ -73,7 +73,7 @@ def test_short_profile_says_what_it_reaches_in_the_simulator(tmp_path: Path) -> 
     assert rec.oven_pv_c.max() == pytest.approx(hi_air, abs=0.6)
     assert rec.pt100_c.min() == pytest.approx(lo_case, abs=0.6)
     assert rec.pt100_c.max() == pytest.approx(hi_case, abs=0.6)
-    assert rec.run["profile_definition"]["description"] == desc  # recorded with the run
+    assert rec.run["profile"]["description"] == desc  # recorded with the run
     doc = (REPO / "docs" / "profiles.md").read_text()
     assert f"{rec.pt100_c.min():.1f} … {rec.pt100_c.max():.1f} °C" in doc
 

@@ -15,13 +15,10 @@ import pytest
 
 from gyrolab.cli import main
 from gyrolab.errors import InputError
-from gyrolab.record.recording import (
-    TOPIC_PT100,
-    RecordingWriter,
-    iter_messages,
-    read_recording,
-)
+from gyrolab.record.format import TOPIC_PT100
+from gyrolab.record.reader import iter_messages, read_recording
 from gyrolab.record.recover import recover_recording, scan
+from gyrolab.record.writer import RecordingWriter
 
 START_NS = 1_618_876_800_000_000_000
 RATE = 100.0
@@ -222,7 +219,7 @@ _WRITER_SCRIPT = textwrap.dedent(
     """
     import sys, time
     import numpy as np
-    from gyrolab.record.recording import RecordingWriter
+    from gyrolab.record.writer import RecordingWriter
     path, speed = sys.argv[1], float(sys.argv[2])
     w = RecordingWriter(path, start_time_ns=0, flush_every_s=1.0)
     t0 = time.monotonic()

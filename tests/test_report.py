@@ -11,7 +11,7 @@ import pytest
 from contract import METRIC_KEYS
 
 from gyrolab.cli import main
-from gyrolab.record.recording import RecordingWriter
+from gyrolab.record.writer import RecordingWriter
 from gyrolab.report import figures as F
 from gyrolab.report.build import build_report, fmt, hms
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock

@@ -22,7 +22,7 @@ from test_acquire import _profile, _run_in_process
 
 from gyrolab.acquisition.simdir import MARKER, PREFIX, sweep_stale
 from gyrolab.cli import main
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 from gyrolab.report.build import build_report, run_log_rows
 from gyrolab.report.outcome import run_outcome
 
@@ -254,7 +254,7 @@ def test_a_stop_signal_in_the_deferred_scope_is_acted_on_where_the_code_chooses(
 
 def test_report_outcome_from_events_without_a_log(tmp_path: Path) -> None:
     """A recording with events but no /log end messages still gets its outcome."""
-    from gyrolab.record.recording import RecordingWriter
+    from gyrolab.record.writer import RecordingWriter
 
     path = tmp_path / "x.mcap"
     with RecordingWriter(path, start_time_ns=0, run={"source": "acquire"}) as w:
@@ -280,7 +280,7 @@ def test_a_stopped_stream_counts_as_a_gap_in_the_header(tmp_path: Path) -> None:
     in the sample index shows it): the header's samples line counts it."""
     import numpy as np
 
-    from gyrolab.record.recording import RecordingWriter
+    from gyrolab.record.writer import RecordingWriter
     from gyrolab.report.outcome import run_coverage
 
     path = tmp_path / "stopped.mcap"

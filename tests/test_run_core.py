@@ -23,7 +23,8 @@ from gyrolab.instruments.roles import (
 )
 from gyrolab.profiles.profile import Profile, Step
 from gyrolab.pt100 import cvd_resistance
-from gyrolab.record.recording import RecordingWriter, read_recording
+from gyrolab.record.reader import read_recording
+from gyrolab.record.writer import RecordingWriter
 
 
 class FakeClock:

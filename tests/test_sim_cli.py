@@ -9,7 +9,7 @@ import pytest
 
 from gyrolab.cli import main
 from gyrolab.errors import InputError
-from gyrolab.record.recording import read_recording
+from gyrolab.record.reader import read_recording
 from gyrolab.sim.model import load_model, nominal_model
 
 PROFILE = """
@@ -63,9 +63,10 @@ def test_recording_has_every_topic_and_consistent_rate(tiny: Path, tmp_path: Pat
     assert [s for e, s in ev if e == "step_started"] == [0, 1, 2]
     starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
     assert starts[:2] == [0.0, 20.5]  # a step boundary inside a block is kept exact
-    assert rec.run["seed"] == 2 and rec.run["rate_hz"] == 50.0 and rec.run["profile"] == "tiny"
+    assert rec.run["seed"] == 2 and rec.bench["adc"]["sample_rate_hz"] == 50.0
+    assert rec.run["profile"]["name"] == "tiny" and rec.run["source"] == "simulate"
     assert rec.run["start_time"] == "2021-04-20T00:00:00Z"
-    assert "34401A" in rec.bench["instruments"]["dmm"]["identity"]
+    assert "34401A" in rec.bench["multimeter"]["idn"]
     prov = rec.metadata["sim_provenance"]
     assert prov["effects"] == ["bias_poly", "arw", "bias_instability"]
     assert "bias_poly" in prov["model_toml"]

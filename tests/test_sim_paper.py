@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from gyrolab.cli import main
-from gyrolab.record.recording import TOPIC_PT100, TOPIC_RATE, read_recording
+from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import read_recording
 
 BIN_S = 3600.0 / 1000.0  # 1000 points/h
 

@@ -13,17 +13,10 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from gyrolab.record.recording import (
-    TOPIC_ADC,
-    TOPIC_PT100,
-    TOPIC_RATE,
-    UNIT_PREFIX,
-    RecordingWriter,
-    iter_blocks,
-    iter_messages,
-    read_recording,
-)
+from gyrolab.record.format import TOPIC_ADC, TOPIC_PT100, TOPIC_RATE, UNIT_PREFIX
+from gyrolab.record.reader import iter_blocks, iter_messages, read_recording
 from gyrolab.record.recover import recover_recording
+from gyrolab.record.writer import RecordingWriter
 
 START_NS = 1_700_000_000_000_000_000
 UNITS = ["A1", "B2", "C3"]

@@ -17,14 +17,9 @@ import numpy as np
 import pytest
 from jscheck import js_script, run_js
 
-from gyrolab.record.recording import (
-    FOXGLOVE_LOG_LEVEL,
-    TOPIC_LOG_FOXGLOVE,
-    TOPIC_RATE_SUMMARY,
-    RecordingWriter,
-    iter_messages,
-    read_recording,
-)
+from gyrolab.record.format import FOXGLOVE_LOG_LEVEL, TOPIC_LOG_FOXGLOVE, TOPIC_RATE_SUMMARY
+from gyrolab.record.reader import iter_messages, read_recording
+from gyrolab.record.writer import RecordingWriter
 
 PACKAGES = ["@mcap/core@2.2.2", "fzstd@0.1.1", "@foxglove/schemas@2.1.0", "ajv@8.17.1"]
 START_NS = 1_618_876_800_123_000_000

@@ -217,7 +217,7 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
     """``[[unit]]`` and ``[scanner]``: the units (each one's rate-stream config is the
     ``[adc]`` table with the unit's ``driver``, ``port`` and ``adc`` overrides) and the
     scanner's config, its channel list taken from the units."""
-    from gyrolab.record.recording import check_serial
+    from gyrolab.record.format import check_serial
 
     raw_units = d.get("unit")
     if not isinstance(raw_units, list) or not raw_units:

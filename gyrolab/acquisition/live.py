@@ -28,15 +28,15 @@ from collections.abc import Callable
 from typing import Any
 
 from gyrolab.errors import GyrolabError
-from gyrolab.record.recording import (
+from gyrolab.record.format import (
     ADC_MESSAGE,
     JSON_SCHEMAS,
     RATE_MESSAGE,
     TOPIC_ADC,
     TOPIC_RATE,
-    RecordingWriter,
-    _file_descriptor_set,
+    file_descriptor_set,
 )
+from gyrolab.record.writer import RecordingWriter
 
 TOPIC_LIVE_STATUS = "/live/status"
 DEFAULT_PORT = 8765
@@ -97,7 +97,7 @@ class LiveServer:
         self.port = int(self._server.port)
         self.start_time_ns = 0
         self._channels: dict[str, Any] = {}
-        fds = _file_descriptor_set()
+        fds = file_descriptor_set()
         for topic, msg in ((TOPIC_ADC, ADC_MESSAGE), (TOPIC_RATE, RATE_MESSAGE)):
             self._add(foxglove, topic, msg, "protobuf", fds, "protobuf")
         schemas = {**JSON_SCHEMAS, TOPIC_LIVE_STATUS: LIVE_STATUS_SCHEMA}

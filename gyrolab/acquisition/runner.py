@@ -57,7 +57,7 @@ from gyrolab.instruments.roles import (  # noqa: F401 - re-exported for compatib
     is_transient,
 )
 from gyrolab.profiles.profile import Profile, Step
-from gyrolab.record.recording import RecordingWriter
+from gyrolab.record.writer import RecordingWriter
 
 # ------------------------------------------------------------------------ protocols
 

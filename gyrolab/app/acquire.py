@@ -44,7 +44,8 @@ from gyrolab.instruments import registry
 from gyrolab.instruments.roles import Chamber, MultiThermometer, RateStream, Thermometer
 from gyrolab.outputs import check_output
 from gyrolab.profiles.profile import Profile, load_profile
-from gyrolab.record.recording import RecordingWriter
+from gyrolab.record.metadata import BenchMetadata, RunMetadata
+from gyrolab.record.writer import RecordingWriter
 
 
 @dataclass(frozen=True)
@@ -266,28 +267,33 @@ def run_acquisition(
         clock = WallClock()
         inst = connect_instruments(cfg, lab_addresses(cfg))
     try:
-        run_meta: dict[str, Any] = {
-            "operator": cfg.run.operator,
-            "unit_serial": cfg.run.unit_serial,
-            "unit_model": cfg.run.unit_model,
-            "notes": cfg.run.notes,
-            "start_time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "profile": profile.to_dict(),
-            "source": "acquire",
-            "bench_name": cfg.name,
-        }
-        if sim is not None:
-            run_meta.update(seed=seed, speed=sim.speed if sim.speed is not None else "max")
-        if cfg.adc.axes > 1:
-            run_meta["axes"] = cfg.adc.axes  # as simulate writes it (recording-format.md)
-        bench_meta: dict[str, Any] = {
-            "name": cfg.name,
-            "simulated": sim is not None,
-            **inst.identity,
-            "limits": cfg.to_dict()["limits"],
-            "safe_state": cfg.to_dict()["safe_state"],
-            "recorder": cfg.to_dict()["recorder"],
-        }
+        run_meta = RunMetadata(
+            source="acquire",
+            start_time=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            profile=profile.to_dict(),
+            operator=cfg.run.operator,
+            unit_serial=cfg.run.unit_serial,
+            unit_model=cfg.run.unit_model,
+            notes=cfg.run.notes,
+            bench_name=cfg.name,
+            seed=seed if sim is not None else None,
+            speed=(sim.speed if sim.speed is not None else "max") if sim is not None else None,
+            axes=cfg.adc.axes,
+        )
+        tables = cfg.to_dict()
+        ident = dict(inst.identity)  # each instrument's describe(), by role name
+        bench_meta = BenchMetadata(
+            name=cfg.name,
+            simulated=sim is not None,
+            multimeter=ident.pop("multimeter", None),
+            oven=ident.pop("oven", None),
+            adc=ident.pop("adc", None),
+            limits=tables["limits"],
+            safe_state=tables["safe_state"],
+            recorder=tables["recorder"],
+            units=ident.pop("units", None),  # multi-unit: each unit's ADC
+            extra=ident,  # e.g. a multi-unit bench's scanner
+        )
         r = cfg.recorder
         with _open_output(out, force) as fh:
             writer = RecordingWriter(

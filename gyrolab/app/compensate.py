@@ -18,7 +18,7 @@ from gyrolab.compensation import commands
 from gyrolab.compensation.config import PipelineConfig, resolve_config
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, check_output
-from gyrolab.record.recording import list_units
+from gyrolab.record.reader import list_units
 
 
 def units_of(path: str) -> list[str]:

@@ -30,7 +30,7 @@ from gyrolab.compensation.firmware import Poly3
 from gyrolab.compensation.model_dir import MODEL_FORMAT, MODEL_FORMAT_VERSION, write_json
 from gyrolab.compensation.prepare import PreparedRun, prepare_file, prepare_run
 from gyrolab.errors import InputError
-from gyrolab.record.recording import AXIS_NAMES
+from gyrolab.record.format import AXIS_NAMES
 
 FIRMWARE_JSON = "firmware.json"
 

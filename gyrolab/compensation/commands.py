@@ -29,6 +29,7 @@ import json
 import sys
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -53,15 +54,10 @@ from gyrolab.compensation.oracle import add_oracle
 from gyrolab.compensation.prepare import PreparedRun, prepare_file
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
-from gyrolab.record.recording import (
-    PROFILE,
-    TOPIC_RATE,
-    decode_block,
-    encode_block,
-    iter_messages,
-    list_units,
-    select_unit,
-)
+from gyrolab.record.blocks import decode_block, encode_block
+from gyrolab.record.format import TOPIC_RATE
+from gyrolab.record.reader import iter_messages, list_units, select_unit
+from gyrolab.record.rewrite import Message, rewrite_recording
 
 TOPIC_RATE_RAW = "/gyro/rate_raw"
 TOPIC_RATE_OFFLINE = "/gyro/rate_offline"
@@ -362,80 +358,35 @@ def _write_compensated(
     block_s: float,
     info: dict[str, Any],
 ) -> None:
-    """Copy ``src`` to ``dst`` record by record (schemas, channels, messages with their
-    times and sequence numbers, metadata), with ``/gyro/rate`` compensated block by block
-    by ``comp`` (a :class:`~gyrolab.compensation.apply.StreamingCompensator`) and the two
-    extra rate channels added (module docstring). Memory: one block at a time."""
-    from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
-
+    """Copy ``src`` to ``dst`` (:func:`~gyrolab.record.rewrite.rewrite_recording`), with
+    ``/gyro/rate`` compensated block by block by ``comp`` (a
+    :class:`~gyrolab.compensation.apply.StreamingCompensator`) and the two extra rate
+    channels added (module docstring). Memory: one block at a time."""
     start_ns = _start_time_ns(src)
-    with open(src, "rb") as fh, open(dst, "wb") as out:
-        try:
-            reader = make_reader(fh)
-            header = reader.get_header()
-            w = Writer(out, chunk_size=1 << 20, compression=CompressionType.ZSTD)
-            w.start(profile=header.profile or PROFILE, library=f"gyrolab {__version__}")
-            sids: dict[int, int] = {}
-            cids: dict[int, int] = {}
-            extra: dict[str, int] = {}
-            for schema, channel, msg in reader.iter_messages(log_time_order=True):
-                if channel.id not in cids:
-                    sid = 0
-                    if schema is not None:
-                        if schema.id not in sids:
-                            sids[schema.id] = w.register_schema(
-                                schema.name, schema.encoding, schema.data
-                            )
-                        sid = sids[schema.id]
-                    cids[channel.id] = w.register_channel(
-                        channel.topic, channel.message_encoding, sid, dict(channel.metadata)
-                    )
-                    if channel.topic == TOPIC_RATE:
-                        for topic in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE):
-                            extra[topic] = w.register_channel(
-                                topic, channel.message_encoding, sid, dict(channel.metadata)
-                            )
-                data = msg.data
-                if channel.topic == TOPIC_RATE:
-                    t0, period, first, arr = decode_block(data, "rate")
-                    w.add_message(
-                        extra[TOPIC_RATE_RAW],
-                        log_time=msg.log_time,
-                        data=data,
-                        publish_time=msg.publish_time,
-                        sequence=msg.sequence,
-                    )
-                    t = t0 + np.arange(arr.shape[0]) * period
-                    y = comp(t, arr.astype(float))
-                    data = encode_block(t0, period, first, y, "rate")
-                w.add_message(
-                    cids[channel.id],
-                    log_time=msg.log_time,
-                    data=data,
-                    publish_time=msg.publish_time,
-                    sequence=msg.sequence,
-                )
-            per = 1000  # offline samples per message: 1 h at 1000 points/h
-            for k, s in enumerate(range(0, y_off.shape[0], per)):
-                t0 = float(t_off[s])
-                ts = start_ns + int(round(t0 * 1e9))
-                w.add_message(
-                    extra[TOPIC_RATE_OFFLINE],
-                    log_time=ts,
-                    data=encode_block(t0, block_s, s, y_off[s : s + per], "rate"),
-                    publish_time=ts,
-                    sequence=k,
-                )
-            for m in reader.iter_metadata():
-                if m.name != "compensation":
-                    w.add_metadata(m.name, dict(m.metadata))
-            w.add_metadata("compensation", {k: json.dumps(v) for k, v in info.items()})
-            w.finish()
-        except InputError:
-            raise
-        except Exception as e:  # mcap raises many types on damaged files
-            raise InputError(src, f"damaged or truncated MCAP ({e})") from None
+
+    def compensate(m: Message) -> list[Message]:
+        if m.topic != TOPIC_RATE:
+            return [m]
+        t0, period, first, arr = decode_block(m.data, "rate")
+        t = t0 + np.arange(arr.shape[0]) * period
+        data = encode_block(t0, period, first, comp(t, arr.astype(float)), "rate")
+        return [replace(m, topic=TOPIC_RATE_RAW), replace(m, data=data)]
+
+    per = 1000  # offline samples per message: 1 h at 1000 points/h
+    offline = []
+    for k, s in enumerate(range(0, y_off.shape[0], per)):
+        t0 = float(t_off[s])
+        ts = start_ns + int(round(t0 * 1e9))
+        data = encode_block(t0, block_s, s, y_off[s : s + per], "rate")
+        offline.append(Message(TOPIC_RATE_OFFLINE, ts, ts, k, data))
+    rewrite_recording(
+        src,
+        dst,
+        transform=compensate,
+        derived={TOPIC_RATE_RAW: TOPIC_RATE, TOPIC_RATE_OFFLINE: TOPIC_RATE},
+        tail=offline,
+        metadata={"compensation": {k: json.dumps(v) for k, v in info.items()}},
+    )
 
 
 def _start_time_ns(path: str) -> int:

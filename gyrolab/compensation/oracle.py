@@ -4,7 +4,7 @@ No temperature model can do better than remove the drift exactly; what is left â
 noise, 1/f bias instability, the ADC's steps â€” is the floor every compensation is
 measured against (issue 11). The truth is known only for a recording written by
 ``gyrolab simulate``: its ``sim_provenance`` record holds the generating model and seed,
-its ``run`` record the rate, and its ``/profile/event`` messages the exact time (to the
+its ``bench.adc`` the sample rate, and its ``/profile/event`` messages the exact time (to the
 sample) each setpoint step started. Replaying those setpoints through
 :class:`~gyrolab.sim.physics.Physics` with the model's *deterministic* effects only
 (every effect except ``arw``, ``bias_instability``, ``rate_random_walk``, ``outliers``,
@@ -26,7 +26,9 @@ import numpy as np
 from gyrolab.compensation.evaluate import drift_pp_table, series_metrics
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import block_average
-from gyrolab.record.recording import TOPIC_EVENT, TOPIC_RATE, read_recording
+from gyrolab.record.format import TOPIC_EVENT, TOPIC_RATE
+from gyrolab.record.metadata import BenchMetadata
+from gyrolab.record.reader import read_recording
 
 STOCHASTIC = ("arw", "bias_instability", "rate_random_walk", "outliers", "quantization")
 
@@ -66,23 +68,23 @@ def oracle_rate(rec: Any) -> np.ndarray | None:
     if getattr(rec, "unit", None) and isinstance(prov, dict):  # a multi-unit run: per serial
         prov = prov.get(rec.unit)
     run = rec.run or {}
-    if not isinstance(prov, dict) or run.get("source") != "simulation" or rec.rate is None:
+    if not isinstance(prov, dict) or run.get("source") != "simulate" or rec.rate is None:
         return None
     steps = [
         (float(e["t"]), float(e["setpoint_c"]))
         for e in rec.events
         if e.get("event") == "step_started" and "setpoint_c" in e
     ]
-    if not steps or "model_toml" not in prov or "rate_hz" not in run:
+    rate_hz = BenchMetadata.from_dict(rec.bench or {}).sample_rate_hz(getattr(rec, "unit", None))
+    if not steps or "model_toml" not in prov or rate_hz is None:
         return None
-    ambient = float((run.get("profile_definition") or {}).get("ambient_c", 25.0))
+    profile = run.get("profile")
+    ambient = float(profile.get("ambient_c", 25.0) if isinstance(profile, dict) else 25.0)
     raw = np.asarray(rec.rate.values, dtype=float)
-    idx = np.rint(np.asarray(rec.rate.t) * float(run["rate_hz"])).astype(np.int64)
+    idx = np.rint(np.asarray(rec.rate.t) * rate_hz).astype(np.int64)
     if idx.size == 0 or idx[0] < 0:
         return None
-    drift = deterministic_drift(
-        str(prov["model_toml"]), float(run["rate_hz"]), int(idx[-1]) + 1, steps, ambient
-    )
+    drift = deterministic_drift(str(prov["model_toml"]), rate_hz, int(idx[-1]) + 1, steps, ambient)
     return raw - drift[idx]
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrolab.numerics.allan import FLICKER_FLOOR, AllanResult, noise_terms
 from gyrolab.numerics.deviations import DeviationResult, deviation, gap_filled
-from gyrolab.record.recording import Recording
+from gyrolab.record.reader import Recording
 
 __all__ = ["Plateau", "as_allan_result", "plateau_noise", "soaked_segments"]
 

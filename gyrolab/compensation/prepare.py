@@ -7,7 +7,7 @@ enough; bad input → one-line :class:`~gyrolab.errors.InputError`). The drift m
 at each block centre is the last PT100 reading at or before it (:func:`features`): the
 same causal rule as the streaming output of :mod:`gyrolab.compensation.apply`.
 
-Three sources: a :class:`~gyrolab.record.recording.Recording` in memory
+Three sources: a :class:`~gyrolab.record.reader.Recording` in memory
 (:func:`prepare_run`), a file streamed block by block in bounded memory
 (:func:`prepare_file`) and plain arrays (:func:`prepare_arrays`: simulations and tests).
 """
@@ -24,13 +24,8 @@ from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.guards import RunHasher, content_hash
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import BlockAverager
-from gyrolab.record.recording import (
-    TOPIC_PT100,
-    TOPIC_RATE,
-    Recording,
-    iter_blocks,
-    read_recording,
-)
+from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import Recording, iter_blocks, read_recording
 
 
 @dataclass

@@ -1,9 +1,9 @@
 """Read the logs users already have into gyrolab's in-memory recording.
 
 One small dispatch (:func:`read_log`) over one reader per format, each returning the same
-:class:`~gyrolab.record.recording.Recording` that a gyrolab MCAP reads into:
+:class:`~gyrolab.record.reader.Recording` that a gyrolab MCAP reads into:
 
-* ``rate``: a :class:`~gyrolab.record.recording.Series` of the gyro in °/s, ``(n,)`` for one axis
+* ``rate``: a :class:`~gyrolab.record.reader.Series` of the gyro in °/s, ``(n,)`` for one axis
   or ``(n, 3)`` for x, y, z; its ``index`` counts nominal sample periods since the first
   sample, so dropped samples stay gaps (``Series.gaps()``), never interpolated;
 * ``pt100_t`` / ``pt100_c``: the temperature readings (s, °C) the drift model uses;
@@ -12,7 +12,7 @@ One small dispatch (:func:`read_log`) over one reader per format, each returning
 Formats, told apart by their first bytes:
 
 =====================  ==============================  ==================================
-gyrolab MCAP           header profile ``gyrolab``      `record.recording.read_recording`
+gyrolab MCAP           header profile ``gyrolab``      `record.reader.read_recording`
 ROS 2 MCAP             profile ``ros2``                :mod:`.ros2` (``sensor_msgs/msg/Imu``
                                                        + ``sensor_msgs/msg/Temperature``)
 PX4 ULog               magic ``ULog\\x01\\x12\\x35``     :mod:`.ulog` (``sensor_gyro``, pyulog)
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.record.recording import Recording, Series
+from gyrolab.record.reader import Recording, Series
 
 RAD2DEG = float(180.0 / np.pi)
 ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -67,7 +67,9 @@ def _mcap_profile(path: Path) -> str:
 
 def single_axis_gyrolab(path: str | os.PathLike[str]) -> bool:
     """True for a gyrolab MCAP whose ``/gyro/rate`` has one axis (streamed as before)."""
-    from gyrolab.record.recording import TOPIC_RATE, decode_block, iter_messages
+    from gyrolab.record.blocks import decode_block
+    from gyrolab.record.format import TOPIC_RATE
+    from gyrolab.record.reader import iter_messages
 
     if detect_format(path) != "gyrolab":
         return False
@@ -97,7 +99,7 @@ def read_log(
     ``imu_topic`` choose ROS 2 topics; ``instance`` the PX4/ArduPilot gyro instance."""
     fmt = detect_format(path)
     if fmt == "gyrolab":
-        from gyrolab.record.recording import read_recording
+        from gyrolab.record.reader import read_recording
 
         return read_recording(path)
     if fmt == "ros2":

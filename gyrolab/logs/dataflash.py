@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.record.recording import Recording
+from gyrolab.record.reader import Recording
 
 _NP = {
     "b": "i1",

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.record.recording import Recording
+from gyrolab.record.reader import Recording
 
 IMU = "sensor_msgs/msg/Imu"
 TEMPERATURE = "sensor_msgs/msg/Temperature"

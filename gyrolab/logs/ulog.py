@@ -14,7 +14,7 @@ import os
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.record.recording import Recording
+from gyrolab.record.reader import Recording
 
 
 def read_ulog(path: str | os.PathLike[str], *, instance: int = 0) -> Recording:

@@ -1,6 +1,6 @@
 """Salvage a recording cut short by a crash (``gyrolab recover``).
 
-A recording written by :class:`~gyrolab.record.recording.RecordingWriter` is an append-only
+A recording written by :class:`~gyrolab.record.writer.RecordingWriter` is an append-only
 sequence of MCAP records: magic, header, the ``run`` and ``bench`` metadata, then one
 chunk (schemas, channels, messages; zstd; CRC-32 of the uncompressed bytes) plus its
 message indexes per flush. A ``kill -9`` or a power cut leaves every record that reached
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import struct
 import zlib
@@ -33,6 +34,8 @@ from typing import Any
 
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file
+from gyrolab.record.blocks import decode_block
+from gyrolab.record.writer import McapFile, json_strings
 
 MAGIC = b"\x89MCAP0\r\n"
 _OP_HEADER = 0x01
@@ -395,10 +398,6 @@ def _account(content: dict[str, Any], rep: RecoveryReport) -> None:
     gyro sample is the tail. A file whose sequences are not a count (another writer) gets
     the damaged chunks' time spans instead.
     """
-    import json
-
-    from gyrolab.record.recording import decode_block
-
     by_topic: dict[str, list[_Message]] = {}
     for m in content["messages"]:
         by_topic.setdefault(content["channels"][m.channel_id].topic, []).append(m)
@@ -520,12 +519,9 @@ def _add_message(m: _Message, content: dict[str, Any], rep: RecoveryReport) -> N
 
 def write_salvaged(content: dict[str, Any], fh: io.BufferedWriter | Any) -> None:
     """Write salvaged content as a complete MCAP file (chunked, zstd, indexed)."""
-    from mcap.writer import CompressionType, Writer
-
-    w = Writer(fh, chunk_size=1 << 20, compression=CompressionType.ZSTD)
     profile, library = content["header"]
-    w.start(profile=profile, library=library or "gyrolab recover")
-    # mcap's Writer numbers schemas and channels itself (1, 2, …); map the old ids.
+    w = McapFile(fh, profile=profile, library=library or "gyrolab recover")
+    # The writer numbers schemas and channels itself (1, 2, …); map the old ids.
     sid_map: dict[int, int] = {0: 0}
     for sid in sorted(content["schemas"]):
         s = content["schemas"][sid]
@@ -539,21 +535,8 @@ def write_salvaged(content: dict[str, Any], fh: io.BufferedWriter | Any) -> None
     for name, values in content["metadata"]:
         w.add_metadata(name, values)
     for m in content["messages"]:
-        w.add_message(
-            cid_map[m.channel_id],
-            log_time=m.log_time,
-            data=m.data,
-            publish_time=m.publish_time,
-            sequence=m.sequence,
-        )
+        w.add_message(cid_map[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
     w.finish()
-
-
-def _as_strings(d: dict[str, Any]) -> dict[str, str]:
-    """MCAP metadata is a string map: non-strings as JSON text (as RecordingWriter does)."""
-    import json
-
-    return {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in d.items()}
 
 
 def recover_recording(
@@ -571,7 +554,7 @@ def recover_recording(
         rep.problems.append("no chunk was complete: the recovered file holds no messages")
     # What recover found travels with the data: the report's header reads it.
     content["metadata"] = [(n, v) for n, v in content["metadata"] if n != "recovery"]
-    content["metadata"].append(("recovery", _as_strings(rep.metadata_record())))
+    content["metadata"].append(("recovery", json_strings(rep.metadata_record())))
     with atomic_file(out, force, inputs=(broken,)) as tmp:
         with open(tmp, "wb") as fh:
             write_salvaged(content, fh)

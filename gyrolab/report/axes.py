@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gyrolab.record.recording import AXIS_NAMES
+from gyrolab.record.format import AXIS_NAMES
 from gyrolab.report.document import Document
 
 

@@ -24,14 +24,8 @@ import numpy as np
 
 from gyrolab import __version__
 from gyrolab.errors import InputError
-from gyrolab.record.recording import (
-    ALL_TOPICS,
-    TOPIC_ADC,
-    TOPIC_PT100,
-    TOPIC_RATE,
-    Recording,
-    read_recording,
-)
+from gyrolab.record.format import ALL_TOPICS, TOPIC_ADC, TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import Recording, read_recording
 from gyrolab.report import figures as F
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.outcome import Coverage, Outcome, run_coverage, run_outcome
@@ -250,7 +244,7 @@ def raw_metrics(tb: np.ndarray, xb: np.ndarray, block_s: float) -> dict[str, Any
 
 def unit_serial(rec: Recording) -> str:
     """The unit under test's serial number as the recording gives it ('—' if none)."""
-    return str(rec.run.get("unit_serial") or rec.bench.get("unit_serial") or "—")
+    return str(rec.run.get("unit_serial") or "—")
 
 
 def run_id(rec: Recording) -> str:
@@ -270,7 +264,7 @@ def _summary(
     rate = rec.rate
     assert rate is not None
     prof = run.get("profile")
-    prof_name = prof.get("name", "?") if isinstance(prof, dict) else str(prof or "?")
+    prof_name = str(prof.get("name", "?")) if isinstance(prof, dict) else "?"
     dur = float(rate.t[-1] - rate.t[0] + rate.period)
     outcome = outcome or run_outcome(rec)
     coverage = coverage or run_coverage(rec)

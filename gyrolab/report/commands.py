@@ -89,7 +89,7 @@ def write_report(
 def report(args: argparse.Namespace) -> int:
     """The ``gyrolab report`` handler."""
     from gyrolab.logs import log_options
-    from gyrolab.record.recording import select_unit
+    from gyrolab.record.reader import select_unit
 
     check_output(
         args.out, args.force, inputs=(args.run, args.model, getattr(args, "spec", None)), kind="dir"

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.record.recording import Recording
+from gyrolab.record.reader import Recording
 
 #: Outcome statuses, most to least orderly.
 STATUSES = ("complete", "aborted", "interrupted", "recovered", "incomplete")
@@ -69,7 +69,7 @@ def run_outcome(rec: Recording) -> Outcome:
         safe_state = "failed" if detail.startswith("FAILED") else "verified"
     else:
         detail = ""
-        simulated = str(rec.run.get("source", "")).startswith("simul")  # gyrolab simulate
+        simulated = rec.run.get("source") == "simulate"  # no chamber, no safe state
         safe_state = "not applicable" if simulated else "not recorded"
     if end is None:
         status, reason = "incomplete", "the run's end was not recorded"
@@ -155,8 +155,6 @@ def _range(x: np.ndarray) -> tuple[float, float] | None:
 def profile_setpoints(rec: Recording) -> list[float]:
     """The setpoints of the profile stored in the ``run`` metadata (empty if none)."""
     prof = rec.run.get("profile")
-    if not isinstance(prof, dict):  # gyrolab simulate: the name, and the table beside it
-        prof = rec.run.get("profile_definition")
     if not isinstance(prof, dict):
         return []
     steps = prof.get("step", prof.get("steps", []))

@@ -21,40 +21,24 @@ from typing import IO, Any
 
 import numpy as np
 
-from gyrolab import __version__
 from gyrolab.profiles.profile import Profile
 from gyrolab.progress import progress
-from gyrolab.record.recording import RecordingWriter
+from gyrolab.record.metadata import BenchMetadata, RunMetadata
+from gyrolab.record.writer import RecordingWriter
+from gyrolab.sim.bench.dmm_scpi import IDN as DMM_IDN
 from gyrolab.sim.family import Unit
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.physics import Physics
-from gyrolab.sim.sensors import cvd_temperature
+from gyrolab.sim.sensors import AdcModel, cvd_temperature
 
 DEFAULT_START = "2021-04-20T00:00:00Z"
 
-# Identities of the simulated instruments (the bench helper's responders answer the same).
-INSTRUMENTS: dict[str, dict[str, str]] = {
-    "dmm": {
-        "identity": "HEWLETT-PACKARD,34401A,SIM00001,11-5-2",
-        "role": "PT100 4-wire resistance",
-        "simulated": "true",
-    },
-    "oven": {
-        "identity": "Watlow F4 (simulated), Modbus RTU address 1",
-        "role": "temperature chamber controller",
-        "simulated": "true",
-    },
-    "gyro_adc": {
-        "identity": "gyrolab simulated 24-bit ADC, serial SIM-ADC-0001",
-        "role": "gyro rate output",
-        "simulated": "true",
-    },
-    "gyro": {
-        "identity": "dual-mass tuning-fork MEMS gyroscope (simulated), serial SIM-GYRO-0001",
-        "role": "device under test",
-        "simulated": "true",
-    },
-}
+# What the simulated file says about its instruments (docs/recording-format.md, ``bench``):
+# no driver ran, the simulator's model made the readings (``driver = "simulate"``); the
+# thermometer answers with the simulated bench's 34401A identity.
+SIM_DRIVER = "simulate"
+SIM_UNIT_MODEL = "dual-mass tuning-fork MEMS gyroscope (simulated)"
+SIM_UNIT_SERIAL = "SIM-GYRO-0001"
 
 
 @dataclass
@@ -74,28 +58,49 @@ def _start_ns(start_time: str) -> int:
     return int(round(ts.timestamp())) * 1_000_000_000 + ts.microsecond * 1000
 
 
-def run_metadata(profile: Profile, rate_hz: float, seed: int, start_time: str) -> dict[str, Any]:
+def run_metadata(profile: Profile, seed: int, start_time: str) -> RunMetadata:
+    """The ``run`` record of a simulated run (unpaced: ``speed`` "max")."""
+    return RunMetadata(
+        source="simulate",
+        start_time=start_time,
+        profile=profile.to_dict(),
+        operator="gyrolab simulate",
+        unit_serial=SIM_UNIT_SERIAL,
+        unit_model=SIM_UNIT_MODEL,
+        bench_name="sim",
+        seed=int(seed),
+        speed="max",
+    )
+
+
+def adc_metadata(adc: AdcModel, rate_hz: float) -> dict[str, Any]:
+    """``bench.adc`` of a simulated ADC: the keys every ADC table has, and the conversion."""
     return {
-        "operator": "gyrolab simulate",
-        "source": "simulation",
-        "start_time": start_time,
-        "profile": profile.name,
-        "profile_definition": profile.to_dict(),
-        "seed": int(seed),
-        "rate_hz": float(rate_hz),
-        "software_version": __version__,
+        "driver": SIM_DRIVER,
+        "sample_rate_hz": float(rate_hz),
+        **adc.to_dict(),
+        "dps_per_count": adc.vref_v / adc.full_scale / adc.gain_v_per_dps,
     }
 
 
-def bench_metadata(model: SimModel, rate_hz: float) -> dict[str, Any]:
-    adc = model.sensors.adc.to_dict()
-    adc["rate_hz"] = float(rate_hz)
-    return {
-        "bench": "sim",
-        "instruments": INSTRUMENTS,
-        "adc": adc,
-        "pt100": {"standard": "IEC 60751", "r0_ohm": 100.0, "wiring": "4-wire", "on": "case"},
-    }
+def bench_metadata(model: SimModel, rate_hz: float) -> BenchMetadata:
+    """The ``bench`` record of a simulated run: the simulated instruments; no bench limits,
+    safe state or recorder table apply."""
+    return BenchMetadata(
+        name="sim",
+        simulated=True,
+        multimeter={
+            "driver": SIM_DRIVER,
+            "model": "34401A",
+            "idn": DMM_IDN,
+            "r0_ohm": 100.0,
+            "wiring": "4-wire",
+            "standard": "IEC 60751",
+            "on": "case",
+        },
+        oven={"driver": SIM_DRIVER, "model": "Watlow F4 (simulated)"},
+        adc=adc_metadata(model.sensors.adc, rate_hz),
+    )
 
 
 def provenance(model: SimModel, seed: int) -> dict[str, Any]:
@@ -152,15 +157,16 @@ def simulate_run(
     every = [p for ph, ex in zip(fleet, extras, strict=True) for p in (ph, *ex)]
     bn = phys.block_n
     rate = phys.rate_hz
-    run_meta = run_metadata(profile, rate, seed, start_time)
+    run_meta = run_metadata(profile, seed, start_time)
     bench_meta = bench_metadata(model, rate)
     if extra:
-        run_meta["axes"] = 1 + len(extra)
-        bench_meta["adc"]["axes"] = 1 + len(extra)
+        run_meta.axes = 1 + len(extra)
+        assert bench_meta.adc is not None
+        bench_meta.adc["axes"] = 1 + len(extra)
     if units is not None:
-        bench_meta["units"] = {
-            u.serial: {"adc": {**u.model.sensors.adc.to_dict(), "rate_hz": float(rate)}}
-            for u in units
+        run_meta.unit_serial = ""  # the units' serials are the run's `units`
+        bench_meta.units = {
+            u.serial: {"adc": adc_metadata(u.model.sensors.adc, rate)} for u in units
         }
     w = RecordingWriter(
         out,

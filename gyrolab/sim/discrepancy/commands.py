@@ -34,7 +34,7 @@ def discrepancy(args: argparse.Namespace) -> int:
     inputs = (args.run, args.model)
     check_output(args.out, args.force, inputs=inputs, kind="dir")
     model = load_model(args.model) if args.model else nominal_model()
-    from gyrolab.record.recording import select_unit
+    from gyrolab.record.reader import select_unit
 
     axes = load_recording_axes(args.run, unit=select_unit(args.run, getattr(args, "unit", None)))
 

@@ -27,14 +27,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.record.recording import (
-    TOPIC_EVENT,
-    TOPIC_OVEN,
-    TOPIC_PT100,
-    TOPIC_RATE,
-    decode_block,
-    iter_messages,
-)
+from gyrolab.record.blocks import decode_block
+from gyrolab.record.format import TOPIC_EVENT, TOPIC_OVEN, TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.reader import iter_messages
 from gyrolab.sim.discrepancy.allan import oadev
 
 SPIKE_K = 8.0

@@ -1,0 +1,325 @@
+"""Reading a recording: whole (:func:`read_recording` into numpy arrays) or streaming
+(:func:`iter_messages`, :func:`iter_blocks`), one unit of a multi-unit file at a time
+(:func:`list_units`, :func:`select_unit`).
+
+The ``run`` and ``bench`` records come back normalised (:mod:`gyrolab.record.metadata`):
+files written with older spellings read in the documented shape.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from gyrolab.errors import InputError
+from gyrolab.record.blocks import decode_block
+from gyrolab.record.format import (
+    ALL_TOPICS,
+    TOPIC_ADC,
+    TOPIC_EVENT,
+    TOPIC_LOG,
+    TOPIC_OVEN,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    UNIT_PREFIX,
+    unit_topic,
+)
+from gyrolab.record.metadata import normalise_bench, normalise_run
+
+
+@dataclass
+class Series:
+    """A batched stream unpacked: per-sample times, values and sample indices."""
+
+    t: np.ndarray
+    values: np.ndarray
+    index: np.ndarray
+    period: float
+
+    @property
+    def rate_hz(self) -> float:
+        return 1.0 / self.period if self.period > 0 else float("nan")
+
+    @property
+    def axes(self) -> int:
+        """Values per sample: 1 (``values`` is ``(n,)``) or 2–3 (``values`` is ``(n, axes)``)."""
+        return 1 if self.values.ndim == 1 else int(self.values.shape[1])
+
+    def axis(self, k: int) -> Series:
+        """The single-axis series of axis ``k`` (the series itself when it has one axis)."""
+        if self.values.ndim == 1:
+            if k != 0:
+                raise IndexError(f"single-axis series has no axis {k}")
+            return self
+        return Series(self.t, np.ascontiguousarray(self.values[:, k]), self.index, self.period)
+
+    def gaps(self) -> list[tuple[float, int]]:
+        """``(t_before_gap, n_missing)`` for every jump in the sample index."""
+        if self.index.size < 2:
+            return []
+        d = np.diff(self.index)
+        where = np.flatnonzero(d != 1)
+        return [(float(self.t[i]), int(d[i] - 1)) for i in where]
+
+
+@dataclass
+class Recording:
+    """A recording read into numpy arrays (only the topics that were asked for)."""
+
+    path: str
+    run: dict[str, Any] = field(default_factory=dict)
+    bench: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+    rate: Series | None = None
+    adc: Series | None = None
+    pt100_t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    pt100_ohm: np.ndarray = field(default_factory=lambda: np.empty(0))
+    pt100_c: np.ndarray = field(default_factory=lambda: np.empty(0))
+    oven_t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    oven_setpoint_c: np.ndarray = field(default_factory=lambda: np.empty(0))
+    oven_pv_c: np.ndarray = field(default_factory=lambda: np.empty(0))
+    oven_mode: list[str] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    logs: list[dict[str, Any]] = field(default_factory=list)
+    topic_counts: dict[str, int] = field(default_factory=dict)
+    unit: str | None = None  # the unit read from a multi-unit recording
+
+    def require_rate(self) -> Series:
+        if self.rate is None or self.rate.t.size == 0:
+            raise InputError(self.path, f"recording has no {TOPIC_RATE} data")
+        return self.rate
+
+    def require_temperature(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.pt100_t.size == 0:
+            raise InputError(self.path, f"recording has no {TOPIC_PT100} data")
+        return self.pt100_t, self.pt100_c
+
+    @property
+    def axes(self) -> int:
+        """Axes of the rate stream (1 when there is none)."""
+        return 1 if self.rate is None else self.rate.axes
+
+    def axis(self, k: int) -> Recording:
+        """A shallow copy whose ``rate`` is axis ``k`` only (the same object for one axis)."""
+        if self.axes == 1 and k == 0:
+            return self
+        rate = self.require_rate().axis(k)
+        adc = None if self.adc is None or self.adc.values.ndim == 1 else self.adc.axis(k)
+        return replace(self, rate=rate, adc=adc)
+
+
+def _parse_meta(values: Mapping[str, str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in values.items():
+        try:
+            out[k] = json.loads(v)
+        except (json.JSONDecodeError, TypeError):
+            out[k] = v
+    return out
+
+
+def open_reader(path: str | os.PathLike[str]) -> tuple[IO[bytes], Any]:
+    """An open MCAP reader of ``path`` and its file (close it); InputError if not MCAP."""
+    from mcap.reader import make_reader
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "file not found")
+    fh = open(p, "rb")
+    magic = fh.read(8)
+    fh.seek(0)
+    if magic != b"\x89MCAP0\r\n":
+        fh.close()
+        raise InputError(p, "not an MCAP file")
+    return fh, make_reader(fh)
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
+    """All metadata records of a recording, values JSON-decoded where possible; ``run``
+    and ``bench`` normalised (:func:`~gyrolab.record.metadata.normalise_run`)."""
+    fh, reader = open_reader(path)
+    try:
+        records = {m.name: _parse_meta(m.metadata) for m in reader.iter_metadata()}
+    except InputError:
+        raise
+    except Exception as e:  # mcap raises many types on damaged files
+        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
+    finally:
+        fh.close()
+    for name, normalise in (("run", normalise_run), ("bench", normalise_bench)):
+        if name in records:
+            records[name] = normalise(records[name])
+    return records
+
+
+def list_units(path: str | os.PathLike[str]) -> list[str]:
+    """The unit serials of a multi-unit recording, in file order; ``[]`` for single-unit."""
+    fh, reader = open_reader(path)
+    try:
+        summary = reader.get_summary()
+        channels = summary.channels.values() if summary is not None else None
+        if channels is None:  # no summary section (a recovered file): scan the messages
+            channels = [c for _s, c, _m in reader.iter_messages()]
+        units: list[str] = []
+        for ch in channels:
+            if ch.topic.startswith(UNIT_PREFIX):
+                serial = ch.topic[len(UNIT_PREFIX) :].split("/", 1)[0]
+                if serial not in units:
+                    units.append(serial)
+        return units
+    except InputError:
+        raise
+    except Exception as e:
+        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
+    finally:
+        fh.close()
+
+
+def select_unit(path: str | os.PathLike[str], unit: str | None) -> str | None:
+    """Resolve ``--unit``: the serial to read from ``path``, or None for a single-unit file.
+
+    A multi-unit file with one unit needs no ``unit``; with several, ``unit`` is required.
+    A unit the file does not hold is an :class:`InputError` listing the serials it has."""
+    try:
+        units = list_units(path)
+    except InputError:
+        if unit is None:  # not a gyrolab MCAP (a user's log): no units; its reader reports
+            return None
+        raise
+    if not units:
+        if unit is not None:
+            serial = read_metadata(path).get("run", {}).get("unit_serial")
+            if unit != serial:
+                raise InputError(
+                    path,
+                    f"is a single-unit recording (unit {serial or 'unnamed'}); "
+                    f"it has no unit {unit!r}",
+                )
+        return None
+    if unit is None:
+        if len(units) == 1:
+            return units[0]
+        raise InputError(
+            path, f"holds {len(units)} units; choose one with --unit SERIAL: {', '.join(units)}"
+        )
+    if unit not in units:
+        raise InputError(path, f"has no unit {unit!r}; its units: {', '.join(units)}")
+    return unit
+
+
+def iter_messages(
+    path: str | os.PathLike[str], topics: list[str] | None = None, unit: str | None = None
+) -> Iterator[tuple[str, int, bytes]]:
+    """``(topic, log_time_ns, data)`` in log-time order, streaming.
+
+    ``unit``: in a multi-unit recording, read that unit's topics under their single-unit
+    names (``/unit/<unit>/gyro/rate`` comes back as ``/gyro/rate``) beside the shared ones."""
+    fh, reader = open_reader(path)
+    if unit is not None:
+        names = list(ALL_TOPICS) if topics is None else topics
+        topics = [unit_topic(t, unit) for t in names]
+        prefix = f"{UNIT_PREFIX}{unit}"
+    try:
+        for _schema, channel, message in reader.iter_messages(topics=topics):
+            topic = channel.topic
+            if unit is not None and topic.startswith(prefix):
+                topic = topic[len(prefix) :]
+            yield topic, message.log_time, message.data
+    except InputError:
+        raise
+    except Exception as e:
+        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
+    finally:
+        fh.close()
+
+
+def iter_blocks(
+    path: str | os.PathLike[str], topic: str = TOPIC_RATE, unit: str | None = None
+) -> Iterator[tuple[float, float, int, np.ndarray]]:
+    """Stream ``/gyro/rate`` or ``/gyro/adc`` blocks as ``(t0, period, first_index, values)``."""
+    kind = "adc" if topic == TOPIC_ADC else "rate"
+    for _topic, _ts, data in iter_messages(path, [topic], unit=unit):
+        yield decode_block(data, kind)
+
+
+def _series(blocks: list[tuple[float, float, int, np.ndarray]], dtype: type) -> Series:
+    if not blocks:
+        return Series(np.empty(0), np.empty(0, dtype=dtype), np.empty(0, dtype=np.int64), 0.0)
+    n = sum(b[3].shape[0] for b in blocks)
+    shapes = {b[3].shape[1:] for b in blocks}
+    if len(shapes) != 1:
+        raise ValueError(f"blocks with different axis counts {sorted(shapes)}")
+    t = np.empty(n)
+    v = np.empty((n, *shapes.pop()), dtype=dtype)
+    idx = np.empty(n, dtype=np.int64)
+    pos = 0
+    for t0, period, first, arr in blocks:
+        m = arr.shape[0]
+        k = np.arange(m)
+        t[pos : pos + m] = t0 + k * period
+        v[pos : pos + m] = arr
+        idx[pos : pos + m] = first + k
+        pos += m
+    return Series(t, v, idx, float(np.median([b[1] for b in blocks])))
+
+
+def read_recording(
+    path: str | os.PathLike[str], topics: list[str] | None = None, unit: str | None = None
+) -> Recording:
+    """Read a recording into arrays. ``topics`` limits what is decoded (default: all);
+    ``unit`` selects one unit of a multi-unit recording (:func:`select_unit`), whose
+    topics come back under their single-unit names.
+
+    Rate samples come back as float64 °/s, ADC counts as int32. Raises
+    :class:`~gyrolab.errors.InputError` on a missing, foreign or damaged file.
+    """
+    topics = list(ALL_TOPICS) if topics is None else topics
+    rec = Recording(path=str(path))
+    rec.metadata = read_metadata(path)
+    rec.run = rec.metadata.get("run", {})
+    rec.bench = rec.metadata.get("bench", {})
+    if unit is not None:
+        rec.unit = unit
+        rec.run = {**rec.run, "unit_serial": unit}
+    rate_blocks: list[tuple[float, float, int, np.ndarray]] = []
+    adc_blocks: list[tuple[float, float, int, np.ndarray]] = []
+    pt, oven = [], []
+    counts: dict[str, int] = {}
+    for topic, _ts, data in iter_messages(path, topics, unit=unit):
+        counts[topic] = counts.get(topic, 0) + 1
+        if topic == TOPIC_RATE:
+            rate_blocks.append(decode_block(data, "rate"))
+        elif topic == TOPIC_ADC:
+            adc_blocks.append(decode_block(data, "adc"))
+        else:
+            msg = json.loads(data)
+            if topic == TOPIC_PT100:
+                pt.append((msg["t"], msg["resistance_ohm"], msg["temperature_c"]))
+            elif topic == TOPIC_OVEN:
+                oven.append((msg["t"], msg["setpoint_c"], msg["process_value_c"]))
+                rec.oven_mode.append(msg["mode"])
+            elif topic == TOPIC_EVENT:
+                rec.events.append(msg)
+            elif topic == TOPIC_LOG:
+                rec.logs.append(msg)
+    rec.topic_counts = counts
+    try:
+        if TOPIC_RATE in topics:
+            rec.rate = _series(rate_blocks, np.float64)
+        if TOPIC_ADC in topics:
+            rec.adc = _series(adc_blocks, np.int32)
+    except ValueError as e:
+        raise InputError(path, str(e)) from None
+    if pt:
+        a = np.asarray(pt, dtype=float)
+        rec.pt100_t, rec.pt100_ohm, rec.pt100_c = a[:, 0], a[:, 1], a[:, 2]
+    if oven:
+        a = np.asarray(oven, dtype=float)
+        rec.oven_t, rec.oven_setpoint_c, rec.oven_pv_c = a[:, 0], a[:, 1], a[:, 2]
+    return rec
