@@ -27,18 +27,6 @@ from typing import Any
 from gyrolab import __version__
 from gyrolab.record.format import FORMAT_VERSION
 
-SOURCES = ("simulate", "acquire")
-#: The keys every ``bench.adc`` table has (a driver or the simulator may add its own).
-ADC_KEYS = (
-    "driver",
-    "sample_rate_hz",
-    "bits",
-    "vref_v",
-    "gain_v_per_dps",
-    "offset_v",
-    "dps_per_count",
-)
-
 
 def normalise_run(d: Mapping[str, Any]) -> dict[str, Any]:
     """``d`` with the older spellings of the ``run`` record rewritten (module docstring);
@@ -149,7 +137,7 @@ class BenchMetadata:
     simulated: bool
     multimeter: dict[str, Any] | None = None
     oven: dict[str, Any] | None = None
-    adc: dict[str, Any] | None = None  # with every key of ADC_KEYS
+    adc: dict[str, Any] | None = None  # driver, sample_rate_hz, bits, vref_v, … (docs)
     limits: dict[str, Any] | None = None
     safe_state: dict[str, Any] | None = None
     recorder: dict[str, Any] | None = None

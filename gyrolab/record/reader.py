@@ -8,12 +8,13 @@ files written with older spellings read in the documented shape.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
@@ -124,34 +125,37 @@ def _parse_meta(values: Mapping[str, str]) -> dict[str, Any]:
     return out
 
 
-def open_reader(path: str | os.PathLike[str]) -> tuple[IO[bytes], Any]:
-    """An open MCAP reader of ``path`` and its file (close it); InputError if not MCAP."""
+RECOVER_HINT = "; try `gyrolab recover`"
+
+
+@contextlib.contextmanager
+def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[Any]:
+    """An MCAP reader of ``path``, closed on exit. A missing or foreign file, and any error
+    the mcap library raises on a damaged one, is an :class:`InputError` (``hint`` appended)."""
     from mcap.reader import make_reader
 
     p = Path(path)
     if not p.is_file():
         raise InputError(p, "file not found")
     fh = open(p, "rb")
-    magic = fh.read(8)
-    fh.seek(0)
-    if magic != b"\x89MCAP0\r\n":
+    try:
+        if fh.read(8) != b"\x89MCAP0\r\n":
+            raise InputError(p, "not an MCAP file")
+        fh.seek(0)
+        yield make_reader(fh)
+    except InputError:
+        raise
+    except Exception as e:  # mcap raises many types on damaged files
+        raise InputError(path, f"damaged or truncated MCAP ({e}){hint}") from None
+    finally:
         fh.close()
-        raise InputError(p, "not an MCAP file")
-    return fh, make_reader(fh)
 
 
 def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """All metadata records of a recording, values JSON-decoded where possible; ``run``
     and ``bench`` normalised (:func:`~gyrolab.record.metadata.normalise_run`)."""
-    fh, reader = open_reader(path)
-    try:
+    with opened(path) as reader:
         records = {m.name: _parse_meta(m.metadata) for m in reader.iter_metadata()}
-    except InputError:
-        raise
-    except Exception as e:  # mcap raises many types on damaged files
-        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
-    finally:
-        fh.close()
     for name, normalise in (("run", normalise_run), ("bench", normalise_bench)):
         if name in records:
             records[name] = normalise(records[name])
@@ -160,8 +164,7 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
 
 def list_units(path: str | os.PathLike[str]) -> list[str]:
     """The unit serials of a multi-unit recording, in file order; ``[]`` for single-unit."""
-    fh, reader = open_reader(path)
-    try:
+    with opened(path) as reader:
         summary = reader.get_summary()
         channels = summary.channels.values() if summary is not None else None
         if channels is None:  # no summary section (a recovered file): scan the messages
@@ -173,12 +176,6 @@ def list_units(path: str | os.PathLike[str]) -> list[str]:
                 if serial not in units:
                     units.append(serial)
         return units
-    except InputError:
-        raise
-    except Exception as e:
-        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
-    finally:
-        fh.close()
 
 
 def select_unit(path: str | os.PathLike[str], unit: str | None) -> str | None:
@@ -220,23 +217,17 @@ def iter_messages(
 
     ``unit``: in a multi-unit recording, read that unit's topics under their single-unit
     names (``/unit/<unit>/gyro/rate`` comes back as ``/gyro/rate``) beside the shared ones."""
-    fh, reader = open_reader(path)
+    prefix = ""
     if unit is not None:
         names = list(ALL_TOPICS) if topics is None else topics
         topics = [unit_topic(t, unit) for t in names]
         prefix = f"{UNIT_PREFIX}{unit}"
-    try:
+    with opened(path) as reader:
         for _schema, channel, message in reader.iter_messages(topics=topics):
             topic = channel.topic
-            if unit is not None and topic.startswith(prefix):
+            if prefix and topic.startswith(prefix):
                 topic = topic[len(prefix) :]
             yield topic, message.log_time, message.data
-    except InputError:
-        raise
-    except Exception as e:
-        raise InputError(path, f"damaged or truncated MCAP ({e}); try `gyrolab recover`") from None
-    finally:
-        fh.close()
 
 
 def iter_blocks(

@@ -14,9 +14,8 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from gyrolab.errors import InputError
 from gyrolab.record.format import PROFILE
-from gyrolab.record.reader import open_reader
+from gyrolab.record.reader import opened
 from gyrolab.record.writer import McapFile
 
 
@@ -50,49 +49,42 @@ def rewrite_recording(
     :class:`InputError`."""
     derived = dict(derived or {})
     metadata = dict(metadata or {})
-    fh, reader = open_reader(src)
-    try:
-        with open(Path(dst), "wb") as out:
-            header = reader.get_header()
-            w = McapFile(out, profile=header.profile or PROFILE)
-            sids: dict[int, int] = {}
-            cids: dict[int, int] = {}
-            by_topic: dict[str, int] = {}
+    # dst is opened first: an error writing it is not the source's damage
+    with open(Path(dst), "wb") as out, opened(src, hint="") as reader:
+        header = reader.get_header()
+        w = McapFile(out, profile=header.profile or PROFILE)
+        sids: dict[int, int] = {}
+        cids: dict[int, int] = {}
+        by_topic: dict[str, int] = {}
 
-            def put(m: Message) -> None:
-                if m.topic not in by_topic:
-                    raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
-                w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
+        def put(m: Message) -> None:
+            if m.topic not in by_topic:
+                raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
+            w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
 
-            for schema, channel, msg in reader.iter_messages(log_time_order=True):
-                if channel.id not in cids:
-                    sid = 0
-                    if schema is not None:
-                        if schema.id not in sids:
-                            sids[schema.id] = w.register_schema(
-                                schema.name, schema.encoding, schema.data
-                            )
-                        sid = sids[schema.id]
-                    enc, meta = channel.message_encoding, dict(channel.metadata)
-                    cids[channel.id] = w.register_channel(channel.topic, enc, sid, meta)
-                    by_topic[channel.topic] = cids[channel.id]
-                    for topic, like in derived.items():
-                        if like == channel.topic:
-                            by_topic[topic] = w.register_channel(topic, enc, sid, meta)
-                m = Message(channel.topic, msg.log_time, msg.publish_time, msg.sequence, msg.data)
-                for out_msg in [m] if transform is None else transform(m):
-                    put(out_msg)
-            for m in tail:
-                put(m)
-            for rec in reader.iter_metadata():
-                if rec.name not in metadata:
-                    w.add_metadata(rec.name, rec.metadata)
-            for name, values in metadata.items():
-                w.add_metadata(name, values)
-            w.finish()
-    except InputError:
-        raise
-    except Exception as e:  # mcap raises many types on damaged files
-        raise InputError(src, f"damaged or truncated MCAP ({e})") from None
-    finally:
-        fh.close()
+        for schema, channel, msg in reader.iter_messages(log_time_order=True):
+            if channel.id not in cids:
+                sid = 0
+                if schema is not None:
+                    if schema.id not in sids:
+                        sids[schema.id] = w.register_schema(
+                            schema.name, schema.encoding, schema.data
+                        )
+                    sid = sids[schema.id]
+                enc, meta = channel.message_encoding, dict(channel.metadata)
+                cids[channel.id] = w.register_channel(channel.topic, enc, sid, meta)
+                by_topic[channel.topic] = cids[channel.id]
+                for topic, like in derived.items():
+                    if like == channel.topic:
+                        by_topic[topic] = w.register_channel(topic, enc, sid, meta)
+            m = Message(channel.topic, msg.log_time, msg.publish_time, msg.sequence, msg.data)
+            for out_msg in [m] if transform is None else transform(m):
+                put(out_msg)
+        for m in tail:
+            put(m)
+        for rec in reader.iter_metadata():
+            if rec.name not in metadata:
+                w.add_metadata(rec.name, rec.metadata)
+        for name, values in metadata.items():
+            w.add_metadata(name, values)
+        w.finish()
