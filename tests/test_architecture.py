@@ -249,19 +249,19 @@ def test_the_checker_sees_function_level_and_attribute_imports() -> None:
     private name taken by ``from``, and one used as a module attribute are all found."""
     src = (
         "import gyrolab.sim.effects as fx\n"
-        "from gyrolab.record import recording\n"
+        "from gyrolab.record import reader\n"
         "def f():\n"
         "    from gyrolab.cli import main\n"
         "    from gyrolab.sim.model import _private\n"
-        "    return fx._play, recording._x, main, _private\n"
+        "    return fx._play, reader._x, main, _private\n"
     )
     tree = ast.parse(src)
     mod = "gyrolab.numerics.allan"
     targets = {target_module(i.target) for i in imports(mod, tree)}
-    assert {"gyrolab.cli", "gyrolab.sim.model", "gyrolab.record.recording"} <= targets
+    assert {"gyrolab.cli", "gyrolab.sim.model", "gyrolab.record.reader"} <= targets
     priv = {u.target for u in private_uses(mod, tree)}
     assert priv == {
         "gyrolab.sim.model._private",
         "gyrolab.sim.effects._play",
-        "gyrolab.record.recording._x",
+        "gyrolab.record.reader._x",
     }
