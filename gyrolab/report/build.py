@@ -149,7 +149,7 @@ class AllanData:
     """One Allan curve plus its noise terms, in °/h for plotting.
 
     ``arw``/``bi`` are ``None`` when the curve does not identify them
-    (:func:`gyrolab.numerics.allan.noise_terms`); ``terms`` keeps the full result
+    (:func:`gyrolab.numerics.noise_terms.noise_terms`); ``terms`` keeps the full result
     (τ ranges, reasons, the upper bound on B when there is no floor)."""
 
     label: str
@@ -215,7 +215,8 @@ def allan_curve(x: np.ndarray, rate_hz: float, label: str) -> AllanData | None:
 
     ``None`` when the series is too short or constant (the figure then omits the curve).
     """
-    from gyrolab.numerics.allan import allan_deviation, noise_terms
+    from gyrolab.numerics.allan import allan_deviation
+    from gyrolab.numerics.noise_terms import noise_terms
 
     try:
         res = allan_deviation(np.asarray(x, dtype=float), rate_hz, taus="octave")
