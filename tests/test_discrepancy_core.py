@@ -35,6 +35,17 @@ def test_fast_oadev_white_noise_slope():
     np.testing.assert_allclose(ad[:8], 0.01 * np.sqrt(0.01 / tau[:8]), rtol=0.05)
 
 
+def test_fast_oadev_of_a_noiseless_channel_is_zero():
+    """A noiseless simulated axis is valid input to the workflow: zeros, not an error."""
+    from gyrolab.errors import InputError
+
+    x = np.full(1000, -0.5)
+    res = allan_deviation(x, 20.0, taus=np.array([0.05, 0.1]), confidence=None, allow_constant=True)
+    assert np.array_equal(res.adev, [0.0, 0.0])
+    with pytest.raises(InputError, match="constant"):
+        allan_deviation(x, 20.0, confidence=None)
+
+
 def test_bin_autocov_reproduces_allan_model():
     """The bins' covariance from the PSDs gives back the Allan variance it was built from."""
     n, dlt = 2000, 10.0

@@ -131,6 +131,7 @@ def allan_deviation(
     overlapping: bool = True,
     confidence: float | None = ONE_SIGMA,
     alpha: int | None = None,
+    allow_constant: bool = False,
 ) -> AllanResult:
     """Allan deviation of rate data (e.g. deg/s) or angle data (e.g. deg).
 
@@ -144,9 +145,11 @@ def allan_deviation(
     confidence : two-sided confidence level of ``adev_lo``/``adev_hi``; ``None`` skips noise
         identification and EDF (bounds and edf are NaN).
     alpha : force the power-law noise exponent for the EDF instead of identifying it per tau.
+    allow_constant : a constant series gives a zero curve instead of an InputError (a
+        noiseless simulated channel is a valid input to the discrepancy workflow).
 
     Returns an :class:`AllanResult`. Raises :class:`~gyrolab.errors.InputError` on NaN/inf,
-    a series too short for any tau, or a constant series.
+    a series too short for any tau, or (unless ``allow_constant``) a constant series.
     """
     arr = np.asarray(data)
     if arr.dtype != np.float64:
@@ -176,7 +179,7 @@ def allan_deviation(
         t = m * tau0
         adev[k] = math.sqrt(s / (2.0 * t * t * c))
         nterms[k] = c
-    if not np.any(adev > 0):
+    if not allow_constant and not np.any(adev > 0):
         raise InputError(None, "constant series: the Allan deviation is zero at every tau")
 
     edf, alphas, lo, hi = (np.full(ms.size, np.nan) for _ in range(4))

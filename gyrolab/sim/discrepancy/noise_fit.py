@@ -67,7 +67,9 @@ def measured_allan(d: BenchData, resid_bins: np.ndarray) -> AllanCurve:
     hr = d.hr
     m_hr = np.rint(hr.tau / hr.dt)
     m_oct = 2 ** np.arange(int(np.log2(max(1, resid_bins.size // 8))) + 1)
-    res = allan_deviation(resid_bins, 1.0 / d.bin_s, taus=m_oct * d.bin_s, confidence=None)
+    res = allan_deviation(
+        resid_bins, 1.0 / d.bin_s, taus=m_oct * d.bin_s, confidence=None, allow_constant=True
+    )
     tau_b, ad_b = res.taus, res.adev
     keep = tau_b > d.bin_s * 1.01
     m_b = np.rint(tau_b[keep] / d.bin_s)
