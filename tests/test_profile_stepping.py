@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from test_run_core import Chamber, FakeClock, Stream
 
-from gyrolab.acquisition.bench_config import AdcConfig, Limits, SafeState
+from gyrolab.acquisition.bench_config import Limits, SafeState
 from gyrolab.acquisition.runner import Acquisition
+from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
 from gyrolab.instruments.roles import ThermometerReading
 from gyrolab.profiles.profile import Profile, Step
 from gyrolab.pt100 import cvd_resistance
@@ -76,7 +77,7 @@ def test_simulate_and_acquire_end_every_step_at_the_same_time(tmp_path: Path) ->
         thermometer=Replay(clock, srec.pt100_t, srec.pt100_c),
         oven=Chamber(clock),
         gyro=Stream(clock),
-        adc=AdcConfig(sample_rate_hz=100.0),
+        adc=GyroAdcConfig(sample_rate_hz=100.0),
         limits=Limits(),
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,
