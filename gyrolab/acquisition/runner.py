@@ -28,12 +28,9 @@ import queue
 import signal
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
-
-import numpy as np
 
 from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import Limits, SafeState
