@@ -61,7 +61,13 @@ def evaluate(
     for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):
         m[key] = series_metrics(app.series[key], bs)
     whiches = ("gabp", "causal") if model.causal is not None else ("gabp",)
-    streams = streaming_block_means_many(model, run, whiches)
+    # kept in the application (``stream.<which>``): the report's figures plot them
+    # (gyrolab.compensation.results), and a second evaluate does not stream the file again
+    todo = tuple(w for w in whiches if f"stream.{w}" not in app.series)
+    if todo:
+        new = streaming_block_means_many(model, run, todo)
+        app.series.update({f"stream.{w}": s for w, s in new.items()})
+    streams = {w: app.series[f"stream.{w}"] for w in whiches}
     m["compensated_streaming"] = series_metrics(streams["gabp"], bs)
     if model.causal is not None:
         causal_series = streams["causal"]
