@@ -53,11 +53,11 @@ def build_report(
     the recording's for the sign-off block; ``axis`` reports one axis of a multi-axis
     unit; ``rec`` is the recording already read (``run_path``'s, every axis).
     """
+    from gyrolab.outputs import json_safe
     from gyrolab.report import analysis
     from gyrolab.report.data import assemble, read_run
     from gyrolab.report.layout import document
     from gyrolab.report.spec import load_spec
-    from gyrolab.report.text import json_safe
 
     t_start = time.perf_counter()
     spec_obj = load_spec(spec) if spec is not None else None

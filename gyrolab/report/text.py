@@ -1,4 +1,4 @@
-"""Numbers, times and metadata as the report's tables show them; metrics made JSON-safe."""
+"""Numbers, times and metadata as the report's tables show them."""
 
 from __future__ import annotations
 
@@ -45,24 +45,6 @@ def flatten(d: Any, prefix: str = "") -> list[tuple[str, str]]:
     else:
         rows.append((prefix, "" if d is None else str(d)))
     return rows
-
-
-def json_safe(x: Any) -> Any:
-    """JSON-safe copy: numpy → Python, NaN/inf → None (JSON has neither)."""
-    if isinstance(x, dict):
-        return {str(k): json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [json_safe(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return json_safe(x.tolist())
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 
 def dotted(d: dict[str, Any], path: str) -> dict[str, Any]:
