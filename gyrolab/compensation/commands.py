@@ -149,19 +149,19 @@ def compensate(args: argparse.Namespace) -> int:
         getattr(args, "seed", None),
     )
     unit_arg = getattr(args, "unit", None)
-    if unit_arg is None and _units(args.run):
+    if unit_arg is None and units_of(args.run):
         # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
         # this layer: it runs this handler once per unit through gyrolab.batch)
         raise InputError(
-            args.run, f"holds units {', '.join(_units(args.run))}: choose one with --unit"
+            args.run, f"holds units {', '.join(units_of(args.run))}: choose one with --unit"
         )
     from gyrolab.logs import log_options
 
     opts = log_options(args)
-    unit = select_unit(args.run, unit_arg) if unit_arg is not None or _units(args.run) else None
+    unit = select_unit(args.run, unit_arg) if unit_arg is not None or units_of(args.run) else None
     vunit = None
     if args.validate and unit is not None:  # the same unit of a multi-unit held-out run
-        vunit = select_unit(args.validate, unit if _units(args.validate) else None)
+        vunit = select_unit(args.validate, unit if units_of(args.validate) else None)
     if unit is not None:  # one unit of a multi-unit recording (single-axis units)
         runs = [prepare_file(args.run, cfg, unit=unit)]
     else:
@@ -258,7 +258,7 @@ def _write_axis(
     save_results(directory, results)
 
 
-def _units(path: str) -> list[str]:
+def units_of(path: str) -> list[str]:
     """The units of a multi-unit gyrolab recording; ``[]`` for anything else (a foreign log
     is not an MCAP: its reader says what is wrong with it)."""
     try:
