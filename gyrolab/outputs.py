@@ -17,11 +17,13 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import json
+import math
 import os
 import shutil
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 from gyrolab.errors import InputError
 
@@ -180,3 +182,18 @@ def atomic_dir(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def json_safe(x: Any) -> Any:
+    """A JSON-safe copy of ``x``: numpy arrays and scalars become Python lists and numbers,
+    NaN and ±inf become ``None`` (JSON has neither), keys become strings. Every JSON
+    output of gyrolab (model directories, reports, fleet tables) goes through it."""
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if hasattr(x, "tolist") and not isinstance(x, (str, bytes)):  # numpy array or scalar
+        return json_safe(x.tolist())
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    return x

@@ -11,12 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import (
-    allan_deviation,
-    edf_greenhall,
-    noise_terms,
-    tau_grid,
-)
+from gyrolab.numerics.allan import allan_deviation
+from gyrolab.numerics.confidence import edf_greenhall
+from gyrolab.numerics.noise_terms import noise_terms
+from gyrolab.numerics.phase import tau_grid
 
 
 def _ocxo(shared_dir: Path) -> np.ndarray:

@@ -51,9 +51,6 @@ FORBIDDEN = {("sim", "acquisition"), ("sim", "instruments")}
 # Violations left in other helpers' areas (issue 13, worked on in parallel), by importer
 # module and imported name; the merge removes each entry with its fix.
 ALLOWED: set[tuple[str, str]] = {
-    # numerics helper: the Allan phase helpers used by the deviations
-    ("gyrolab.numerics.deviations", "gyrolab.numerics.allan._phase_detrended"),
-    ("gyrolab.numerics.deviations", "gyrolab.numerics.allan._phase_from_rate"),
 }
 
 

@@ -139,7 +139,7 @@ def test_demo_report_has_noise_per_temperature_plateau(demo_run: Path) -> None:
     step, with the figure against temperature."""
     from gyrolab.compensation.plateau_noise import plateau_noise
     from gyrolab.record.reader import read_recording
-    from gyrolab.report.build import fmt
+    from gyrolab.report.text import fmt
 
     html = (demo_run / "report" / "index.html").read_text(encoding="utf-8")
     assert 'id="tab-plateau-noise"' in html and 'id="fig-plateau-noise"' in html

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import edf_greenhall
+from gyrolab.numerics.confidence import edf_greenhall
 from gyrolab.numerics.deviations import KINDS, deviation, gap_filled
 
 PEER = {

@@ -6,30 +6,44 @@ import numpy as np
 import pytest
 from scipy.linalg import cholesky, solve_triangular, toeplitz
 
-from gyrolab.sim.discrepancy.allan import oadev
+from gyrolab.numerics.allan import allan_deviation
 from gyrolab.sim.discrepancy.data import from_arrays
 from gyrolab.sim.discrepancy.gls import CovWhitener, bin_noise_autocov, gls_ar, gls_cov
 from gyrolab.sim.discrepancy.noise_fit import fit_outliers, lattice_phase_hist
 
 
-def test_oadev_matches_stable32_reference(shared_dir):
+def test_fast_oadev_matches_stable32_reference(shared_dir):
+    """The discrepancy's Allan call (a τ subset, no confidence work) against Stable32."""
     ref = shared_dir / "ref" / "allan"
     f = np.loadtxt(ref / "ocxo_frequency.txt", comments="#")
     y = f / 1e7 - 1.0
     rows = np.loadtxt(ref / "stable32_oadev_alltau.txt", comments="#")
     m = rows[:, 0].astype(int)
     pick = np.isin(m, [1, 2, 4, 8, 16, 64, 256, 1024])
-    tau, ad = oadev(y, 1.0, m[pick])
+    res = allan_deviation(y, 1.0, taus=m[pick], confidence=None)
+    tau, ad = res.taus, res.adev
     assert np.allclose(tau, rows[pick, 1])
     np.testing.assert_allclose(ad, rows[pick, 5], rtol=2e-3)
 
 
-def test_oadev_white_noise_slope():
+def test_fast_oadev_white_noise_slope():
     rng = np.random.default_rng(1)
     x = rng.standard_normal(200_000) * 0.01
-    tau, ad = oadev(x, 0.01)
+    res = allan_deviation(x, 100.0, confidence=None)
+    tau, ad = res.taus, res.adev
     # white rate noise: σ(τ) = σ_x √(dt/τ)
     np.testing.assert_allclose(ad[:8], 0.01 * np.sqrt(0.01 / tau[:8]), rtol=0.05)
+
+
+def test_fast_oadev_of_a_noiseless_channel_is_zero():
+    """A noiseless simulated axis is valid input to the workflow: zeros, not an error."""
+    from gyrolab.errors import InputError
+
+    x = np.full(1000, -0.5)
+    res = allan_deviation(x, 20.0, taus=np.array([0.05, 0.1]), confidence=None, allow_constant=True)
+    assert np.array_equal(res.adev, [0.0, 0.0])
+    with pytest.raises(InputError, match="constant"):
+        allan_deviation(x, 20.0, confidence=None)
 
 
 def test_bin_autocov_reproduces_allan_model():

@@ -416,7 +416,8 @@ def test_c_export_other_kinds(unit: dict[str, Path], kind: str) -> None:
 
 
 def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
-    from gyrolab.numerics.allan import allan_deviation, noise_terms
+    from gyrolab.numerics.allan import allan_deviation
+    from gyrolab.numerics.noise_terms import noise_terms
 
     out = unit["dir"] / "imu.yaml"
     assert (

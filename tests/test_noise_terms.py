@@ -14,7 +14,8 @@ import pytest
 from test_allan import flicker_noise
 
 from gyrolab.compensation.metrics import signal_metrics
-from gyrolab.numerics.allan import FLICKER_FLOOR, allan_deviation, noise_terms
+from gyrolab.numerics.allan import allan_deviation
+from gyrolab.numerics.noise_terms import FLICKER_FLOOR, noise_terms
 
 
 def _record(n: int, fs: float, q: float, big_n: float, b: float, k: float, seed: int):

@@ -13,10 +13,11 @@ from contract import METRIC_KEYS
 from gyrolab.cli import main
 from gyrolab.record.writer import RecordingWriter
 from gyrolab.report import figures as F
-from gyrolab.report.build import build_report, fmt, hms
+from gyrolab.report.build import build_report
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.html import render
 from gyrolab.report.pdf import write_pdf
+from gyrolab.report.text import fmt, hms
 
 
 @pytest.fixture(scope="module")
@@ -176,7 +177,7 @@ def test_model_of_another_version_exits_2(
 def test_gpso_optimum_on_the_box_edge_is_flagged() -> None:
     from types import SimpleNamespace
 
-    from gyrolab.report.build import gpso_edge_note
+    from gyrolab.report.model_section import gpso_edge_note
 
     cfg = SimpleNamespace(k_range=(3, 11), alpha_range=(50.0, 5000.0))
     note = gpso_edge_note(SimpleNamespace(config=cfg, K=11, alpha=5000.0))

@@ -23,8 +23,9 @@ from test_acquire import _profile, _run_in_process
 from gyrolab.acquisition.simdir import MARKER, PREFIX, sweep_stale
 from gyrolab.cli import main
 from gyrolab.record.reader import read_recording
-from gyrolab.report.build import build_report, run_log_rows
+from gyrolab.report.build import build_report
 from gyrolab.report.outcome import run_outcome
+from gyrolab.report.record_sections import run_log_rows
 
 ENV = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from gyrolab.acquisition.bench_config import BenchConfig, Limits, bench_from_dict, load_bench
-from gyrolab.acquisition.runner import (
+from gyrolab.errors import InputError
+from gyrolab.profiles.plan import (
     Event,
     Log,
     ProfilePlan,
@@ -17,7 +18,6 @@ from gyrolab.acquisition.runner import (
     check_profile_limits,
     slope_c_per_min,
 )
-from gyrolab.errors import InputError
 from gyrolab.profiles.profile import Profile, Step, load_profile
 
 REPO = Path(__file__).resolve().parents[1]

@@ -367,7 +367,7 @@ def _check_units(cfg: BenchConfig) -> None:
 def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str) -> None:
     """Refuse (before any I/O) a profile the bench's PT100 watchdog would abort: every
     setpoint must lie at least ``PT100_MARGIN_C`` inside ``[pt100_min_c, pt100_max_c]``.
-    (Setpoints against ``setpoint_min_c..setpoint_max_c``: ``runner.check_profile_limits``.)
+    (Setpoints against ``setpoint_min_c..setpoint_max_c``: ``profiles.plan.check_profile_limits``.)
     """
     lim = cfg.limits
     lo, hi = lim.pt100_min_c + PT100_MARGIN_C, lim.pt100_max_c - PT100_MARGIN_C

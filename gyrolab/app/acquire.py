@@ -35,7 +35,6 @@ from gyrolab.acquisition.runner import (
     RunResult,
     Status,
     UnitDevices,
-    check_profile_limits,
 )
 from gyrolab.app.sim_bench import SimHandle, sim_bench_config, sim_drivers, start_sim_bench
 from gyrolab.clock import Clock, WallClock
@@ -43,6 +42,7 @@ from gyrolab.errors import GyrolabError, InputError
 from gyrolab.instruments import registry
 from gyrolab.instruments.roles import Chamber, MultiThermometer, RateStream, Thermometer
 from gyrolab.outputs import check_output
+from gyrolab.profiles.plan import check_profile_limits
 from gyrolab.profiles.profile import Profile, load_profile
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
 from gyrolab.record.writer import RecordingWriter

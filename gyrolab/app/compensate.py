@@ -15,19 +15,11 @@ from pathlib import Path
 
 from gyrolab.batch import BatchOptions, Item, run_items
 from gyrolab.compensation import commands
+from gyrolab.compensation.commands import units_of
 from gyrolab.compensation.config import PipelineConfig, resolve_config
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.record.reader import list_units
-
-
-def units_of(path: str) -> list[str]:
-    """The units of a multi-unit gyrolab recording; ``[]`` for anything else (a foreign log
-    is not an MCAP: its reader says what is wrong with it)."""
-    try:
-        return list_units(path)
-    except InputError:
-        return []
 
 
 def compensate(args: argparse.Namespace) -> int:

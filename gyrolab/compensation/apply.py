@@ -44,7 +44,8 @@ class Application:
     """A model applied to one run, at 1000 points/h (``series``) plus diagnostics."""
 
     t: np.ndarray
-    series: dict[str, np.ndarray]  # raw, compensated, compensated_drift_only, baselines.*
+    # raw, compensated, compensated_drift_only, baselines.*; evaluate adds stream.<which>
+    series: dict[str, np.ndarray]
     decomposition: Decomposition
     flp_info: dict[str, Any]
     bandwidth: dict[str, float]

@@ -52,6 +52,7 @@ from gyrolab.compensation.guards import check_not_calibration, range_check, warn
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, load_model, save_model, write_json
 from gyrolab.compensation.oracle import add_oracle
 from gyrolab.compensation.prepare import PreparedRun, prepare_file
+from gyrolab.compensation.results import keep_oracle, run_results, save_results
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
 from gyrolab.record.blocks import decode_block, encode_block
@@ -144,19 +145,19 @@ def compensate(args: argparse.Namespace) -> int:
         getattr(args, "seed", None),
     )
     unit_arg = getattr(args, "unit", None)
-    if unit_arg is None and _units(args.run):
+    if unit_arg is None and units_of(args.run):
         # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
         # this layer: it runs this handler once per unit through gyrolab.batch)
         raise InputError(
-            args.run, f"holds units {', '.join(_units(args.run))}: choose one with --unit"
+            args.run, f"holds units {', '.join(units_of(args.run))}: choose one with --unit"
         )
     from gyrolab.logs import log_options
 
     opts = log_options(args)
-    unit = select_unit(args.run, unit_arg) if unit_arg is not None or _units(args.run) else None
+    unit = select_unit(args.run, unit_arg) if unit_arg is not None or units_of(args.run) else None
     vunit = None
     if args.validate and unit is not None:  # the same unit of a multi-unit held-out run
-        vunit = select_unit(args.validate, unit if _units(args.validate) else None)
+        vunit = select_unit(args.validate, unit if units_of(args.validate) else None)
     if unit is not None:  # one unit of a multi-unit recording (single-axis units)
         runs = [prepare_file(args.run, cfg, unit=unit)]
     else:
@@ -177,7 +178,7 @@ def compensate(args: argparse.Namespace) -> int:
         t_axis = time.perf_counter()
         fitted.append(_fit_axis(args, cfg, run, None if vals is None else vals[k], seed))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
-        model, metrics, metrics_cal = fitted[-1]
+        model, metrics, metrics_cal, _results = fitted[-1]
         metrics["timing_s"] = total
         metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
         model.timing_s = metrics["timing_breakdown_s"]
@@ -188,10 +189,11 @@ def compensate(args: argparse.Namespace) -> int:
                 metrics["unit"] = unit if vals is None else vunit
     if len(runs) == 1:
         # the floor beside the headline, where the truth is known (gyrolab simulate runs)
-        _model, metrics, metrics_cal = fitted[0]
-        add_oracle(metrics, args.validate or args.run, cfg.block_s, vunit if vals else unit)
+        _model, metrics, metrics_cal, results = fitted[0]
+        ob = add_oracle(metrics, args.validate or args.run, cfg.block_s, vunit if vals else unit)
+        keep_oracle(results[-1], ob)
         if vals is not None:
-            add_oracle(metrics_cal, args.run, cfg.block_s, unit)
+            keep_oracle(results[0], add_oracle(metrics_cal, args.run, cfg.block_s, unit))
     with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
         if len(runs) == 1:
             _write_axis(Path(tmp), *fitted[0])
@@ -201,7 +203,7 @@ def compensate(args: argparse.Namespace) -> int:
                 sub.mkdir()
                 _write_axis(sub, *f)
             write_head(Path(tmp), len(runs), [f[1] for f in fitted])
-    for k, (_model, metrics, metrics_cal) in enumerate(fitted):
+    for k, (_model, metrics, metrics_cal, _res) in enumerate(fitted):
         if len(runs) > 1:
             print(f"axis {'xyz'[k]}:")
         print(_summary(metrics))
@@ -219,32 +221,40 @@ def _fit_axis(
     val: PreparedRun | None,
     seed: int = 0,
 ) -> tuple[Any, ...]:
-    """Fit one axis; its metrics (held-out when ``val``) with the firmware cubic's cost."""
+    """Fit one axis → ``(model, metrics, calibration metrics, results)``: the metrics
+    (held-out when ``val``) with the firmware cubic's cost, and what the report reads of
+    each evaluated run (:mod:`gyrolab.compensation.results`)."""
     with _named(run.path):
         model, dec = fit(run, cfg, seed=seed)
         app = compensate_offline(model, run, dec)
         metrics_cal = evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
         metrics_cal["firmware_poly3"] = poly3_metrics(p3, run, cfg.block_s, metrics_cal)
+        results = [run_results("calibration", model, app, run, held_out=False)]
     if val is not None:
         with _named(val.path):
-            metrics = evaluate(model, compensate_offline(model, val), val, held_out=True)
+            app_val = compensate_offline(model, val)
+            metrics = evaluate(model, app_val, val, held_out=True)
             metrics["firmware_poly3"] = poly3_metrics(p3, val, cfg.block_s, metrics)
+            results.append(run_results("validation", model, app_val, val, held_out=True))
         metrics["calibration"] = metrics_cal
         warn_outside(args.validate, metrics.get("temperature", {}))
     else:
         metrics = metrics_cal
     model.firmware_poly3 = p3  # type: ignore[attr-defined]
-    return model, metrics, metrics_cal
+    return model, metrics, metrics_cal, results
 
 
-def _write_axis(directory: Path, model: Any, metrics: dict[str, Any], _cal: Any) -> None:
+def _write_axis(
+    directory: Path, model: Any, metrics: dict[str, Any], _cal: Any, results: list[Any]
+) -> None:
     save_model(model, str(directory))
     write_json(directory / "metrics.json", metrics)
     write_json(directory / FIRMWARE_JSON, {"poly3": model.firmware_poly3.to_dict()})
+    save_results(directory, results)
 
 
-def _units(path: str) -> list[str]:
+def units_of(path: str) -> list[str]:
     """The units of a multi-unit gyrolab recording; ``[]`` for anything else (a foreign log
     is not an MCAP: its reader says what is wrong with it)."""
     try:

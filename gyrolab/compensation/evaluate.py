@@ -20,8 +20,9 @@ from gyrolab.compensation.fit import CompensationModel
 from gyrolab.compensation.guards import range_check
 from gyrolab.compensation.metrics import signal_metrics
 from gyrolab.compensation.prepare import PreparedRun
-from gyrolab.numerics.allan import allan_deviation, noise_terms
+from gyrolab.numerics.allan import allan_deviation
 from gyrolab.numerics.averaging import block_means
+from gyrolab.numerics.noise_terms import noise_terms
 
 DRIFT_PP_WINDOW_S = 100.0  # s; issue 11: p-p of 3.6 s averages is set by white noise
 
@@ -46,7 +47,7 @@ def series_metrics(x: np.ndarray, block_s: float) -> dict[str, float]:
 def series_noise_terms(x: np.ndarray, block_s: float) -> dict[str, Any]:
     """The IEEE 952 terms (Q, N, B, K, R) the Allan curve of a ``block_s`` series
     identifies — τ ≤ T/10 and slopes supported by the 1σ confidence intervals, B only at a
-    floor (:func:`gyrolab.numerics.allan.noise_terms`) — with the τ range of each and a
+    floor (:func:`gyrolab.numerics.noise_terms.noise_terms`) — with the τ range of each and a
     reason for each term that is not identifiable (``None``)."""
     return noise_terms(allan_deviation(x, 1.0 / block_s, taus="octave")).to_dict()
 
@@ -60,7 +61,13 @@ def evaluate(
     for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):
         m[key] = series_metrics(app.series[key], bs)
     whiches = ("gabp", "causal") if model.causal is not None else ("gabp",)
-    streams = streaming_block_means_many(model, run, whiches)
+    # kept in the application (``stream.<which>``): the report's figures plot them
+    # (gyrolab.compensation.results), and a second evaluate does not stream the file again
+    todo = tuple(w for w in whiches if f"stream.{w}" not in app.series)
+    if todo:
+        new = streaming_block_means_many(model, run, todo)
+        app.series.update({f"stream.{w}": s for w, s in new.items()})
+    streams = {w: app.series[f"stream.{w}"] for w in whiches}
     m["compensated_streaming"] = series_metrics(streams["gabp"], bs)
     if model.causal is not None:
         causal_series = streams["causal"]

@@ -31,8 +31,9 @@ from __future__ import annotations
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import AllanResult, allan_deviation, noise_terms
+from gyrolab.numerics.allan import AllanResult, allan_deviation
 from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means
+from gyrolab.numerics.noise_terms import noise_terms
 
 __all__ = ["METRIC_KEYS", "signal_metrics"]
 

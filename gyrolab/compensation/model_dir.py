@@ -43,6 +43,7 @@ from gyrolab.compensation.flp import ForwardLinearPredictor
 from gyrolab.compensation.gabp import MLPDriftModel
 from gyrolab.compensation.guards import check_finite
 from gyrolab.errors import InputError
+from gyrolab.outputs import json_safe
 
 MODEL_FORMAT = "gyrolab.compensation-model"
 MODEL_FORMAT_VERSION = 1
@@ -50,26 +51,8 @@ MODEL_JSON = "model.json"
 ARRAYS_NPZ = "arrays.npz"
 
 
-def _jsonable(x: Any) -> Any:
-    """numpy scalars/arrays → plain JSON types (NaN/inf become null: JSON has none)."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if np.isfinite(v) else None
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    return x
-
-
 def write_json(path: str | os.PathLike[str], obj: Any) -> None:
-    Path(path).write_text(json.dumps(_jsonable(obj), indent=2, sort_keys=False) + "\n")
+    Path(path).write_text(json.dumps(json_safe(obj), indent=2, sort_keys=False) + "\n")
 
 
 def save_model_dir(

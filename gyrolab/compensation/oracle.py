@@ -97,20 +97,22 @@ def oracle_block_means(rec: Any, block_s: float) -> np.ndarray | None:
     return block_average(rec.rate.t, o, block_s, rec.rate.period)[1]
 
 
-def add_oracle(metrics: dict[str, Any], path: str, block_s: float, unit: str | None = None) -> bool:
+def add_oracle(
+    metrics: dict[str, Any], path: str, block_s: float, unit: str | None = None
+) -> np.ndarray | None:
     """Add ``oracle`` (the five metrics) and its 100 s p-p to ``metrics`` when ``path`` is
-    a ``gyrolab simulate`` recording; return whether it was added."""
+    a ``gyrolab simulate`` recording; return the oracle's block means (``None``: none)."""
     try:
         rec = read_recording(path, topics=[TOPIC_RATE, TOPIC_EVENT], unit=unit)
     except InputError:  # a user's log (ROS bag, DataFlash, …): no simulation truth
-        return False
+        return None
     ob = oracle_block_means(rec, block_s)
     if ob is None:
-        return False
+        return None
     n = int(metrics.get("n_points", ob.size))
     ob = ob[:n]
     metrics["oracle"] = series_metrics(ob, block_s)
     metrics.setdefault("drift_pp_100s_deg_per_s", {}).update(
         drift_pp_table({"oracle": ob}, block_s)
     )
-    return True
+    return ob

@@ -8,7 +8,7 @@ within ``tol_c`` of its final value (the median of the step's last tenth): the g
 settled, so the segment is a static test at one temperature. On the segment's rate samples
 (gaps stay gaps: NaN, :func:`~gyrolab.numerics.deviations.gap_filled`) the overlapping
 Allan deviation (:func:`~gyrolab.numerics.deviations.deviation`) and the slope-rule
-noise terms (:func:`~gyrolab.numerics.allan.noise_terms`) give N and B, with B's
+noise terms (:func:`~gyrolab.numerics.noise_terms.noise_terms`) give N and B, with B's
 one-sigma interval from the curve's bounds at the tau of the minimum.
 """
 
@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyrolab.numerics.allan import FLICKER_FLOOR, AllanResult, noise_terms
+from gyrolab.numerics.allan import AllanResult
 from gyrolab.numerics.deviations import DeviationResult, deviation, gap_filled
+from gyrolab.numerics.noise_terms import FLICKER_FLOOR, noise_terms
 from gyrolab.record.reader import Recording
 
 __all__ = ["Plateau", "as_allan_result", "plateau_noise", "soaked_segments"]

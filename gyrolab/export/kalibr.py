@@ -11,7 +11,7 @@ continuous-time densities:
 * ``update_rate`` [Hz] — the rate of the IMU messages (kalibr makes the discrete-time
   σ_d = σ·√rate itself).
 
-gyrolab's terms are in °/s (:func:`gyrolab.numerics.allan.noise_terms`), so both are
+gyrolab's terms are in °/s (:func:`gyrolab.numerics.noise_terms.noise_terms`), so both are
 multiplied by π/180 and nothing else. The Allan curve is that of the run's causal,
 full-rate compensated output (the temperature model applied, so the thermal drift is not
 mistaken for random walk); kalibr has one value for all axes, the largest axis is written
@@ -36,7 +36,8 @@ DEG2RAD = math.pi / 180.0
 
 def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
     """Allan deviation of ``y_dps`` and the N, K terms in kalibr's units (with provenance)."""
-    from gyrolab.numerics.allan import allan_deviation, noise_terms
+    from gyrolab.numerics.allan import allan_deviation
+    from gyrolab.numerics.noise_terms import noise_terms
 
     res = allan_deviation(np.asarray(y_dps, dtype=float), rate_hz, taus="octave", confidence=None)
     slope = noise_terms(res, method="slope")

@@ -1,7 +1,7 @@
 """The time-and-frequency family beside the Allan deviation: MDEV, TDEV, HDEV, TOTDEV.
 
 All estimators work on the phase (angle) ``x_k = tau0 * sum_{i<k} y_i`` of rate data ``y``
-(built once by :mod:`gyrolab.numerics.allan`'s compensated cumulative sum), ``N`` phase
+(built once by :mod:`gyrolab.numerics.phase`'s compensated cumulative sum), ``N`` phase
 points, ``tau = m * tau0`` (NIST SP 1065, W. J. Riley, "Handbook of Frequency Stability
 Analysis", 2008; equation numbers below are SP 1065's)::
 
@@ -33,7 +33,7 @@ SP 1065 table 7, ``edf = b T/tau - c`` for alpha = 0, -1, -2 (white, flicker, ra
 rate), and the OADEV EDF for alpha = 1, 2 (phase noise, where TOTDEV ~ OADEV); bounds
 ``s sqrt(edf / chi2_{1-p}(edf))``, ``s sqrt(edf / chi2_p(edf))`` (SP 1065 eq. 45). The noise
 type alpha at each tau comes from the lag-1 autocorrelation of the tau-averaged rate
-(:func:`~gyrolab.numerics.allan.noise_id_lag1`), averages that touch a gap left out;
+(:func:`~gyrolab.numerics.confidence.noise_id_lag1`), averages that touch a gap left out;
 with gaps, ``N`` in the EDF is the number of samples present plus one (an approximation).
 """
 
@@ -45,18 +45,10 @@ from typing import Literal
 
 import numba
 import numpy as np
-from scipy import stats
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import (
-    NOISE_ID_MAX_POINTS,
-    ONE_SIGMA,
-    _phase_detrended,
-    _phase_from_rate,
-    edf_greenhall,
-    noise_id_lag1,
-    tau_grid,
-)
+from gyrolab.numerics.confidence import ONE_SIGMA, confidence_bounds, edf_greenhall
+from gyrolab.numerics.phase import phase_detrended, phase_from_rate, tau_grid
 
 __all__ = ["KINDS", "DeviationResult", "deviation", "gap_filled"]
 
@@ -222,11 +214,11 @@ def _phase_and_mask(
             filled = filled - np.where(bad_pts, 0.0, filled).sum() / (arr.size - missing)
             filled[bad_pts] = 0.0
         phase = np.empty(arr.size + 1)
-        _phase_from_rate(np.ascontiguousarray(filled), 1.0, phase)
+        phase_from_rate(np.ascontiguousarray(filled), 1.0, phase)
         bad_units = bad_pts
     elif data_type in ("angle", "phase"):
         phase = np.empty(arr.size)
-        _phase_detrended(np.ascontiguousarray(filled), phase)
+        phase_detrended(np.ascontiguousarray(filled), phase)
         phase /= tau0  # angle in rate-unit x samples, as the rate branch builds it
         bad_units = bad_pts[:-1] | bad_pts[1:]
     else:
@@ -347,31 +339,18 @@ def deviation(
     if not np.any(dev > 0):
         raise InputError(None, "constant series: the deviation is zero at every tau")
 
-    edf = np.full(ms.size, np.nan)
-    alphas = np.full(ms.size, np.nan)
-    lo = np.full(ms.size, np.nan)
-    hi = np.full(ms.size, np.nan)
+    edf, alphas, lo, hi = (np.full(ms.size, np.nan) for _ in range(4))
     if confidence is not None:
         n_eff = n_phase - missing
-        last = 0 if alpha is None else int(alpha)
-        p = (1.0 - confidence) / 2.0
-        for k, m in enumerate(ms):
-            m = int(m)
-            if alpha is None:
-                # tau-averaged rate from strided views of the phase: no n-sized temporaries
-                nb = min((n_phase - 1) // m, (4 if gaps else 1) * NOISE_ID_MAX_POINTS)
-                ybar = np.diff(phase[: nb * m + 1 : m])
-                if gaps:
-                    cbs = cb[: nb * m + 1 : m]
-                    ybar = ybar[cbs[1:] == cbs[:-1]][:NOISE_ID_MAX_POINTS]
-                if ybar.size >= 30:
-                    last, _ = noise_id_lag1(ybar)
-            alphas[k] = last
-            e = _edf(kind, last, m, n_eff)
-            edf[k] = e
-            if np.isfinite(e) and e > 0 and np.isfinite(dev[k]):
-                lo[k] = dev[k] * math.sqrt(e / stats.chi2.ppf(1.0 - p, e))
-                hi[k] = dev[k] * math.sqrt(e / stats.chi2.ppf(p, e))
+        edf, alphas, lo, hi = confidence_bounds(
+            phase,
+            ms,
+            dev,
+            lambda a, m: _edf(kind, a, m, n_eff),
+            confidence,
+            alpha,
+            cb if gaps else None,
+        )
     return DeviationResult(
         kind=kind,
         taus=taus_s,

@@ -14,18 +14,23 @@ from pathlib import Path
 from typing import Any
 
 from gyrolab.record.format import AXIS_NAMES
+from gyrolab.record.reader import Recording
 from gyrolab.report.document import Document
 
 
-def n_axes(run: str | Path, model: str | Path | None, log_options: dict | None = None) -> int:
-    """Axes of the report: those of the model directory, else those of the run."""
+def n_axes(
+    run: str | Path, model: str | Path | None, log_options: dict | None = None
+) -> tuple[int, Recording | None]:
+    """Axes of the report: those of the model directory, else those of the run (then the
+    recording, read to count them, is returned too, so that it is read once)."""
     if model is not None:
         from gyrolab.compensation.axes import axis_dirs
 
-        return len(axis_dirs(model))
-    from gyrolab.report.build import read_run
+        return len(axis_dirs(model)), None
+    from gyrolab.report.data import read_run
 
-    return read_run(run, log_options).axes
+    rec = read_run(run, log_options)
+    return rec.axes, rec
 
 
 def build_axes_report(
@@ -34,15 +39,20 @@ def build_axes_report(
     n: int,
     step: Any,
     log_options: dict | None = None,
+    rec: Recording | None = None,
     **kw: Any,
 ) -> tuple[Document, dict[str, Any]]:
-    """One document with every axis's report (module docstring); ``kw`` go to every
-    :func:`~gyrolab.report.build.build_report` (spec, operator, serial)."""
+    """One document with every axis's report (module docstring); ``rec``: the recording
+    already read; ``kw`` go to every :func:`~gyrolab.report.build.build_report` (spec,
+    operator, serial)."""
     from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.report.build import build_report, read_run
+    from gyrolab.report.build import build_report
+    from gyrolab.report.data import read_run
 
     t0 = time.perf_counter()
-    have = read_run(run, log_options).axes
+    if rec is None:  # read once: every axis's report uses it
+        rec = read_run(run, log_options)
+    have = rec.axes
     if have != n:
         raise_mismatch(run, have, n)
     dirs = [d for _a, d in axis_dirs(model)] if model is not None else [None] * n
@@ -50,7 +60,7 @@ def build_axes_report(
     metrics: dict[str, Any] = {"axes": {}}
     for k in range(n):
         name = AXIS_NAMES[k]
-        d, m = build_report(run, dirs[k], step, axis=k, log_options=log_options, **kw)
+        d, m = build_report(run, dirs[k], step, axis=k, log_options=log_options, rec=rec, **kw)
         metrics["axes"][name] = m
         for sec in d.sections:
             sec.key = f"{name}-{sec.key}"

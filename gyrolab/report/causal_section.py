@@ -1,11 +1,12 @@
 """The report's headline section: the causal full-bandwidth output, the baselines and the
 paper's offline method beside it, and the oracle where the truth is known.
 
-Self-contained (one function called by :func:`gyrolab.report.build.build_report`): it
-adds ``oracle`` to the metrics when the recording is a ``gyrolab simulate`` output
-(:mod:`gyrolab.compensation.oracle`) and returns one :class:`Section` with a table and a
-figure. Every column is measured on the same averages (3.6 s, and 100 s for the drift
-peak-to-peak), so no method gets a low-pass the others do not.
+Laid out from a :class:`~gyrolab.report.analysis.ModelRun` (called by
+:func:`gyrolab.report.layout.document`): the series are those ``gyrolab compensate`` kept
+(or the report computed, :mod:`gyrolab.report.analysis`), the oracle's among them for a
+``gyrolab simulate`` output (:mod:`gyrolab.compensation.oracle`). One :class:`Section`
+with a table and a figure. Every column is measured on the same averages (3.6 s, and
+100 s for the drift peak-to-peak), so no method gets a low-pass the others do not.
 """
 
 from __future__ import annotations
@@ -13,11 +14,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
-from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means
 from gyrolab.report import figures as F
+from gyrolab.report.analysis import ModelRun
 from gyrolab.report.document import FigureBlock, Section, TableBlock, TextBlock
+from gyrolab.report.text import dotted
 
 ORACLE_COLOR = "#000000"
 OFFLINE_COLOR = "#ff7f0e"
@@ -30,60 +31,22 @@ def _fmt(x: Any) -> str:
     return f"{x:.4g}"
 
 
-def headline_figure(t: np.ndarray, series: list[tuple[str, np.ndarray, str]]) -> Figure:
-    """Raw output (top) and the residual of every method (bottom), all as 100 s averages."""
-    from gyrolab.compensation.evaluate import DRIFT_PP_WINDOW_S
-
-    fig = Figure(figsize=(9.0, 5.0), layout="constrained")
-    top, bot = fig.subplots(2, 1, sharex=True, height_ratios=[1, 1.4])
-
-    def means(x: np.ndarray) -> np.ndarray:  # of the 3.6 s series: 28 blocks, 100.8 s
-        return block_means(np.asarray(x[: t.size], float), 1.0 / PAPER_BLOCK_S, DRIFT_PP_WINDOW_S)
-
-    th = means(t) / 3600.0
-    for label, x, color in series:
-        xm = means(x)
-        ax = top if label == "raw" else bot
-        lw = 1.2 if label.startswith("causal") else 0.8
-        ax.plot(th, xm, color=color, lw=lw, label=label)
-    top.set_ylabel("raw (°/s)")
-    bot.set_ylabel("compensated (°/s)")
-    bot.set_xlabel("time since power-on (h)")
-    for ax in (top, bot):
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
-    top.set_title("100 s averages: the causal headline, the baselines, the oracle")
-    return fig
-
-
-def causal_headline_section(
-    metrics: dict[str, Any], model: Any, app: Any, run: Any, rec: Any
-) -> Section | None:
+def causal_headline_section(mr: ModelRun) -> Section | None:
     """The headline section (module docstring); ``None`` for a model without a causal
     part (a model directory written before it existed)."""
-    from gyrolab.compensation.apply import streaming_block_means
-    from gyrolab.compensation.evaluate import drift_pp_table, series_metrics
-    from gyrolab.compensation.oracle import oracle_block_means
-
-    if getattr(model, "causal", None) is None or "causal" not in metrics:
+    metrics, res = mr.metrics, mr.results
+    if getattr(mr.model, "causal", None) is None or "causal" not in metrics:
         return None
-    bs = model.config.block_s
-    n = run.t.size
-    causal = streaming_block_means(model, run, "causal")[:n]
-    oracle = oracle_block_means(rec, bs)
-    series: list[tuple[str, np.ndarray, str]] = [("raw", app.series["raw"], F.RAW_COLOR)]
+    n = res.t.size
+    oracle = res.series.get("oracle")
+    series: list[tuple[str, Any, str]] = [("raw", res.series["raw"], F.RAW_COLOR)]
     if oracle is not None:
-        oracle = oracle[:n]
-        metrics["oracle"] = series_metrics(oracle, bs)
-        metrics.setdefault("drift_pp_100s_deg_per_s", {}).update(
-            drift_pp_table({"oracle": oracle}, bs)
-        )
         series.append(("oracle (true drift removed)", oracle, ORACLE_COLOR))
     fam = metrics["causal_model"]["family"]
     series += [
-        (f"causal headline ({fam})", causal, F.COMP_COLOR),
-        ("baseline: poly(T), causal", app.series.get("baselines.poly"), POLY_COLOR),
-        ("paper's method, offline", app.series["compensated"], OFFLINE_COLOR),
+        (f"causal headline ({fam})", res.series.get("causal"), F.COMP_COLOR),
+        ("baseline: poly(T), causal", res.series.get("baselines.poly"), POLY_COLOR),
+        ("paper's method, offline", res.series["compensated"], OFFLINE_COLOR),
     ]
     series = [s for s in series if s[1] is not None]
 
@@ -104,10 +67,7 @@ def causal_headline_section(
     ]
 
     def get(path: str) -> dict[str, Any]:
-        d: Any = metrics
-        for p in path.split("."):
-            d = d.get(p, {}) if isinstance(d, dict) else {}
-        return d if isinstance(d, dict) else {}
+        return dotted(metrics, path)
 
     pp = metrics.get("drift_pp_100s_deg_per_s", {})
     rows = [
@@ -150,7 +110,12 @@ def causal_headline_section(
         FigureBlock(
             "causal-headline",
             "Causal headline against the baselines",
-            headline_figure(run.t[:n], [(a, np.asarray(b)[:n], c) for a, b, c in series]),
+            F.causal_headline(
+                res.t[:n],
+                [(a, np.asarray(b)[:n], c) for a, b, c in series],
+                res.block_s,
+                float(metrics["headline"]["drift_pp_window_s"]),
+            ),
             "100 s averages of the raw output (top) and of each compensated output (bottom).",
         )
     )

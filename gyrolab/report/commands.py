@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -66,15 +67,17 @@ def write_report(
         if bar.n < len(stages) - 1:
             bar.update(1)
 
+    t0 = time.perf_counter()
     try:
         from gyrolab.report.axes import build_axes_report, n_axes
 
-        n = 1 if unit is not None else n_axes(run, model, log_options)
+        n, rec = (1, None) if unit is not None else n_axes(run, model, log_options)
         kw = {"spec": spec, "operator": operator, "serial": serial, "log_options": log_options}
         if n > 1:
-            doc, metrics = build_axes_report(run, model, n, step, **kw)
+            doc, metrics = build_axes_report(run, model, n, step, rec=rec, **kw)
         else:
-            doc, metrics = build_report(run, model, step=step, unit=unit, **kw)
+            doc, metrics = build_report(run, model, step=step, unit=unit, rec=rec, **kw)
+        metrics["timing_s"] = time.perf_counter() - t0  # the recording's read included
         step("write")
         with atomic_dir(out, force, command="report", inputs=(run, model, spec)) as tmp:
             (tmp / "index.html").write_text(render(doc), encoding="utf-8")

@@ -382,3 +382,59 @@ def allan(curves: Sequence[AllanCurve]) -> Figure:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7, loc="best")
     return fig
+
+
+def causal_headline(
+    t: np.ndarray,
+    series: Sequence[tuple[str, np.ndarray, str]],
+    block_s: float,
+    window_s: float,
+) -> Figure:
+    """Raw output (top) and the residual of every method (bottom), all as ``window_s``
+    averages (whole blocks) of the ``block_s`` series ``(label, values, colour)`` at ``t``."""
+    from gyrolab.numerics.averaging import block_means
+
+    def means(x: np.ndarray) -> np.ndarray:
+        return block_means(np.asarray(x[: t.size], float), 1.0 / block_s, window_s)
+
+    fig = _figure(9.0, 5.0)
+    top, bot = fig.subplots(2, 1, sharex=True, height_ratios=[1, 1.4])
+    th = _hours(means(t))
+    for label, x, color in series:
+        xm = means(x)
+        ax = top if label == "raw" else bot
+        lw = 1.2 if label.startswith("causal") else 0.8
+        ax.plot(th, xm, color=color, lw=lw, label=label)
+    top.set_ylabel("raw (°/s)")
+    bot.set_ylabel("compensated (°/s)")
+    bot.set_xlabel("time since power-on (h)")
+    for ax in (top, bot):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="best")
+    top.set_title("100 s averages: the causal headline, the baselines, the oracle")
+    return fig
+
+
+def plateau_noise(
+    temp_c: np.ndarray,
+    arw: np.ndarray,
+    bi: np.ndarray,
+    bi_lo: np.ndarray,
+    bi_hi: np.ndarray,
+) -> Figure:
+    """ARW (°/√h) and bias instability (°/h, bars: its interval) of each soaked step
+    against the step's mean PT100 temperature (°C)."""
+    fig = _figure(8.0, 3.2)
+    ax1, ax2 = fig.subplots(1, 2)
+    ax1.plot(temp_c, arw, "o", color="#1f77b4")
+    ax1.set_xlabel("PT100 (°C)")
+    ax1.set_ylabel("ARW (°/√h)")
+    ax1.set_ylim(bottom=0.0)  # the spread read against the level, not magnified
+    b = np.asarray(bi, dtype=float)
+    err = np.array([b - np.asarray(bi_lo, float), np.asarray(bi_hi, float) - b])
+    ax2.errorbar(temp_c, b, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", color="#d62728")
+    ax2.set_xlabel("PT100 (°C)")
+    ax2.set_ylabel("bias instability (°/h)")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+    return fig

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.outputs import atomic_dir, check_output
+from gyrolab.outputs import atomic_dir, check_output, json_safe
 
 MIN_UNITS_FOR_OUTLIERS = 5
 Z_LIMIT = 3.5
@@ -487,16 +487,6 @@ def build(rows: list[UnitRow], res: dict[str, Any]):  # type: ignore[no-untyped-
     return doc
 
 
-def _json_safe(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_json_safe(v) for v in x]
-    return x
-
-
 def write_fleet(
     paths: list[str], out: str | Path, spec: str | None = None, force: bool = False
 ) -> dict[str, Any]:
@@ -520,7 +510,7 @@ def write_fleet(
         )
         (tmp / "index.html").write_text(render(build(rows, res)), encoding="utf-8")
         doc = {**res, "units": units, "files": ["index.html", "fleet.json", *files]}
-        (tmp / "fleet.json").write_text(json.dumps(_json_safe(doc), indent=1) + "\n")
+        (tmp / "fleet.json").write_text(json.dumps(json_safe(doc), indent=1) + "\n")
     return doc
 
 

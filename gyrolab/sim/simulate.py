@@ -1,7 +1,8 @@
 """``gyrolab simulate``: run a profile through :class:`~gyrolab.sim.physics.Physics` to MCAP.
 
 A loop over :meth:`Physics.advance` in 1 s blocks (aligned to whole seconds since power-on),
-split where the profile changes the setpoint. Per block it writes ``/gyro/adc`` (the codes)
+cut where the profile plan (:class:`~gyrolab.profiles.plan.ProfilePlan`, the interpreter
+``acquire`` runs) changes the setpoint. Per block it writes ``/gyro/adc`` (the codes)
 and ``/gyro/rate`` (the codes converted back exactly as a bench converts them), and at 1 Hz
 ``/temperature/pt100`` (DMM reading and its IEC 60751 inverse) and ``/oven/state``. Memory
 is one block plus the flicker generator's chunk, whatever the run's length.
@@ -14,19 +15,19 @@ from __future__ import annotations
 
 import datetime as dt
 import os
-from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import IO, Any
 
 import numpy as np
 
+from gyrolab.profiles.plan import Action, Event, Log, ProfilePlan, SetSetpoint
 from gyrolab.profiles.profile import Profile
 from gyrolab.progress import progress
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
 from gyrolab.record.writer import RecordingWriter
-from gyrolab.sim.bench.dmm_scpi import IDN as DMM_IDN
 from gyrolab.sim.family import Unit
+from gyrolab.sim.identities import AGILENT_34401A_IDN, WATLOW_F4
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.physics import Physics
 from gyrolab.sim.sensors import AdcModel, cvd_temperature
@@ -92,13 +93,13 @@ def bench_metadata(model: SimModel, rate_hz: float) -> BenchMetadata:
         multimeter={
             "driver": SIM_DRIVER,
             "model": "34401A",
-            "idn": DMM_IDN,
+            "idn": AGILENT_34401A_IDN,
             "r0_ohm": 100.0,
             "wiring": "4-wire",
             "standard": "IEC 60751",
             "on": "case",
         },
-        oven={"driver": SIM_DRIVER, "model": "Watlow F4 (simulated)"},
+        oven={"driver": SIM_DRIVER, "model": WATLOW_F4},
         adc=adc_metadata(model.sensors.adc, rate_hz),
     )
 
@@ -126,9 +127,11 @@ def simulate_run(
 ) -> SimSummary:
     """Simulate ``profile`` with ``model`` and write the recording to ``out``.
 
-    Steps with a stability rule are held past their minimum duration until the PT100 slope
-    over ``stable_window_s`` is below ``stable_slope_c_per_min`` (checked once a second),
-    or ``max_extra_s`` has passed.
+    The profile is stepped by :class:`~gyrolab.profiles.plan.ProfilePlan`, the interpreter
+    ``acquire`` runs: fed the PT100 reading (the DMM's, of the first unit) once per 1 s
+    block and asked again where a step's minimum duration or ``max_extra_s`` runs out (the
+    block is cut there), so a step ends when ``acquire`` would end it on the same
+    temperature trace; the plan's events and logs are written as ``acquire`` writes them.
 
     ``axis_models`` makes a 2- or 3-axis unit: ``model`` is axis x, the others y (and z),
     each with its own effects and parameters on the same case (:func:`axis_physics`).
@@ -192,23 +195,30 @@ def simulate_run(
                 "sim_provenance_axes",
                 {"axes": 1 + len(extra), "models_toml": [m.to_toml() for m in axis_models]},
             )
-        w.write_event(0.0, "run_started", -1, detail=f"profile {profile.name}")
         w.write_log(
             0.0,
             "info",
             "simulator",
             f"simulating profile {profile.name} at {rate:g} Hz, seed {seed}",
         )
-        steps = profile.steps
-        step = 0
-        step_start = 0
-        for p in every:
-            p.set_setpoint(steps[0].setpoint_c)
-        w.write_event(0.0, "step_started", 0, steps[0].setpoint_c, steps[0].label)
-        pt_hist: deque[tuple[float, float]] = deque()
+        plan = ProfilePlan(profile)
+
+        def carry_out(acts: list[Action], t_now: float) -> None:
+            # what acquire's engine does with the plan's actions, here on the physics
+            for a in acts:
+                if isinstance(a, SetSetpoint):
+                    for p in every:
+                        p.set_setpoint(a.setpoint_c)
+                elif isinstance(a, Event):
+                    te = t_now if a.t is None else a.t
+                    w.write_event(te, a.event, a.step, a.setpoint_c, a.detail)
+                elif isinstance(a, Log):
+                    w.write_log(t_now, a.level, "simulator", a.message, a.kind, a.data)
+
+        carry_out(plan.start(0.0), 0.0)
+        step, step_pos = 0, 0  # the plan's step and the sample it began at
         bar = progress(total=round(profile.duration_s), desc="simulate", unit="s")
-        done = False
-        while not done:
+        while plan.state == "step":
             idx = phys.index
             t_now = phys.t
             for serial, ph in zip(serials, fleet, strict=True):
@@ -217,60 +227,51 @@ def simulate_run(
                 w.write_pt100(t_now, r_ohm, t_unit, unit=serial)
                 if ph is phys:
                     t_c = t_unit
+            # the reading the bench's DMM gives, once per block: the stability rule's input
+            carry_out(plan.update(t_now, t_c), t_now)
             w.write_oven(t_now, phys.setpoint_c, phys.chamber_c(), "run")
-            s = steps[step]
-            if s.stable_slope_c_per_min is not None:
-                pt_hist.append((t_now, t_c))
-                while pt_hist and pt_hist[0][0] < t_now - s.stable_window_s:
-                    pt_hist.popleft()
-            # samples in this block, cut where the step's minimum duration ends
+            if plan.step_index != step:
+                step, step_pos = plan.step_index, idx
+            if plan.state != "step":
+                break
+            # samples in this block, cut where the plan must be asked again (a step's
+            # minimum duration or its max_extra_s running out)
             end_block = (idx // bn + 1) * bn
             parts_counts: list[list[np.ndarray]] = [[] for _ in fleet]
             pos = idx
-            while pos < end_block:
+            while pos < end_block and plan.state == "step":
+                wake = plan.wake_at()
                 # at least one sample per step, so every step is seen by the recording
-                min_end = step_start + max(1, int(round(s.duration_s * rate)))
-                cut = min(end_block, min_end) if pos < min_end else end_block
-                for parts, ph, ex in zip(parts_counts, fleet, extras, strict=True):
-                    blk = ph.advance(cut - pos)
-                    if ex:
-                        cols = [blk.counts] + [p.advance(cut - pos).counts for p in ex]
-                        parts.append(np.column_stack(cols))
-                    else:
-                        parts.append(blk.counts)
-                pos = cut
-                ended = pos == min_end and s.stable_slope_c_per_min is None
-                if s.stable_slope_c_per_min is not None and pos >= min_end and pos == end_block:
-                    ended = _stable(pt_hist, s) or (pos - min_end) >= s.max_extra_s * rate
-                    if ended and _stable(pt_hist, s):
-                        w.write_event(pos / rate, "soaked", step, s.setpoint_c)
-                if ended:
-                    w.write_event(pos / rate, "step_ended", step, s.setpoint_c)
-                    step += 1
-                    step_start = pos
-                    pt_hist.clear()
-                    if step == len(steps):
-                        done = True
-                        break
-                    s = steps[step]
-                    for p in every:
-                        p.set_setpoint(s.setpoint_c)
-                    w.write_event(pos / rate, "step_started", step, s.setpoint_c, s.label)
-            for serial, ph, parts in zip(serials, fleet, parts_counts, strict=True):
-                counts = parts[0] if len(parts) == 1 else np.concatenate(parts)
-                w.write_adc_block(idx / rate, ph.period, idx, counts, unit=serial)
-                dps = ph.adc.counts_to_dps(counts)
-                w.write_rate_block(idx / rate, ph.period, idx, dps, unit=serial)
-            n_blocks += 1
+                wake_pos = max(round(wake * rate), step_pos + 1)
+                cut = min(end_block, wake_pos)
+                if cut > pos:
+                    for parts, ph, ex in zip(parts_counts, fleet, extras, strict=True):
+                        blk = ph.advance(cut - pos)
+                        if ex:
+                            cols = [blk.counts] + [p.advance(cut - pos).counts for p in ex]
+                            parts.append(np.column_stack(cols))
+                        else:
+                            parts.append(blk.counts)
+                    pos = cut
+                if pos >= wake_pos:
+                    carry_out(plan.update(wake), pos / rate)
+                    if plan.step_index != step:
+                        step, step_pos = plan.step_index, pos
+            if parts_counts[0]:
+                for serial, ph, parts in zip(serials, fleet, parts_counts, strict=True):
+                    counts = parts[0] if len(parts) == 1 else np.concatenate(parts)
+                    w.write_adc_block(idx / rate, ph.period, idx, counts, unit=serial)
+                    dps = ph.adc.counts_to_dps(counts)
+                    w.write_rate_block(idx / rate, ph.period, idx, dps, unit=serial)
+                n_blocks += 1
             bar.update(1)
         bar.close()
         t_end = phys.t
         w.write_oven(t_end, phys.setpoint_c, phys.chamber_c(), "standby")
-        w.write_event(t_end, "run_ended", -1, detail="profile complete")
         w.write_log(t_end, "info", "simulator", f"done: {phys.index} samples, {t_end:.0f} s")
     finally:
         w.close()
-    return SimSummary(t_end, phys.index, n_blocks, len(steps))
+    return SimSummary(t_end, phys.index, n_blocks, len(profile.steps))
 
 
 def axis_physics(
@@ -303,12 +304,3 @@ def axis_physics(
             )
         out.append(Physics(m, rate_hz=rate_hz, seed=seed + 7919 * k, ambient_c=ambient_c))
     return out
-
-
-def _stable(hist: deque[tuple[float, float]], s: Any) -> bool:
-    """PT100 slope over the window below the step's threshold (°C/min)."""
-    if len(hist) < 3 or hist[-1][0] - hist[0][0] < 0.99 * s.stable_window_s:
-        return False
-    a = np.asarray(hist)
-    slope = np.polyfit(a[:, 0], a[:, 1], 1)[0] * 60.0
-    return abs(slope) < s.stable_slope_c_per_min

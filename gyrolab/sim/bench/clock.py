@@ -1,4 +1,4 @@
-"""One simulated clock for the whole simulated bench.
+"""One simulated clock for the whole simulated bench (the real-time one: ``gyrolab.clock``).
 
 Simulated time (s since power-on) is advanced by a single master (the bench's tick
 thread); everybody else reads it (:meth:`SimClock.now`) or waits for it

@@ -20,8 +20,8 @@ from typing import Any
 
 from gyrolab.sim.bench.clock import SimClock
 from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
+from gyrolab.sim.identities import AGILENT_34401A_IDN, KEYSIGHT_34465A_IDN
 
-IDN = "HEWLETT-PACKARD,34401A,0,11-5-2"
 RANGES = (100.0, 1e3, 10e3, 100e3, 1e6, 10e6, 100e6)
 NPLCS = (0.02, 0.2, 1.0, 10.0, 100.0)
 OVERLOAD = "+9.90000000E+37"
@@ -71,7 +71,7 @@ class Scpi34401A:
     now (Ω); ``clock`` paces readings in simulated time (None: instant)."""
 
     line_frequency_hz = 50.0
-    IDN = IDN
+    IDN = AGILENT_34401A_IDN  # what ``*IDN?`` answers
 
     def __init__(self, read_ohm: Callable[[], float], clock: SimClock | None = None) -> None:
         self.read_ohm = read_ohm
@@ -238,13 +238,12 @@ class Scpi34465A(Scpi34401A):
     Truevolt NPLC set (0.02, 0.06, 0.2, 1, 10, 100). Keysight Truevolt DMM Command Quick
     Reference (docs/instruments.md). Offset compensation doubles the reading time."""
 
-    IDN = "Keysight Technologies,34465A,MY59000001,A.03.01-03.15-03.01-00.52-04-02"
+    IDN = KEYSIGHT_34465A_IDN
     NPLCS_34465A = (0.02, 0.06, 0.2, 1.0, 10.0, 100.0)
 
     def __init__(self, read_ohm: Callable[[], float], clock: SimClock | None = None) -> None:
         super().__init__(read_ohm, clock)
         self.ocomp = False
-        self._table[0] = (scpi_re("*IDN?"), lambda a: self.IDN)
         self._table += [
             (scpi_re("[SENSe:]FRESistance:OCOMpensated"), self._ocomp),
             (scpi_re("[SENSe:]FRESistance:OCOMpensated?"), lambda a: str(int(self.ocomp))),

@@ -28,8 +28,8 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
-ROM = "P300 ROM Ver1.20"
-TYPE = "T,S4,200.0"  # dry-bulb sensor T, controller model, max temperature
+from gyrolab.sim.identities import ESPEC_P300_ROM, ESPEC_P300_TYPE
+
 LIMITS_C = (-75.0, 200.0)  # the controller's own setpoint range (TEMP? fields 3-4)
 MODES = ("OFF", "STANDBY", "CONSTANT", "RUN")
 
@@ -64,9 +64,9 @@ class EspecP300:
     def _handle(self, cmd: str) -> str:
         u = cmd.upper()
         if u == "ROM?":
-            return ROM
+            return ESPEC_P300_ROM
         if u == "TYPE?":
-            return TYPE
+            return ESPEC_P300_TYPE
         if u == "TEMP?":
             return (
                 f"{self.hooks.chamber_c():.1f},{self.setpoint_c:.1f},"

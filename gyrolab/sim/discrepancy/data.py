@@ -27,10 +27,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gyrolab.errors import InputError
+from gyrolab.numerics.allan import allan_deviation
 from gyrolab.record.blocks import decode_block
 from gyrolab.record.format import TOPIC_EVENT, TOPIC_OVEN, TOPIC_PT100, TOPIC_RATE
 from gyrolab.record.reader import iter_messages
-from gyrolab.sim.discrepancy.allan import oadev
 
 SPIKE_K = 8.0
 """Spike threshold in robust standard deviations of the centred second difference."""
@@ -208,7 +208,9 @@ def high_rate_stats(
     white = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
     q, frac = _lattice(x)  # raw: despiking fills in off-lattice means
     m = 2 ** np.arange(int(np.floor(np.log2(max(1, bin_n)))) + 1)
-    tau, ad = oadev(xd, dt, m)
+    # the overlapping ADEV alone (no confidence work) at the octave taus up to one bin
+    adev = allan_deviation(xd, 1.0 / dt, taus=m * dt, confidence=None, allow_constant=True)
+    tau, ad = adev.taus, adev.adev
     hr = HighRate(
         dt=dt,
         n=int(x.size),

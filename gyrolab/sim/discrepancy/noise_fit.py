@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize
 from scipy.special import log_ndtr, ndtr
 
-from gyrolab.sim.discrepancy.allan import edf_estimate, oadev
+from gyrolab.numerics.allan import allan_deviation
 from gyrolab.sim.discrepancy.data import BenchData
 
 RRW_CHI2 = 40.0
@@ -53,11 +53,24 @@ class AllanCurve:
     edf: np.ndarray
 
 
+def edf_estimate(n: int, m: np.ndarray) -> np.ndarray:
+    """A conservative equivalent number of degrees of freedom of each overlapping-ADEV
+    point: about ``n/m`` independent clusters, halved for the overlap's correlation. (The
+    weights of the fit only; Greenhall's EDF, ``gyrolab.numerics.confidence``, would need
+    a noise identification per τ of every residual the workflow tries.)"""
+    return np.maximum(1.0, 0.5 * (n / np.asarray(m, dtype=float) - 1.0))
+
+
 def measured_allan(d: BenchData, resid_bins: np.ndarray) -> AllanCurve:
-    """ADEV of the despiked output (τ ≤ bin) joined to that of the residual bins (τ > bin)."""
+    """ADEV of the despiked output (τ ≤ bin) joined to that of the residual bins (τ > bin),
+    the latter at octave τ with at least 8 clusters (m ≤ n/8)."""
     hr = d.hr
     m_hr = np.rint(hr.tau / hr.dt)
-    tau_b, ad_b = oadev(resid_bins, d.bin_s)
+    m_oct = 2 ** np.arange(int(np.log2(max(1, resid_bins.size // 8))) + 1)
+    res = allan_deviation(
+        resid_bins, 1.0 / d.bin_s, taus=m_oct * d.bin_s, confidence=None, allow_constant=True
+    )
+    tau_b, ad_b = res.taus, res.adev
     keep = tau_b > d.bin_s * 1.01
     m_b = np.rint(tau_b[keep] / d.bin_s)
     tau = np.concatenate([hr.tau, tau_b[keep]])

@@ -221,6 +221,7 @@ font-size:13px}}th{{background:#eee}}img{{max-width:100%}}code{{background:#f4f4
 
 
 def json_default(o: Any) -> Any:
+    """``json.dumps`` default for numpy scalars and arrays (discrepancy.json, the page)."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

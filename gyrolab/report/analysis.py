@@ -1,0 +1,203 @@
+"""Where every number of the report comes from: the layers below, never the report.
+
+The only module of :mod:`gyrolab.report` that calls :mod:`gyrolab.compensation`. With a
+model, what ``gyrolab compensate`` computed on this run (its calibration run, or its
+``--validate`` run) is read from the model directory — ``metrics.json`` and the results
+files of :mod:`gyrolab.compensation.results` — and nothing is applied again. For any
+other run, or a model directory written before the results were kept, the model is
+applied here (the same calls ``compensate`` makes) and :attr:`ModelRun.computed` says
+why, so the document can say so. Without a model: the raw averages, their metrics and
+Allan curve, and the noise per temperature plateau, all from the recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrolab.compensation.results import AllanSummary, RunResults
+from gyrolab.errors import InputError
+from gyrolab.record.reader import Recording
+
+#: metrics.json keys of ``compensate`` that describe the fit, not this run's report.
+COMPENSATE_ONLY = ("calibration", "timing_s", "timing_breakdown_s")
+
+
+@dataclass
+class ModelRun:
+    """A model and its application to the report's run.
+
+    ``results``: the series, modes and Allan curves of the run; ``metrics``: its
+    metrics.json content (docs/cli.md keys); ``computed``: ``""`` when both were read from
+    the model directory, else the sentence saying why the report applied the model."""
+
+    model: Any  # gyrolab.compensation.fit.CompensationModel
+    model_dir: str
+    results: RunResults
+    metrics: dict[str, Any]
+    held_out: bool
+    computed: str = ""
+
+
+def paper_block_s() -> float:
+    """The averaging time of a report without a model (the paper's 1000 points/h)."""
+    from gyrolab.numerics.averaging import PAPER_BLOCK_S
+
+    return float(PAPER_BLOCK_S)
+
+
+def load_model(model_dir: str | Path) -> Any:
+    """The model of a single-axis model directory (format version checked)."""
+    from gyrolab.compensation.model_dir import load_model as load
+
+    return load(str(model_dir))
+
+
+def block_averages(rec: Recording, block_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rate averaged over ``block_s`` (the samples themselves for a shorter run)."""
+    from gyrolab.numerics.averaging import block_average
+
+    rate = rec.require_rate()
+    x = np.asarray(rate.values, dtype=float)
+    if rate.t.size and (rate.t[-1] - rate.t[0]) >= 2 * block_s:
+        tb, xb, _ = block_average(rate.t, x, block_s, rate.period)
+        return tb, xb
+    return rate.t, x
+
+
+def raw_metrics(xb: np.ndarray, block_s: float, keys: list[str]) -> dict[str, Any]:
+    """The five metrics (docs/cli.md) of the averaged raw output (NaN when too short)."""
+    from gyrolab.compensation.evaluate import series_metrics
+
+    try:
+        return series_metrics(xb, block_s)
+    except InputError:
+        return {k: float("nan") for k in keys}
+
+
+def allan_summary(x: np.ndarray, rate_hz: float) -> AllanSummary | None:
+    """The Allan curve and its terms (:func:`gyrolab.compensation.results.allan_summary`)."""
+    from gyrolab.compensation.results import allan_summary as summary
+
+    return summary(x, rate_hz)
+
+
+def plateau_rows(rec: Recording) -> list[Any]:
+    """ARW and bias instability of every soaked step (:mod:`.plateau_noise`)."""
+    from gyrolab.compensation.plateau_noise import plateau_noise
+
+    return plateau_noise(rec)
+
+
+def range_note(metrics: dict[str, Any]) -> str:
+    """The sentence for a run outside the model's calibrated range ('' inside it)."""
+    rng = metrics.get("temperature") or {}
+    if not rng.get("outside_calibration_range"):
+        return ""
+    from gyrolab.compensation.guards import range_warning
+
+    line = range_warning(Path(str(metrics.get("run", "this run"))).name, rng) or ""
+    return line.replace("warning: ", "Outside the calibrated range — ", 1)
+
+
+def firmware_note(metrics: dict[str, Any]) -> str:
+    """What the firmware cubic costs against the chosen output ('' without one)."""
+    if "firmware_poly3" not in metrics:
+        return ""
+    from gyrolab.compensation.firmware import firmware_sentence
+
+    return firmware_sentence(metrics)
+
+
+def model_run(model_dir: str | Path, model: Any, rec: Recording) -> ModelRun:
+    """The model on ``rec``: read from ``model_dir`` when ``compensate`` evaluated this
+    run (same content hash of the rate and PT100 data), else applied here."""
+    from gyrolab.compensation.prepare import prepare_run
+    from gyrolab.compensation.results import load_results, run_metrics
+
+    run = prepare_run(rec, model.config)  # checks the run and hashes its data
+    stored = load_results(model_dir)
+    match = next(
+        (r for r in stored.values() if r.content_hash and r.content_hash == run.content_hash),
+        None,
+    )
+    metrics = None if match is None else run_metrics(model_dir, match.role)
+    if match is not None and metrics is not None:
+        m = {k: v for k, v in metrics.items() if k not in COMPENSATE_ONLY}
+        m["run"] = str(rec.path)
+        m["calibration_run"] = model.calibration.get("path")
+        m["model_timing_s"] = metrics.get("timing_breakdown_s", model.timing_s)
+        m["model_results"] = "model_dir"  # docs/cli.md: read, not recomputed
+        out = ModelRun(model, str(model_dir), match, m, match.held_out)
+        if model.causal is not None and not match.oracle_checked:
+            _add_oracle(out, rec)
+        return out
+    why = (
+        f"{Path(model_dir).name} holds no results of gyrolab compensate (written before "
+        "they were kept)"
+        if not stored
+        else "this run is neither the model's calibration run nor its --validate run"
+    )
+    return _apply(model_dir, model, run, rec, why)
+
+
+def _apply(model_dir: str | Path, model: Any, run: Any, rec: Recording, why: str) -> ModelRun:
+    """Apply the model to the run as ``compensate`` does (fixed K and α, no search)."""
+    from gyrolab.compensation.apply import compensate_offline
+    from gyrolab.compensation.evaluate import evaluate
+    from gyrolab.compensation.firmware import firmware_metrics_for_dir
+    from gyrolab.compensation.results import run_results
+
+    held_out = not is_calibration_run(model, run)
+    app = compensate_offline(model, run)
+    metrics = evaluate(model, app, run, held_out=held_out)
+    metrics["calibration_run"] = model.calibration.get("path")
+    firmware_metrics_for_dir(model_dir, run, metrics)
+    metrics["model_timing_s"] = model.timing_s
+    metrics["model_results"] = "computed"
+    res = run_results("report", model, app, run, held_out)
+    out = ModelRun(
+        model,
+        str(model_dir),
+        res,
+        metrics,
+        held_out,
+        computed=f"The model was applied to this run by the report: {why}.",
+    )
+    if model.causal is not None:
+        _add_oracle(out, rec)
+    return out
+
+
+def _add_oracle(mr: ModelRun, rec: Recording) -> None:
+    """The oracle of a simulated run (true drift removed), where compensate did not look
+    for it: its block means in the results, its metrics and 100 s p-p in the metrics."""
+    from gyrolab.compensation.evaluate import drift_pp_table, series_metrics
+    from gyrolab.compensation.oracle import oracle_block_means
+    from gyrolab.compensation.results import keep_oracle
+
+    bs = mr.results.block_s
+    ob = oracle_block_means(rec, bs)
+    if ob is not None:
+        ob = ob[: mr.results.t.size]
+        mr.metrics["oracle"] = series_metrics(ob, bs)
+        mr.metrics.setdefault("drift_pp_100s_deg_per_s", {}).update(
+            drift_pp_table({"oracle": ob}, bs)
+        )
+    keep_oracle(mr.results, ob)
+
+
+def is_calibration_run(model: Any, run: Any) -> bool:
+    """True when ``run`` is the run the model was fitted on: same content hash of the rate
+    and temperature data (models that record it), else the same averaged series."""
+    digest = model.calibration.get("content_hash")
+    if digest and getattr(run, "content_hash", ""):
+        return bool(digest == run.content_hash)
+    cal = model.diagnostics.get("calib_rate")
+    if cal is None:
+        return Path(str(model.calibration.get("path", ""))).resolve() == Path(run.path).resolve()
+    cal = np.asarray(cal, dtype=float)
+    return cal.shape == run.rate.shape and bool(np.allclose(cal, run.rate, rtol=0, atol=1e-12))
