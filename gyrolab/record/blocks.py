@@ -27,6 +27,19 @@ def _varint(n: int) -> bytes:
             return bytes(out)
 
 
+def _read_varint(mv: memoryview, i: int) -> tuple[int, int]:
+    """The varint starting at byte ``i`` of ``mv`` and the index after it (inverse of
+    :func:`_varint`)."""
+    v = shift = 0
+    while True:
+        b = mv[i]
+        i += 1
+        v |= (b & 0x7F) << shift
+        shift += 7
+        if not b & 0x80:
+            return v, i
+
+
 def encode_block(
     t0: float, period: float, first_index: int, values: np.ndarray, kind: str
 ) -> bytes:
@@ -68,15 +81,7 @@ def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]
     mv = memoryview(data)
     i, n = 0, len(data)
     while i < n:
-        key = 0
-        shift = 0
-        while True:
-            b = mv[i]
-            i += 1
-            key |= (b & 0x7F) << shift
-            shift += 7
-            if not b & 0x80:
-                break
+        key, i = _read_varint(mv, i)
         fno, wt = key >> 3, key & 7
         if wt == 1:
             (val,) = struct.unpack_from("<d", mv, i)
@@ -86,29 +91,13 @@ def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]
             elif fno == 2:
                 period = val
         elif wt == 0:
-            v = 0
-            shift = 0
-            while True:
-                b = mv[i]
-                i += 1
-                v |= (b & 0x7F) << shift
-                shift += 7
-                if not b & 0x80:
-                    break
+            v, i = _read_varint(mv, i)
             if fno == 3:
                 first = v
             elif fno == 5:
                 axes = max(1, v)
         elif wt == 2:
-            ln = 0
-            shift = 0
-            while True:
-                b = mv[i]
-                i += 1
-                ln |= (b & 0x7F) << shift
-                shift += 7
-                if not b & 0x80:
-                    break
+            ln, i = _read_varint(mv, i)
             if fno == 4:
                 arr = np.frombuffer(mv[i : i + ln], dtype=arr.dtype)
             i += ln
