@@ -155,6 +155,45 @@ def bound_threads(n: int) -> None:
         pass
 
 
+# glibc mallopt(3) parameters; see tune_malloc
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def tune_malloc() -> bool:
+    """Let glibc keep this process's freed large blocks for reuse (True: done; False: not glibc).
+
+    A Dask nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (its
+    ``distributed.nanny.pre-spawn-environ``). Setting any malloc threshold turns off glibc's
+    dynamic mmap threshold (mallopt(3)), so every array above 128 KiB is a fresh ``mmap``,
+    page-faulted in and zeroed by the kernel, and ``munmap``-ed when freed. The pipeline
+    makes thousands of multi-MiB temporaries per unit: measured, one unit of a 13 h run took
+    10.6 s of system time that way against 1.3 s (27.9 s against 17.3 s wall), and two such
+    workers contend for memory bandwidth on top. Set back to what the dynamic threshold
+    reaches on its own (mmap above 32 MiB, its ceiling on 64-bit), and trim only above
+    256 MiB; :func:`release_memory` gives the memory back after each item instead, as the
+    nanny's setting intends.
+    """
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(
+            libc.mallopt(_M_MMAP_THRESHOLD, 32 << 20) and libc.mallopt(_M_TRIM_THRESHOLD, 256 << 20)
+        )
+    except (OSError, AttributeError):  # not glibc (musl, macOS, Windows): nothing to tune
+        return False
+
+
+def release_memory() -> None:
+    """Return the freed heap to the system between items (glibc ``malloc_trim(0)``)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 def _peak_rss_mib() -> float:
     import resource
 
@@ -216,6 +255,7 @@ def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
         res.status = "skipped"
         return res
     bound_threads(opt.threads)
+    tune_malloc()
     handler = _task_handler(task)
     args = _namespace(task, item, opt)
     sink = io.StringIO()
@@ -233,6 +273,7 @@ def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
         res.error += f" (unit {item.unit})"
     res.seconds = time.perf_counter() - t0
     res.peak_rss_mib = _peak_rss_mib()
+    release_memory()
     return res
 
 

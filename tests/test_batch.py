@@ -135,3 +135,47 @@ def test_bad_batch_arguments_are_exit_2(tmp_path: Path, capsys: pytest.CaptureFi
     )
     assert "matches no file" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+_MMAPPED = """
+import ctypes, sys
+import numpy as np
+from gyrolab.batch import tune_malloc
+
+class MallInfo2(ctypes.Structure):  # glibc >= 2.33, mallinfo2(3)
+    _fields_ = [(n, ctypes.c_size_t) for n in (
+        "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+        "fordblks", "keepcost")]
+
+libc = ctypes.CDLL("libc.so.6")
+libc.mallinfo2.restype = MallInfo2
+if sys.argv[1] == "tuned":
+    assert tune_malloc()
+for _ in range(3):  # a pipeline's temporaries: allocated, used, freed, again
+    a = np.ones(1 << 21)  # 16 MiB
+    a.sum()
+    print(libc.mallinfo2().hblkhd)  # bytes in mmap-ed blocks while it lives
+    del a
+"""
+
+
+def test_tune_malloc_keeps_large_temporaries_off_mmap() -> None:
+    """Under a Dask nanny's ``MALLOC_TRIM_THRESHOLD_=65536`` glibc's dynamic mmap threshold
+    is off: every temporary above 128 KiB is a fresh mmap, zeroed by the kernel and unmapped
+    when freed (the 2.3x per-item cost in docs/performance.md). After
+    :func:`gyrolab.batch.tune_malloc` a 16 MiB temporary comes from the heap and is reused."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "MALLOC_TRIM_THRESHOLD_": "65536"}
+    mapped = {}
+    for how in ("nanny", "tuned"):
+        out = subprocess.run(
+            [sys.executable, "-c", _MMAPPED, how], env=env, capture_output=True, text=True
+        )
+        if out.returncode and "mallinfo2" in out.stderr:
+            pytest.skip("not glibc >= 2.33")
+        assert out.returncode == 0, out.stderr
+        mapped[how] = [int(v) for v in out.stdout.split()]
+    assert all(v >= 16 << 20 for v in mapped["nanny"])  # each one mmap-ed
+    assert all(v < 16 << 20 for v in mapped["tuned"])  # none of them
