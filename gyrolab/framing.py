@@ -19,6 +19,13 @@ Frame layout (all multi-byte fields little-endian except the CRC)::
 a = 1, sends exactly the frames it always did). A frame of n samples is 18 + 3·n·a bytes
 (48 bytes for the default n = 10, a = 1).
 
+An ADC configured to carry the unit's internal temperature (``temperature=True``, like n
+and a a setting both ends share) inserts one word before the CRC: at offset 16 + 3·n·a,
+2 bytes, the gyro's temperature register as it read it at the frame's first sample,
+int16 two's complement little-endian (its scale is the part's: docs/instruments.md). Such a
+frame is 20 + 3·n·a bytes and L = 14 + 3·n·a; the CRC covers the word. Without the option
+the frames are byte for byte those above.
+
 The decoder accepts a frame only if the sync word, the length (it must be the configured
 n), the CRC, the sequence number (strictly newer than the last accepted frame) and the
 timestamp (consistent with the sequence step at the nominal rate) all agree. After any
@@ -38,6 +45,7 @@ import numpy as np
 SYNC = b"\xa5\x5a"
 HEADER_SIZE = 16  # sync + length + seq + timestamp
 CRC_SIZE = 2
+TEMP_SIZE = 2  # the optional internal-temperature word (int16 LE) before the CRC
 MAX_SAMPLES = 4096
 SEQ_MOD = 1 << 32
 _HEAD = struct.Struct("<2sHIQ")
@@ -53,14 +61,19 @@ def crc16_ccitt(data: bytes | bytearray | memoryview, init: int = 0xFFFF) -> int
     return crc_hqx(data, init)
 
 
-def frame_size(samples_per_frame: int, axes: int = 1) -> int:
-    """Bytes on the wire of one frame of ``samples_per_frame`` samples of ``axes`` axes."""
-    return HEADER_SIZE + 3 * samples_per_frame * axes + CRC_SIZE
+def frame_size(samples_per_frame: int, axes: int = 1, temperature: bool = False) -> int:
+    """Bytes on the wire of one frame of ``samples_per_frame`` samples of ``axes`` axes
+    (and the internal-temperature word when ``temperature``)."""
+    extra = TEMP_SIZE if temperature else 0
+    return HEADER_SIZE + 3 * samples_per_frame * axes + extra + CRC_SIZE
 
 
-def encode_frame(seq: int, timestamp_us: int, counts: np.ndarray) -> bytes:
+def encode_frame(
+    seq: int, timestamp_us: int, counts: np.ndarray, temperature_code: int | None = None
+) -> bytes:
     """One frame; ``counts`` are signed 24-bit values (−8388608 … 8388607), ``(n,)`` for one
-    axis or ``(n, axes)`` for several (sent interleaved, sample by sample)."""
+    axis or ``(n, axes)`` for several (sent interleaved, sample by sample);
+    ``temperature_code``, when given, the int16 internal-temperature word."""
     c = np.asarray(counts, dtype=np.int64).ravel()
     n = c.size
     if not 1 <= n <= MAX_SAMPLES:
@@ -68,7 +81,11 @@ def encode_frame(seq: int, timestamp_us: int, counts: np.ndarray) -> bytes:
     if c.min() < -(1 << 23) or c.max() >= 1 << 23:
         raise ValueError("sample outside the signed 24-bit range")
     raw = (c & 0xFFFFFF).astype("<u4").view(np.uint8).reshape(n, 4)[:, :3].tobytes()
-    body = _HEAD.pack(SYNC, 12 + 3 * n, seq % SEQ_MOD, int(timestamp_us)) + raw
+    if temperature_code is not None:
+        if not -(1 << 15) <= int(temperature_code) < 1 << 15:
+            raise ValueError("temperature word outside the int16 range")
+        raw += int(temperature_code).to_bytes(2, "little", signed=True)
+    body = _HEAD.pack(SYNC, 12 + len(raw), seq % SEQ_MOD, int(timestamp_us)) + raw
     return body + crc_hqx(memoryview(body)[2:], 0xFFFF).to_bytes(2, "big")
 
 
@@ -123,13 +140,15 @@ class FrameBatch:
 
     ``seq`` are unwrapped (64-bit) frame numbers, ``timestamp_us`` the device clock,
     ``counts`` a (frames × samples_per_frame) int32 array. ``gaps_before[k]`` is the
-    :class:`Gap` just before frame ``k`` (or absent).
+    :class:`Gap` just before frame ``k`` (or absent). ``temperature_code``: each frame's
+    int16 internal-temperature word (None unless the decoder expects one).
     """
 
     seq: np.ndarray
     timestamp_us: np.ndarray
     counts: np.ndarray
     gaps_before: dict[int, Gap] = field(default_factory=dict)
+    temperature_code: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.seq.size)
@@ -142,7 +161,9 @@ class FrameDecoder:
     of another length are rejected; ``counts`` come back as (frames × n·axes), each row
     interleaved x0 y0 z0 x1 …). ``rate_hz`` (samples/s), when given, makes the decoder also
     check that a frame's timestamp advanced by ``Δseq · n / rate_hz`` (± 1 frame + 1 %), which
-    catches the rare random byte run that passes a 16-bit CRC.
+    catches the rare random byte run that passes a 16-bit CRC. ``temperature``: the frames
+    carry the internal-temperature word (module doc); frames without it are rejected by
+    their length, and the other way round.
     """
 
     def __init__(
@@ -152,6 +173,7 @@ class FrameDecoder:
         *,
         restart_after: int = 4,
         axes: int = 1,
+        temperature: bool = False,
     ) -> None:
         if not 1 <= samples_per_frame <= MAX_SAMPLES:
             raise ValueError(f"samples_per_frame must be 1..{MAX_SAMPLES}")
@@ -159,8 +181,9 @@ class FrameDecoder:
             raise ValueError(f"axes must be 1..3 with n·axes <= {MAX_SAMPLES}")
         self.n = samples_per_frame
         self.axes = axes
-        self.length = 12 + 3 * samples_per_frame * axes
-        self.size = frame_size(samples_per_frame, axes)
+        self.temperature = bool(temperature)
+        self.size = frame_size(samples_per_frame, axes, self.temperature)
+        self.length = self.size - 6  # bytes from seq through the last sample (or word)
         self.frame_us = None if rate_hz is None else samples_per_frame / rate_hz * 1e6
         self.restart_after = restart_after
         self.stats = DecoderStats()
@@ -206,6 +229,8 @@ class FrameDecoder:
         seqs: list[int] = []
         tss: list[int] = []
         raw = bytearray()
+        temps: list[int] = []
+        tw = TEMP_SIZE if self.temperature else 0
         gaps: dict[int, Gap] = {}
         mv = memoryview(buf)
         pos = 0
@@ -276,7 +301,9 @@ class FrameDecoder:
                 self._cause = "lost"
                 seqs.append(useq)
                 tss.append(ts)
-                raw += mv[i + 16 : end - 2]
+                raw += mv[i + 16 : end - 2 - tw]
+                if tw:
+                    temps.append(int.from_bytes(buf[end - 4 : end - 2], "little", signed=True))
                 pos = end
         finally:
             mv.release()
@@ -284,7 +311,11 @@ class FrameDecoder:
         st.frames_ok += len(seqs)
         counts = decode_int24(raw).reshape(-1, n) if raw else np.empty((0, n), dtype=np.int32)
         return FrameBatch(
-            np.asarray(seqs, dtype=np.int64), np.asarray(tss, dtype=np.int64), counts, gaps
+            np.asarray(seqs, dtype=np.int64),
+            np.asarray(tss, dtype=np.int64),
+            counts,
+            gaps,
+            np.asarray(temps, dtype=np.int16) if tw else None,
         )
 
     def _restart_candidate(self, seq: int, ts: int) -> bool:

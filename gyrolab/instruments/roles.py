@@ -132,6 +132,10 @@ class AdcBlock:
     period, ``first_index`` the first sample's index since the stream's frame 0
     (``first_seq · samples_per_frame``), ``counts`` int32: ``(n,)`` for a single-axis ADC,
     ``(n, axes)`` for several.
+
+    A stream that reports the unit's internal temperature adds ``temperature_c`` (°C, one
+    reading every ``samples_per_reading`` samples, the k-th taken at sample
+    ``first_index + k · samples_per_reading``); otherwise None and 0.
     """
 
     first_seq: int
@@ -139,6 +143,8 @@ class AdcBlock:
     t0: float
     period: float
     counts: np.ndarray
+    temperature_c: np.ndarray | None = None
+    samples_per_reading: int = 0
 
 
 @dataclass

@@ -16,11 +16,13 @@ on is dropped, also across reconnects); every missing frame is reported as a
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import serial
 
 from gyrolab.framing import FrameBatch, FrameDecoder
@@ -47,6 +49,12 @@ class GyroAdcConfig:
     offset_v: float = 0.0
     block_s: float = 0.5  # samples per recorded block = block_s · rate (bounds crash loss)
     serial: str = ""
+    # The unit's internal temperature sensor in every frame (docs/instruments.md, "Internal
+    # temperature"): one int16 word, °C = temperature_zero_c + code · temperature_c_per_lsb.
+    # Default scale: the ADIS16135's TEMP_OUT (0.0058 °C/LSB typical, 0 °C = 0x0000).
+    internal_temperature: bool = False
+    temperature_c_per_lsb: float = 0.0058
+    temperature_zero_c: float = 0.0
 
     def dps_per_count(self) -> float:
         return self.vref_v / 2 ** (self.bits - 1) / self.gain_v_per_dps
@@ -54,6 +62,10 @@ class GyroAdcConfig:
     def to_dps(self, counts: Any) -> Any:
         """Counts → °/s with this calibration (works on numpy arrays)."""
         return (counts * (self.vref_v / 2 ** (self.bits - 1)) - self.offset_v) / self.gain_v_per_dps
+
+    def to_celsius(self, codes: Any) -> Any:
+        """Internal-temperature words → °C (``zero + code · c_per_lsb``; numpy arrays too)."""
+        return self.temperature_zero_c + codes * self.temperature_c_per_lsb
 
     def check(self, safe_state_mode: str) -> None:
         """ValueError unless the stream's settings make sense."""
@@ -63,6 +75,8 @@ class GyroAdcConfig:
             raise ValueError("samples_per_frame must be 1..4096")
         if not (1 <= self.axes <= 3 and self.samples_per_frame * self.axes <= 4096):
             raise ValueError("axes must be 1..3 with samples_per_frame·axes <= 4096")
+        if not (self.temperature_c_per_lsb > 0 and math.isfinite(self.temperature_zero_c)):
+            raise ValueError("temperature_c_per_lsb must be > 0, temperature_zero_c finite")
 
 
 @dataclass
@@ -85,6 +99,10 @@ class GyroAdcReader:
     ``disconnect`` event and from then on retries opening it every ``backoff`` seconds,
     doubling from ``backoff_initial_s`` to ``backoff_max_s``; frames lost meanwhile are
     reported as a gap with cause ``disconnect`` once data flows again.
+
+    ``temperature`` = ``(zero_c, c_per_lsb)``: the frames carry the unit's internal
+    temperature word (:mod:`gyrolab.framing`), delivered in °C with each block
+    (``AdcBlock.temperature_c``, one reading per frame).
     """
 
     def __init__(
@@ -94,6 +112,7 @@ class GyroAdcReader:
         samples_per_frame: int = 10,
         rate_hz: float = 1000.0,
         axes: int = 1,
+        temperature: tuple[float, float] | None = None,
         baudrate: int = 921600,
         backoff_initial_s: float = 0.05,
         backoff_max_s: float = 2.0,
@@ -110,7 +129,10 @@ class GyroAdcReader:
         self._factory = serial_factory or serial.Serial
         self._clock = clock
         self.axes = int(axes)
-        self.decoder = FrameDecoder(samples_per_frame, rate_hz, axes=self.axes)
+        self.temperature = temperature
+        self.decoder = FrameDecoder(
+            samples_per_frame, rate_hz, axes=self.axes, temperature=temperature is not None
+        )
         self.stats = ReaderStats()
         self._ser: Any = None
         self._backoff = backoff_initial_s
@@ -236,6 +258,10 @@ class GyroAdcReader:
             if b <= a:
                 continue
             seq0 = int(batch.seq[a])
+            temp = None
+            if self.temperature is not None and batch.temperature_code is not None:
+                zero_c, c_per_lsb = self.temperature
+                temp = zero_c + batch.temperature_code[a:b].astype(np.float64) * c_per_lsb
             out.blocks.append(
                 AdcBlock(
                     first_seq=seq0,
@@ -247,6 +273,8 @@ class GyroAdcReader:
                         if self.axes == 1
                         else batch.counts[a:b].reshape(-1, self.axes)
                     ),
+                    temperature_c=temp,
+                    samples_per_reading=spf if temp is not None else 0,
                 )
             )
 
@@ -293,6 +321,16 @@ class GyroAdcStream(GyroAdcReader):
             "dps_per_count": a.dps_per_count(),
             # Only a multi-axis ADC says so: single-axis metadata stays as it always was.
             **({"axes": a.axes} if a.axes > 1 else {}),
+            # Likewise only a stream that carries the internal temperature.
+            **(
+                {
+                    "internal_temperature": True,
+                    "temperature_c_per_lsb": a.temperature_c_per_lsb,
+                    "temperature_zero_c": a.temperature_zero_c,
+                }
+                if a.internal_temperature
+                else {}
+            ),
         }
 
 
@@ -303,6 +341,9 @@ def open_adc(c: GyroAdcConfig, ctx: OpenContext) -> GyroAdcStream:
         samples_per_frame=c.samples_per_frame,
         rate_hz=c.sample_rate_hz,
         axes=c.axes,
+        temperature=(
+            (c.temperature_zero_c, c.temperature_c_per_lsb) if c.internal_temperature else None
+        ),
         baudrate=c.baud_rate,
         clock=ctx.clock,
     )
