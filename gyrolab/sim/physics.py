@@ -19,7 +19,7 @@ import numpy as np
 from gyrolab.sim.effects import EFFECTS, BlockContext, Effect
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.noise import FlickerStream, effect_rng
-from gyrolab.sim.sensors import AdcModel, cvd_resistance
+from gyrolab.sim.sensors import AdcModel, DieThermometer, cvd_resistance
 from gyrolab.sim.thermal import kernel_params, thermal_kernel
 
 
@@ -36,6 +36,7 @@ class PhysicsBlock:
     case_c: float
     die_c: float
     case_trace: np.ndarray | None = None  # case temperature at every sample, °C
+    die_trace: np.ndarray | None = None  # die temperature at every sample, °C
 
     @property
     def n(self) -> int:
@@ -112,6 +113,12 @@ class Physics:
         a = float(ambient_c)
         self._state = np.array([a, 0.0, a, a], dtype=np.float64)  # air, air rate, case, die
         self._dmm_rng = effect_rng(self.seed, "dmm")
+        # The internal (die) temperature sensor: its own stream, the unit's offset drawn first
+        self.die_sensor = DieThermometer()
+        self._die_rng = effect_rng(self.seed, "die_sensor")
+        self.die_sensor_offset_c = self.die_sensor.offset_sd_c * float(
+            self._die_rng.standard_normal()
+        )
 
     # ------------------------------------------------------------------ clock
     @property
@@ -173,6 +180,7 @@ class Physics:
             case_c=self.case_c(),
             die_c=self.die_c(),
             case_trace=case,
+            die_trace=die,
         )
 
     # ------------------------------------------------------------ instruments
@@ -196,3 +204,12 @@ class Physics:
         """What a 4-wire DMM reads now: CVD(T_case + rtd offset) + DMM noise, Ω."""
         noise = self.model.sensors.dmm_noise_ohm * float(self._dmm_rng.standard_normal())
         return self.pt100_true_ohm() + noise
+
+    def die_sensor_codes(self, die_c: np.ndarray) -> np.ndarray:
+        """What the unit's internal temperature sensor reports for die temperatures
+        ``die_c`` (°C; e.g. ``PhysicsBlock.die_trace`` at each frame's first sample): register
+        codes with the unit's offset, one noise draw per reading (its own stream, in order,
+        so the codes do not depend on how the calls are cut) and quantisation."""
+        die = np.asarray(die_c, dtype=float)
+        w = self._die_rng.standard_normal(die.size)
+        return self.die_sensor.codes(die, self.die_sensor_offset_c, w)

@@ -26,7 +26,7 @@ from gyrolab.pt100 import R0_OHM, A, B, C, cvd_resistance, cvd_temperature
 
 # One CVD implementation for the driver and the simulator (package level, see pt100.py).
 CVD_A, CVD_B, CVD_C, PT100_R0 = A, B, C, R0_OHM
-__all__ = ["AdcModel", "cvd_resistance", "cvd_temperature"]
+__all__ = ["AdcModel", "DieThermometer", "cvd_resistance", "cvd_temperature"]
 
 
 @dataclass(frozen=True)
@@ -75,3 +75,36 @@ class AdcModel:
         d = asdict(self)
         d["conversion"] = "rate_dps = (counts * vref_v / 2**(bits-1) - offset_v) / gain_v_per_dps"
         return d
+
+
+@dataclass(frozen=True)
+class DieThermometer:
+    """The gyro's internal (die) temperature sensor as its register reports it::
+
+        code = clip(round((T_die + δ_unit + σ·w − zero_c) / c_per_lsb), −2^(bits−1), 2^(bits−1) − 1)
+
+    ``c_per_lsb`` and ``zero_c`` (°C per LSB, °C at code 0) and ``bits`` are the part's
+    register format — default the ADIS16135's TEMP_OUT: 16-bit two's complement, 0.0058 °C
+    per LSB typical, 0 °C = 0x0000 (ADIS16135 data sheet, Tables 12–13; docs/instruments.md).
+    ``offset_sd_c`` (°C, 1σ) is the spread of the unit's own offset δ_unit from the die
+    (drawn once per unit), ``noise_c`` (°C rms) the white noise w of each reading: simulator
+    parameters (docs/sim-model.md), not the data sheet's.
+    """
+
+    c_per_lsb: float = 0.0058
+    zero_c: float = 0.0
+    bits: int = 16
+    offset_sd_c: float = 0.5
+    noise_c: float = 0.02
+
+    def codes(self, die_c: np.ndarray, offset_c: float, w: np.ndarray) -> np.ndarray:
+        """Register codes (int16 for 16 bits) of die temperatures ``die_c`` (°C), with the
+        unit's offset ``offset_c`` and standard-normal draws ``w``."""
+        fs = 1 << (int(self.bits) - 1)
+        t = np.asarray(die_c, dtype=float) + offset_c + self.noise_c * np.asarray(w, dtype=float)
+        c = np.rint((t - self.zero_c) / self.c_per_lsb)
+        return np.clip(c, -fs, fs - 1).astype(np.int32)
+
+    def to_celsius(self, codes: np.ndarray) -> np.ndarray:
+        """°C of register codes, as the bench software converts them."""
+        return self.zero_c + np.asarray(codes, dtype=float) * self.c_per_lsb

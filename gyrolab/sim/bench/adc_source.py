@@ -2,9 +2,11 @@
 
 Frame ``k`` carries samples ``k·n … k·n + n − 1`` (n = samples per frame) of the physics'
 sample index, so its sequence number *is* its position in the run and its timestamp is
-``k·n / rate_hz`` in µs. The source keeps, on request, the truth of every frame it
-produced — its samples and what happened to it on the way out — so tests can check the
-driver against it.
+``k·n / rate_hz`` in µs. A source with ``temperature`` adds each frame's
+internal-temperature word (the unit's die sensor,
+:meth:`gyrolab.sim.physics.Physics.die_sensor_codes`). The source keeps, on request, the
+truth of every frame it produced — its samples and what happened to it on the way out —
+so tests can check the driver against it.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ class AdcSource:
         samples_per_frame: int,
         rate_hz: float,
         axes: int = 1,
+        temperature: bool = False,
         faults: ByteFaults | None = None,
         keep_truth: bool = False,
         write_timeout_s: float = 0.5,
@@ -77,7 +80,8 @@ class AdcSource:
         self._stall_backlog: list[tuple[int, bytes]] | None = None
         self._lock = threading.Lock()
         self.axes = int(axes)
-        self._frame_bytes = frame_size(self.n, self.axes)
+        self.temperature = bool(temperature)  # frames carry the internal-temperature word
+        self._frame_bytes = frame_size(self.n, self.axes, self.temperature)
         self._congested = False
 
     # ----------------------------------------------------------------- faults
@@ -101,9 +105,14 @@ class AdcSource:
         self.port.connect()
 
     # ----------------------------------------------------------------- output
-    def emit(self, first_index: int, counts: np.ndarray) -> None:
+    def emit(
+        self, first_index: int, counts: np.ndarray, temperature_codes: np.ndarray | None = None
+    ) -> None:
         """Frame and send samples ``first_index …`` (a whole number of frames); ``counts``
-        is ``(samples,)`` for one axis or ``(samples, axes)``, sent interleaved."""
+        is ``(samples,)`` for one axis or ``(samples, axes)``, sent interleaved;
+        ``temperature_codes`` (a source with ``temperature``): one word per frame."""
+        if self.temperature != (temperature_codes is not None):
+            raise ValueError("temperature_codes: one per frame exactly when temperature=True")
         n = self.n
         if first_index % n or len(counts) % n:
             raise ValueError("blocks must hold whole frames, aligned on frame boundaries")
@@ -115,7 +124,8 @@ class AdcSource:
         for k in range(c.shape[0]):
             seq = seq0 + k
             ts_us = round(seq * n * 1e6 / self.rate_hz)
-            raw = encode_frame(seq, ts_us, c[k])
+            word = None if temperature_codes is None else int(temperature_codes[k])
+            raw = encode_frame(seq, ts_us, c[k], word)
             wire, damaged = self.faults.apply(raw)
             self.stats.frames += 1
             slot = -1

@@ -13,9 +13,11 @@ speed.
 A multi-unit bench (``unit_physics``: one Physics per unit, e.g. from
 :func:`gyrolab.sim.family.unit_family`) streams every unit's frames on its own pty
 (``bench.unit_adc_ports``, in unit order) and serves a 34970A scanner on TCP
-(``bench.scanner_tcp_resource``) reading unit *k*'s PT100 on channel 101 + *k*. The
-chamber is shared: every unit follows the oven's setpoint, and the controller's process
-value is the first unit's chamber air (a family shares the chamber's parameters).
+(``bench.scanner_tcp_resource``) reading unit *k*'s PT100 on channel 101 + *k* (a unit
+flagged in ``unit_internal_temperature`` sends its die sensor's reading in every frame
+instead; its scanner channel is unwired). The chamber is shared: every unit follows the
+oven's setpoint, and the controller's process value is the first unit's chamber air (a
+family shares the chamber's parameters).
 
 ``bench.lock`` guards the physics; the instruments' replies take it, so the tick thread
 holds it only for a tick's :meth:`Physics.advance` (well under a millisecond). The costly
@@ -85,6 +87,7 @@ class SimBench:
         oven_control_event: int | None = None,
         axis_physics: list[Any] | None = None,
         unit_physics: list[Any] | None = None,
+        unit_internal_temperature: list[bool] | None = None,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
@@ -127,6 +130,11 @@ class SimBench:
 
         self.unit_physics = list(unit_physics or [physics])
         self.multi_unit = unit_physics is not None
+        # Units whose ADC frames carry their internal (die) temperature sensor's word
+        # (Physics.die_sensor_codes, one per frame; gyrolab.framing).
+        self.unit_internal = list(unit_internal_temperature or [False] * len(self.unit_physics))
+        if len(self.unit_internal) != len(self.unit_physics):
+            raise ValueError("unit_internal_temperature: one flag per unit")
         # One ADC port and source per unit (a single-unit bench: the one "adc" port).
         self.unit_ptys = [
             PtyPort(self.workdir / (f"adc{k + 1}" if self.multi_unit else "adc"))
@@ -140,13 +148,14 @@ class SimBench:
                 samples_per_frame=self.samples_per_frame,
                 rate_hz=self.rate_hz,
                 axes=1 + len(self.axis_physics),
+                temperature=internal,
                 faults=self.faults.adc,
                 keep_truth=keep_truth,
                 # Back-pressure only when running as fast as possible; paced, a slow reader
                 # overruns like a real UART receiver would.
                 write_timeout_s=0.5 if speed is None else 0.05,
             )
-            for pty in self.unit_ptys
+            for pty, internal in zip(self.unit_ptys, self.unit_internal, strict=True)
         ]
         self.adc_pty, self.adc = self.unit_ptys[0], self.unit_adcs[0]
         self.oven = WatlowF4Slave(
@@ -217,9 +226,10 @@ class SimBench:
             return r
 
     def _read_channel_ohm(self, channel: int) -> float | None:
-        """The scanner's channel 101 + k: unit k's PT100 (None: nothing wired there)."""
+        """The scanner's channel 101 + k: unit k's PT100 (None: nothing wired there, or the
+        unit is read by its internal sensor)."""
         k = channel - 101
-        if not 0 <= k < len(self.unit_physics):
+        if not 0 <= k < len(self.unit_physics) or self.unit_internal[k]:
             return None
         with self.lock:
             return float(self.unit_physics[k].pt100_ohm())
@@ -374,10 +384,19 @@ class SimBench:
                     if self.axis_physics:
                         cols = [counts] + [p.advance(n).counts for p in self.axis_physics]
                         counts = np.stack(cols, axis=1)
-                    others = [p.advance(n).counts for p in self.unit_physics[1:]]
-                self.adc.emit(block.first_index, counts)
-                for src, c in zip(self.unit_adcs[1:], others, strict=True):
-                    src.emit(block.first_index, c)
+                    blocks = [block] + [p.advance(n) for p in self.unit_physics[1:]]
+                    # Internal sensors: the die at each frame's first sample, as read.
+                    words = [
+                        p.die_sensor_codes(b.die_trace[:: self.samples_per_frame])
+                        if internal
+                        else None
+                        for p, b, internal in zip(
+                            self.unit_physics, blocks, self.unit_internal, strict=True
+                        )
+                    ]
+                self.adc.emit(block.first_index, counts, words[0])
+                for src, b, w in zip(self.unit_adcs[1:], blocks[1:], words[1:], strict=True):
+                    src.emit(block.first_index, b.counts, w)
                 self._fire_due()
         except BaseException as e:  # surfaced by stop() / tests; never silent
             self.error = e
