@@ -36,6 +36,23 @@ ALL_TOPICS = (
     TOPIC_RATE_SUMMARY,
     TOPIC_LOG_FOXGLOVE,
 )
+# A unit's internal (die) temperature sensor, where its rate stream reports one and the bench
+# takes it as the unit's temperature (docs/recording-format.md). Not in ALL_TOPICS: its
+# channel exists only in files that have such a unit, so every other file stays as it was.
+TOPIC_TEMPERATURE_INTERNAL = "/temperature/internal"
+INTERNAL_TEMPERATURE_SCHEMA: dict[str, Any] = {
+    "title": "gyrolab.InternalTemperature",
+    "type": "object",
+    "properties": {
+        "t": {"type": "number", "description": "s since run start, mean time of the readings"},
+        "temperature_c": {
+            "type": "number",
+            "description": "the unit's internal sensor, °C: mean of the readings averaged",
+        },
+        "readings": {"type": "integer", "description": "sensor readings averaged (≥ 1)"},
+    },
+    "required": ["t", "temperature_c", "readings"],
+}
 #: gyrolab /log level -> foxglove.LogLevel (UNKNOWN 0, DEBUG 1, INFO 2, WARNING 3, ERROR 4,
 #: FATAL 5; @foxglove/schemas 2.1 jsonschema Log)
 FOXGLOVE_LOG_LEVEL = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fault": 5}

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
@@ -28,6 +29,7 @@ from gyrolab.record.format import (
     TOPIC_OVEN,
     TOPIC_PT100,
     TOPIC_RATE,
+    TOPIC_TEMPERATURE_INTERNAL,
     UNIT_PREFIX,
     unit_topic,
 )
@@ -90,6 +92,9 @@ class Recording:
     logs: list[dict[str, Any]] = field(default_factory=list)
     topic_counts: dict[str, int] = field(default_factory=dict)
     unit: str | None = None  # the unit read from a multi-unit recording
+    # What pt100_t / pt100_c hold: the unit's PT100 ("pt100"), or, for a unit whose bench
+    # took its internal sensor as its temperature, that sensor ("internal": pt100_ohm is NaN)
+    temperature_source: str = "pt100"
 
     def require_rate(self) -> Series:
         if self.rate is None or self.rate.t.size == 0:
@@ -97,8 +102,11 @@ class Recording:
         return self.rate
 
     def require_temperature(self) -> tuple[np.ndarray, np.ndarray]:
+        """The temperature readings the drift model uses (s, °C): see ``temperature_source``."""
         if self.pt100_t.size == 0:
-            raise InputError(self.path, f"recording has no {TOPIC_PT100} data")
+            raise InputError(
+                self.path, f"recording has no {TOPIC_PT100} (or {TOPIC_TEMPERATURE_INTERNAL}) data"
+            )
         return self.pt100_t, self.pt100_c
 
     @property
@@ -280,9 +288,13 @@ def read_recording(
         rec.run = {**rec.run, "unit_serial": unit}
     rate_blocks: list[tuple[float, float, int, np.ndarray]] = []
     adc_blocks: list[tuple[float, float, int, np.ndarray]] = []
-    pt, oven = [], []
+    pt, oven, internal = [], [], []
     counts: dict[str, int] = {}
-    for topic, _ts, data in iter_messages(path, topics, unit=unit):
+    wanted = list(topics)
+    if unit is not None and TOPIC_PT100 in wanted:
+        # A unit on its internal sensor has that topic instead of a PT100 (the bench said so)
+        wanted.append(TOPIC_TEMPERATURE_INTERNAL)
+    for topic, _ts, data in iter_messages(path, wanted, unit=unit):
         counts[topic] = counts.get(topic, 0) + 1
         if topic == TOPIC_RATE:
             rate_blocks.append(decode_block(data, "rate"))
@@ -292,6 +304,8 @@ def read_recording(
             msg = json.loads(data)
             if topic == TOPIC_PT100:
                 pt.append((msg["t"], msg["resistance_ohm"], msg["temperature_c"]))
+            elif topic == TOPIC_TEMPERATURE_INTERNAL:
+                internal.append((msg["t"], math.nan, msg["temperature_c"]))
             elif topic == TOPIC_OVEN:
                 oven.append((msg["t"], msg["setpoint_c"], msg["process_value_c"]))
                 rec.oven_mode.append(msg["mode"])
@@ -307,6 +321,8 @@ def read_recording(
             rec.adc = _series(adc_blocks, np.int32)
     except ValueError as e:
         raise InputError(path, str(e)) from None
+    if internal and not pt:
+        pt, rec.temperature_source = internal, "internal"
     if pt:
         a = np.asarray(pt, dtype=float)
         rec.pt100_t, rec.pt100_ohm, rec.pt100_c = a[:, 0], a[:, 1], a[:, 2]

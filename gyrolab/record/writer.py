@@ -24,6 +24,7 @@ from gyrolab.record.format import (
     ADC_MESSAGE,
     FORMAT_VERSION,
     FOXGLOVE_LOG_LEVEL,
+    INTERNAL_TEMPERATURE_SCHEMA,
     JSON_SCHEMAS,
     PROFILE,
     RATE_MESSAGE,
@@ -35,6 +36,7 @@ from gyrolab.record.format import (
     TOPIC_PT100,
     TOPIC_RATE,
     TOPIC_RATE_SUMMARY,
+    TOPIC_TEMPERATURE_INTERNAL,
     check_serial,
     file_descriptor_set,
     is_per_unit,
@@ -148,6 +150,7 @@ class RecordingWriter:
         fsync: bool = False,
         fsync_every_s: float | None = None,
         units: list[str] | None = None,
+        internal_temperature: list[str] | tuple[str, ...] = (),
     ) -> None:
         self._own = not hasattr(stream, "write")
         self._fh: IO[bytes] = open(stream, "wb") if self._own else stream  # type: ignore[arg-type]
@@ -198,6 +201,20 @@ class RecordingWriter:
             )
             for u in serials if is_per_unit(topic) else [None]:
                 name = unit_topic(topic, u)
+                self._chan[name] = self._w.register_channel(name, "json", sid)
+                self._group[name] = u
+        # A unit on its internal temperature sensor: its own topic, registered only here, so
+        # that a file without such a unit is byte for byte what it was before.
+        if internal_temperature:
+            bad = [u for u in internal_temperature if u not in (self.units or [])]
+            if bad:
+                raise ValueError(f"internal_temperature: {bad} are not units of this recording")
+            s = INTERNAL_TEMPERATURE_SCHEMA
+            sid = self._w.register_schema(
+                s["title"], "jsonschema", json.dumps(s, sort_keys=True).encode()
+            )
+            for u in internal_temperature:
+                name = unit_topic(TOPIC_TEMPERATURE_INTERNAL, u)
                 self._chan[name] = self._w.register_channel(name, "json", sid)
                 self._group[name] = u
         if isinstance(run, RunMetadata):  # the producers: the typed schema
@@ -366,6 +383,16 @@ class RecordingWriter:
                 "temperature_c": float(temperature_c),
             },
         )
+
+    def write_internal_temperature(
+        self, t: float, temperature_c: float, readings: int, unit: str
+    ) -> None:
+        """One ``/unit/<serial>/temperature/internal`` message (the writer's
+        ``internal_temperature`` units only): the mean of ``readings`` sensor readings."""
+        name = unit_topic(TOPIC_TEMPERATURE_INTERNAL, unit)
+        if name not in self._chan:
+            raise ValueError(f"unit {unit!r} was not declared internal_temperature")
+        self._json(name, {"t": t, "temperature_c": float(temperature_c), "readings": int(readings)})
 
     def write_oven(self, t: float, setpoint_c: float, process_value_c: float, mode: str) -> None:
         self._json(
