@@ -51,6 +51,14 @@ def _effect_spec(text: str) -> str:
     return text
 
 
+def _unit_numbers(text: str) -> str:
+    """``--internal-temperature``: 'all' or 1-based unit numbers, comma separated."""
+    parts = text.split(",")
+    if text != "all" and not all(p.strip().isdigit() and int(p) >= 1 for p in parts):
+        raise argparse.ArgumentTypeError(f"bad --internal-temperature {text!r} (K[,K...]|all)")
+    return text
+
+
 def _log_options(sp: argparse.ArgumentParser) -> None:
     """Options for runs that are users' logs (gyrolab/logs, docs/export.md)."""
     g = sp.add_argument_group("users' logs (ROS 2 MCAP, PX4 ULog, ArduPilot DataFlash)")
@@ -119,6 +127,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="--bench sim only: N units of a seeded family in the chamber, read by a scanner "
         "(1-10; docs/fleet.md)",
+    )
+    a.add_argument(
+        "--internal-temperature",
+        type=_unit_numbers,
+        default=None,
+        metavar="K[,K...]|all",
+        help="--bench sim --units N only: these units (1-based) are read by their internal "
+        "temperature sensor instead of a PT100 on the scanner (docs/fleet.md)",
     )
     a.add_argument(
         "--driver",
@@ -261,6 +277,11 @@ def acquire(args: argparse.Namespace) -> int:
         faults=args.faults,
         axis_models=tuple(args.axis_model or ()),
         units=args.units or 0,
+        internal_temperature=(
+            tuple(range(1, (args.units or 0) + 1))
+            if args.internal_temperature == "all"
+            else tuple(int(k) for k in (args.internal_temperature or "").split(",") if k)
+        ),
         force=args.force,
         live_port=args.live,
         live_host=args.live_host,

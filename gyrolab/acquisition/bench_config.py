@@ -44,11 +44,18 @@ class UnitConfig:
     """One unit of a multi-unit bench (``[[unit]]``, docs/bench-config.md): its ``serial``
     (the recording's /unit/<serial>/… topics), its rate stream (``adc``: the rate-stream
     driver's config, the bench's ``[adc]`` table with this unit's ``driver``, ``port`` and
-    overrides) and ``temperature_channel``, the scanner channel of its PT100."""
+    overrides) and its temperature: ``temperature = "pt100"`` read by the scanner on
+    ``temperature_channel``, or ``"internal"``, the unit's own sensor in its rate stream
+    (``temperature_channel`` None; the stream config's ``internal_temperature`` set)."""
 
     serial: str
     adc: Any
-    temperature_channel: int
+    temperature_channel: int | None
+    temperature: str = "pt100"
+
+    @property
+    def internal(self) -> bool:
+        return self.temperature == "internal"
 
 
 @dataclass(frozen=True)
@@ -98,7 +105,8 @@ class BenchConfig:
     safe_state: SafeState = field(default_factory=SafeState)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
     # A multi-unit bench: its units (``[[unit]]``) and the scanning multimeter that reads
-    # their PT100s (``[scanner]``); none on a single-unit bench.
+    # their PT100s (``[scanner]``); none on a single-unit bench, and no scanner when every
+    # unit is read by its internal sensor (``[[unit]] temperature = "internal"``).
     units: tuple[UnitConfig, ...] = ()
     scanner: Any = None
     source: str = "<defaults>"
@@ -110,9 +118,11 @@ class BenchConfig:
         d.pop("source")
         units, scanner = d.pop("units"), d.pop("scanner")
         if units:
-            d["unit"] = list(units)
+            # TOML has no null: a unit on its internal sensor has no temperature_channel
+            d["unit"] = [{k: v for k, v in u.items() if v is not None} for u in units]
             del d["multimeter"]  # a multi-unit bench has no [thermometer]
-            d["scanner"] = {k: v for k, v in scanner.items() if k != "channels"}
+            if scanner is not None:  # none when every unit is on its internal sensor
+                d["scanner"] = {k: v for k, v in scanner.items() if k != "channels"}
         return d
 
     def profile_path(self) -> str:
@@ -210,13 +220,17 @@ def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     return cfg
 
 
-_UNIT_KEYS = ("serial", "driver", "port", "temperature_channel", "adc")
+_UNIT_KEYS = ("serial", "driver", "port", "temperature", "temperature_channel", "adc")
+# A unit's temperature (``[[unit]] temperature``): its PT100 on a scanner channel, or the
+# unit's own internal sensor, reported in its rate stream.
+TEMPERATURE_SOURCES = ("pt100", "internal")
 
 
 def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...], Any]:
     """``[[unit]]`` and ``[scanner]``: the units (each one's rate-stream config is the
     ``[adc]`` table with the unit's ``driver``, ``port`` and ``adc`` overrides) and the
-    scanner's config, its channel list taken from the units."""
+    scanner's config, its channel list taken from the units read by PT100 (no scanner when
+    every unit is on its internal sensor)."""
     from gyrolab.record.format import check_serial
 
     raw_units = d.get("unit")
@@ -230,9 +244,9 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
                 source, f"[{t}]: a multi-unit bench reads each unit's PT100 with [scanner]"
             )
     raw_scanner = d.get("scanner")
-    if not isinstance(raw_scanner, dict):
-        raise InputError(source, "[[unit]] needs [scanner], the multimeter reading their PT100s")
-    if "channels" in raw_scanner:
+    if raw_scanner is not None and not isinstance(raw_scanner, dict):
+        raise InputError(source, "[scanner] must be a table")
+    if raw_scanner is not None and "channels" in raw_scanner:
         raise InputError(source, "[scanner] channels: set by each [[unit]] temperature_channel")
     adc_raw = d.get("adc", {})
     units = []
@@ -246,12 +260,7 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
         except ValueError as e:
             raise InputError(source, f"{where} serial: {e}") from None
         where = f"[[unit]] {serial}"
-        ch = u.get("temperature_channel")
-        if isinstance(ch, bool) or not isinstance(ch, int):
-            raise InputError(
-                source, f"{where}: temperature_channel = {ch!r}: the scanner channel of its "
-                "PT100, an integer such as 101"
-            )
+        temperature, ch = _unit_temperature(u, where, source)
         over = u.get("adc", {})
         if not isinstance(over, dict):
             raise InputError(source, f"{where}: adc must be a table of [adc] keys")
@@ -261,10 +270,57 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
             spec = registry.get(str(name), "rate_stream")
         except KeyError as e:
             raise InputError(source, f"{where} driver = {name!r}: {e.args[0]}") from None
-        units.append(UnitConfig(serial, _section(spec.config, raw, f"{where} adc", source), ch))
+        if temperature == "internal":
+            # The stream must carry the sensor: its driver's config says whether it can.
+            if "internal_temperature" not in {f.name for f in fields(spec.config)}:
+                raise InputError(
+                    source,
+                    f'{where} temperature = "internal": its rate-stream driver {name!r} '
+                    "reports no internal temperature",
+                )
+            raw["internal_temperature"] = True
+        adc = _section(spec.config, raw, f"{where} adc", source)
+        units.append(UnitConfig(serial, adc, ch, temperature))
+    channels = tuple(u.temperature_channel for u in units if not u.internal)
+    if not channels:
+        if raw_scanner is not None:
+            raise InputError(
+                source,
+                '[scanner]: every [[unit]] has temperature = "internal", so it reads no PT100 '
+                "(remove [scanner])",
+            )
+        return tuple(units), None
+    if raw_scanner is None:
+        raise InputError(source, "[[unit]] needs [scanner], the multimeter reading their PT100s")
     scanner = _role_section(d, "multi_thermometer", ("scanner",), source)
-    scanner = replace(scanner, channels=tuple(u.temperature_channel for u in units))
-    return tuple(units), scanner
+    return tuple(units), replace(scanner, channels=channels)
+
+
+def _unit_temperature(u: dict[str, Any], where: str, source: str) -> tuple[str, int | None]:
+    """A ``[[unit]]``'s temperature: ``("pt100", channel)`` or ``("internal", None)``."""
+    temperature = u.get("temperature", "pt100")
+    if temperature not in TEMPERATURE_SOURCES:
+        raise InputError(
+            source,
+            f'{where}: temperature = {temperature!r}: "pt100" (its PT100 on the scanner\'s '
+            'temperature_channel) or "internal" (the unit\'s own sensor, in its rate stream)',
+        )
+    ch = u.get("temperature_channel")
+    if temperature == "internal":
+        if ch is not None:
+            raise InputError(
+                source,
+                f'{where}: temperature = "internal" and temperature_channel = {ch!r}: '
+                "give one of the two",
+            )
+        return temperature, None
+    if isinstance(ch, bool) or not isinstance(ch, int):
+        raise InputError(
+            source,
+            f"{where}: temperature_channel = {ch!r}: the scanner channel of its PT100, an "
+            'integer such as 101 (or temperature = "internal" for its own sensor)',
+        )
+    return temperature, ch
 
 
 # Physical bounds a limit must lie within (docs/bench-config.md, "Limits"): beyond them a
@@ -395,8 +451,9 @@ def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
             continue
         table = next((t for t in names if t in d), names[0])
         needed.append((f"[{table}]", role, getattr(cfg, fname)))
-    if cfg.units:
+    if cfg.scanner is not None:
         needed.append(("[scanner]", "multi_thermometer", cfg.scanner))
+    if cfg.units:
         needed += [(f"[[unit]] {u.serial}", "rate_stream", u.adc) for u in cfg.units]
     for where, role, sub in needed:
         key = registry.get(sub.driver, role).address_key

@@ -137,12 +137,17 @@ class RunResult:
 class UnitDevices:
     """One unit of a multi-unit run: its ``serial``, its connected rate ``stream`` (whose
     ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``adc`` and the
-    scanner ``channel`` of its PT100."""
+    scanner ``channel`` of its PT100 — None for a unit read by its internal sensor, whose
+    stream delivers its temperature (``AdcBlock.temperature_c``)."""
 
     serial: str
     stream: RateStream
     adc: Any
-    channel: int
+    channel: int | None
+
+    @property
+    def internal(self) -> bool:
+        return self.channel is None
 
 
 class _Poller(threading.Thread):
@@ -283,9 +288,11 @@ class Acquisition:
     A single-unit bench gives ``thermometer``, ``gyro`` and ``adc``. A multi-unit bench
     gives ``units`` (one :class:`UnitDevices` each) and, as ``thermometer``, the scanner
     (a :class:`~gyrolab.instruments.roles.MultiThermometer`) that reads every unit's
-    PT100; the writer must then be a multi-unit one (``RecordingWriter(units=…)``). The
-    profile's stability rule watches the first unit's PT100 (as ``gyrolab simulate
-    --units`` does); the over/under-temperature watchdog watches every unit's. A unit whose
+    PT100 — a unit read by its internal sensor (``UnitDevices.channel`` None) has it in its
+    stream instead, and with every unit so ``thermometer`` is None; the writer must then be a
+    multi-unit one (``RecordingWriter(units=…, internal_temperature=…)``). The profile's
+    stability rule watches the first unit's temperature (as ``gyrolab simulate --units``
+    does); the over/under-temperature watchdog watches every unit's. A unit whose
     stream fails (a fatal error, or silent longer than ``comm_timeout_s``) is logged and
     dropped; the run goes on with the others (docs/bench-config.md, "Several units").
     """
@@ -296,7 +303,7 @@ class Acquisition:
         profile: Profile,
         writer: RecordingWriter,
         clock: Clock,
-        thermometer: Thermometer | MultiThermometer,
+        thermometer: Thermometer | MultiThermometer | None,
         oven: Oven,
         gyro: GyroStream | None = None,
         adc: RateStreamConfig | None = None,
@@ -315,6 +322,8 @@ class Acquisition:
         check_profile_limits(profile, limits)
         if (units is None) == (gyro is None) or (units is None) == (adc is None):
             raise ValueError("give gyro and adc (one unit) or units (several), not both")
+        if thermometer is None and (units is None or not all(u.internal for u in units)):
+            raise ValueError("a PT100 (a unit without its internal sensor) needs a thermometer")
         # threaded=False: no threads; every turn of the main loop polls the instruments
         # itself and then sleeps ``turn_s`` on ``clock`` (a fake clock in tests advances).
         self.threaded = threaded
@@ -359,6 +368,7 @@ class Acquisition:
                     self.log,
                     unit=u.serial,
                     on_samples=on_samples if k == 0 else None,
+                    on_temperature=self._unit_temperature(k, u.serial) if u.internal else None,
                 )
                 for k, u in enumerate(units)
             ]
@@ -430,7 +440,8 @@ class Acquisition:
                     0.0,
                 )
         now = self._t0
-        for name in (self.thermo.name, self.oven.name, *self.streams):
+        thermo = [] if self.thermo is None else [self.thermo.name]
+        for name in (*thermo, self.oven.name, *self.streams):
             self._last_ok[name] = now
             self.silence.heard(name)
         self._do(self.plan.start(0.0))
@@ -438,16 +449,20 @@ class Acquisition:
             name: _AdcThread(rec.dev, self.q.put, self.stop_ev, self.clock)
             for name, rec in self.streams.items()
         }
-        threads: list[Any] = [
-            _Poller(
-                self.thermo.name,
-                self.thermo.read,
-                self.pt100_period_s,
-                self.clock,
-                self.q.put,
-                self.stop_ev,
-                reports=getattr(self.thermo, "reports", None),
-            ),
+        threads: list[Any] = []
+        if self.thermo is not None:  # none when every unit is read by its internal sensor
+            threads.append(
+                _Poller(
+                    self.thermo.name,
+                    self.thermo.read,
+                    self.pt100_period_s,
+                    self.clock,
+                    self.q.put,
+                    self.stop_ev,
+                    reports=getattr(self.thermo, "reports", None),
+                )
+            )
+        threads += [
             _Poller(
                 self.oven.name,
                 self.oven.read,
@@ -619,9 +634,9 @@ class Acquisition:
                     {"setpoint_c": value},
                     t,
                 )
-        elif source == self.thermo.name and self.units is not None:
+        elif self.thermo is not None and source == self.thermo.name and self.units is not None:
             self._on_scan(t, payload)
-        elif source == self.thermo.name:
+        elif self.thermo is not None and source == self.thermo.name:
             ohm, c = payload
             self.w.write_pt100(t, ohm, c)
             self.status.pt100_c = c
@@ -636,9 +651,11 @@ class Acquisition:
     def _on_scan(self, t: float, readings: dict[int, Any]) -> None:
         """A sweep of the scanner: every unit's PT100 to its topic and the watchdog; the
         first unit's to the plan's stability rule."""
-        assert self.units is not None
+        assert self.units is not None and self.thermo is not None
         plan_c: float | None = None
         for k, u in enumerate(self.units):
+            if u.internal:
+                continue  # its stream reports its temperature (_unit_temperature)
             r = readings.get(u.channel)
             if r is None or not math.isfinite(r[1]):
                 if u.serial not in self._pt_missing:
@@ -661,6 +678,19 @@ class Acquisition:
         if plan_c is not None:
             self.status.pt100_c = plan_c
         self._do(self.plan.update(t, plan_c))
+
+    def _unit_temperature(self, k: int, serial: str) -> Callable[[float, float], None]:
+        """The engine's side of unit ``k``'s internal sensor (its RateRecorder calls it with
+        each recorded reading): the over/under-temperature watchdog, as for a PT100, and for
+        the first unit the plan's stability rule."""
+
+        def take(t: float, c: float) -> None:
+            self._pt100_watch(t, c, serial, "internal sensor")
+            if k == 0:
+                self.status.pt100_c = c
+                self._do(self.plan.update(t, c))
+
+        return take
 
     def _drop_unit(self, source: str, t: float, reason: str) -> None:
         """Give up on a unit's rate stream: log it, stop reading it, carry on with the
@@ -733,7 +763,9 @@ class Acquisition:
             self._fault = f"{source}: {message}"
             self.log("fault", source, message, "fault", None, t)
 
-    def _pt100_watch(self, t: float, c: float, unit: str | None = None) -> None:
+    def _pt100_watch(
+        self, t: float, c: float, unit: str | None = None, sensor: str = "PT100"
+    ) -> None:
         lim = self.limits
         if lim.pt100_min_c <= c <= lim.pt100_max_c:
             self._pt_bad[unit] = 0
@@ -741,7 +773,7 @@ class Acquisition:
         n = self._pt_bad[unit] = self._pt_bad.get(unit, 0) + 1
         if n >= lim.watchdog_samples:
             which = "over" if c > lim.pt100_max_c else "under"
-            whose = "PT100" if unit is None else f"unit {unit} PT100"
+            whose = sensor if unit is None else f"unit {unit} {sensor}"
             self._fail(
                 "watchdog",
                 f"{whose} {which}-temperature: {c:.2f} °C outside "

@@ -45,6 +45,7 @@ class RateRecorder:
         *,
         unit: str | None = None,
         on_samples: Callable[[float], None] | None = None,
+        on_temperature: Callable[[float, float], None] | None = None,
     ) -> None:
         self.dev = device
         self.adc = adc
@@ -52,6 +53,11 @@ class RateRecorder:
         self.log = log
         self.unit = unit
         self.on_samples = on_samples
+        # A unit on its internal sensor (a multi-unit recording's unit): the readings its
+        # blocks carry go to /unit/<serial>/temperature/internal, averaged per recorded
+        # block, and each average to ``on_temperature(t, c)`` (the engine's watchdog, plan).
+        self.on_temperature = on_temperature
+        self._temps: list[tuple[float, float]] = []  # (run time, °C) not yet written
         self.dropped = False  # a multi-unit run gave up on this stream
         # Device index of run sample 0, next expected index, block buffer.
         self.idx0: int | None = None
@@ -138,6 +144,8 @@ class RateRecorder:
             # on sample times follow the ADC's own clock (frame timestamps), not arrival.
             self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self.period)
         assert self._next_idx is not None
+        if self.on_temperature is not None and blk.temperature_c is not None:
+            self._take_temperatures(blk)
         if idx < self._next_idx:
             # Some or all of these samples were written already: never write one twice.
             dup = min(n, self._next_idx - idx)
@@ -191,8 +199,32 @@ class RateRecorder:
         if self._blk_n >= self._block_len:
             self.emit_block()
 
+    def _take_temperatures(self, blk: AdcBlock) -> None:
+        """Keep the internal-temperature readings of samples not recorded yet (a repeated
+        frame's reading is dropped with its samples), on the run clock."""
+        assert self._next_idx is not None
+        k = np.arange(len(blk.temperature_c))
+        first = int(blk.first_index) + k * int(blk.samples_per_reading)
+        new = first >= self._next_idx
+        t = float(blk.t0) + (first - int(blk.first_index)) * self.period - self._adc_offset
+        vals = np.asarray(blk.temperature_c, dtype=float)
+        self._temps += [(float(a), float(b)) for a, b in zip(t[new], vals[new], strict=True)]
+
+    def _emit_temperature(self) -> None:
+        """Write the readings kept since the last block as one message (their mean) and
+        hand it to ``on_temperature``."""
+        if not self._temps or self.unit is None or self.on_temperature is None:
+            return
+        t, c = np.mean(np.asarray(self._temps), axis=0)
+        n = len(self._temps)
+        self._temps = []
+        self.w.write_internal_temperature(float(t), float(c), n, unit=self.unit)
+        self.on_temperature(float(t), float(c))
+
     def emit_block(self) -> None:
-        """Write the block being filled (``/gyro/adc`` and ``/gyro/rate``)."""
+        """Write the block being filled (``/gyro/adc`` and ``/gyro/rate``), and the unit's
+        internal temperature readings of it."""
+        self._emit_temperature()
         if not self._blk_n:
             return
         counts = np.concatenate(self._blk) if len(self._blk) > 1 else self._blk[0]

@@ -68,6 +68,8 @@ class AcquireOptions:
     live_port: int | None = None
     live_host: str = "127.0.0.1"
     units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
+    # --units only: the units (1-based) read by their internal temperature sensor
+    internal_temperature: tuple[int, ...] = ()
 
 
 # --------------------------------------------------------------------- instruments
@@ -104,9 +106,14 @@ def lab_addresses(cfg: BenchConfig) -> dict[str, str]:
     chamber's, the scanner's (``multi_thermometer``) and each unit's stream's
     (``unit/<serial>``)."""
     if cfg.units:
+        scanner = (
+            {"multi_thermometer": registry.address(cfg.scanner, "multi_thermometer")}
+            if cfg.scanner is not None  # none when every unit is on its internal sensor
+            else {}
+        )
         return {
             "chamber": registry.address(cfg.oven, "chamber"),
-            "multi_thermometer": registry.address(cfg.scanner, "multi_thermometer"),
+            **scanner,
             **{f"unit/{u.serial}": registry.address(u.adc, "rate_stream") for u in cfg.units},
         }
     return {
@@ -140,10 +147,12 @@ def connect_instruments(
     # (attribute, role, driver config, address key, table in BENCH.toml)
     opening: list[tuple[str, str, Any, str, str]]
     if cfg.units:
-        opening = [
-            ("oven", "chamber", cfg.oven, "chamber", "[chamber]"),
-            ("scanner", "multi_thermometer", cfg.scanner, "multi_thermometer", "[scanner]"),
-        ] + [
+        opening = [("oven", "chamber", cfg.oven, "chamber", "[chamber]")]
+        if cfg.scanner is not None:
+            opening.append(
+                ("scanner", "multi_thermometer", cfg.scanner, "multi_thermometer", "[scanner]")
+            )
+        opening += [
             ("units", "rate_stream", u.adc, f"unit/{u.serial}", f"[[unit]] {u.serial}")
             for u in cfg.units
         ]
@@ -170,8 +179,11 @@ def connect_instruments(
                 continue
             setattr(inst, attr, dev)
             inst.identity[dev.name] = dev.describe()
-        for u in cfg.units:
-            inst.identity["units"][u.serial]["temperature_channel"] = u.temperature_channel
+        for u in cfg.units:  # where each unit's temperature comes from
+            unit = inst.identity["units"][u.serial]
+            unit["temperature_source"] = u.temperature
+            if u.temperature_channel is not None:
+                unit["temperature_channel"] = u.temperature_channel
     except BaseException:
         inst.close()
         raise
@@ -305,6 +317,7 @@ def run_acquisition(
                 flush_every_s=r.flush_every_s,
                 fsync_every_s=r.fsync_every_s,
                 units=[u.serial for u in cfg.units] if cfg.units else None,
+                internal_temperature=[u.serial for u in cfg.units if u.internal],
             )
             if live is not None:
                 live.attach(writer)
@@ -315,16 +328,16 @@ def run_acquisition(
                 fh.flush()  # header + metadata on disk before the first reading
                 assert inst.oven is not None
                 devices: dict[str, Any]
-                if cfg.units:  # the scanner reads every unit's PT100
-                    assert inst.scanner is not None
+                if cfg.units:  # the scanner reads the PT100s; a unit's own sensor, its stream
                     devices = {
                         "thermometer": inst.scanner,
                         "units": [
                             UnitDevices(u.serial, stream, u.adc, u.temperature_channel)
                             for u, (_, stream) in zip(cfg.units, inst.units, strict=True)
                         ],
-                        "pt100_period_s": cfg.scanner.period_s,
                     }
+                    if cfg.scanner is not None:
+                        devices["pt100_period_s"] = cfg.scanner.period_s
                 else:
                     assert inst.thermometer and inst.gyro
                     devices = {
@@ -390,8 +403,14 @@ def acquire(opts: AcquireOptions) -> RunResult:
         )
     if opts.units and not sim_only:
         raise GyrolabError("--units applies to --bench sim only (a bench file lists [[unit]]s)")
+    if opts.internal_temperature and not opts.units:
+        raise GyrolabError(
+            "--internal-temperature applies to --bench sim --units N only "
+            '(a bench file says [[unit]] temperature = "internal")'
+        )
     if sim_only:
-        cfg = sim_drivers(sim_bench_config(opts.seed, opts.units), opts.drivers)
+        base = sim_bench_config(opts.seed, opts.units, opts.internal_temperature)
+        cfg = sim_drivers(base, opts.drivers)
     else:
         cfg = load_bench(opts.bench)
         if opts.speed is not None:

@@ -121,11 +121,13 @@ class SimHandle:
         self.bench.clock.speed = self.speed
 
 
-def sim_bench_config(seed: int, units: int = 0) -> BenchConfig:
+def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) -> BenchConfig:
     """The bench file ``--bench sim`` stands for: defaults, a simulated operator and unit;
     with ``units`` (``--units N``), N units of the seeded family
     (:func:`gyrolab.sim.family.unit_family`, serials ``SIM<seed>-01`` …) on one scanner,
-    unit k's PT100 on channel 101 + k (a 34901A holds ten)."""
+    unit k's PT100 on channel 101 + k (a 34901A holds ten). ``internal``
+    (``--internal-temperature``): the units (1-based) read by their internal sensor
+    instead (``[[unit]] temperature = "internal"``; no scanner when that is every unit)."""
     cfg = BenchConfig(
         name="sim",
         run=RunInfo(
@@ -143,8 +145,23 @@ def sim_bench_config(seed: int, units: int = 0) -> BenchConfig:
 
     if not 1 <= units <= 10:
         raise InputError("--units", f"the simulated scanner reads 1 to 10 units, not {units}")
-    unit_cfgs = tuple(UnitConfig(unit_serial(seed, k), cfg.adc, 101 + k) for k in range(units))
-    channels = tuple(u.temperature_channel for u in unit_cfgs)
+    bad = sorted(set(internal) - set(range(1, units + 1)))
+    if bad:
+        raise InputError("--internal-temperature", f"no unit {bad[0]} among units 1..{units}")
+    unit_cfgs = tuple(
+        UnitConfig(
+            unit_serial(seed, k),
+            replace(cfg.adc, internal_temperature=True),
+            None,
+            "internal",
+        )
+        if k + 1 in internal
+        else UnitConfig(unit_serial(seed, k), cfg.adc, 101 + k)
+        for k in range(units)
+    )
+    channels = tuple(u.temperature_channel for u in unit_cfgs if not u.internal)
+    if not channels:  # every unit on its internal sensor: no scanner
+        return replace(cfg, units=unit_cfgs)
     scanner = registry.default_config("multi_thermometer")
     return replace(cfg, units=unit_cfgs, scanner=replace(scanner, channels=channels))
 
@@ -208,6 +225,8 @@ def start_sim_bench(
         "chamber": registry.get(cfg.oven.driver, "chamber"),
         **(
             {"multi_thermometer": registry.get(cfg.scanner.driver, "multi_thermometer")}
+            if cfg.scanner is not None
+            else {}
             if cfg.units
             else {"thermometer": registry.get(cfg.multimeter.driver, "thermometer")}
         ),
@@ -236,6 +255,7 @@ def start_sim_bench(
         model=model,
         axis_physics=extra_axes,
         unit_physics=unit_physics,
+        unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,
         samples_per_frame=cfg.adc.samples_per_frame,
@@ -266,7 +286,7 @@ def start_sim_bench(
         cfg = replace(
             cfg,
             units=tuple(
-                replace(u, adc=calibrated(u.adc, p.adc))
+                replace(u, adc=_with_die_sensor(calibrated(u.adc, p.adc), p, u.internal))
                 for u, p in zip(cfg.units, bench.unit_physics, strict=True)
             ),
         )
@@ -304,6 +324,15 @@ def start_sim_bench(
         metadata=metadata,
     )
     return handle, cfg
+
+
+def _with_die_sensor(adc: Any, physics: Any, internal: bool) -> Any:
+    """A unit's stream config with its simulated internal sensor's register scale (the
+    part's data sheet, as a lab takes it), for a unit read by that sensor."""
+    if not internal:
+        return adc
+    s = physics.die_sensor
+    return replace(adc, temperature_c_per_lsb=s.c_per_lsb, temperature_zero_c=s.zero_c)
 
 
 def _sim_units(
