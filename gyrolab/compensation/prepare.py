@@ -48,6 +48,8 @@ class PreparedRun:
     filled_blocks: int = 0
     content_hash: str = ""  # guards.RunHasher digest of the rate and PT100 data
     unit: str | None = None  # the unit of a multi-unit recording (docs/fleet.md)
+    # what pt_c is: the PT100, or the unit's internal sensor (Recording.temperature_source)
+    temperature_source: str = "pt100"
 
 
 def causal_temperature(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
@@ -197,4 +199,5 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
         hasher.add_rate(x)
     run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit)
     run.content_hash = hasher.hexdigest(pt_t, pt_c)
+    run.temperature_source = rec.temperature_source
     return run

@@ -52,8 +52,10 @@ def temperature_profile(
     pt100_c: np.ndarray,
     safe: np.ndarray | None = None,
     profile_c: tuple[float, float] | None = None,
+    temperature_label: str = "gyro case (PT100)",
 ) -> Figure:
-    """Oven setpoint, chamber process value and the PT100 on the gyro case against time.
+    """Oven setpoint, chamber process value and the PT100 on the gyro case against time
+    (``temperature_label``: a unit read by its internal sensor says so).
 
     ``safe`` marks the oven readings taken in the end-of-run safe state: the setpoint's
     step to the safe setpoint is drawn apart (red, dashed, annotated) so it reads as the
@@ -87,7 +89,7 @@ def temperature_profile(
             )
         ax.plot(th, pv_c, color="#ff7f0e", lw=1.0, label="chamber air (PV)")
     if np.size(pt100_t):
-        ax.plot(_hours(pt100_t), pt100_c, color="#1f77b4", lw=1.2, label="gyro case (PT100)")
+        ax.plot(_hours(pt100_t), pt100_c, color="#1f77b4", lw=1.2, label=temperature_label)
     ax.set_xlabel("time since power-on (h)")
     ax.set_ylabel("temperature (°C)")
     ax.set_title("Temperature profile")

@@ -124,6 +124,7 @@ def run_section(data: ReportData) -> Section:
         )
     if data.model is not None and data.model.computed:
         sec.blocks.append(TextBlock(data.model.computed, "note"))
+    internal = rec.temperature_source == "internal"
     if rec.oven_t.size or rec.pt100_t.size:
         safe = np.array([m == "safe" for m in rec.oven_mode], dtype=bool)
         sec.blocks.append(
@@ -138,9 +139,17 @@ def run_section(data: ReportData) -> Section:
                     rec.pt100_c,
                     safe=safe,
                     profile_c=data.coverage.profile_c,
+                    temperature_label=(
+                        "gyro die (internal sensor)" if internal else "gyro case (PT100)"
+                    ),
                 ),
-                "Oven setpoint (commanded), chamber air (oven process value) and the PT100 on "
-                "the gyro case; the shaded band is the profile's setpoint range. "
+                "Oven setpoint (commanded), chamber air (oven process value) and "
+                + (
+                    "the unit's internal (die) temperature sensor, its model input"
+                    if internal
+                    else "the PT100 on the gyro case"
+                )
+                + "; the shaded band is the profile's setpoint range. "
                 + (
                     "The red dashed step at the end is the end-of-run safe state (the oven "
                     "commanded to its safe setpoint and read back), not part of the profile."
