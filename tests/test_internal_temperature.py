@@ -199,8 +199,8 @@ def test_every_units_temperature_is_recorded_and_read_back(mixed_run: Path) -> N
     recs = {s: read_recording(mixed_run, unit=s) for s in ("SIM0-01", "SIM0-02", "SIM0-03")}
     one = recs["SIM0-01"]
     assert one.temperature_source == "internal" and np.isnan(one.pt100_ohm).all()
-    # averaged per 0.5 s block over the 960 s run, and following the die through the steps
-    assert one.pt100_t.size >= 1800 and np.ptp(one.pt100_c) > 2.0
+    # averaged per recorded block (1 s here) over the 960 s run, following the die
+    assert one.pt100_t.size >= 900 and np.ptp(one.pt100_c) > 2.0
     units = one.bench["units"]
     assert units["SIM0-01"]["temperature_source"] == "internal"
     assert "temperature_channel" not in units["SIM0-01"]
@@ -262,7 +262,7 @@ def test_every_unit_internal_runs_without_a_scanner(tmp_path: Path) -> None:
     assert res.outcome == "completed" and res.units_dropped == []
     for s in ("SIM0-01", "SIM0-02"):
         rec = read_recording(out, unit=s)
-        assert rec.temperature_source == "internal" and rec.pt100_t.size >= 200
+        assert rec.temperature_source == "internal" and rec.pt100_t.size >= 100  # per block
         assert "scanner" not in rec.bench
     events = [e["event"] for e in rec.events]
     assert events.count("step_started") == 3 and events[-2:] == ["run_ended", "safe_state"]
