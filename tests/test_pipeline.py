@@ -304,6 +304,30 @@ def test_streamed_preparation_equals_in_memory(runs: dict[str, Path]) -> None:
     np.testing.assert_array_equal(tb, a.t)
 
 
+def test_streamed_preparation_reads_the_file_once(
+    runs: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """PT100 readings and the rate come from one pass through the reader (one
+    decompression of the chunks), with the same data and content hash as a whole read."""
+    import gyrolab.record.reader as reader
+
+    passes: list[object] = []
+    real = reader.iter_messages
+
+    def counted(*args: object, **kwargs: object) -> object:
+        passes.append(args[1] if len(args) > 1 else kwargs.get("topics"))
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(reader, "iter_messages", counted)
+    b = prepare_file(str(runs["cal"]), SMALL)
+    assert len(passes) == 1, passes
+    monkeypatch.undo()
+    a = load(runs["cal"])
+    assert b.content_hash == a.content_hash
+    np.testing.assert_array_equal(b.pt_c, a.pt_c)
+    np.testing.assert_array_equal(b.t, a.t)
+
+
 def test_streaming_block_means_from_file_and_memory_agree(
     runs: dict[str, Path], fitted: tuple[CompensationModel, Decomposition]
 ) -> None:

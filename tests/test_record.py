@@ -13,7 +13,7 @@ import pytest
 from gyrolab.record.blocks import decode_block, encode_block
 from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
-from gyrolab.record.reader import iter_messages, read_metadata, read_recording
+from gyrolab.record.reader import iter_blocks, iter_messages, read_metadata, read_recording
 from gyrolab.record.rewrite import Message, rewrite_recording
 from gyrolab.record.writer import RecordingWriter
 from gyrolab.report.outcome import profile_setpoints, run_outcome
@@ -83,6 +83,28 @@ def test_an_old_multi_unit_file_reads_each_units_rate(tmp_path: Path) -> None:
     bench = BenchMetadata.from_dict(read_recording(path, unit="B2").bench)
     assert bench.sample_rate_hz("A1") == 100.0 and bench.sample_rate_hz("B2") == 50.0
     assert bench.units is not None and "rate_hz" not in bench.units["B2"]["adc"]
+
+
+def test_the_rate_goes_to_a_callback_in_the_pass_that_reads_the_rest(tmp_path: Path) -> None:
+    """``on_rate``: one unit's rate blocks, in order, to the caller (not kept), the PT100
+    readings read in the same pass exactly as without it."""
+    path = tmp_path / "units.mcap"
+    _write(path, OLD_RUN, OLD_BENCH, units=["A1", "B2"])
+    topics = [TOPIC_PT100, TOPIC_RATE]
+    blocks: list[tuple[float, float, int, np.ndarray]] = []
+    rec = read_recording(path, topics=topics, unit="B2", on_rate=blocks.append)
+    whole = read_recording(path, topics=topics, unit="B2")
+    assert rec.rate is None and rec.topic_counts == whole.topic_counts == {
+        TOPIC_PT100: 3,
+        TOPIC_RATE: 3,
+    }
+    for k in ("pt100_t", "pt100_ohm", "pt100_c"):
+        np.testing.assert_array_equal(getattr(rec, k), getattr(whole, k))
+    streamed = list(iter_blocks(path, TOPIC_RATE, unit="B2"))
+    heads = [(k, 0.01, 100 * k) for k in (0, 1, 2)]  # (t0, period, first index)
+    assert [b[:3] for b in blocks] == [b[:3] for b in streamed] == heads
+    assert whole.rate is not None
+    np.testing.assert_array_equal(np.concatenate([b[3] for b in blocks]), whole.rate.values)
 
 
 def test_typed_metadata_round_trips_and_keeps_unknown_keys() -> None:

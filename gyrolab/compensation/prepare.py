@@ -25,7 +25,7 @@ from gyrolab.compensation.guards import RunHasher, content_hash
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
-from gyrolab.record.reader import Recording, iter_blocks, read_recording
+from gyrolab.record.reader import Block, Recording, iter_blocks, read_recording
 
 
 @dataclass
@@ -137,33 +137,54 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     return run
 
 
-def iter_rate_batches(
-    path: str, min_samples: int = 1 << 20, unit: str | None = None
-) -> Iterator[tuple[np.ndarray, np.ndarray, float]]:
-    """``(t, rate, period)`` for runs of consecutive ``/gyro/rate`` messages holding at
+RateBatch = tuple[np.ndarray, np.ndarray, float]
+
+
+class RateBatcher:
+    """Consecutive ``/gyro/rate`` blocks gathered into ``(t, rate, period)`` batches of at
     least ``min_samples`` samples (the last one fewer): per-sample times built for the
     whole batch at once, so the per-message Python cost is one decode."""
-    t0s: list[float] = []
-    pers: list[float] = []
-    arrs: list[np.ndarray] = []
-    n = 0
 
-    def flush() -> tuple[np.ndarray, np.ndarray, float]:
+    def __init__(self, min_samples: int = 1 << 20) -> None:
+        self.min_samples = min_samples
+        self._t0s: list[float] = []
+        self._pers: list[float] = []
+        self._arrs: list[np.ndarray] = []
+        self._n = 0
+
+    def add(self, block: Block) -> RateBatch | None:
+        """Take one decoded block; the batch it completes, else ``None``."""
+        t0, period, _first, arr = block
+        self._t0s.append(t0)
+        self._pers.append(period)
+        self._arrs.append(arr)
+        self._n += arr.size
+        return self.flush() if self._n >= self.min_samples else None
+
+    def flush(self) -> RateBatch | None:
+        """The blocks taken since the last batch, as one batch (``None``: none)."""
+        if not self._arrs:
+            return None
+        t0s, pers, arrs = self._t0s, self._pers, self._arrs
+        self._t0s, self._pers, self._arrs, self._n = [], [], [], 0
         sizes = np.array([a.size for a in arrs])
         start = np.repeat(np.cumsum(sizes) - sizes, sizes)
         t = np.repeat(t0s, sizes) + (np.arange(sizes.sum()) - start) * np.repeat(pers, sizes)
         return t, np.concatenate(arrs).astype(float), float(np.median(pers))
 
-    for t0, period, _first, arr in iter_blocks(path, TOPIC_RATE, unit=unit):
-        t0s.append(t0)
-        pers.append(period)
-        arrs.append(arr)
-        n += arr.size
-        if n >= min_samples:
-            yield flush()
-            t0s, pers, arrs, n = [], [], [], 0
-    if arrs:
-        yield flush()
+
+def iter_rate_batches(
+    path: str, min_samples: int = 1 << 20, unit: str | None = None
+) -> Iterator[RateBatch]:
+    """``(t, rate, period)`` batches of the file's ``/gyro/rate`` (:class:`RateBatcher`)."""
+    batcher = RateBatcher(min_samples)
+    for block in iter_blocks(path, TOPIC_RATE, unit=unit):
+        batch = batcher.add(block)
+        if batch is not None:
+            yield batch
+    last = batcher.flush()
+    if last is not None:
+        yield last
 
 
 def prepare_arrays(
@@ -189,14 +210,23 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
     """Like :func:`prepare_run`, streaming ``/gyro/rate`` from the file block by block:
     memory is that of the 1000 points/h series, not of the run (``raw_t``/``raw_rate`` are
     ``None``; :func:`gyrolab.compensation.apply.streaming_block_means` re-reads the file
-    when it needs the samples)."""
-    rec = read_recording(path, topics=[TOPIC_PT100], unit=unit)
-    pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
+    when it needs the samples). One pass through the file: the PT100 readings are gathered
+    while the rate streams (:func:`~gyrolab.record.reader.read_recording` ``on_rate``)."""
     acc = BlockAverager(cfg.block_s)
     hasher = RunHasher()
-    for t, x, period in iter_rate_batches(path, unit=unit):
-        acc.add(t, x, period)
-        hasher.add_rate(x)
+    batcher = RateBatcher()
+
+    def take(batch: RateBatch | None) -> None:
+        if batch is not None:
+            t, x, period = batch
+            acc.add(t, x, period)
+            hasher.add_rate(x)
+
+    rec = read_recording(
+        path, topics=[TOPIC_PT100, TOPIC_RATE], unit=unit, on_rate=lambda b: take(batcher.add(b))
+    )
+    take(batcher.flush())
+    pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
     run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit)
     run.content_hash = hasher.hexdigest(pt_t, pt_c)
     run.temperature_source = rec.temperature_source

@@ -1,5 +1,6 @@
 """Reading a recording: whole (:func:`read_recording` into numpy arrays) or streaming
-(:func:`iter_messages`, :func:`iter_blocks`), one unit of a multi-unit file at a time
+(:func:`iter_messages`, :func:`iter_blocks`, or :func:`read_recording` handing the rate
+blocks to a callback while it reads the other topics), one unit of a multi-unit file at a time
 (:func:`list_units`, :func:`select_unit`).
 
 The ``run`` and ``bench`` records come back normalised (:mod:`gyrolab.record.metadata`):
@@ -12,7 +13,7 @@ import contextlib
 import json
 import math
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,9 @@ from gyrolab.record.format import (
     unit_topic,
 )
 from gyrolab.record.metadata import normalise_bench, normalise_run
+
+#: A decoded rate or ADC block: ``(t0, period, first_index, values)``.
+Block = tuple[float, float, int, np.ndarray]
 
 
 @dataclass
@@ -240,14 +244,14 @@ def iter_messages(
 
 def iter_blocks(
     path: str | os.PathLike[str], topic: str = TOPIC_RATE, unit: str | None = None
-) -> Iterator[tuple[float, float, int, np.ndarray]]:
+) -> Iterator[Block]:
     """Stream ``/gyro/rate`` or ``/gyro/adc`` blocks as ``(t0, period, first_index, values)``."""
     kind = "adc" if topic == TOPIC_ADC else "rate"
     for _topic, _ts, data in iter_messages(path, [topic], unit=unit):
         yield decode_block(data, kind)
 
 
-def _series(blocks: list[tuple[float, float, int, np.ndarray]], dtype: type) -> Series:
+def _series(blocks: list[Block], dtype: type) -> Series:
     if not blocks:
         return Series(np.empty(0), np.empty(0, dtype=dtype), np.empty(0, dtype=np.int64), 0.0)
     n = sum(b[3].shape[0] for b in blocks)
@@ -269,11 +273,18 @@ def _series(blocks: list[tuple[float, float, int, np.ndarray]], dtype: type) -> 
 
 
 def read_recording(
-    path: str | os.PathLike[str], topics: list[str] | None = None, unit: str | None = None
+    path: str | os.PathLike[str],
+    topics: list[str] | None = None,
+    unit: str | None = None,
+    on_rate: Callable[[Block], None] | None = None,
 ) -> Recording:
     """Read a recording into arrays. ``topics`` limits what is decoded (default: all);
     ``unit`` selects one unit of a multi-unit recording (:func:`select_unit`), whose
     topics come back under their single-unit names.
+
+    ``on_rate``: each ``/gyro/rate`` block, in log-time order, goes to it instead of into
+    ``rate`` (left ``None``): a caller streams the rate in bounded memory while the small
+    topics are read in the same pass (one decompression of the file's chunks, not two).
 
     Rate samples come back as float64 °/s, ADC counts as int32. Raises
     :class:`~gyrolab.errors.InputError` on a missing, foreign or damaged file.
@@ -286,8 +297,9 @@ def read_recording(
     if unit is not None:
         rec.unit = unit
         rec.run = {**rec.run, "unit_serial": unit}
-    rate_blocks: list[tuple[float, float, int, np.ndarray]] = []
-    adc_blocks: list[tuple[float, float, int, np.ndarray]] = []
+    rate_blocks: list[Block] = []
+    adc_blocks: list[Block] = []
+    keep_rate = rate_blocks.append if on_rate is None else on_rate
     pt, oven, internal = [], [], []
     counts: dict[str, int] = {}
     wanted = list(topics)
@@ -297,7 +309,7 @@ def read_recording(
     for topic, _ts, data in iter_messages(path, wanted, unit=unit):
         counts[topic] = counts.get(topic, 0) + 1
         if topic == TOPIC_RATE:
-            rate_blocks.append(decode_block(data, "rate"))
+            keep_rate(decode_block(data, "rate"))
         elif topic == TOPIC_ADC:
             adc_blocks.append(decode_block(data, "adc"))
         else:
@@ -315,7 +327,7 @@ def read_recording(
                 rec.logs.append(msg)
     rec.topic_counts = counts
     try:
-        if TOPIC_RATE in topics:
+        if TOPIC_RATE in topics and on_rate is None:
             rec.rate = _series(rate_blocks, np.float64)
         if TOPIC_ADC in topics:
             rec.adc = _series(adc_blocks, np.int32)
