@@ -7,6 +7,7 @@ is the command's default and is timed in docs/report.md); the browser test reuse
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -51,6 +52,37 @@ def test_demo_writes_every_stage(demo_run: Path) -> None:
     assert info["heldout_source"] == "acquire --bench sim"
     html = (demo_run / "report" / "index.html").read_text(encoding="utf-8")
     assert "34401A" in html and "Watlow" in html  # instrument identities from the bench
+
+
+def test_demo_outputs_name_runs_relative_to_dir(demo_run: Path) -> None:
+    """The stages ran in a temporary sibling (``.demo.*.part``) renamed into place: no text
+    output may name it (nor any other path under DIR's parent); the runs are named relative
+    to DIR, as a lab would look them up after the rename."""
+    texts = [
+        p
+        for p in demo_run.rglob("*")
+        if p.is_file() and p.suffix in {".json", ".toml", ".html", ".csv", ".md"}
+    ]
+    assert len(texts) >= 8  # model.json, metrics.json (x3), results.json, index.html (x2), …
+    build_dir = re.compile(r"\.demo\.[^/\"'<>\s]*\.part")
+    for p in texts:
+        text = p.read_text(encoding="utf-8")
+        assert not build_dir.search(text), f"{p.relative_to(demo_run)} names the build dir"
+        assert str(demo_run.parent) not in text, f"{p.relative_to(demo_run)}: absolute path"
+    model = json.loads((demo_run / "model" / "model.json").read_text())
+    assert model["calibration"]["path"] == "calibration.mcap"
+    fit = json.loads((demo_run / "model" / "metrics.json").read_text())
+    assert (fit["run"], fit["calibration"]["run"]) == ("heldout.mcap", "calibration.mcap")
+    results = json.loads((demo_run / "model" / "results.json").read_text())["runs"]
+    assert {r: v["path"] for r, v in results.items()} == {
+        "calibration": "calibration.mcap",
+        "validation": "heldout.mcap",
+    }
+    held = json.loads((demo_run / "report" / "metrics.json").read_text())
+    assert (held["run"], held["calibration_run"]) == ("heldout.mcap", "calibration.mcap")
+    raw = json.loads((demo_run / "calibration-report" / "metrics.json").read_text())
+    assert raw["run"] == "calibration.mcap"
+    assert (demo_run / held["calibration_run"]).is_file()  # resolves against DIR
 
 
 def test_model_report_contract(demo_run: Path) -> None:

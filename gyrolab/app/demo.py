@@ -17,8 +17,11 @@ The README quick start in one command, using only the real pieces (nothing is fa
 (the compensated report: ``index.html``, ``metrics.json``, ``report.pdf``),
 ``calibration-report/`` (raw) and ``demo.json``. It appears atomically: the work happens
 in a temporary sibling directory renamed into place at the end, and any failure removes
-it. Each stage is a library call (no command line, no change of directory); the paths
-recorded inside the outputs are those the stages wrote (the temporary directory).
+it. Each stage is a library call (no command line, no change of directory) on the files
+in the temporary directory; the runs recorded inside the outputs (model.json's
+``calibration.path``, ``run`` and ``calibration_run`` in the metrics, results.json, the
+report's software table) are named relative to ``DIR`` (``calibration.mcap``,
+``heldout.mcap``), never by the temporary directory, which no longer exists afterwards.
 """
 
 from __future__ import annotations
@@ -76,7 +79,10 @@ def run_demo(
 
     try:
         with atomic_dir(out_p, force, command="demo", inputs=(profile,)) as tmp:
-            cal, held = tmp / "calibration.mcap", tmp / "heldout.mcap"
+            # the outputs name each run by its path relative to DIR, which stays true after
+            # the rename (tmp, where the stages read it, is gone by then)
+            cal_label, held_label = "calibration.mcap", "heldout.mcap"
+            cal, held = tmp / cal_label, tmp / held_label
             model, report = tmp / "model", tmp / "report"
             t0 = stage("simulate calibration run")
             line = simulate_file(cal, prof_arg, rate_hz=rate_hz, seed=seed)
@@ -99,17 +105,23 @@ def run_demo(
             t0 = stage("compensate (GPSO-VMD, MPE, FLP, GA-BP)")
             compensate(
                 argparse.Namespace(
-                    run=str(cal), out=str(model), validate=str(held), seed=seed, force=False
+                    run=str(cal),
+                    out=str(model),
+                    validate=str(held),
+                    seed=seed,
+                    force=False,
+                    run_label=cal_label,
+                    validate_label=held_label,
                 )
             )
             done("compensate", t0)
 
             t0 = stage("report (held-out run, with model)")
-            metrics = write_report(held, report, model)
+            metrics = write_report(held, report, model, label=held_label)
             done("report", t0)
 
             t0 = stage("report (calibration run, raw)")
-            write_report(cal, tmp / "calibration-report")
+            write_report(cal, tmp / "calibration-report", label=cal_label)
             done("raw report", t0)
             timings["total"] = time.perf_counter() - t_all
             info = {

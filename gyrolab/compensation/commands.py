@@ -135,7 +135,9 @@ def compensate(args: argparse.Namespace) -> int:
     """Fit on ``args.run``, optionally evaluate on ``args.validate``, write ``args.out``.
 
     A run with several axes (or a foreign log, :mod:`gyrolab.logs`) gets one model per axis
-    in one directory (:mod:`gyrolab.compensation.axes`)."""
+    in one directory (:mod:`gyrolab.compensation.axes`). The outputs name the runs as
+    given, or by ``args.run_label``/``args.validate_label`` when an app sets them
+    (:mod:`gyrolab.app.demo`: paths relative to its output directory)."""
     t_start = time.perf_counter()
     inputs = (args.run, args.validate, getattr(args, "config", None))
     check_output(args.out, args.force, inputs=inputs, kind="dir")
@@ -172,6 +174,10 @@ def compensate(args: argparse.Namespace) -> int:
         )
     for run, val in zip(runs, vals or [], strict=False):
         check_not_calibration(args.validate, val.content_hash, run.content_hash)
+    # how the outputs name the runs: an app's stable labels, else the paths as given
+    for prepared, label in ((runs, "run_label"), (vals or [], "validate_label")):
+        for r in prepared:
+            r.label = getattr(args, label, None) or ""
     t_read = time.perf_counter() - t_start
     fitted = []
     for k, run in enumerate(runs):

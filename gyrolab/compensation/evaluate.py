@@ -57,7 +57,7 @@ def evaluate(
 ) -> dict[str, Any]:
     """metrics.json content for one application (docs/cli.md keys plus diagnostics)."""
     bs = model.config.block_s
-    m: dict[str, Any] = {"run": run.path, "held_out": bool(held_out)}
+    m: dict[str, Any] = {"run": run.name, "held_out": bool(held_out)}
     for key in ("raw", "compensated", "compensated_drift_only", "compensated_streaming_flp"):
         m[key] = series_metrics(app.series[key], bs)
     whiches = ("gabp", "causal") if model.causal is not None else ("gabp",)

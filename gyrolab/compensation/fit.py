@@ -227,7 +227,7 @@ def fit(
         K=dec.K,
         alpha=dec.alpha,
         calibration={
-            "path": run.path,
+            "path": run.name,
             "n_points": int(run.t.size),
             "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
             **calibration_ranges(run, cfg.dtdt_window_s),

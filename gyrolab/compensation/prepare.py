@@ -33,7 +33,9 @@ class PreparedRun:
     """A run reduced to what the model needs.
 
     ``t``/``rate``/``temp``/``X``: the 1000 points/h series (s, °/s, °C, features);
-    ``raw_t``/``raw_rate``: full-rate samples; ``pt_t``/``pt_c``: PT100 readings."""
+    ``raw_t``/``raw_rate``: full-rate samples; ``pt_t``/``pt_c``: PT100 readings.
+    ``path`` is the file read (error messages name it); :attr:`name` is how the outputs
+    record the run."""
 
     path: str
     t: np.ndarray
@@ -50,6 +52,14 @@ class PreparedRun:
     unit: str | None = None  # the unit of a multi-unit recording (docs/fleet.md)
     # what pt_c is: the PT100, or the unit's internal sensor (Recording.temperature_source)
     temperature_source: str = "pt100"
+    label: str = ""  # the caller's stable name for the run ("": the path as given)
+
+    @property
+    def name(self) -> str:
+        """The run as model.json, metrics.json and results.json record it: ``label``, else
+        ``path`` as the caller gave it (``gyrolab demo`` passes paths relative to its DIR,
+        never its temporary build directory)."""
+        return self.label or self.path
 
 
 def causal_temperature(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:

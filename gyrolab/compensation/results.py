@@ -188,7 +188,7 @@ def run_results(role: str, model: Any, app: Any, run: Any, held_out: bool) -> Ru
     dec = app.decomposition
     return RunResults(
         role=role,
-        path=str(run.path),
+        path=str(run.name),
         content_hash=str(run.content_hash),
         held_out=bool(held_out),
         block_s=bs,

@@ -112,13 +112,17 @@ def firmware_note(metrics: dict[str, Any]) -> str:
     return firmware_sentence(metrics)
 
 
-def model_run(model_dir: str | Path, model: Any, rec: Recording) -> ModelRun:
+def model_run(
+    model_dir: str | Path, model: Any, rec: Recording, label: str | None = None
+) -> ModelRun:
     """The model on ``rec``: read from ``model_dir`` when ``compensate`` evaluated this
-    run (same content hash of the rate and PT100 data), else applied here."""
+    run (same content hash of the rate and PT100 data), else applied here. ``label``: how
+    the metrics name the run (default: its path as given)."""
     from gyrolab.compensation.prepare import prepare_run
     from gyrolab.compensation.results import load_results, run_metrics
 
     run = prepare_run(rec, model.config)  # checks the run and hashes its data
+    run.label = label or ""
     stored = load_results(model_dir)
     match = next(
         (r for r in stored.values() if r.content_hash and r.content_hash == run.content_hash),
@@ -127,7 +131,7 @@ def model_run(model_dir: str | Path, model: Any, rec: Recording) -> ModelRun:
     metrics = None if match is None else run_metrics(model_dir, match.role)
     if match is not None and metrics is not None:
         m = {k: v for k, v in metrics.items() if k not in COMPENSATE_ONLY}
-        m["run"] = str(rec.path)
+        m["run"] = run.name
         m["calibration_run"] = model.calibration.get("path")
         m["model_timing_s"] = metrics.get("timing_breakdown_s", model.timing_s)
         m["model_results"] = "model_dir"  # docs/cli.md: read, not recomputed

@@ -45,13 +45,15 @@ def build_report(
     log_options: dict | None = None,
     unit: str | None = None,
     rec: Recording | None = None,
+    label: str | None = None,
 ) -> tuple[Document, dict[str, Any]]:
     """The report document and ``metrics.json`` content of ``run_path`` (and the model).
 
     ``step(name)`` is called as each stage starts (progress display). ``spec`` (a spec
     TOML, :mod:`gyrolab.report.spec`) adds the verdict; ``operator``/``serial`` override
     the recording's for the sign-off block; ``axis`` reports one axis of a multi-axis
-    unit; ``rec`` is the recording already read (``run_path``'s, every axis).
+    unit; ``rec`` is the recording already read (``run_path``'s, every axis); ``label``
+    names the run in metrics.json (default: ``run_path`` as given).
     """
     from gyrolab.outputs import json_safe
     from gyrolab.report import analysis
@@ -70,7 +72,7 @@ def build_report(
         rec = read_run(run_path, log_options, unit)  # unit: of a multi-unit recording
     if axis is not None:  # one axis of a multi-axis unit (gyrolab.report.axes)
         rec = rec.axis(axis)
-    data = assemble(rec, model_dir, model, step, spec_obj, operator, serial, unit)
+    data = assemble(rec, model_dir, model, step, spec_obj, operator, serial, unit, label)
     step("figures")
     doc = document(data)
     metrics = data.metrics

@@ -46,11 +46,14 @@ def write_report(
     serial: str | None = None,
     log_options: dict | None = None,
     unit: str | None = None,
+    label: str | None = None,
 ) -> dict[str, Any]:
     """Build and write the report of ``run`` into ``out``; returns the metrics.
 
     ``spec`` (SPEC.toml, :mod:`gyrolab.report.spec`) adds per-limit pass/fail and the
-    verdict; ``operator``/``serial`` fill the sign-off block instead of the recording's.
+    verdict; ``operator``/``serial`` fill the sign-off block instead of the recording's;
+    ``label``: how metrics.json names the run (default: ``run`` as given; the demo passes
+    a path relative to its output directory).
     """
     from gyrolab.report.build import build_report
     from gyrolab.report.html import render
@@ -72,7 +75,13 @@ def write_report(
         from gyrolab.report.axes import build_axes_report, n_axes
 
         n, rec = (1, None) if unit is not None else n_axes(run, model, log_options)
-        kw = {"spec": spec, "operator": operator, "serial": serial, "log_options": log_options}
+        kw = {
+            "spec": spec,
+            "operator": operator,
+            "serial": serial,
+            "log_options": log_options,
+            "label": label,
+        }
         if n > 1:
             doc, metrics = build_axes_report(run, model, n, step, rec=rec, **kw)
         else:

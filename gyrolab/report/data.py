@@ -115,14 +115,16 @@ def assemble(
     operator: str | None = None,
     serial: str | None = None,
     unit: str | None = None,
+    label: str | None = None,
 ) -> ReportData:
     """:class:`ReportData` of ``rec`` (one axis), with ``model`` (loaded from
     ``model_dir``) applied or its results read, and ``spec`` (a loaded
-    :class:`~gyrolab.report.spec.Spec`) judged. ``step(name)`` marks each stage."""
+    :class:`~gyrolab.report.spec.Spec`) judged. ``step(name)`` marks each stage.
+    ``label``: how metrics.json names the run (default: its path as given)."""
     mr: ModelRun | None = None
     if model is not None and model_dir is not None:
         step("apply model")
-        mr = analysis.model_run(model_dir, model, rec)
+        mr = analysis.model_run(model_dir, model, rec, label)
     block_s = float(model.config.block_s) if model is not None else analysis.paper_block_s()
     tb, xb = analysis.block_averages(rec, block_s)
     step("metrics")
@@ -130,7 +132,7 @@ def assemble(
         metrics = mr.metrics
     else:
         metrics = {
-            "run": str(rec.path),
+            "run": label or str(rec.path),
             "raw": analysis.raw_metrics(xb, block_s, [k for k, _ in METRIC_ROWS]),
             "held_out": False,
             "sample_period_s": block_s,
