@@ -280,3 +280,55 @@ def test_report_says_when_a_run_is_outside_the_calibrated_range(
     assert any(t.startswith("Outside the calibrated range — hot.mcap:") for t in texts)
     allan = next(b for s in doc.sections for b in s.blocks if getattr(b, "key", "") == "allan")
     assert "raw: ARW" in allan.caption and "τ =" in allan.caption
+
+
+def write_unit_run(path: Path, seed: int, internal: bool) -> Path:
+    """test_pipeline.write_run's cooling run as unit G-1 of a bench: its temperature from its
+    internal (die) sensor, 1 °C above the case, or from its PT100."""
+    rng = np.random.default_rng(seed)
+    fs, n = 10.0, int(1.2 * 3600 * 10)
+    t = np.arange(n) / fs
+    temp = case_temperature(t, heating=False)
+    rate = true_bias(temp) + rng.normal(0.0, 0.05 / 60 * np.sqrt(fs), n)
+    extra = {"internal_temperature": ["G-1"]} if internal else {}
+    with RecordingWriter(path, start_time_ns=1_700_000_000 * 10**9, units=["G-1"], **extra) as w:
+        for s in range(0, n, 10):
+            w.write_rate_block(t[s], 1 / fs, s, rate[s : s + 10].astype(np.float32), unit="G-1")
+            if internal:
+                w.write_internal_temperature(t[s] + 0.5, float(temp[s]) + 1.0, 10, unit="G-1")
+            else:
+                w.write_pt100(t[s], 100.0, float(temp[s]) + rng.normal(0, 0.01), unit="G-1")
+    return path
+
+
+def test_a_model_on_another_temperature_source_is_flagged_not_refused(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    die = write_unit_run(tmp_path / "die.mcap", 31, internal=True)
+    case = write_unit_run(tmp_path / "case.mcap", 32, internal=False)
+    out = tmp_path / "m"
+    args = ["compensate", str(die), "--unit", "G-1", "--out", str(out), "--validate", str(case)]
+    assert main(args) == 0
+    warn = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("warning:")]
+    # the die sensor's 1 °C offset already shows as points outside the calibrated range
+    assert len(warn) == 2 and "outside the calibrated temperature range" in warn[0]
+    assert warn[1:] == [
+        f"warning: {case}: the model was fitted on the internal (die) sensor temperature, "
+        "this run's is its PT100 (case): the offset and lag between die and case enter the "
+        "drift model's input"
+    ]
+    assert (
+        json.loads((out / "model.json").read_text())["calibration"]["temperature_source"]
+        == "internal"
+    )
+    metrics = json.loads((out / "metrics.json").read_text())
+    t = metrics["temperature"]
+    assert (t["calibration_temperature_source"], t["temperature_source"]) == ("internal", "pt100")
+    assert t["temperature_source_mismatch"] is True
+    assert metrics["calibration"]["temperature"]["temperature_source_mismatch"] is False
+    # apply (single-unit runs, PT100): written, the warning on stderr, the flag in the file
+    comp = tmp_path / "c.mcap"
+    assert main(["apply", str(out), str(runs["val"]), "--out", str(comp)]) == 0
+    assert "fitted on the internal (die) sensor temperature" in capsys.readouterr().err
+    rng = read_metadata(comp)["compensation"]["calibrated_range"]
+    assert rng["temperature_source_mismatch"] is True and rng["temperature_source"] == "pt100"

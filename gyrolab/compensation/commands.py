@@ -191,8 +191,6 @@ def compensate(args: argparse.Namespace) -> int:
         if unit is not None:  # the unit the model belongs to (docs/fleet.md)
             model.calibration["unit"] = unit
             metrics_cal["unit"] = unit
-            # the model's input: the unit's PT100 or its internal sensor (docs/fleet.md)
-            model.calibration["temperature_source"] = run.temperature_source
             if vals is None or vunit is not None:  # held out on the same serial
                 metrics["unit"] = unit if vals is None else vunit
     if len(runs) == 1:

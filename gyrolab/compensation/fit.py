@@ -234,6 +234,8 @@ def fit(
             "raw_rate_hz": 1.0 / run.raw_period,
             "filled_blocks": run.filled_blocks,
             "content_hash": run.content_hash,
+            # the model's input: the PT100 or the unit's internal sensor (guards.source_check)
+            "temperature_source": run.temperature_source,
         },
         flp_mixed=flp_mixed,
         flp_stream=flp_stream,

@@ -11,6 +11,10 @@
   Outside, the model is extrapolated (linearly for the networks, by its own curve for the
   polynomial), so ``compensate --validate`` and ``apply`` warn on stderr and
   ``metrics.json`` carries the flag and the fractions.
+* :func:`source_check` / :func:`source_warning` — the temperature source the model was
+  fitted on (``calibration.temperature_source``: the unit's PT100, or its internal die
+  sensor) against the run's. A mismatch is not refused (the die–case offset and lag may be
+  acceptable) but flagged the same way: a stderr line and ``temperature_source_mismatch``.
 * :func:`check_finite` — a model whose parameters are not all finite is refused when
   loaded (one line naming the file, exit 2) instead of producing an all-NaN output.
 """
@@ -105,15 +109,45 @@ def _outside(x: np.ndarray, lo: float, hi: float, min_margin: float) -> tuple[fl
     return float(out.mean()), margin
 
 
+def source_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
+    """The model's temperature source (``calibration.temperature_source``, absent =
+    ``"pt100"``: models fitted before internal sensors existed) against the run's
+    (``PreparedRun.temperature_source``), and whether they differ."""
+    fitted = str(calibration.get("temperature_source", "pt100"))
+    used = str(run.temperature_source)
+    return {
+        "temperature_source": used,
+        "calibration_temperature_source": fitted,
+        "temperature_source_mismatch": used != fitted,
+    }
+
+
+SOURCE_NAMES = {"pt100": "PT100 (case)", "internal": "internal (die) sensor"}
+
+
+def source_warning(path: str, t: dict[str, Any]) -> str | None:
+    """One stderr line for a run whose temperature source is not the model's (``None``
+    when they agree): a die sensor reads the die, offset from and lagging the case PT100."""
+    if not t.get("temperature_source_mismatch"):
+        return None
+    fitted, used = t["calibration_temperature_source"], t["temperature_source"]
+    return (
+        f"warning: {path}: the model was fitted on the {SOURCE_NAMES.get(fitted, fitted)} "
+        f"temperature, this run's is its {SOURCE_NAMES.get(used, used)}: the offset and lag "
+        "between die and case enter the drift model's input"
+    )
+
+
 def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     """The ``temperature`` block of metrics.json: the run's temperature (and dT/dt) range
     against the calibrated one, the fraction of 3.6 s points outside (strictly, key
     ``fraction_outside_calibration``; and beyond the margin, which sets the flag), and
-    ``outside_calibration_range``. Models written before dT/dt ranges were stored get the
-    temperature check only. Empty when the model records no range."""
+    ``outside_calibration_range``; with :func:`source_check`'s keys. Models written before
+    dT/dt ranges were stored get the temperature check only; with no range, the source
+    keys only."""
     lo, hi = calibration.get("temp_min_c"), calibration.get("temp_max_c")
     if lo is None or hi is None:
-        return {}
+        return source_check(calibration, run)
     strict = (run.temp < lo) | (run.temp > hi)
     frac_t, margin_t = _outside(run.temp, lo, hi, TEMP_MARGIN_C)
     out: dict[str, Any] = {
@@ -144,6 +178,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
         )
         flag = flag or frac_r > 0
     out["outside_calibration_range"] = bool(flag)
+    out.update(source_check(calibration, run))
     return out
 
 
@@ -169,9 +204,10 @@ def range_warning(path: str, t: dict[str, Any]) -> str | None:
 
 
 def warn_outside(path: str, t: dict[str, Any]) -> None:
-    msg = range_warning(path, t)
-    if msg:
-        print(msg, file=sys.stderr)
+    """The stderr lines of a ``temperature`` block: outside the range, another source."""
+    for msg in (range_warning(path, t), source_warning(path, t)):
+        if msg:
+            print(msg, file=sys.stderr)
 
 
 def check_finite(directory: str | Path, meta: dict[str, Any], arrays: dict[str, Any]) -> None:

@@ -144,6 +144,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     acc.add(rate.t, x, rate.period)
     run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit)
     run.content_hash = content_hash(x, pt_t, pt_c)
+    run.temperature_source = rec.temperature_source
     return run
 
 

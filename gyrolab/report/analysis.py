@@ -12,6 +12,7 @@ Allan curve, and the noise per temperature plateau, all from the recording.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -93,14 +94,29 @@ def plateau_rows(rec: Recording) -> list[Any]:
 
 
 def range_note(metrics: dict[str, Any]) -> str:
-    """The sentence for a run outside the model's calibrated range ('' inside it)."""
+    """The sentences for a run outside the model's calibrated range and for one whose
+    temperature source is not the model's ('' when neither)."""
     rng = metrics.get("temperature") or {}
-    if not rng.get("outside_calibration_range"):
-        return ""
-    from gyrolab.compensation.guards import range_warning
+    from gyrolab.compensation.guards import range_warning, source_warning
 
-    line = range_warning(Path(str(metrics.get("run", "this run"))).name, rng) or ""
-    return line.replace("warning: ", "Outside the calibrated range — ", 1)
+    name = Path(str(metrics.get("run", "this run"))).name
+    notes = []
+    if rng.get("outside_calibration_range"):
+        line = range_warning(name, rng) or ""
+        notes.append(line.replace("warning: ", "Outside the calibrated range — ", 1))
+    line = source_warning(name, rng)
+    if line:
+        notes.append(line.replace("warning: ", "Another temperature source — ", 1) + ".")
+    return " ".join(notes)
+
+
+def warn_source(metrics: dict[str, Any]) -> None:
+    """The stderr line of a run whose temperature source is not the model's."""
+    from gyrolab.compensation.guards import source_warning
+
+    line = source_warning(str(metrics.get("run", "this run")), metrics.get("temperature") or {})
+    if line:
+        print(line, file=sys.stderr)
 
 
 def firmware_note(metrics: dict[str, Any]) -> str:

@@ -186,6 +186,8 @@ def assemble(
     step("allan")
     data.allan = _allan_curves(data)
     data.range_note = analysis.range_note(metrics) if mr is not None else ""
+    if mr is not None:
+        analysis.warn_source(metrics)
     data.firmware_note = analysis.firmware_note(metrics)
     step("plateau noise")
     data.plateaus = analysis.plateau_rows(rec)
