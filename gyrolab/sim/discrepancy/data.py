@@ -2,7 +2,9 @@
 
 Only what a real bench records is read: ``/gyro/rate``, ``/temperature/pt100``,
 ``/oven/state`` and ``/profile/event``. Metadata records (where a simulator may store its
-provenance) are never opened.
+provenance) are never opened. A unit whose temperature is its internal (die) sensor
+(``/unit/<serial>/temperature/internal``, no PT100) is refused: the thermal model fits a
+PT100 on the case, and the die's lag and offset would be named as case effects.
 
 The 100 Hz rate stream is reduced in one pass to
 
@@ -29,7 +31,13 @@ import numpy as np
 from gyrolab.errors import InputError
 from gyrolab.numerics.allan import allan_deviation
 from gyrolab.record.blocks import decode_block
-from gyrolab.record.format import TOPIC_EVENT, TOPIC_OVEN, TOPIC_PT100, TOPIC_RATE
+from gyrolab.record.format import (
+    TOPIC_EVENT,
+    TOPIC_OVEN,
+    TOPIC_PT100,
+    TOPIC_RATE,
+    TOPIC_TEMPERATURE_INTERNAL,
+)
 from gyrolab.record.reader import iter_messages
 
 SPIKE_K = 8.0
@@ -306,8 +314,13 @@ def _read_bench(
     pt: list[tuple[float, float]] = []
     oven: list[tuple[float, float, float]] = []
     topics = [TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN]
+    if unit is not None:  # a unit on its internal sensor records that instead of a PT100
+        topics.append(TOPIC_TEMPERATURE_INTERNAL)
+    internal = 0
     for topic, _ts, data in iter_messages(path, topics, unit=unit):
-        if topic == TOPIC_RATE:
+        if topic == TOPIC_TEMPERATURE_INTERNAL:
+            internal += 1
+        elif topic == TOPIC_RATE:
             blocks.append(decode_block(data, "rate"))
         elif topic == TOPIC_PT100:
             m = json.loads(data)
@@ -317,6 +330,16 @@ def _read_bench(
             oven.append((m["t"], m["setpoint_c"], m["process_value_c"]))
     if not blocks:
         raise InputError(path, f"recording has no {TOPIC_RATE} data")
+    if not pt and internal:
+        # The thermal fit models a PT100 on the case (τ_case, ΔT_self, δ = rtd_self_heating);
+        # a die sensor lags the case by τ_die and carries its own offset, which that fit
+        # would report as a longer τ_case and a PT100 self-heating that is not there.
+        raise InputError(
+            path,
+            f"unit {unit} records its internal (die) temperature, not a PT100 on its case: "
+            "the discrepancy thermal model fits the case and would misread the die's lag "
+            "and offset as case effects (docs/discrepancy.md)",
+        )
     if not pt:
         raise InputError(path, f"recording has no {TOPIC_PT100} data")
     if not oven:
