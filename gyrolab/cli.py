@@ -217,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("run", metavar="RUN.mcap")
     cv.add_argument("--to", required=True, choices=["csv", "hdf5", "parquet", "netcdf"])
     cv.add_argument("--out", required=True, help="output FILE")
+    cv.add_argument("--unit", metavar="SERIAL", help="the unit of a multi-unit run")
     cv.add_argument("--force", action="store_true", help="overwrite an existing output")
     ex = cmd("export", "write a fitted model in a firmware's or another tool's format")
     ex.add_argument("model", metavar="MODEL_DIR")

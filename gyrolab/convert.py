@@ -8,11 +8,13 @@ The sample table is the same in every format, one row per gyro sample (docs/conv
                  rate_x_dps, rate_y_dps (, rate_z_dps) instead, and adc_counts_x … likewise
     adc_counts   raw 24-bit ADC code (int32; only when the recording has /gyro/adc)
     pt100_c      PT100 temperature, °C: the last reading at or before t_s (NaN before the
-                 first); held, never interpolated
+                 first); held, never interpolated. A unit on its internal sensor
+                 (``--unit`` of a multi-unit recording) has internal_temperature_c instead
     setpoint_c   oven setpoint, °C: the last /oven/state at or before t_s (NaN before)
 
 HDF5 and NetCDF also hold the low-rate tables as they were recorded (``pt100``: t_s,
-resistance_ohm, temperature_c; ``oven``: t_s, setpoint_c, process_value_c, mode) and every
+resistance_ohm, temperature_c, or ``internal_temperature``: t_s, temperature_c, readings;
+``oven``: t_s, setpoint_c, process_value_c, mode) and every
 format carries the run's metadata records, profile events and log (JSON text in
 attributes / key-value metadata / ``#`` header lines of the CSV), units on every column.
 
@@ -47,8 +49,10 @@ from gyrolab.record.format import (
     TOPIC_OVEN,
     TOPIC_PT100,
     TOPIC_RATE,
+    TOPIC_TEMPERATURE_INTERNAL,
+    unit_topic,
 )
-from gyrolab.record.reader import iter_messages, read_metadata
+from gyrolab.record.reader import iter_messages, read_metadata, select_unit
 
 FORMATS = ("csv", "hdf5", "parquet", "netcdf")
 #: rows buffered before one write (a Parquet row group, an HDF5/NetCDF append)
@@ -64,6 +68,12 @@ COLUMNS: dict[str, tuple[str, str, str]] = {
     "pt100_c": ("float64", "degC", "PT100 temperature, last reading at or before t_s"),
     "setpoint_c": ("float64", "degC", "oven setpoint, last state at or before t_s"),
 }
+#: pt100_c's place for a unit whose temperature is its internal (die) sensor: named for it,
+#: so the die reading is never taken for the case PT100
+INTERNAL_COLUMN = (
+    "internal_temperature_c",
+    ("float64", "degC", "unit's internal (die) sensor, last reading at or before t_s"),
+)
 LOW_RATE: dict[str, dict[str, tuple[str, str]]] = {
     "pt100": {
         "t_s": ("s", "time since run start"),
@@ -74,6 +84,11 @@ LOW_RATE: dict[str, dict[str, tuple[str, str]]] = {
         "t_s": ("s", "time since run start"),
         "setpoint_c": ("degC", "commanded setpoint"),
         "process_value_c": ("degC", "chamber air"),
+    },
+    "internal_temperature": {
+        "t_s": ("s", "mean time of the readings averaged"),
+        "temperature_c": ("degC", "unit's internal (die) sensor, mean of the readings"),
+        "readings": ("1", "sensor readings averaged"),
     },
 }
 _LIBS = {"hdf5": "h5py", "parquet": "pyarrow", "netcdf": "netCDF4"}
@@ -86,12 +101,21 @@ class RunTables:
     metadata: dict[str, dict[str, Any]]
     has_adc: bool
     start_time_ns: int
+    # the unit's temperature readings as recorded: PT100 (t, ohm, °C), or its internal
+    # sensor (t, °C, readings) when temperature_source is "internal"
     pt100: list[tuple[float, float, float]] = field(default_factory=list)
     oven: list[tuple[float, float, float, str]] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     logs: list[dict[str, Any]] = field(default_factory=list)
     gaps: int = 0
     axes: int = 1  # a multi-axis unit has one rate (and ADC) column per axis
+    unit: str | None = None  # the unit converted from a multi-unit recording
+    temperature_source: str = "pt100"  # or "internal" (Recording.temperature_source)
+
+    def low_rate(self) -> list[tuple[str, list[tuple[Any, ...]]]]:
+        """The low-rate tables (names of :data:`LOW_RATE`) with their rows."""
+        temp = "pt100" if self.temperature_source == "pt100" else "internal_temperature"
+        return [(temp, self.pt100), ("oven", self.oven)]
 
 
 AXIS_NAMES = "xyz"
@@ -104,6 +128,9 @@ def table_columns(tables: RunTables) -> dict[str, tuple[str, str, str]]:
     out: dict[str, tuple[str, str, str]] = {}
     for k, (dt, u, d) in COLUMNS.items():
         if k == "adc_counts" and not tables.has_adc:
+            continue
+        if k == "pt100_c" and tables.temperature_source == "internal":
+            out[INTERNAL_COLUMN[0]] = INTERNAL_COLUMN[1]
             continue
         if tables.axes > 1 and k in ("rate_dps", "adc_counts"):
             for j in range(tables.axes):
@@ -187,7 +214,7 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
                 else:
                     for j in range(ax):
                         cols[f"adc_counts_{AXIS_NAMES[j]}"] = codes[:, j]
-            cols["pt100_c"] = held(t, pt_t, pt_c, last_pt)
+            cols[temp_col] = held(t, pt_t, pt_c, last_pt)
             cols["setpoint_c"] = held(t, ov_t, ov_sp, last_ov)
             if next_index is not None and first != next_index:
                 tables.gaps += 1
@@ -204,8 +231,11 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
             ov_t.clear()
             ov_sp.clear()
 
-    topics = [TOPIC_RATE, TOPIC_ADC, TOPIC_PT100, TOPIC_OVEN, TOPIC_EVENT, TOPIC_LOG]
-    for topic, _ts, data in iter_messages(path, topics):
+    internal = tables.temperature_source == "internal"
+    temp_col = INTERNAL_COLUMN[0] if internal else "pt100_c"
+    topics = [TOPIC_RATE, TOPIC_ADC, TOPIC_OVEN, TOPIC_EVENT, TOPIC_LOG]
+    topics.append(TOPIC_TEMPERATURE_INTERNAL if internal else TOPIC_PT100)
+    for topic, _ts, data in iter_messages(path, topics, unit=tables.unit):
         if topic == TOPIC_RATE:
             blk = decode_block(data, "rate")
             axes = 1 if blk[3].ndim == 1 else blk[3].shape[1]
@@ -223,6 +253,10 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
             msg = json.loads(data)
             if topic == TOPIC_PT100:
                 tables.pt100.append((msg["t"], msg["resistance_ohm"], msg["temperature_c"]))
+                pt_t.append(float(msg["t"]))
+                pt_c.append(float(msg["temperature_c"]))
+            elif topic == TOPIC_TEMPERATURE_INTERNAL:
+                tables.pt100.append((msg["t"], msg["temperature_c"], msg["readings"]))
                 pt_t.append(float(msg["t"]))
                 pt_c.append(float(msg["temperature_c"]))
             elif topic == TOPIC_OVEN:
@@ -253,7 +287,9 @@ def _batched(blocks: Iterator[dict[str, np.ndarray]], rows: int) -> Iterator[dic
 
 def _attrs(tables: RunTables, src: Path) -> dict[str, str]:
     """File-level attributes: all JSON text (string maps are what every format stores)."""
-    cols = COLUMNS if tables.axes == 1 else table_columns(tables)  # single-axis: as always
+    plain = tables.axes == 1 and tables.temperature_source == "pt100"
+    cols = COLUMNS if plain else table_columns(tables)  # single-axis PT100 run: as always
+    unit = {} if tables.unit is None else {"gyrolab_unit": tables.unit}
     return {
         "gyrolab_source": str(src.name),
         "gyrolab_start_time_ns": str(tables.start_time_ns),
@@ -261,6 +297,7 @@ def _attrs(tables: RunTables, src: Path) -> dict[str, str]:
         "gyrolab_columns": json.dumps(
             {k: {"unit": u, "description": d} for k, (_t, u, d) in cols.items()}
         ),
+        **unit,
     }
 
 
@@ -372,7 +409,7 @@ def _write_hdf5(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Path)
 
 
 def _low_rate_hdf5(f: Any, tables: RunTables) -> None:
-    for name, rows in (("pt100", tables.pt100), ("oven", tables.oven)):
+    for name, rows in tables.low_rate():
         g = f.create_group(name)
         a = np.asarray([r[:3] for r in rows], dtype=float).reshape(-1, 3)
         for j, (col, (u, d)) in enumerate(LOW_RATE[name].items()):
@@ -417,7 +454,7 @@ def _write_netcdf(tmp: Path, blocks: Iterator[dict], tables: RunTables, src: Pat
             for k in names:
                 var[k][n : n + m] = b[k]
             n += m
-        for name, rows in (("pt100", tables.pt100), ("oven", tables.oven)):
+        for name, rows in tables.low_rate():
             g = nc.createGroup(name)
             g.createDimension("reading", len(rows))
             a = np.asarray([r[:3] for r in rows], dtype=float).reshape(-1, 3)
@@ -444,9 +481,14 @@ _WRITERS = {
 
 
 def convert_recording(
-    src: str | os.PathLike[str], to: str, out: str | os.PathLike[str], force: bool = False
+    src: str | os.PathLike[str],
+    to: str,
+    out: str | os.PathLike[str],
+    force: bool = False,
+    unit: str | None = None,
 ) -> dict[str, Any]:
-    """Convert ``src`` to ``out`` in format ``to``; returns ``{"rows", "gaps", "format"}``."""
+    """Convert ``src`` to ``out`` in format ``to``; returns ``{"rows", "gaps", "format"}``.
+    ``unit``: the unit of a multi-unit recording (needed when it holds several)."""
     src_p, out_p = Path(src), Path(out)
     if to not in FORMATS:
         raise GyrolabError(f"convert: unknown format {to!r} (one of {', '.join(FORMATS)})")
@@ -460,20 +502,28 @@ def convert_recording(
             )
     check_output(out_p, force, inputs=(src_p,), kind="file")  # never the input (outputs.py)
     meta = read_metadata(src_p)  # also rejects a missing, foreign or damaged file
+    unit = select_unit(src_p, unit)
     counts = _summary(src_p)
-    if counts.get(TOPIC_RATE, 0) == 0:
-        raise InputError(src_p, f"recording has no {TOPIC_RATE} data")
+    rate_topic = unit_topic(TOPIC_RATE, unit)
+    if counts.get(rate_topic, 0) == 0:
+        raise InputError(src_p, f"recording has no {rate_topic} data")
+    # a unit whose bench took its internal sensor has that topic and no PT100 (the reader's
+    # rule, gyrolab.record.reader.read_recording)
+    internal = unit is not None and counts.get(unit_topic(TOPIC_PT100, unit), 0) == 0
+    internal = internal and counts.get(unit_topic(TOPIC_TEMPERATURE_INTERNAL, unit), 0) > 0
     # log_time = start + t (docs/recording-format.md): the start from the first rate block
-    _topic, ts, data = next(iter_messages(src_p, [TOPIC_RATE]))
+    _topic, ts, data = next(iter_messages(src_p, [TOPIC_RATE], unit=unit))
     first = decode_block(data, "rate")
     start_ns = ts - int(round(first[0] * 1e9))
     tables = RunTables(
         metadata=meta,
-        has_adc=counts.get(TOPIC_ADC, 0) > 0,
+        has_adc=counts.get(unit_topic(TOPIC_ADC, unit), 0) > 0,
         start_time_ns=start_ns,
         axes=1 if first[3].ndim == 1 else int(first[3].shape[1]),
+        unit=unit,
+        temperature_source="internal" if internal else "pt100",
     )
-    bar = progress(total=counts[TOPIC_RATE], desc=f"convert → {to}", unit="block")
+    bar = progress(total=counts[rate_topic], desc=f"convert → {to}", unit="block")
 
     def counted() -> Iterator[dict[str, np.ndarray]]:
         for b in iter_sample_blocks(src_p, tables):
@@ -490,6 +540,8 @@ def convert_recording(
 
 def convert(args: argparse.Namespace) -> int:
     """CLI handler of ``gyrolab convert``."""
-    res = convert_recording(args.run, args.to, args.out, force=args.force)
+    res = convert_recording(
+        args.run, args.to, args.out, force=args.force, unit=getattr(args, "unit", None)
+    )
     print(f"wrote {res['out']}: {res['rows']} samples ({res['gaps']} gap(s)) as {res['format']}")
     return 0
