@@ -5,6 +5,7 @@ and reading it back."""
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from dataclasses import replace
@@ -225,21 +226,105 @@ def test_every_units_temperature_is_recorded_and_read_back(mixed_run: Path) -> N
     assert topics == {TOPIC_TEMPERATURE_INTERNAL}  # its own topic, no PT100
 
 
-def test_compensate_uses_the_internal_sensor_as_model_input(
-    mixed_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    import json
-
+@pytest.fixture(scope="module")
+def internal_model(mixed_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A model fitted on unit 1's internal sensor (the pipeline cut to a few seconds)."""
     from test_pipeline import SMALL
 
     from gyrolab.cli import main
 
     fast = replace(SMALL, causal_families=("poly",), ga_generations=2, bp_max_iter=50)
-    monkeypatch.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", fast)
-    out = tmp_path / "m"
-    assert main(["compensate", str(mixed_run), "--unit", "SIM0-01", "--out", str(out)]) == 0
-    cal = json.loads((out / "model.json").read_text())["calibration"]
+    out = tmp_path_factory.mktemp("model") / "m"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("gyrolab.compensation.commands.DEFAULT_CONFIG", fast)
+        assert main(["compensate", str(mixed_run), "--unit", "SIM0-01", "--out", str(out)]) == 0
+    return out
+
+
+def test_compensate_uses_the_internal_sensor_as_model_input(internal_model: Path) -> None:
+    cal = json.loads((internal_model / "model.json").read_text())["calibration"]
     assert cal["unit"] == "SIM0-01" and cal["temperature_source"] == "internal"
+    t = json.loads((internal_model / "metrics.json").read_text())["temperature"]
+    # its own calibration run: the same source, no flag
+    assert t["temperature_source"] == "internal" and t["temperature_source_mismatch"] is False
+
+
+def test_the_report_flags_a_model_on_another_temperature_source(
+    mixed_run: Path, internal_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gyrolab.cli import main
+    from gyrolab.compensation.guards import range_check
+    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.compensation.prepare import prepare_file
+
+    model = load_model(str(internal_model))
+    pt100_run = prepare_file(mixed_run, model.config, unit="SIM0-02")
+    assert range_check(model.calibration, pt100_run)["temperature_source_mismatch"] is True
+    # a model written before the key existed was fitted on a PT100
+    old = {k: v for k, v in model.calibration.items() if k != "temperature_source"}
+    assert range_check(old, pt100_run)["temperature_source_mismatch"] is False
+    # the report applies it, says so on stderr and in its text, and records the flag
+    out = tmp_path / "r"
+    args = ["report", str(mixed_run), "--unit", "SIM0-02", "--model", str(internal_model)]
+    assert main([*args, "--out", str(out)]) == 0
+    assert "fitted on the internal (die) sensor temperature" in capsys.readouterr().err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["temperature"]["temperature_source_mismatch"] is True
+    assert "Another temperature source" in (out / "index.html").read_text()
+
+
+def test_discrepancy_refuses_a_die_temperature_in_one_line(
+    mixed_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gyrolab.cli import main
+
+    out = tmp_path / "d"
+    assert main(["discrepancy", str(mixed_run), "--unit", "SIM0-01", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "records its internal (die) temperature, not a PT100" in err[0]
+    assert not out.exists()
+
+
+def test_convert_names_the_internal_temperature_column(mixed_run: Path, tmp_path: Path) -> None:
+    import csv
+
+    from gyrolab.convert import convert_recording
+
+    with pytest.raises(InputError, match="choose one with --unit"):
+        convert_recording(mixed_run, "csv", tmp_path / "all.csv")
+    recs = {}
+    for s in ("SIM0-01", "SIM0-02"):
+        convert_recording(mixed_run, "csv", tmp_path / f"{s}.csv", unit=s)
+        with open(tmp_path / f"{s}.csv", encoding="utf-8") as fh:
+            head = [ln for ln in fh if ln.startswith("# gyrolab_unit")]
+            fh.seek(0)
+            rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+        assert head == [f"# gyrolab_unit: {s}\n"]
+        recs[s] = (rows, read_recording(mixed_run, unit=s))
+    rows, rec = recs["SIM0-01"]
+    assert "internal_temperature_c" in rows[0] and "pt100_c" not in rows[0]
+    # held: the last internal reading at or before each sample
+    t = np.array([float(r["t_s"]) for r in rows])
+    got = np.array([float(r["internal_temperature_c"]) for r in rows])
+    k = np.searchsorted(rec.pt100_t, t, side="right") - 1
+    assert np.array_equal(got[k >= 0], rec.pt100_c[k[k >= 0]]) and np.isnan(got[k < 0]).all()
+    rows, rec = recs["SIM0-02"]
+    assert "pt100_c" in rows[0] and "internal_temperature_c" not in rows[0]
+    assert rows[0]["rate_dps"] and len(rows) == rec.require_rate().t.size
+
+
+def test_convert_hdf5_keeps_the_internal_readings_table(mixed_run: Path, tmp_path: Path) -> None:
+    h5py = pytest.importorskip("h5py")
+    from gyrolab.convert import convert_recording
+
+    convert_recording(mixed_run, "hdf5", tmp_path / "u.h5", unit="SIM0-01")
+    rec = read_recording(mixed_run, unit="SIM0-01")
+    with h5py.File(tmp_path / "u.h5", "r") as f:
+        assert "pt100" not in f and "pt100_c" not in f["samples"]
+        g = f["internal_temperature"]
+        assert np.array_equal(g["temperature_c"][:], rec.pt100_c)
+        assert (g["readings"][:] >= 1).all()
+        assert f["samples/internal_temperature_c"].attrs["units"] == "degC"
 
 
 def test_every_unit_internal_runs_without_a_scanner(tmp_path: Path) -> None:
