@@ -13,7 +13,9 @@ Times inside messages are seconds since the run's start (``t``/``t0``); the MCAP
 
 from __future__ import annotations
 
+import json
 import re
+from dataclasses import dataclass
 from typing import Any
 
 TOPIC_ADC = "/gyro/adc"
@@ -265,3 +267,45 @@ def file_descriptor_set() -> bytes:
                 w if i == 0 else w.capitalize() for i, w in enumerate(name.split("_"))
             )
     return fds.SerializeToString(deterministic=True)
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """One channel of a recording: its topic, the MCAP schema (name, encoding, data) and
+    the message encoding; ``unit`` is the serial of a per-unit topic (None: shared)."""
+
+    topic: str
+    schema_name: str
+    schema_encoding: str  # "protobuf" | "jsonschema"
+    schema_data: bytes
+    message_encoding: str  # "protobuf" | "json"
+    unit: str | None = None
+
+
+def recording_channels(
+    units: list[str] | None = None, internal_temperature: tuple[str, ...] | list[str] = ()
+) -> list[ChannelSpec]:
+    """Every channel of a recording, in the order the writer registers them: the single-unit
+    layout (``units`` None) or the multi-unit one (each unit's ``/unit/<serial>/…`` topics
+    and the shared ones), then ``/unit/<serial>/temperature/internal`` of each unit in
+    ``internal_temperature``. The writer and the live view (gyrolab/acquisition/live.py)
+    both take their channels from here, so a viewer is offered exactly what the file holds."""
+    serials: list[str | None] = [None] if units is None else list(units)
+    fds = file_descriptor_set()
+    out = [
+        ChannelSpec(unit_topic(topic, u), msg, "protobuf", fds, "protobuf", u)
+        for u in serials
+        for topic, msg in ((TOPIC_ADC, ADC_MESSAGE), (TOPIC_RATE, RATE_MESSAGE))
+    ]
+    for topic, schema in JSON_SCHEMAS.items():
+        data = json.dumps(schema, sort_keys=True).encode()
+        for u in serials if is_per_unit(topic) else [None]:
+            out.append(
+                ChannelSpec(unit_topic(topic, u), schema["title"], "jsonschema", data, "json", u)
+            )
+    s = INTERNAL_TEMPERATURE_SCHEMA
+    data = json.dumps(s, sort_keys=True).encode()
+    for u in internal_temperature:
+        name = unit_topic(TOPIC_TEMPERATURE_INTERNAL, u)
+        out.append(ChannelSpec(name, s["title"], "jsonschema", data, "json", u))
+    return out

@@ -21,13 +21,9 @@ import numpy as np
 from gyrolab import __version__
 from gyrolab.record.blocks import encode_block
 from gyrolab.record.format import (
-    ADC_MESSAGE,
     FORMAT_VERSION,
     FOXGLOVE_LOG_LEVEL,
-    INTERNAL_TEMPERATURE_SCHEMA,
-    JSON_SCHEMAS,
     PROFILE,
-    RATE_MESSAGE,
     TOPIC_ADC,
     TOPIC_EVENT,
     TOPIC_LOG,
@@ -38,8 +34,7 @@ from gyrolab.record.format import (
     TOPIC_RATE_SUMMARY,
     TOPIC_TEMPERATURE_INTERNAL,
     check_serial,
-    file_descriptor_set,
-    is_per_unit,
+    recording_channels,
     unit_topic,
 )
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
@@ -183,40 +178,24 @@ class RecordingWriter:
         self.units = None if units is None else [check_serial(u) for u in units]
         if self.units is not None and (not self.units or len(set(self.units)) != len(units)):
             raise ValueError(f"units must be distinct serials, got {units}")
-        serials: list[str | None] = [None] if self.units is None else list(self.units)
         if self.units is not None:
             for g in [*self.units, None]:
                 self._buf[g], self._buf_bytes[g] = [], 0
-        fds = file_descriptor_set()
-        adc_schema = self._w.register_schema(ADC_MESSAGE, "protobuf", fds)
-        rate_schema = self._w.register_schema(RATE_MESSAGE, "protobuf", fds)
-        for u in serials:
-            for topic, sch in ((TOPIC_ADC, adc_schema), (TOPIC_RATE, rate_schema)):
-                name = unit_topic(topic, u)
-                self._chan[name] = self._w.register_channel(name, "protobuf", sch)
-                self._group[name] = u
-        for topic, schema in JSON_SCHEMAS.items():
-            sid = self._w.register_schema(
-                schema["title"], "jsonschema", json.dumps(schema, sort_keys=True).encode()
-            )
-            for u in serials if is_per_unit(topic) else [None]:
-                name = unit_topic(topic, u)
-                self._chan[name] = self._w.register_channel(name, "json", sid)
-                self._group[name] = u
-        # A unit on its internal temperature sensor: its own topic, registered only here, so
-        # that a file without such a unit is byte for byte what it was before.
-        if internal_temperature:
-            bad = [u for u in internal_temperature if u not in (self.units or [])]
-            if bad:
-                raise ValueError(f"internal_temperature: {bad} are not units of this recording")
-            s = INTERNAL_TEMPERATURE_SCHEMA
-            sid = self._w.register_schema(
-                s["title"], "jsonschema", json.dumps(s, sort_keys=True).encode()
-            )
-            for u in internal_temperature:
-                name = unit_topic(TOPIC_TEMPERATURE_INTERNAL, u)
-                self._chan[name] = self._w.register_channel(name, "json", sid)
-                self._group[name] = u
+        # A unit on its internal temperature sensor has its own topic, only in files that
+        # have such a unit (every other file is byte for byte what it was before).
+        bad = [u for u in internal_temperature if u not in (self.units or [])]
+        if bad:
+            raise ValueError(f"internal_temperature: {bad} are not units of this recording")
+        self.internal_temperature = tuple(internal_temperature)
+        # One schema record per schema, in first-use order (ids as files always had them).
+        schema_ids: dict[str, int] = {}
+        for c in recording_channels(self.units, self.internal_temperature):
+            sid = schema_ids.get(c.schema_name)
+            if sid is None:
+                sid = self._w.register_schema(c.schema_name, c.schema_encoding, c.schema_data)
+                schema_ids[c.schema_name] = sid
+            self._chan[c.topic] = self._w.register_channel(c.topic, c.message_encoding, sid)
+            self._group[c.topic] = c.unit
         if isinstance(run, RunMetadata):  # the producers: the typed schema
             if self.units is not None:
                 run = replace(run, units=list(self.units))
