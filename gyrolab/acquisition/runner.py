@@ -15,9 +15,10 @@ Three parts, Bluesky/ophyd style — the plan never touches a port:
 
 Safety: every profile setpoint is checked against the bench limits before anything
 starts; the PT100 over/under-temperature watchdog, an instrument that raises a fatal
-fault, and an instrument silent for longer than ``comm_timeout_s`` all end the run the
-same way as SIGINT does: the oven is commanded to the configured safe state (and read
-back), the queued data is written, the file is finalized. Every transition and fault goes
+fault, an instrument silent for longer than ``comm_timeout_s`` (and, on a multi-unit
+bench, no unit's temperature reading for that long) all end the run the same way as SIGINT
+does: the oven is commanded to the configured safe state (and read back), the queued data
+is written, the file is finalized. Every transition and fault goes
 to ``/profile/event`` and ``/log``.
 """
 
@@ -85,6 +86,10 @@ class RunTimeSilence:
         return silent_s > timeout_s
 
 
+# The silence policy's name for "some unit's temperature (PT100 or internal sensor) gave a
+# reading" (multi-unit runs).
+UNIT_TEMPERATURES = "unit temperatures"
+
 # The role protocols and the error vocabulary live in roles.py; these names stay here for
 # code that imported them from the runner.
 Oven = Chamber
@@ -97,8 +102,23 @@ GyroStream = RateStream
 
 
 @dataclass
+class UnitStatus:
+    """One unit of a multi-unit run in a :class:`Status`: ``state`` is ``recording``,
+    ``pt100_lost`` (its PT100 channel reads overload: its rate is still recorded) or
+    ``dropped`` (its rate stream was given up)."""
+
+    serial: str
+    state: str = "recording"
+    temperature_c: float = math.nan  # its last reading: PT100, or its internal sensor
+    samples: int = 0
+    frames_lost: int = 0
+    frames_bad: int = 0
+
+
+@dataclass
 class Status:
-    """A snapshot for the progress display."""
+    """A snapshot for the progress display (``units``: a multi-unit run's, in bench order;
+    ``pt100_c`` is then the first unit's, the one the profile's stability rule watches)."""
 
     t: float = 0.0
     step: int = -1
@@ -110,6 +130,7 @@ class Status:
     frames_lost: int = 0
     frames_bad: int = 0
     samples: int = 0
+    units: list[UnitStatus] = field(default_factory=list)
 
 
 @dataclass
@@ -294,7 +315,10 @@ class Acquisition:
     stability rule watches the first unit's temperature (as ``gyrolab simulate --units``
     does); the over/under-temperature watchdog watches every unit's. A unit whose
     stream fails (a fatal error, or silent longer than ``comm_timeout_s``) is logged and
-    dropped; the run goes on with the others (docs/bench-config.md, "Several units").
+    dropped; the run goes on with the others. A unit whose PT100 channel reads overload
+    (an open lead) stays in the run with a gap in its temperature topic (logged when lost
+    and when back); when no unit's temperature reads for longer than ``comm_timeout_s`` the run
+    ends as for a silent thermometer (docs/fleet.md, "Acquisition").
     """
 
     def __init__(
@@ -352,7 +376,11 @@ class Acquisition:
         self._down_since: dict[str, float] = {}
         self._down_errors: dict[str, int] = {}
         self._pt_bad: dict[str | None, int] = {}  # consecutive out-of-limit readings per unit
-        self._pt_missing: set[str] = set()  # units whose PT100 reading was lost (logged once)
+        # Multi-unit: units whose PT100 channel reads overload now -> (since, sweeps lost);
+        # each unit's last reading (°C); when any unit last had a reading (clock time).
+        self._pt_missing: dict[str, tuple[float, int]] = {}
+        self._unit_c: dict[str, float] = {}
+        self._pt_any_at = 0.0
         self._faults = 0
         self._setpoint_pending: float | None = None
         # One recorder per rate stream, by its source name in /log.
@@ -444,6 +472,8 @@ class Acquisition:
         for name in (*thermo, self.oven.name, *self.streams):
             self._last_ok[name] = now
             self.silence.heard(name)
+        self._pt_any_at = now
+        self.silence.heard(UNIT_TEMPERATURES)
         self._do(self.plan.start(0.0))
         self._readers = {
             name: _AdcThread(rec.dev, self.q.put, self.stop_ev, self.clock)
@@ -565,11 +595,18 @@ class Acquisition:
         st.setpoint_c = self.plan.step.setpoint_c if self.plan.step else math.nan
         st.remaining_s = self.plan.remaining_s(t)
         st.frames_lost = st.frames_bad = st.samples = 0
+        st.units = []
         for rec in self.streams.values():
             c = rec.dev.counters()
-            st.frames_lost += int(c.get("frames_lost", 0))
-            st.frames_bad += int(c.get("frames_bad", 0))
+            lost, bad = int(c.get("frames_lost", 0)), int(c.get("frames_bad", 0))
+            st.frames_lost += lost
+            st.frames_bad += bad
             st.samples += rec.samples
+            if rec.unit is not None:
+                lost_pt = rec.unit in self._pt_missing
+                state = "dropped" if rec.dropped else "pt100_lost" if lost_pt else "recording"
+                c_now = math.nan if lost_pt else self._unit_c.get(rec.unit, math.nan)
+                st.units.append(UnitStatus(rec.unit, state, c_now, rec.samples, lost, bad))
 
     # -- actions from the plan
     def _do(self, actions: list[Action]) -> None:
@@ -650,33 +687,39 @@ class Acquisition:
 
     def _on_scan(self, t: float, readings: dict[int, Any]) -> None:
         """A sweep of the scanner: every unit's PT100 to its topic and the watchdog; the
-        first unit's to the plan's stability rule."""
+        first unit's to the plan's stability rule.
+
+        A channel that reads overload (NaN: a PT100 lead open or unplugged) loses that
+        unit's reading only: nothing is written for it (its temperature topic has a gap),
+        the unit stays in the run (its rate is still recorded), and the loss and the
+        recovery are logged once each. A lost reading neither clears nor adds to the unit's
+        count of consecutive out-of-limit readings (it says nothing about the temperature).
+        """
         assert self.units is not None and self.thermo is not None
         plan_c: float | None = None
+        any_ok = False
         for k, u in enumerate(self.units):
             if u.internal:
                 continue  # its stream reports its temperature (_unit_temperature)
             r = readings.get(u.channel)
             if r is None or not math.isfinite(r[1]):
-                if u.serial not in self._pt_missing:
-                    self._pt_missing.add(u.serial)
-                    self.log(
-                        "warning",
-                        self.thermo.name,
-                        f"unit {u.serial}: no PT100 reading on channel {u.channel} "
-                        "(overload: sensor open or unplugged)",
-                        "fault",
-                        {"unit": u.serial, "channel": u.channel},
-                        t,
-                    )
+                self._pt100_lost(t, u)
                 continue
+            any_ok = True
+            self._pt100_back(t, u)
             ohm, c = r
             self.w.write_pt100(t, ohm, c, unit=u.serial)
+            self._unit_c[u.serial] = c
             self._pt100_watch(t, c, u.serial)
             if k == 0:
                 plan_c = c
+        if any_ok:
+            self._pt_any_at = self.clock.now()
+            self.silence.heard(UNIT_TEMPERATURES)
         if plan_c is not None:
             self.status.pt100_c = plan_c
+        elif not self.units[0].internal:  # the plan's PT100 is lost: say so, not a stale value
+            self.status.pt100_c = math.nan
         self._do(self.plan.update(t, plan_c))
 
     def _unit_temperature(self, k: int, serial: str) -> Callable[[float, float], None]:
@@ -685,12 +728,54 @@ class Acquisition:
         the first unit the plan's stability rule."""
 
         def take(t: float, c: float) -> None:
+            self._unit_c[serial] = c
+            self._pt_any_at = self.clock.now()
+            self.silence.heard(UNIT_TEMPERATURES)
             self._pt100_watch(t, c, serial, "internal sensor")
             if k == 0:
                 self.status.pt100_c = c
                 self._do(self.plan.update(t, c))
 
         return take
+
+    def _pt100_lost(self, t: float, u: UnitDevices) -> None:
+        """Unit ``u``'s channel gave no reading at run time ``t``: a fault, logged once."""
+        assert self.thermo is not None
+        since, n = self._pt_missing.get(u.serial, (t, 0))
+        self._pt_missing[u.serial] = (since, n + 1)
+        if n:
+            return
+        self._faults += 1
+        self.log(
+            "warning",
+            self.thermo.name,
+            f"unit {u.serial}: no PT100 reading on channel {u.channel} "
+            "(overload: sensor open or unplugged); the unit's rate is still recorded",
+            "fault",
+            {"unit": u.serial, "channel": u.channel},
+            t,
+        )
+
+    def _pt100_back(self, t: float, u: UnitDevices) -> None:
+        """Unit ``u``'s channel reads again at run time ``t``: a recovery, with how long."""
+        if u.serial not in self._pt_missing:
+            return
+        assert self.thermo is not None
+        since, n = self._pt_missing.pop(u.serial)
+        self.log(
+            "info",
+            self.thermo.name,
+            f"unit {u.serial}: PT100 on channel {u.channel} reads again after "
+            f"{t - since:.1f} s ({n} sweep(s) without it)",
+            "recovery",
+            {
+                "unit": u.serial,
+                "channel": u.channel,
+                "outage_s": round(t - since, 3),
+                "sweeps_lost": n,
+            },
+            t,
+        )
 
     def _drop_unit(self, source: str, t: float, reason: str) -> None:
         """Give up on a unit's rate stream: log it, stop reading it, carry on with the
@@ -796,6 +881,18 @@ class Acquisition:
                     continue
                 self._fail("watchdog", message, t)
                 return
+        if self.units is not None:
+            # A scanner that answers with every channel overloaded is heard, yet the
+            # over/under-temperature watchdog is blind: as bad as a silent thermometer.
+            blind = now - self._pt_any_at
+            if self.silence.lost(UNIT_TEMPERATURES, blind, self.limits.comm_timeout_s):
+                self._fail(
+                    "watchdog",
+                    f"no unit's temperature reading for {blind:.1f} s (every PT100 channel "
+                    f"overloaded; > comm_timeout_s {self.limits.comm_timeout_s:g} s): the "
+                    "temperature watchdog cannot watch the chamber",
+                    t,
+                )
 
     # -- ending
     def _shutdown(self, outcome: str, reason: str, threads: list[threading.Thread]) -> bool:
