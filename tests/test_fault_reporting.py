@@ -105,6 +105,56 @@ def test_a_stream_that_stops_is_a_gap_up_to_the_end_of_the_run(tmp_path: Path, c
     assert f"1 gap(s) ({d['n_missing']} samples missing)" in err
 
 
+def test_scanner_faults_on_the_simulated_multi_unit_bench(tmp_path: Path, capsys) -> None:
+    """Three units through the real 34970A driver on the simulated scanner: unit 2's PT100
+    channel open for 30 s (only its readings lost, logged, back again), an execution error
+    in the scanner's queue (logged, the run goes on), then the scanner silent for good (the
+    run ends, oven in the safe state, the recording whole)."""
+    prof = _write(tmp_path / "p.toml", PROFILE)
+    f = _write(
+        tmp_path / "faults.toml",
+        """
+[[event]]
+kind = "open_channel"
+unit = 1
+t_s = 20
+duration_s = 30
+[[event]]
+kind = "scpi_error"
+t_s = 60
+detail = '-222,"Data out of range"'
+[[event]]
+kind = "outage"
+t_s = 100
+duration_s = 1e6
+""",
+    )
+    out = tmp_path / "run.mcap"
+    argv = ["acquire", "--bench", "sim", "--units", "3", "--profile", str(prof)]
+    rc = main([*argv, "--faults", str(f), "--speed", "40", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 1 and "lost communication with scanner" in err, err
+    assert "safe state verified" in err and "(3 units; dropped: none)" in err
+    serials = ["SIM0-01", "SIM0-02", "SIM0-03"]
+    recs = {s: read_recording(out, unit=s) for s in serials}
+    logs = recs["SIM0-01"].logs
+    lost, back = [m for m in logs if m.get("data", {}).get("unit") == "SIM0-02"]
+    assert lost["kind"] == "fault" and lost["data"]["channel"] == 102
+    assert back["kind"] == "recovery" and 25.0 <= back["data"]["outage_s"] <= 35.0
+    t2, t1 = recs["SIM0-02"].pt100_t, recs["SIM0-01"].pt100_t
+    assert not ((t2 >= lost["t"]) & (t2 < back["t"])).any() and (t2 > back["t"]).any()
+    assert ((t1 >= lost["t"]) & (t1 < back["t"])).sum() >= 12  # the others went on
+    (e222,) = [m for m in logs if m.get("data", {}).get("code") == -222]
+    assert e222["source"] == "scanner" and e222["data"]["fatal"] is False
+    assert e222["t"] < t1.max()  # readings went on after it
+    ev = [e["event"] for e in recs["SIM0-03"].events]
+    assert ev[-2:] == ["aborted", "safe_state"]
+    assert "verified" in recs["SIM0-03"].events[-1]["detail"]
+    for s in serials:  # every unit's rate, whole, up to the end of the run
+        rate = recs[s].require_rate()
+        assert rate.gaps() == [] and rate.t[-1] > t1.max() + 30.0
+
+
 def test_faults_file_keys_are_strict_and_only_for_the_simulated_bench(
     tmp_path: Path, capsys
 ) -> None:
@@ -117,6 +167,8 @@ def test_faults_file_keys_are_strict_and_only_for_the_simulated_bench(
         '[[event]]\nkind = "stall"\nt_s = 1\n': "stall needs duration_s > 0",
         '[oven]\nexception_prob = 1.5\n': "exception_prob = 1.5",
         '[[event]]\nkind = "scpi_error"\ndetail = "oops"\n': "expected an error-queue entry",
+        '[[event]]\nkind = "open_channel"\nt_s = 1\n': "open_channel needs duration_s > 0",
+        '[[event]]\nkind = "open_channel"\nt_s = 1\nduration_s = 5\n': "--units N only",
     }
     for i, (text, msg) in enumerate(cases.items()):
         f = _write(tmp_path / f"f{i}.toml", text)

@@ -204,11 +204,15 @@ def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], Non
         if t > state["t"]:
             bar.update(t - state["t"])
             state["t"] = t
+        units = ""
+        if st.units:  # a multi-unit run: how many units are fully recorded
+            ok = sum(u.state == "recording" for u in st.units)
+            units = f" units {ok}/{len(st.units)} ok"
         bar.set_postfix_str(
             f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
             f"oven {st.chamber_c:.2f} PT100 {st.pt100_c:.2f} °C "
             f"ETA(run) {_hms(st.remaining_s)} lost {st.frames_lost} bad {st.frames_bad}"
-            f"{speed_note}",
+            f"{units}{speed_note}",
             refresh=False,
         )
 
@@ -428,9 +432,10 @@ def acquire(opts: AcquireOptions) -> RunResult:
     if opts.faults is not None:
         if not sim_only:
             raise GyrolabError("--faults applies to --bench sim only (it drives the simulator)")
-        from gyrolab.sim.bench.fault_file import load_faults
+        from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults
 
         faults = load_faults(opts.faults)
+        check_plan_for_bench(faults, opts.units, str(opts.faults))
     profile_spec = opts.profile or cfg.profile_path()
     profile = load_profile(profile_spec)
     if opts.profile:

@@ -81,6 +81,10 @@ class Scpi34401A:
         self.readings = 0
         self.log: list[str] = []  # every command received, for tests
         self._lock = threading.RLock()
+        # The error queue has a lock of its own: a fault pushed by the bench's tick thread
+        # must not wait for ``_lock``, which a reading holds while it waits for that very
+        # thread to advance the simulated clock.
+        self._qlock = threading.Lock()
         self._table = self.system_commands() + [
             (scpi_re("CONFigure:FRESistance"), self._conf_fres),
             (scpi_re("CONFigure?"), self._conf_q),
@@ -110,8 +114,7 @@ class Scpi34401A:
     # ---------------------------------------------------------------- faults
     def push_error(self, error: str) -> None:
         """Put ``error`` (``-222,"Data out of range"``) into the error queue."""
-        with self._lock:
-            self._push(error)
+        self._push(error)
 
     def start_outage(self, until_t_sim: float) -> None:
         """Say nothing until simulated time ``until_t_sim`` (cable pulled, meter hung)."""
@@ -119,11 +122,12 @@ class Scpi34401A:
 
     # ---------------------------------------------------------------- interpreter
     def _push(self, error: str) -> None:
-        q = self.state.errors
-        if len(q) < 19:
-            q.append(error)
-        elif len(q) == 19:
-            q.append(E_OVERFLOW)
+        with self._qlock:
+            q = self.state.errors
+            if len(q) < 19:
+                q.append(error)
+            elif len(q) == 19:
+                q.append(E_OVERFLOW)
 
     def handle(self, line: str) -> str | None:
         """Execute one line (commands separated by ``;``); the reply, or None."""
@@ -154,10 +158,12 @@ class Scpi34401A:
         self.state = DmmState(remote=remote, errors=errors)
 
     def _cls(self, arg: str) -> None:
-        self.state.errors.clear()
+        with self._qlock:
+            self.state.errors.clear()
 
     def _err(self, arg: str) -> str:
-        return self.state.errors.pop(0) if self.state.errors else NO_ERROR
+        with self._qlock:
+            return self.state.errors.pop(0) if self.state.errors else NO_ERROR
 
     def _remote(self, on: bool) -> Callable[[str], None]:
         def f(arg: str) -> None:

@@ -17,13 +17,17 @@ Layout (every key optional; unknown keys are errors naming the file and the key)
     seed = 0
 
     [[event]]             # scheduled faults (FaultEvent), any number
-    kind = "scpi_error"   # disconnect | stall | outage | scpi_error |
+    kind = "scpi_error"   # disconnect | stall | outage | scpi_error | open_channel |
                           # modbus_exception | modbus_crc | modbus_no_reply
     t_s = 30.0            # simulated bench seconds (the run starts a few s later)
-    duration_s = 0.0      # disconnect / stall / outage
+    duration_s = 0.0      # disconnect / stall / outage / open_channel
     count = 1             # modbus_* : the next `count` replies
     detail = '-310,"System error"'   # scpi_error: the error-queue entry
-    unit = 0              # disconnect / stall on a multi-unit bench: which unit (0-based)
+    unit = 0              # disconnect / stall / open_channel on a multi-unit bench: which
+                          # unit (0-based)
+
+``outage`` and ``scpi_error`` hit the bench's thermometer: the multimeter, or on a
+multi-unit bench the scanner; ``open_channel`` is for multi-unit benches only.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from gyrolab.sim.bench.faults import (
     ADC_KINDS,
     DMM_KINDS,
     OVEN_KINDS,
+    SCANNER_KINDS,
     ByteFaults,
     FaultEvent,
     FaultPlan,
@@ -111,7 +116,7 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
     if not isinstance(raw_events, list):
         raise InputError(source, "event must be an array of tables ([[event]])")
     events = []
-    kinds = ADC_KINDS + DMM_KINDS + OVEN_KINDS
+    kinds = ADC_KINDS + DMM_KINDS + OVEN_KINDS + SCANNER_KINDS
     for i, raw in enumerate(raw_events, start=1):
         where = f"[[event]] {i}"
         e = _table(raw, _EVENT_KEYS, where, source)
@@ -128,7 +133,8 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
             raise InputError(
                 source, f"{where}: t_s, duration_s, unit must be >= 0 and count >= 1"
             )
-        if e["kind"] in ("disconnect", "stall", "outage") and not e.get("duration_s", 0.0) > 0:
+        timed = ("disconnect", "stall", "outage", "open_channel")
+        if e["kind"] in timed and not e.get("duration_s", 0.0) > 0:
             raise InputError(source, f"{where}: {e['kind']} needs duration_s > 0")
         if e["kind"] == "scpi_error" and "detail" in e and not _SCPI_ERROR.match(e["detail"]):
             raise InputError(
@@ -139,6 +145,21 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
         # A scheduled fault needs a time: "now" (t_s None) is for SimBench.inject only.
         events.append(FaultEvent(**{"t_s": 0.0, **e}))
     return FaultPlan(adc=ByteFaults(**adc), oven=ModbusFaults(**oven), events=events)
+
+
+def check_plan_for_bench(plan: FaultPlan, units: int, source: str = "<faults>") -> None:
+    """InputError unless every event fits a bench of ``units`` units (0: single-unit):
+    ``unit`` within the bench, ``open_channel`` only where a scanner reads the PT100s."""
+    n = max(1, units)
+    for i, e in enumerate(plan.events, start=1):
+        if e.kind == "open_channel" and not units:
+            raise InputError(
+                source, f"[[event]] {i}: open_channel is a scanner channel: --units N only"
+            )
+        if e.unit >= n:
+            raise InputError(
+                source, f"[[event]] {i}: unit = {e.unit}: the bench has {n} unit(s) (0-based)"
+            )
 
 
 def load_faults(path: str | os.PathLike[str]) -> FaultPlan:

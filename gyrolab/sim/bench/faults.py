@@ -8,9 +8,13 @@ Two kinds of fault:
   from seeded generators, so a run's faults are reproducible;
 - **scheduled** (:class:`FaultEvent`, at a simulated time or "now" through
   ``SimBench.inject``): ADC port disconnect (for ``duration_s``), ADC stall (no bytes for
-  ``duration_s``, then the backlog in a burst), multimeter outage (no replies for
-  ``duration_s``), SCPI errors pushed into the meter's error queue, bursts of ``count``
-  Modbus exception / CRC-error / no-reply responses.
+  ``duration_s``, then the backlog in a burst), thermometer outage (no replies for
+  ``duration_s``), SCPI errors pushed into the thermometer's error queue, bursts of
+  ``count`` Modbus exception / CRC-error / no-reply responses, and on a multi-unit bench a
+  unit's PT100 channel open (the scanner reads overload on it for ``duration_s``).
+
+The thermometer is the multimeter on a single-unit bench and the scanner on a multi-unit
+bench (the instrument that reads the PT100s there).
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 ADC_KINDS = ("disconnect", "stall")
-DMM_KINDS = ("outage", "scpi_error")
+DMM_KINDS = ("outage", "scpi_error")  # the bench's thermometer: multimeter or scanner
+SCANNER_KINDS = ("open_channel",)  # multi-unit benches only
 OVEN_KINDS = ("modbus_exception", "modbus_crc", "modbus_no_reply")
 
 
@@ -107,11 +112,14 @@ class ModbusFaults:
 class FaultEvent:
     """A scheduled fault. ``t_s`` is simulated time (None: as soon as injected).
 
-    ``kind``: ``disconnect`` / ``stall`` (ADC, for ``duration_s``), ``outage`` (DMM
-    silent for ``duration_s``), ``scpi_error`` (``detail`` pushed to the DMM error
-    queue, e.g. ``-222,"Data out of range"``), ``modbus_exception`` / ``modbus_crc`` /
-    ``modbus_no_reply`` (the next ``count`` oven replies). ``unit``: on a multi-unit bench,
-    the unit whose ADC a ``disconnect`` or ``stall`` hits (0-based).
+    ``kind``: ``disconnect`` / ``stall`` (ADC, for ``duration_s``), ``outage`` (the
+    thermometer — multimeter, or a multi-unit bench's scanner — silent for ``duration_s``),
+    ``scpi_error`` (``detail`` pushed to the thermometer's error queue, e.g.
+    ``-222,"Data out of range"``), ``modbus_exception`` / ``modbus_crc`` /
+    ``modbus_no_reply`` (the next ``count`` oven replies), ``open_channel`` (a multi-unit
+    bench's scanner reads overload on the unit's PT100 channel for ``duration_s``: a lead
+    broken). ``unit``: on a multi-unit bench, the unit whose ADC a ``disconnect`` or
+    ``stall`` hits, or whose PT100 an ``open_channel`` opens (0-based).
     """
 
     kind: str
@@ -119,10 +127,10 @@ class FaultEvent:
     duration_s: float = 0.0
     count: int = 1
     detail: str = ""
-    unit: int = 0  # disconnect / stall: which unit's ADC (0-based; a single-unit bench: 0)
+    unit: int = 0  # disconnect / stall / open_channel: which unit (0-based)
 
     def __post_init__(self) -> None:
-        if self.kind not in ADC_KINDS + DMM_KINDS + OVEN_KINDS:
+        if self.kind not in ADC_KINDS + DMM_KINDS + OVEN_KINDS + SCANNER_KINDS:
             raise ValueError(f"unknown fault kind {self.kind!r}")
         if self.unit < 0:
             raise ValueError(f"unit must be >= 0, got {self.unit}")

@@ -9,7 +9,10 @@ them the scan list), ``[SENS:]FRES:NPLC <n>,(@list)``, ``ROUT:SCAN (@list)``,
 wired reads overload (+9.9E+37), as an open 4-wire input does; 4-wire channels are 101-110
 (each paired with its sense channel n+10). A sweep takes each channel's integration time
 (NPLC / 50 Hz, ×2 for autozero) in simulated time. Errors are pushed with the SCPI codes
-of the 34401A responder it extends.
+of the 34401A responder it extends. Faults: the 34401A responder's outage (no replies) and
+error-queue entries, and :meth:`Scpi34970A.open_channel` (a PT100 lead broken: the channel
+reads overload for a while; as on the instrument, an overload puts nothing in the error
+queue — 34970A User's Guide ch. 5, "The Questionable Data Register").
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ class Scpi34970A(Scpi34401A):
         self.conf: dict[int, ChannelConf] = {}
         self.scan: list[int] = []
         self.sweeps = 0
+        self.open_until: dict[int, float] = {}  # channel -> simulated time it reads again
         self._table = self.system_commands() + [
             (scpi_re("CONFigure:FRESistance"), self._conf_fres),
             (scpi_re("[SENSe:]FRESistance:NPLCycles"), self._nplc),
@@ -82,6 +86,13 @@ class Scpi34970A(Scpi34401A):
             (scpi_re("ROUTe:SCAN:SIZE?"), lambda a: str(len(self.scan))),
             (scpi_re("READ?"), self._read),
         ]
+
+    def open_channel(self, channel: int, until_t_sim: float) -> None:
+        """The sensor on ``channel`` is open (a lead broken) until simulated time
+        ``until_t_sim``: the channel reads overload meanwhile. Called from the bench's tick
+        thread: no lock (a sweep holds the responder's lock while it waits for that thread
+        to advance the clock)."""
+        self.open_until[channel] = until_t_sim
 
     def _rst(self, arg: str) -> None:
         super()._rst(arg)
@@ -153,9 +164,10 @@ class Scpi34970A(Scpi34401A):
         if self.clock is not None:
             self.clock.sleep(self.sweep_s(), timeout_wall_s=10.0)
         self.sweeps += 1
+        now = self.clock.now() if self.clock is not None else 0.0
         out = []
         for c in self.scan:
-            r = self.read_channel(c)
+            r = None if now < self.open_until.get(c, -1.0) else self.read_channel(c)
             if r is None or not r < 1.2 * self.conf[c].range_ohm:
                 out.append(OVERLOAD)
             else:

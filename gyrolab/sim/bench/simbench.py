@@ -195,6 +195,8 @@ class SimBench:
             if ev.unit >= len(self.unit_adcs):
                 n_units = len(self.unit_adcs)
                 raise ValueError(f"fault {ev.kind}: no unit {ev.unit} on a {n_units}-unit bench")
+            if ev.kind == "open_channel" and not self.multi_unit:
+                raise ValueError("fault open_channel: a scanner channel (multi-unit bench only)")
         for ev in self.faults.events:  # t_s None here means: at the first tick
             t = self.clock.now() if ev.t_s is None else float(ev.t_s)
             heapq.heappush(self._events, (t, next(self._tie), "start", ev))
@@ -203,6 +205,12 @@ class SimBench:
         self._prefetcher: threading.Thread | None = None
         self._stop = threading.Event()
         self.error: BaseException | None = None
+
+    @property
+    def thermometer(self) -> Scpi34401A:
+        """The instrument that reads the PT100s (what ``outage`` and ``scpi_error`` faults
+        hit): the scanner on a multi-unit bench, else the multimeter."""
+        return self.scanner if self.scanner is not None else self.dmm
 
     # ---------------------------------------------------------------- physics hooks
     def _chamber_c(self) -> float:
@@ -329,9 +337,12 @@ class SimBench:
             else:
                 adc.end_stall()
         elif ev.kind == "outage":
-            self.dmm.start_outage(end)
+            self.thermometer.start_outage(end)
         elif ev.kind == "scpi_error":
-            self.dmm.push_error(ev.detail or '-310,"System error"')
+            self.thermometer.push_error(ev.detail or '-310,"System error"')
+        elif ev.kind == "open_channel":
+            assert self.scanner is not None
+            self.scanner.open_channel(101 + ev.unit, end)
         else:  # modbus_exception | modbus_crc | modbus_no_reply
             self.faults.oven.burst(ev.kind, ev.count)
 
