@@ -139,6 +139,72 @@ def test_client_subscribes_and_decodes_what_is_recorded(tmp_path: Path) -> None:
     assert on_disk == got[TOPIC_PT100]
 
 
+def test_every_unit_s_topics_are_advertised_and_served(tmp_path: Path) -> None:
+    """A multi-unit recording: the viewer is offered exactly the file's channels (each
+    unit's /unit/<serial>/… topics with the recording's schemas, no single-unit topic) and
+    receives every unit's messages, byte for byte; /live/status carries each unit's state."""
+    from mcap.reader import make_reader
+
+    from gyrolab.acquisition.runner import Status, UnitStatus
+    from gyrolab.record.format import TOPIC_OVEN, unit_topic
+
+    serials = ["A1", "B2"]
+    rate = {s: unit_topic(TOPIC_RATE, s) for s in serials}
+    pt = {s: unit_topic(TOPIC_PT100, s) for s in serials}
+    with LiveServer(port=0) as live:
+        w = RecordingWriter(tmp_path / "u.mcap", start_time_ns=START_NS, units=serials)
+        live.attach(w)
+        c = Client(live.url)
+        want = {*rate.values(), *pt.values(), TOPIC_OVEN, TOPIC_LIVE_STATUS}
+        c.read_advertise(want)
+        by_topic = {ch["topic"]: ch for ch in c.channels.values()}
+        assert TOPIC_RATE not in by_topic and TOPIC_PT100 not in by_topic
+        assert by_topic[rate["B2"]]["encoding"] == "protobuf"
+        assert by_topic[rate["B2"]]["schemaName"] == "gyrolab.GyroRateBlock"
+        assert by_topic[pt["A1"]]["schemaName"] == "gyrolab.Pt100Reading"
+        c.subscribe(want)
+        c.pump(time.monotonic() + 0.3)
+        for k in range(5):
+            for j, s in enumerate(serials):
+                block = np.full(100, k + 10 * j, dtype=np.float32)
+                w.write_rate_block(k * 1.0, 0.01, k * 100, block, unit=s)
+                w.write_pt100(k + 0.5, 109.7 + j, 25.0 + j, unit=s)
+        w.write_oven(4.9, 25.0, 25.1, "run")
+        st = Status(t=5.0, step=0, n_steps=2, samples=1000)
+        st.units = [UnitStatus("A1", "recording", 25.0, 500), UnitStatus("B2", "pt100_lost")]
+        live.offer_status(st)
+        w.close()
+        deadline = time.monotonic() + 5.0
+        while len(c.received) < 22 and time.monotonic() < deadline:
+            c.pump(time.monotonic() + 0.1)
+        c.close()
+    with open(tmp_path / "u.mcap", "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None
+    advertised = {ch["topic"] for ch in c.channels.values()}
+    assert advertised == {ch.topic for ch in summary.channels.values()} | {TOPIC_LIVE_STATUS}
+    got: dict[str, list[tuple[int, bytes]]] = {}
+    for topic, ts, data in c.received:
+        got.setdefault(topic, []).append((ts, data))
+    assert {t: len(got.get(t, [])) for t in want - {TOPIC_LIVE_STATUS}} == {
+        **{t: 5 for t in (*rate.values(), *pt.values())},
+        TOPIC_OVEN: 1,
+    }
+    on_disk: dict[str, list[tuple[int, bytes]]] = {}
+    for tp, ts, d in iter_messages(tmp_path / "u.mcap"):
+        on_disk.setdefault(tp, []).append((ts, d))
+    for t in (*rate.values(), *pt.values()):
+        assert got[t] == on_disk[t]
+    assert decode_block(got[rate["B2"]][3][1], "rate")[3][0] == 13.0  # B2's own data
+    (status,) = [json.loads(d) for _ts, d in got[TOPIC_LIVE_STATUS]]
+    assert status["units"] == [
+        {"serial": "A1", "state": "recording", "temperature_c": 25.0, "samples": 500,
+         "frames_lost": 0, "frames_bad": 0},
+        {"serial": "B2", "state": "pt100_lost", "samples": 0, "frames_lost": 0,
+         "frames_bad": 0},
+    ]  # fmt: skip
+
+
 def test_a_stalled_viewer_drops_messages_not_samples(tmp_path: Path) -> None:
     """A client that subscribes and then never reads: the server's per-client backlog drops
     the oldest messages; the recorder is never held up and records everything."""
@@ -177,8 +243,12 @@ def test_offer_never_blocks_when_the_queue_is_full() -> None:
     assert live.dropped >= 92 and live.offered == 100
 
 
-def test_acquire_live_at_300x_with_a_client(tmp_path: Path) -> None:
+@pytest.mark.parametrize("units", [0, 2])
+def test_acquire_live_at_300x_with_a_client(tmp_path: Path, units: int) -> None:
+    """A whole ``acquire --bench sim --live`` run with a client, single-unit and with
+    ``--units 2`` (every unit's topics and per-unit status reach the viewer)."""
     from gyrolab.cli import main
+    from gyrolab.record.format import unit_topic
     from gyrolab.record.reader import read_recording
 
     prof = tmp_path / "p.toml"
@@ -190,10 +260,14 @@ def test_acquire_live_at_300x_with_a_client(tmp_path: Path) -> None:
     out = tmp_path / "live.mcap"
     box: dict = {}
 
+    serials = [f"SIM0-{k:02d}" for k in range(1, units + 1)] or [None]
+    summ = {unit_topic(TOPIC_RATE_SUMMARY, s) for s in serials}
+    pt = {unit_topic(TOPIC_PT100, s) for s in serials}
+
     def watch() -> None:
         c = Client(f"ws://127.0.0.1:{port}", timeout=30)
-        topics = {TOPIC_RATE_SUMMARY, TOPIC_PT100, TOPIC_LIVE_STATUS, TOPIC_LOG_FOXGLOVE}
-        c.read_advertise(topics)
+        topics = summ | pt | {TOPIC_LIVE_STATUS, TOPIC_LOG_FOXGLOVE}
+        c.read_advertise(topics, timeout=30)  # advertised once the recording opens
         c.subscribe(topics)
         try:
             c.pump(time.monotonic() + 30)
@@ -203,23 +277,31 @@ def test_acquire_live_at_300x_with_a_client(tmp_path: Path) -> None:
 
     th = threading.Thread(target=watch, daemon=True)
     th.start()
+    more = ["--units", str(units)] if units else []
     rc = main(
         ["acquire", "--bench", "sim", "--out", str(out), "--profile", str(prof),
-         "--speed", "300", "--live", str(port)]
+         "--speed", "300", "--live", str(port), *more]
     )  # fmt: skip
     assert rc == 0
     th.join(timeout=40)
     c = box["c"]
-    rec = read_recording(out)
-    assert rec.rate is not None and rec.rate.gaps() == []  # the viewer cost no sample
+    for s in serials:
+        rate = read_recording(out, unit=s).rate
+        assert rate is not None and rate.gaps() == []  # the viewer cost no sample
     topics = {tp for tp, _ts, _d in c.received}
-    assert {TOPIC_RATE_SUMMARY, TOPIC_PT100, TOPIC_LIVE_STATUS} <= topics
+    assert summ | pt | {TOPIC_LIVE_STATUS} <= topics  # every unit's
     status = [json.loads(d) for tp, _ts, d in c.received if tp == TOPIC_LIVE_STATUS]
     assert status[-1]["n_steps"] == 2 and status[-1]["step_text"].startswith("step ")
-    # what the viewer got of /gyro/rate_summary is what the file holds
-    disk = {ts: d for tp, ts, d in iter_messages(out, [TOPIC_RATE_SUMMARY])}
-    live_summ = [(ts, d) for tp, ts, d in c.received if tp == TOPIC_RATE_SUMMARY]
-    assert live_summ and all(disk[ts] == d for ts, d in live_summ)
+    if units:
+        assert [u["serial"] for u in status[-1]["units"]] == serials
+        assert {u["state"] for u in status[-1]["units"]} == {"recording"}
+        assert all(u["samples"] > 0 for u in status[-1]["units"])
+    else:
+        assert "units" not in status[-1]
+    # what the viewer got of each rate summary is what the file holds
+    disk = {(tp, ts): d for tp, ts, d in iter_messages(out, sorted(summ))}
+    live_summ = [(tp, ts, d) for tp, ts, d in c.received if tp in summ]
+    assert live_summ and all(disk[(tp, ts)] == d for tp, ts, d in live_summ)
 
 
 def _leaf_panels(node: object) -> list[str]:

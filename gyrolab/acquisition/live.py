@@ -4,10 +4,12 @@
 WebSocket server, subprotocol ``foxglove.websocket.v1``) on 127.0.0.1 (another interface
 only with ``--live-host``). It publishes every message the recorder writes, on the same
 topics with the same schemas and log times (protobuf ``FileDescriptorSet`` for the gyro
-blocks, JSON Schema for the rest, viewer topics included), plus ``/live/status``: the
-run's progress (step, setpoint, temperatures, time left, samples, frames lost, messages
-dropped by the live path). docs/live-view.md shows how to watch a run with the shipped
-layout ``docs/foxglove/gyrolab-layout.json``.
+blocks, JSON Schema for the rest, viewer topics included; a multi-unit run's
+``/unit/<serial>/…`` topics for every unit: the channels are the recording's own,
+:func:`gyrolab.record.format.recording_channels`), plus ``/live/status``: the run's
+progress (step, setpoint, temperatures, time left, samples, frames lost, messages dropped
+by the live path; on a multi-unit run each unit's state). docs/live-view.md shows how to
+watch a run with the shipped layout ``docs/foxglove/gyrolab-layout.json``.
 
 The run comes first. The recorder's only cost is :meth:`LiveServer.offer`: one
 ``put_nowait`` into a bounded queue (``queue_size`` messages) — it never blocks and never
@@ -28,14 +30,7 @@ from collections.abc import Callable
 from typing import Any
 
 from gyrolab.errors import GyrolabError
-from gyrolab.record.format import (
-    ADC_MESSAGE,
-    JSON_SCHEMAS,
-    RATE_MESSAGE,
-    TOPIC_ADC,
-    TOPIC_RATE,
-    file_descriptor_set,
-)
+from gyrolab.record.format import recording_channels
 from gyrolab.record.writer import RecordingWriter
 
 TOPIC_LIVE_STATUS = "/live/status"
@@ -57,6 +52,31 @@ LIVE_STATUS_SCHEMA: dict[str, Any] = {
         "frames_bad": {"type": "integer"},
         "live_published": {"type": "integer", "description": "messages sent to the server"},
         "live_dropped": {"type": "integer", "description": "messages the live view dropped"},
+        "units": {
+            "type": "array",
+            "description": "multi-unit runs only: each unit, in bench order",
+            "items": {
+                "type": "object",
+                "properties": {
+                    "serial": {"type": "string"},
+                    "state": {
+                        "type": "string",
+                        "description": "recording | pt100_lost (its PT100 channel reads "
+                        "overload; the rate is still recorded) | dropped (its stream "
+                        "was given up)",
+                    },
+                    "temperature_c": {
+                        "type": "number",
+                        "description": "its last temperature reading (PT100, or its internal "
+                        "sensor), °C",
+                    },
+                    "samples": {"type": "integer", "description": "its gyro samples recorded"},
+                    "frames_lost": {"type": "integer"},
+                    "frames_bad": {"type": "integer"},
+                },
+                "required": ["serial", "state", "samples"],
+            },
+        },
     },
     "required": ["t", "step", "n_steps"],
 }
@@ -96,14 +116,12 @@ class LiveServer:
         self.host = host
         self.port = int(self._server.port)
         self.start_time_ns = 0
+        self._fg = foxglove
         self._channels: dict[str, Any] = {}
-        fds = file_descriptor_set()
-        for topic, msg in ((TOPIC_ADC, ADC_MESSAGE), (TOPIC_RATE, RATE_MESSAGE)):
-            self._add(foxglove, topic, msg, "protobuf", fds, "protobuf")
-        schemas = {**JSON_SCHEMAS, TOPIC_LIVE_STATUS: LIVE_STATUS_SCHEMA}
-        for topic, schema in schemas.items():
-            data = json.dumps(schema, sort_keys=True).encode()
-            self._add(foxglove, topic, schema["title"], "jsonschema", data, "json")
+        # The recording's own channels are advertised when a writer is attached (its
+        # layout, single- or multi-unit, decides them); the status topic from the start.
+        data = json.dumps(LIVE_STATUS_SCHEMA, sort_keys=True).encode()
+        self._add(TOPIC_LIVE_STATUS, LIVE_STATUS_SCHEMA["title"], "jsonschema", data, "json")
         self._q: queue.Queue[tuple[str, int, bytes] | None] = queue.Queue(maxsize=queue_size)
         self.offered = 0
         self.dropped = 0
@@ -112,9 +130,11 @@ class LiveServer:
         self._thread = threading.Thread(target=self._publish, name="live-view", daemon=True)
         self._thread.start()
 
-    def _add(self, fg: Any, topic: str, name: str, enc: str, data: bytes, msg_enc: str) -> None:
-        schema = fg.Schema(name=name, encoding=enc, data=data)
-        self._channels[topic] = fg.Channel(
+    def _add(self, topic: str, name: str, enc: str, data: bytes, msg_enc: str) -> None:
+        if topic in self._channels:
+            return
+        schema = self._fg.Schema(name=name, encoding=enc, data=data)
+        self._channels[topic] = self._fg.Channel(
             topic, schema=schema, message_encoding=msg_enc, context=self._ctx
         )
 
@@ -132,7 +152,10 @@ class LiveServer:
             self.dropped += 1
 
     def attach(self, writer: RecordingWriter) -> None:
-        """Tap ``writer``: every message it records is offered to the viewers."""
+        """Advertise ``writer``'s channels (every unit's on a multi-unit recording, with the
+        recording's schemas) and tap it: every message it records is offered to the viewers."""
+        for c in recording_channels(writer.units, writer.internal_temperature):
+            self._add(c.topic, c.schema_name, c.schema_encoding, c.schema_data, c.message_encoding)
         self.start_time_ns = writer.start_time_ns
         writer.tap = self.offer
 
@@ -171,6 +194,23 @@ class LiveServer:
             "live_dropped": self.dropped,
         }
         msg = {k: v for k, v in msg.items() if v is not None}
+        units = [
+            {
+                k: v
+                for k, v in {
+                    "serial": u.serial,
+                    "state": u.state,
+                    "temperature_c": num(u.temperature_c),
+                    "samples": int(u.samples),
+                    "frames_lost": int(u.frames_lost),
+                    "frames_bad": int(u.frames_bad),
+                }.items()
+                if v is not None
+            }
+            for u in st.units
+        ]
+        if units:
+            msg["units"] = units
         ts = self.start_time_ns + int(round(float(st.t) * 1e9))
         self.offer(TOPIC_LIVE_STATUS, ts, json.dumps(msg, separators=(",", ":")).encode())
 
