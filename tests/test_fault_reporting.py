@@ -8,6 +8,7 @@ that stops for good is a gap up to the end of the run.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -182,6 +183,28 @@ def test_faults_file_keys_are_strict_and_only_for_the_simulated_bench(
     assert main(["acquire", "--bench", str(lab), "--faults", str(f), "--out", str(out)]) == 2
     assert "--faults applies to --bench sim only" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_fault_plan_must_fit_the_bench() -> None:
+    """Scanner faults name a unit the bench has, whose PT100 the scanner reads."""
+    from gyrolab.errors import InputError
+    from gyrolab.sim.bench.fault_file import check_plan_for_bench, faults_from_dict
+
+    def plan(kind: str, unit: int) -> object:
+        ev = {"kind": kind, "t_s": 1.0, "duration_s": 5.0, "unit": unit}
+        return faults_from_dict({"event": [ev]}, "f.toml")
+
+    check_plan_for_bench(plan("open_channel", 1), 3, "f.toml")  # fits
+    check_plan_for_bench(plan("outage", 0), 2, "f.toml", (1,))  # unit 2 is on the scanner
+    bad = {
+        ("open_channel", 1, 3, (2,)): "unit = 1 reads its internal sensor",
+        ("open_channel", 0, 0, ()): "--units N only",
+        ("open_channel", 3, 3, ()): "unit = 3: the bench has 3 unit(s)",
+        ("outage", 0, 2, (1, 2)): "every unit reads its internal sensor, no scanner",
+    }
+    for (kind, unit, units, internal), msg in bad.items():
+        with pytest.raises(InputError, match=re.escape(msg)):
+            check_plan_for_bench(plan(kind, unit), units, "f.toml", internal)  # type: ignore[arg-type]
 
 
 class _LateMeter:

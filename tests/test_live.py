@@ -146,13 +146,15 @@ def test_every_unit_s_topics_are_advertised_and_served(tmp_path: Path) -> None:
     from mcap.reader import make_reader
 
     from gyrolab.acquisition.runner import Status, UnitStatus
-    from gyrolab.record.format import TOPIC_OVEN, unit_topic
+    from gyrolab.record.format import TOPIC_OVEN, TOPIC_TEMPERATURE_INTERNAL, unit_topic
 
     serials = ["A1", "B2"]
     rate = {s: unit_topic(TOPIC_RATE, s) for s in serials}
     pt = {s: unit_topic(TOPIC_PT100, s) for s in serials}
     with LiveServer(port=0) as live:
-        w = RecordingWriter(tmp_path / "u.mcap", start_time_ns=START_NS, units=serials)
+        w = RecordingWriter(
+            tmp_path / "u.mcap", start_time_ns=START_NS, units=serials, internal_temperature=["B2"]
+        )
         live.attach(w)
         c = Client(live.url)
         want = {*rate.values(), *pt.values(), TOPIC_OVEN, TOPIC_LIVE_STATUS}
@@ -183,6 +185,8 @@ def test_every_unit_s_topics_are_advertised_and_served(tmp_path: Path) -> None:
     assert summary is not None
     advertised = {ch["topic"] for ch in c.channels.values()}
     assert advertised == {ch.topic for ch in summary.channels.values()} | {TOPIC_LIVE_STATUS}
+    assert unit_topic(TOPIC_TEMPERATURE_INTERNAL, "B2") in advertised  # B2's internal sensor
+    assert unit_topic(TOPIC_TEMPERATURE_INTERNAL, "A1") not in advertised
     got: dict[str, list[tuple[int, bytes]]] = {}
     for topic, ts, data in c.received:
         got.setdefault(topic, []).append((ts, data))

@@ -435,7 +435,7 @@ def acquire(opts: AcquireOptions) -> RunResult:
         from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults
 
         faults = load_faults(opts.faults)
-        check_plan_for_bench(faults, opts.units, str(opts.faults))
+        check_plan_for_bench(faults, opts.units, str(opts.faults), opts.internal_temperature)
     profile_spec = opts.profile or cfg.profile_path()
     profile = load_profile(profile_spec)
     if opts.profile:

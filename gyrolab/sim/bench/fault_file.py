@@ -147,18 +147,29 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
     return FaultPlan(adc=ByteFaults(**adc), oven=ModbusFaults(**oven), events=events)
 
 
-def check_plan_for_bench(plan: FaultPlan, units: int, source: str = "<faults>") -> None:
-    """InputError unless every event fits a bench of ``units`` units (0: single-unit):
-    ``unit`` within the bench, ``open_channel`` only where a scanner reads the PT100s."""
+def check_plan_for_bench(
+    plan: FaultPlan, units: int, source: str = "<faults>", internal: tuple[int, ...] = ()
+) -> None:
+    """InputError unless every event fits a bench of ``units`` units (0: single-unit) of
+    which ``internal`` (1-based) read their internal sensor: ``unit`` within the bench,
+    ``open_channel`` only on a unit whose PT100 the scanner reads, ``outage`` /
+    ``scpi_error`` only where a thermometer is read (not when every unit is internal)."""
     n = max(1, units)
     for i, e in enumerate(plan.events, start=1):
-        if e.kind == "open_channel" and not units:
-            raise InputError(
-                source, f"[[event]] {i}: open_channel is a scanner channel: --units N only"
-            )
+        where = f"[[event]] {i}"
         if e.unit >= n:
             raise InputError(
-                source, f"[[event]] {i}: unit = {e.unit}: the bench has {n} unit(s) (0-based)"
+                source, f"{where}: unit = {e.unit}: the bench has {n} unit(s) (0-based)"
+            )
+        if e.kind == "open_channel" and not units:
+            raise InputError(source, f"{where}: open_channel is a scanner channel: --units N only")
+        if e.kind == "open_channel" and e.unit + 1 in internal:
+            raise InputError(
+                source, f"{where}: unit = {e.unit} reads its internal sensor: no scanner channel"
+            )
+        if e.kind in DMM_KINDS and units and set(range(1, units + 1)) <= set(internal):
+            raise InputError(
+                source, f"{where}: {e.kind}: every unit reads its internal sensor, no scanner"
             )
 
 
