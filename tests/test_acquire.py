@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from contract import ADC_KEYS, recording_metadata_keys
+from simruns import run_on_sim
 
 from gyrolab.cli import main
 from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
@@ -184,7 +185,6 @@ def _run_in_process(tmp_path: Path, profile: Path, *, speed: float, faults, limi
     """run_acquisition against a SimBench built here (for faults and ground truth)."""
     from dataclasses import replace
 
-    from gyrolab.app.acquire import run_acquisition
     from gyrolab.app.sim_bench import sim_bench_config, start_sim_bench
     from gyrolab.profiles.profile import load_profile
 
@@ -195,13 +195,7 @@ def _run_in_process(tmp_path: Path, profile: Path, *, speed: float, faults, limi
     if limits is not None:
         cfg = replace(cfg, limits=limits)
     out = tmp_path / "run.mcap"
-    old = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    try:
-        res = run_acquisition(cfg=cfg, profile=prof, out=out, force=False, sim=sim)
-    finally:
-        sys.setswitchinterval(old)
-        sim.stop()
+    res = run_on_sim(cfg, prof, out, sim)
     return res, read_recording(out), sim.bench
 
 

@@ -3,25 +3,19 @@ drivers over real pseudo-terminals and the scanner's TCP socket (docs/fleet.md).
 
 from __future__ import annotations
 
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from simruns import run_on_sim, three_step_profile
 
 from gyrolab.cli import main
 from gyrolab.record.format import TOPIC_EVENT, TOPIC_LOG, TOPIC_OVEN, TOPIC_PT100, TOPIC_RATE
 from gyrolab.record.reader import list_units, read_recording
 
 SERIALS = [f"SIM4-{k:02d}" for k in range(1, 9)]
-# Three steps of 320 s (compensate needs 922 s), about 10 s of wall time at 100x.
-PROFILE = (
-    'name = "units"\n'
-    "[[step]]\nsetpoint_c = 25\nduration_s = 320\n"
-    "[[step]]\nsetpoint_c = 60\nduration_s = 320\n"
-    "[[step]]\nsetpoint_c = 0\nduration_s = 320\n"
-)
+PROFILE = three_step_profile("units")
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +65,7 @@ def test_the_recording_compensates_one_unit_with_unit(
 
 
 def test_a_unit_unplugged_mid_run_is_dropped_and_the_others_complete(tmp_path: Path) -> None:
-    from gyrolab.app.acquire import run_acquisition, sim_bench_config, start_sim_bench
+    from gyrolab.app.acquire import sim_bench_config, start_sim_bench
     from gyrolab.profiles.profile import load_profile
     from gyrolab.sim.bench import FaultEvent, FaultPlan
 
@@ -83,13 +77,7 @@ def test_a_unit_unplugged_mid_run_is_dropped_and_the_others_complete(tmp_path: P
     sim, cfg = start_sim_bench(sim_bench_config(0, 3), prof, seed=0, speed=40.0, faults=faults)
     cfg = replace(cfg, limits=replace(cfg.limits, comm_timeout_s=10.0))
     out = tmp_path / "run.mcap"
-    old = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    try:
-        res = run_acquisition(cfg=cfg, profile=prof, out=out, force=False, sim=sim)
-    finally:
-        sys.setswitchinterval(old)
-        sim.stop()
+    res = run_on_sim(cfg, prof, out, sim)
     assert res.outcome == "completed" and res.units_dropped == ["SIM0-02"]
     rec = read_recording(out, topics=[TOPIC_LOG], unit="SIM0-01")
     (drop,) = [m for m in rec.logs if m.get("kind") == "unit_dropped"]

@@ -6,13 +6,13 @@ and reading it back."""
 from __future__ import annotations
 
 import json
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from simruns import run_on_sim, three_step_profile
 
 from gyrolab.acquisition.bench_config import bench_from_dict, load_bench
 from gyrolab.errors import InputError
@@ -173,12 +173,7 @@ def test_bad_temperature_keys_are_one_line_naming_file_and_key(
 
 # ------------------------------------------------------------------ acquire, end to end
 
-PROFILE = (
-    'name = "internal"\n'
-    "[[step]]\nsetpoint_c = 25\nduration_s = 320\n"
-    "[[step]]\nsetpoint_c = 60\nduration_s = 320\n"
-    "[[step]]\nsetpoint_c = 0\nduration_s = 320\n"
-)
+PROFILE = three_step_profile("internal")
 
 
 @pytest.fixture(scope="module")
@@ -328,7 +323,7 @@ def test_convert_hdf5_keeps_the_internal_readings_table(mixed_run: Path, tmp_pat
 
 
 def test_every_unit_internal_runs_without_a_scanner(tmp_path: Path) -> None:
-    from gyrolab.app.acquire import run_acquisition, sim_bench_config, start_sim_bench
+    from gyrolab.app.acquire import sim_bench_config, start_sim_bench
     from gyrolab.profiles.profile import load_profile
 
     (tmp_path / "p.toml").write_text(PROFILE.replace("320", "40"))
@@ -337,13 +332,7 @@ def test_every_unit_internal_runs_without_a_scanner(tmp_path: Path) -> None:
     assert cfg.scanner is None
     sim, cfg = start_sim_bench(cfg, prof, seed=0, speed=40.0)
     out = tmp_path / "run.mcap"
-    old = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    try:
-        res = run_acquisition(cfg=cfg, profile=prof, out=out, force=False, sim=sim)
-    finally:
-        sys.setswitchinterval(old)
-        sim.stop()
+    res = run_on_sim(cfg, prof, out, sim)
     assert res.outcome == "completed" and res.units_dropped == []
     for s in ("SIM0-01", "SIM0-02"):
         rec = read_recording(out, unit=s)
