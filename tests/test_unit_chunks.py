@@ -14,7 +14,12 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from gyrolab.record.format import TOPIC_ADC, TOPIC_PT100, TOPIC_RATE, UNIT_PREFIX
-from gyrolab.record.reader import iter_blocks, iter_messages, read_recording
+from gyrolab.record.reader import (
+    chunks_in_file_order,
+    iter_blocks,
+    iter_messages,
+    read_recording,
+)
 from gyrolab.record.recover import recover_recording
 from gyrolab.record.writer import RecordingWriter
 
@@ -84,6 +89,30 @@ def _interleaved_copy(src: Path, dst: Path) -> None:
             w.add_metadata(m.name, m.metadata)
         for _sch, _ch, m in r.iter_messages():
             w.add_message(m.channel_id, m.log_time, m.data, m.publish_time, m.sequence)
+        w.finish()
+
+
+def _shuffled_copy(src: Path, dst: Path, chunk_size: int) -> None:
+    """The same channels and messages written out of log-time order (a fixed permutation),
+    log times cut to whole seconds so that a topic has many messages at one time."""
+    with open(src, "rb") as fh, open(dst, "wb") as out:
+        r = make_reader(fh)
+        s = r.get_summary()
+        assert s is not None
+        w = Writer(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        w.start(profile="gyrolab", library="test")
+        for sid in sorted(s.schemas):
+            w.register_schema(s.schemas[sid].name, s.schemas[sid].encoding, s.schemas[sid].data)
+        for cid in sorted(s.channels):
+            c = s.channels[cid]
+            w.register_channel(c.topic, c.message_encoding, c.schema_id)
+        for m in r.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        msgs = [m for _s, _c, m in r.iter_messages()]
+        for i in np.random.default_rng(5).permutation(len(msgs)):
+            m = msgs[i]
+            t = m.log_time - m.log_time % 10**9
+            w.add_message(m.channel_id, t, m.data, t, m.sequence)
         w.finish()
 
 
@@ -182,3 +211,41 @@ def test_a_flush_writes_every_units_buffer(tmp_path: Path) -> None:
     assert _by_topic(got) == _by_topic(sorted(seen, key=lambda m: m[1]))
     assert {t for t, _ts, _d in got} >= {f"/unit/{u}{TOPIC_RATE}" for u in UNITS}
     w.close()
+
+
+def test_reading_in_file_order_gives_each_topic_in_log_time_order(tmp_path: Path) -> None:
+    """``order="topic"`` (and a single topic in log-time order) read chunks in file order:
+    each topic's messages come back exactly as the mcap library's log-time merge gives them,
+    on the one-unit-per-chunk layout, on the interleaved one, and on files written out of
+    order (within one chunk: sorted per chunk; across overlapping chunks: the merge)."""
+    path = tmp_path / "units.mcap"
+    _write(path, seconds=10.0)
+    files = {"units": path, "interleaved": tmp_path / "old.mcap"}
+    _interleaved_copy(path, files["interleaved"])
+    for name, size in (("shuffled", 4096), ("shuffled-one-chunk", 1 << 24)):
+        files[name] = tmp_path / f"{name}.mcap"
+        _shuffled_copy(path, files[name], size)
+    fast = {}
+    for name, f in files.items():
+        with open(f, "rb") as fh:
+            r = make_reader(fh)
+            fast[name] = chunks_in_file_order(r.get_summary(), None) is not None
+            merged = [(c.topic, m.log_time, m.data) for _s, c, m in r.iter_messages()]
+        assert _by_topic(list(iter_messages(f, order="topic"))) == _by_topic(merged), name
+        assert _by_topic(list(iter_messages(f))) == _by_topic(merged), name
+        assert list(iter_messages(f)) == merged  # all topics: the whole log-time order
+        for topic in (TOPIC_RATE, TOPIC_PT100):  # one unit, one topic: the whole order
+            full = f"{UNIT_PREFIX}B2{topic}"
+            want = [(topic, ts, d) for ts, d in _by_topic(merged)[full]]
+            assert list(iter_messages(f, [topic], unit="B2")) == want, (name, topic)
+        u = "C3"
+        by_unit = _by_topic(list(iter_messages(f, unit=u, order="topic")))
+        assert by_unit[TOPIC_RATE] == _by_topic(merged)[f"{UNIT_PREFIX}{u}{TOPIC_RATE}"]
+    # the file-order path is taken where it is exact, the merge where chunks overlap in time
+    assert fast == {
+        "units": True,
+        "interleaved": True,  # log-time order into shared chunks: they follow in time
+        "shuffled": False,
+        "shuffled-one-chunk": True,
+    }
+    assert len(_by_topic(merged)[f"{UNIT_PREFIX}A1{TOPIC_RATE}"]) == 20

@@ -238,7 +238,7 @@ def select_unit(path: str | os.PathLike[str], unit: str | None) -> str | None:
 Order = Literal["log_time", "topic"]
 
 
-def _chunks_in_file_order(summary: Any, topics: list[str] | None) -> list[Any] | None:
+def chunks_in_file_order(summary: Any, topics: list[str] | None) -> list[Any] | None:
     """The chunk indexes holding ``topics``, in file order, when reading those chunks in that
     order gives each topic's messages in log-time order once each chunk's own are sorted:
     every topic's chunks follow one another in time (one's last message time ≤ the next's
@@ -277,7 +277,7 @@ _MESSAGE_HEAD = struct.Struct("<HIQQ")
 def _iter_chunks(
     fh: BinaryIO, summary: Any, chunks: list[Any], topics: list[str] | None
 ) -> Iterator[tuple[str, int, bytes]]:
-    """``(topic, log_time_ns, data)`` of ``chunks`` (:func:`_chunks_in_file_order`), one
+    """``(topic, log_time_ns, data)`` of ``chunks`` (:func:`chunks_in_file_order`), one
     chunk decompressed at a time, each chunk's messages sorted stably by log time.
 
     The chunk's records are walked here rather than by the mcap library's parser, which
@@ -312,7 +312,7 @@ def _iter_chunks(
             pos = end
         if pos != size:
             raise ValueError(f"chunk at byte {ci.chunk_start_offset} ends inside a record")
-        if any(a[1] > b[1] for a, b in zip(msgs, msgs[1:])):
+        if any(a[1] > b[1] for a, b in zip(msgs, msgs[1:], strict=False)):
             msgs.sort(key=lambda m: m[1])  # stable: ties keep their place in the chunk
         yield from msgs
 
@@ -332,7 +332,7 @@ def iter_messages(
     ``"log_time"``), the topics interleaved as the file holds them — for callers that keep
     each topic apart. It reads the file's chunks in file order, one at a time, without the
     mcap library's log-time merge of every message (a heap: a quarter of a unit's read time),
-    whenever the summary shows that order is exact (:func:`_chunks_in_file_order`: files
+    whenever the summary shows that order is exact (:func:`chunks_in_file_order`: files
     gyrolab writes); otherwise through the merge, as ``"log_time"`` does. One topic asked
     for in ``"log_time"`` order reads the same way (its order is then the whole order)."""
     prefix = ""
@@ -342,7 +342,7 @@ def iter_messages(
         prefix = f"{UNIT_PREFIX}{unit}"
     per_topic = order == "topic" or (topics is not None and len(set(topics)) == 1)
     with opened_file(path) as (reader, fh):
-        chunks = _chunks_in_file_order(reader.get_summary(), topics) if per_topic else None
+        chunks = chunks_in_file_order(reader.get_summary(), topics) if per_topic else None
         if chunks is not None:
             messages = _iter_chunks(fh, reader.get_summary(), chunks, topics)
         else:
