@@ -18,12 +18,14 @@ from gyrolab.compensation.apply import (
 )
 from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.evaluate import evaluate
+from gyrolab.compensation.firmware import fit_poly3, poly3_block_means
 from gyrolab.compensation.fit import CompensationModel, Decomposition, fit
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, load_model, save_model
 from gyrolab.compensation.prepare import (
     PreparedRun,
     causal_temperature,
     features,
+    iter_rate_batches,
     prepare_file,
     prepare_run,
 )
@@ -326,6 +328,46 @@ def test_streamed_preparation_reads_the_file_once(
     assert b.content_hash == a.content_hash
     np.testing.assert_array_equal(b.pt_c, a.pt_c)
     np.testing.assert_array_equal(b.t, a.t)
+
+
+def test_the_kept_rate_batches_give_the_streamed_results_without_a_read(
+    runs: dict[str, Path],
+    fitted: tuple[CompensationModel, Decomposition],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """prepare_file keeps the rate batches a later pass would read from the file (up to
+    RATE_KEEP_MAX_SAMPLES): the same batches, the same block means bit for bit, no read;
+    over the limit it keeps none and each pass streams the file as before."""
+    import gyrolab.compensation.prepare as prepare
+    import gyrolab.record.reader as reader
+
+    model, _ = fitted
+    path = str(runs["val"])
+    kept = prepare_file(path, SMALL)
+    assert kept.rate_batches is not None
+    for a, b in zip(kept.rate_batches, iter_rate_batches(path), strict=True):
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+        assert a[2] == b[2]
+    monkeypatch.setattr(prepare, "RATE_KEEP_MAX_SAMPLES", 10)
+    streamed = prepare_file(path, SMALL)
+    assert streamed.rate_batches is None
+    passes: list[object] = []
+    real = reader.iter_messages
+
+    def counted(*args: object, **kwargs: object) -> object:
+        passes.append(args[1] if len(args) > 1 else kwargs.get("topics"))
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(reader, "iter_messages", counted)
+    p3 = fit_poly3(kept)
+    results = {}
+    for name, run in (("kept", kept), ("streamed", streamed)):
+        before = len(passes)
+        results[name] = (streaming_block_means(model, run), poly3_block_means(p3, run, 3.6))
+        assert len(passes) - before == (0 if name == "kept" else 2)
+    for x, y in zip(results["kept"], results["streamed"], strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 def test_streaming_block_means_from_file_and_memory_agree(

@@ -35,7 +35,7 @@ from scipy import signal
 
 from gyrolab.compensation.fit import CompensationModel, Decomposition, decompose, fit_flp
 from gyrolab.compensation.flp import ForwardLinearPredictor
-from gyrolab.compensation.prepare import PreparedRun, features, iter_rate_batches
+from gyrolab.compensation.prepare import PreparedRun, features, run_rate_batches
 from gyrolab.numerics.averaging import BlockAverager
 
 
@@ -184,7 +184,7 @@ def streaming_block_means_many(
             (run.raw_t, run.raw_rate, run.raw_period)
         ]
     else:
-        batches = iter_rate_batches(run.path, unit=run.unit)
+        batches = run_rate_batches(run)
     for t, x, period in batches:
         for w in whiches:
             accs[w].add(t, comps[w](t, x), period)

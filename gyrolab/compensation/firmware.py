@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.compensation.evaluate import series_metrics
-from gyrolab.compensation.prepare import PreparedRun, causal_temperature, iter_rate_batches
+from gyrolab.compensation.prepare import PreparedRun, causal_temperature, run_rate_batches
 from gyrolab.numerics.averaging import BlockAverager
 
 DEG2RAD = float(np.pi / 180.0)
@@ -92,7 +92,7 @@ def poly3_block_means(p3: Poly3, run: PreparedRun, block_s: float) -> np.ndarray
     if run.raw_rate is not None and run.raw_t is not None:
         acc.add(run.raw_t, comp(run.raw_t, run.raw_rate), run.raw_period)
     else:
-        for t, x, period in iter_rate_batches(run.path, unit=run.unit):
+        for t, x, period in run_rate_batches(run):
             acc.add(t, comp(t, x), period)
     return acc.result()[1]
 
