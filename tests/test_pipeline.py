@@ -306,11 +306,10 @@ def test_streamed_preparation_equals_in_memory(runs: dict[str, Path]) -> None:
     np.testing.assert_array_equal(tb, a.t)
 
 
-def test_streamed_preparation_reads_the_file_once(
-    runs: dict[str, Path], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """PT100 readings and the rate come from one pass through the reader (one
-    decompression of the chunks), with the same data and content hash as a whole read."""
+@pytest.fixture
+def reader_passes(monkeypatch: pytest.MonkeyPatch) -> list[object]:
+    """The topics of every pass through ``gyrolab.record.reader.iter_messages`` from here on
+    (the one place a recording's chunks are decompressed)."""
     import gyrolab.record.reader as reader
 
     passes: list[object] = []
@@ -321,9 +320,16 @@ def test_streamed_preparation_reads_the_file_once(
         return real(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(reader, "iter_messages", counted)
+    return passes
+
+
+def test_streamed_preparation_reads_the_file_once(
+    runs: dict[str, Path], reader_passes: list[object]
+) -> None:
+    """PT100 readings and the rate come from one pass through the reader (one
+    decompression of the chunks), with the same data and content hash as a whole read."""
     b = prepare_file(str(runs["cal"]), SMALL)
-    assert len(passes) == 1, passes
-    monkeypatch.undo()
+    assert len(reader_passes) == 1, reader_passes
     a = load(runs["cal"])
     assert b.content_hash == a.content_hash
     np.testing.assert_array_equal(b.pt_c, a.pt_c)
@@ -334,12 +340,12 @@ def test_the_kept_rate_batches_give_the_streamed_results_without_a_read(
     runs: dict[str, Path],
     fitted: tuple[CompensationModel, Decomposition],
     monkeypatch: pytest.MonkeyPatch,
+    reader_passes: list[object],
 ) -> None:
     """prepare_file keeps the rate batches a later pass would read from the file (up to
     RATE_KEEP_MAX_SAMPLES): the same batches, the same block means bit for bit, no read;
     over the limit it keeps none and each pass streams the file as before."""
     import gyrolab.compensation.prepare as prepare
-    import gyrolab.record.reader as reader
 
     model, _ = fitted
     path = str(runs["val"])
@@ -352,14 +358,7 @@ def test_the_kept_rate_batches_give_the_streamed_results_without_a_read(
     monkeypatch.setattr(prepare, "RATE_KEEP_MAX_SAMPLES", 10)
     streamed = prepare_file(path, SMALL)
     assert streamed.rate_batches is None
-    passes: list[object] = []
-    real = reader.iter_messages
-
-    def counted(*args: object, **kwargs: object) -> object:
-        passes.append(args[1] if len(args) > 1 else kwargs.get("topics"))
-        return real(*args, **kwargs)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(reader, "iter_messages", counted)
+    passes = reader_passes
     p3 = fit_poly3(kept)
     results = {}
     for name, run in (("kept", kept), ("streamed", streamed)):
