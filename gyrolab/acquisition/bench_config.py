@@ -364,20 +364,13 @@ def validate(cfg: BenchConfig) -> None:
         raise InputError(s, "[safe_state] setpoint_c is outside the setpoint limits")
     if not lim.pt100_min_c < ss.setpoint_c < lim.pt100_max_c:
         raise InputError(s, "[safe_state] setpoint_c is outside [limits] pt100_min_c..pt100_max_c")
-    for fname, _, names in _ROLE_TABLES:
-        sub = getattr(cfg, fname)
-        # The driver's own checks (its config's optional check(), registry.DriverSpec).
-        check = getattr(sub, "check", None)
-        if check is not None:
-            try:
-                check(ss.mode)
-            except ValueError as e:
-                raise InputError(s, f"[{names[0]}] {sub.driver}: {e}") from None
-    # A multi-unit bench: the scanner's and every unit's stream's own checks too.
-    extra = [(f"[[unit]] {u.serial} adc", u.adc) for u in cfg.units]
+    # The driver's own checks (its config's optional check(), registry.DriverSpec): each
+    # role's, and on a multi-unit bench every unit's stream's and the scanner's too.
+    drivers = [(f"[{names[0]}]", getattr(cfg, fname)) for fname, _, names in _ROLE_TABLES]
+    drivers += [(f"[[unit]] {u.serial} adc", u.adc) for u in cfg.units]
     if cfg.scanner is not None:
-        extra.append(("[scanner]", cfg.scanner))
-    for where, sub in extra:
+        drivers.append(("[scanner]", cfg.scanner))
+    for where, sub in drivers:
         check = getattr(sub, "check", None)
         if check is not None:
             try:
