@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import ctypes
+import functools
 import glob
 import io
 import json
@@ -159,6 +161,16 @@ def bound_threads(n: int) -> None:
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 
 
+@functools.cache
+def _glibc() -> Any:
+    """glibc's ``libc.so.6`` (``None`` elsewhere: musl, macOS, Windows)."""
+    try:
+        lib = ctypes.CDLL("libc.so.6")
+    except OSError:
+        return None
+    return lib if hasattr(lib, "mallopt") and hasattr(lib, "malloc_trim") else None
+
+
 def tune_malloc() -> bool:
     """Let glibc keep this process's freed large blocks for reuse (True: done; False: not glibc).
 
@@ -173,25 +185,19 @@ def tune_malloc() -> bool:
     256 MiB; :func:`release_memory` gives the memory back after each item instead, as the
     nanny's setting intends.
     """
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL("libc.so.6")
-        return bool(
-            libc.mallopt(_M_MMAP_THRESHOLD, 32 << 20) and libc.mallopt(_M_TRIM_THRESHOLD, 256 << 20)
-        )
-    except (OSError, AttributeError):  # not glibc (musl, macOS, Windows): nothing to tune
+    libc = _glibc()
+    if libc is None:  # nothing to tune
         return False
+    return bool(
+        libc.mallopt(_M_MMAP_THRESHOLD, 32 << 20) and libc.mallopt(_M_TRIM_THRESHOLD, 256 << 20)
+    )
 
 
 def release_memory() -> None:
     """Return the freed heap to the system between items (glibc ``malloc_trim(0)``)."""
-    try:
-        import ctypes
-
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        pass
+    libc = _glibc()
+    if libc is not None:
+        libc.malloc_trim(0)
 
 
 def _peak_rss_mib() -> float:
