@@ -342,9 +342,10 @@ def iter_messages(
         prefix = f"{UNIT_PREFIX}{unit}"
     per_topic = order == "topic" or (topics is not None and len(set(topics)) == 1)
     with opened_file(path) as (reader, fh):
-        chunks = chunks_in_file_order(reader.get_summary(), topics) if per_topic else None
+        summary = reader.get_summary() if per_topic else None
+        chunks = chunks_in_file_order(summary, topics)
         if chunks is not None:
-            messages = _iter_chunks(fh, reader.get_summary(), chunks, topics)
+            messages = _iter_chunks(fh, summary, chunks, topics)
         else:
             messages = (
                 (c.topic, m.log_time, m.data) for _s, c, m in reader.iter_messages(topics=topics)
