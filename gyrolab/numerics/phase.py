@@ -31,18 +31,23 @@ def all_finite(y: np.ndarray) -> bool:
     return True
 
 
+@numba.njit(cache=True, inline="always")
+def _neumaier_add(s: float, c: float, v: float) -> tuple[float, float]:
+    """One term of a Neumaier-compensated sum: the new (sum, compensation) after adding v."""
+    t = s + v
+    if abs(s) >= abs(v):
+        c += (s - t) + v
+    else:
+        c += (v - t) + s
+    return t, c
+
+
 @numba.njit(cache=True)
 def _neumaier_mean(y: np.ndarray) -> float:
     s = 0.0
     c = 0.0
     for i in range(y.size):
-        v = y[i]
-        t = s + v
-        if abs(s) >= abs(v):
-            c += (s - t) + v
-        else:
-            c += (v - t) + s
-        s = t
+        s, c = _neumaier_add(s, c, y[i])
     return (s + c) / y.size
 
 
@@ -54,13 +59,7 @@ def phase_from_rate(y: np.ndarray, tau0: float, out: np.ndarray) -> None:
     c = 0.0
     out[0] = 0.0
     for i in range(y.size):
-        v = (y[i] - mean) * tau0
-        t = s + v
-        if abs(s) >= abs(v):
-            c += (s - t) + v
-        else:
-            c += (v - t) + s
-        s = t
+        s, c = _neumaier_add(s, c, (y[i] - mean) * tau0)
         out[i + 1] = s + c
 
 
