@@ -472,8 +472,7 @@ class Acquisition:
         for name in (*thermo, self.oven.name, *self.streams):
             self._last_ok[name] = now
             self.silence.heard(name)
-        self._pt_any_at = now
-        self.silence.heard(UNIT_TEMPERATURES)
+        self._temperature_heard(now)
         self._do(self.plan.start(0.0))
         self._readers = {
             name: _AdcThread(rec.dev, self.q.put, self.stop_ev, self.clock)
@@ -714,8 +713,7 @@ class Acquisition:
             if k == 0:
                 plan_c = c
         if any_ok:
-            self._pt_any_at = self.clock.now()
-            self.silence.heard(UNIT_TEMPERATURES)
+            self._temperature_heard()
         if plan_c is not None:
             self.status.pt100_c = plan_c
         elif not self.units[0].internal:  # the plan's PT100 is lost: say so, not a stale value
@@ -729,14 +727,19 @@ class Acquisition:
 
         def take(t: float, c: float) -> None:
             self._unit_c[serial] = c
-            self._pt_any_at = self.clock.now()
-            self.silence.heard(UNIT_TEMPERATURES)
+            self._temperature_heard()
             self._pt100_watch(t, c, serial, "internal sensor")
             if k == 0:
                 self.status.pt100_c = c
                 self._do(self.plan.update(t, c))
 
         return take
+
+    def _temperature_heard(self, at: float | None = None) -> None:
+        """Some unit's temperature gave a reading at clock time ``at`` (default: now), for
+        the blind-temperature watchdog (_watchdog)."""
+        self._pt_any_at = self.clock.now() if at is None else at
+        self.silence.heard(UNIT_TEMPERATURES)
 
     def _pt100_lost(self, t: float, u: UnitDevices) -> None:
         """Unit ``u``'s channel gave no reading at run time ``t``: a fault, logged once."""
