@@ -148,13 +148,10 @@ def _is_adc(name: str) -> bool:
 
 def _summary(path: Path) -> dict[str, int]:
     """Message count per topic, from the summary section."""
-    from mcap.reader import make_reader
+    from gyrolab.record.source import opened
 
-    with open(path, "rb") as fh:
-        try:
-            s = make_reader(fh).get_summary()
-        except Exception as e:
-            raise InputError(path, f"damaged MCAP ({e}); try `gyrolab recover`") from None
+    with opened(path) as src:
+        s = src.summary
     if s is None or s.statistics is None:
         raise InputError(path, "MCAP without a summary section; try `gyrolab recover`")
     topics = {c.id: c.topic for c in s.channels.values()}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from os import PathLike
+from pathlib import Path
 
 
 class GyrolabError(Exception):
@@ -18,3 +19,14 @@ class InputError(GyrolabError):
         self.path = None if path is None else str(path)
         self.problem = problem
         super().__init__(problem if self.path is None else f"{self.path}: {problem}")
+
+
+def existing_file(path: str | PathLike[str], what: str = "recording") -> Path:
+    """``path`` when it names a file; otherwise the :class:`InputError` that says what it
+    names instead (a directory — a model directory given as the run, say — or nothing)."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(p, f"is a directory, not a {what} file")
+    if not p.is_file():
+        raise InputError(p, "file not found" if not p.exists() else f"is not a {what} file")
+    return p

@@ -14,13 +14,9 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from gyrolab.record.format import TOPIC_ADC, TOPIC_PT100, TOPIC_RATE, UNIT_PREFIX
-from gyrolab.record.reader import (
-    chunks_in_file_order,
-    iter_blocks,
-    iter_messages,
-    read_recording,
-)
+from gyrolab.record.reader import iter_blocks, iter_messages, read_recording
 from gyrolab.record.recover import recover_recording
+from gyrolab.record.source import chunks_in_file_order
 from gyrolab.record.writer import RecordingWriter
 
 START_NS = 1_700_000_000_000_000_000

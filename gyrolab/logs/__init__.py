@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gyrolab.errors import InputError
+from gyrolab.errors import InputError, existing_file
 from gyrolab.record.reader import Recording, Series
 
 RAD2DEG = float(180.0 / np.pi)
@@ -41,9 +41,7 @@ DATAFLASH_HEAD = b"\xa3\x95"
 
 def detect_format(path: str | os.PathLike[str]) -> str:
     """``gyrolab`` | ``ros2`` | ``ulog`` | ``dataflash`` from the file's first bytes."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "file not found")
+    p = existing_file(path)
     with open(p, "rb") as fh:
         head = fh.read(8)
     if head == MCAP_MAGIC:
@@ -56,13 +54,10 @@ def detect_format(path: str | os.PathLike[str]) -> str:
 
 
 def _mcap_profile(path: Path) -> str:
-    from mcap.reader import make_reader
+    from gyrolab.record.source import opened
 
-    try:
-        with open(path, "rb") as fh:
-            return make_reader(fh).get_header().profile
-    except Exception as e:  # mcap raises many types on damaged files
-        raise InputError(path, f"damaged MCAP ({e})") from None
+    with opened(path) as src:  # checked like every MCAP read (gyrolab/record/integrity.py)
+        return str(src.header().profile)
 
 
 def single_axis_gyrolab(path: str | os.PathLike[str]) -> bool:

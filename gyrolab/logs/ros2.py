@@ -52,10 +52,10 @@ def imu_fast(data: bytes) -> tuple[float, float, float, float] | None:
 
 
 def _topics_of(path: str | os.PathLike[str]) -> dict[str, str]:
-    from mcap.reader import make_reader
+    from gyrolab.record.source import opened
 
-    with open(path, "rb") as fh:
-        summary = make_reader(fh).get_summary()
+    with opened(path) as src:
+        summary = src.summary
     if summary is None:
         raise InputError(path, "MCAP without a summary section: cannot list its topics")
     return {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
@@ -83,10 +83,10 @@ def read_ros2(
     imu_topic: str | None = None,
 ) -> Recording:
     """A ROS 2 MCAP → :class:`Recording` (3 axes, °/s; temperature °C)."""
-    from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
     from gyrolab.logs import build_recording
+    from gyrolab.record.source import opened
 
     factory = DecoderFactory()
     decoders: dict[int, Any] = {}
@@ -97,33 +97,33 @@ def read_ros2(
     temp = _pick(path, topics, TEMPERATURE, temperature_topic, "--temperature-topic")
     t, g, tt, tc, lt, tlt = [], [], [], [], [], []
     try:
-        with open(path, "rb") as fh:
-            reader = make_reader(fh)
-            for (
-                schema,
-                ch,
-                m,
-            ) in reader.iter_messages(topics=[imu, temp]):
-                if schema.id not in decoders:
-                    decoders[schema.id] = factory.decoder_for(ch.message_encoding, schema)
-                if ch.topic == imu:
-                    lt.append(m.log_time * 1e-9)
-                    r = imu_fast(m.data) if fast is not False else None
+        # opened: the bag is checked like every MCAP read (chunk CRCs, gyrolab/record/integrity.py)
+        with opened(path) as src:
+            schemas, channels = src.schemas(), src.channels()
+            for topic, log_time, data, cid, _seq, _pub in src.messages([imu, temp]):
+                ch = channels[cid]
+                if ch.schema_id not in decoders:
+                    schema = schemas[ch.schema_id]
+                    decoders[ch.schema_id] = factory.decoder_for(ch.message_encoding, schema)
+                decode = decoders[ch.schema_id]
+                if topic == imu:
+                    lt.append(log_time * 1e-9)
+                    r = imu_fast(data) if fast is not False else None
                     if fast is None:
-                        msg = decoders[schema.id](m.data)
+                        msg = decode(data)
                         w = msg.angular_velocity
                         fast = r == (_stamp(msg), w.x, w.y, w.z)
                         r = r if fast else None
                     if r is None:
-                        msg = decoders[schema.id](m.data)
+                        msg = decode(data)
                         w = msg.angular_velocity
                         r = (_stamp(msg), w.x, w.y, w.z)
                     t.append(r[0])
                     g.append(r[1:])
                 else:
-                    msg = decoders[schema.id](m.data)
+                    msg = decode(data)
                     tt.append(_stamp(msg))
-                    tlt.append(m.log_time * 1e-9)
+                    tlt.append(log_time * 1e-9)
                     tc.append(msg.temperature)
     except InputError:
         raise

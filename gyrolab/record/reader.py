@@ -9,15 +9,12 @@ files written with older spellings read in the documented shape.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
-import struct
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any, BinaryIO, Literal
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +33,7 @@ from gyrolab.record.format import (
     unit_topic,
 )
 from gyrolab.record.metadata import normalise_bench, normalise_run
+from gyrolab.record.source import Order, opened
 
 #: A decoded rate or ADC block: ``(t0, period, first_index, values)``.
 Block = tuple[float, float, int, np.ndarray]
@@ -138,47 +136,11 @@ def _parse_meta(values: Mapping[str, str]) -> dict[str, Any]:
     return out
 
 
-RECOVER_HINT = "; try `gyrolab recover`"
-
-
-@contextlib.contextmanager
-def opened_file(
-    path: str | os.PathLike[str], hint: str = RECOVER_HINT
-) -> Iterator[tuple[Any, BinaryIO]]:
-    """``(reader, file)``: an MCAP reader of ``path`` and the file it reads, closed on exit.
-    A missing or foreign file, and any error the mcap library raises on a damaged one, is an
-    :class:`InputError` (``hint`` appended)."""
-    from mcap.reader import make_reader
-
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "file not found")
-    fh = open(p, "rb")
-    try:
-        if fh.read(8) != b"\x89MCAP0\r\n":
-            raise InputError(p, "not an MCAP file")
-        fh.seek(0)
-        yield make_reader(fh), fh
-    except InputError:
-        raise
-    except Exception as e:  # mcap raises many types on damaged files
-        raise InputError(path, f"damaged or truncated MCAP ({e}){hint}") from None
-    finally:
-        fh.close()
-
-
-@contextlib.contextmanager
-def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[Any]:
-    """An MCAP reader of ``path`` (:func:`opened_file`), closed on exit."""
-    with opened_file(path, hint) as (reader, _fh):
-        yield reader
-
-
 def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """All metadata records of a recording, values JSON-decoded where possible; ``run``
     and ``bench`` normalised (:func:`~gyrolab.record.metadata.normalise_run`)."""
-    with opened(path) as reader:
-        records = {m.name: _parse_meta(m.metadata) for m in reader.iter_metadata()}
+    with opened(path) as src:
+        records = {m.name: _parse_meta(m.metadata) for m in src.metadata()}
     for name, normalise in (("run", normalise_run), ("bench", normalise_bench)):
         if name in records:
             records[name] = normalise(records[name])
@@ -187,11 +149,8 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
 
 def list_units(path: str | os.PathLike[str]) -> list[str]:
     """The unit serials of a multi-unit recording, in file order; ``[]`` for single-unit."""
-    with opened(path) as reader:
-        summary = reader.get_summary()
-        channels = summary.channels.values() if summary is not None else None
-        if channels is None:  # no summary section (a recovered file): scan the messages
-            channels = [c for _s, c, _m in reader.iter_messages()]
+    with opened(path) as src:
+        channels = src.channels().values()
         units: list[str] = []
         for ch in channels:
             if ch.topic.startswith(UNIT_PREFIX):
@@ -233,90 +192,6 @@ def select_unit(path: str | os.PathLike[str], unit: str | None) -> str | None:
     return unit
 
 
-#: ``iter_messages`` orders: every message by log time, or each topic's messages by log time
-#: (topics interleaved as the file holds them).
-Order = Literal["log_time", "topic"]
-
-
-def chunks_in_file_order(summary: Any, topics: list[str] | None) -> list[Any] | None:
-    """The chunk indexes holding ``topics``, in file order, when reading those chunks in that
-    order gives each topic's messages in log-time order once each chunk's own are sorted:
-    every topic's chunks follow one another in time (one's last message time ≤ the next's
-    first). ``None`` when that does not hold or cannot be known from the summary (no chunk
-    index, or one without message indexes): the caller reads through the log-time merge.
-
-    Why it holds: the merge yields messages by (log time, chunk offset, position in chunk);
-    chunks of a topic that do not overlap in time, read in offset order, each sorted stably
-    by log time, give that same order for the topic."""
-    if summary is None or not summary.chunk_indexes:
-        return None
-    wanted = {
-        cid for cid, ch in summary.channels.items() if topics is None or ch.topic in topics
-    }
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    last_end: dict[int, int] = {}
-    out = []
-    for ci in chunks:
-        if not ci.message_index_offsets:  # which channels it holds is unknown
-            return None
-        held = wanted.intersection(ci.message_index_offsets)
-        if not held:
-            continue
-        for cid in held:
-            if last_end.get(cid, ci.message_start_time) > ci.message_start_time:
-                return None
-            last_end[cid] = ci.message_end_time
-        out.append(ci)
-    return out
-
-
-#: An MCAP message record's body: channel id, sequence, log time, publish time, then the data.
-_MESSAGE_HEAD = struct.Struct("<HIQQ")
-
-
-def _iter_chunks(
-    fh: BinaryIO, summary: Any, chunks: list[Any], topics: list[str] | None
-) -> Iterator[tuple[str, int, bytes]]:
-    """``(topic, log_time_ns, data)`` of ``chunks`` (:func:`chunks_in_file_order`), one
-    chunk decompressed at a time, each chunk's messages sorted stably by log time.
-
-    The chunk's records are walked here rather than by the mcap library's parser, which
-    builds an object for every record of the chunk (a unit's chunk holds four topics): only
-    the messages asked for are taken out, at their offsets (MCAP spec: opcode byte, u64
-    length, body)."""
-    from mcap.data_stream import ReadDataStream
-    from mcap.opcode import Opcode
-    from mcap.records import Chunk
-    from mcap.stream_reader import get_chunk_data_stream
-
-    names = {
-        cid: ch.topic
-        for cid, ch in summary.channels.items()
-        if topics is None or ch.topic in topics
-    }
-    head, head_size, message = _MESSAGE_HEAD.unpack_from, _MESSAGE_HEAD.size, Opcode.MESSAGE
-    length_at = struct.Struct("<Q").unpack_from
-    for ci in chunks:
-        fh.seek(ci.chunk_start_offset + 1 + 8)  # past the record's opcode and length
-        stream, size = get_chunk_data_stream(Chunk.read(ReadDataStream(fh)))
-        buf = stream.read(size)
-        msgs: list[tuple[str, int, bytes]] = []
-        pos = 0
-        while pos < size:
-            (length,) = length_at(buf, pos + 1)
-            body, end = pos + 9, pos + 9 + length
-            if buf[pos] == message:
-                cid, _seq, log_time, _pub = head(buf, body)
-                if cid in names:
-                    msgs.append((names[cid], log_time, buf[body + head_size : end]))
-            pos = end
-        if pos != size:
-            raise ValueError(f"chunk at byte {ci.chunk_start_offset} ends inside a record")
-        if any(a[1] > b[1] for a, b in zip(msgs, msgs[1:], strict=False)):
-            msgs.sort(key=lambda m: m[1])  # stable: ties keep their place in the chunk
-        yield from msgs
-
-
 def iter_messages(
     path: str | os.PathLike[str],
     topics: list[str] | None = None,
@@ -331,26 +206,23 @@ def iter_messages(
     ``order="topic"``: each topic's messages in log-time order (exactly as with
     ``"log_time"``), the topics interleaved as the file holds them — for callers that keep
     each topic apart. It reads the file's chunks in file order, one at a time, without the
-    mcap library's log-time merge of every message (a heap: a quarter of a unit's read time),
-    whenever the summary shows that order is exact (:func:`chunks_in_file_order`: files
-    gyrolab writes); otherwise through the merge, as ``"log_time"`` does. One topic asked
-    for in ``"log_time"`` order reads the same way (its order is then the whole order)."""
+    log-time merge of every message (a heap: a quarter of a unit's read time), whenever the
+    summary shows that order is exact (:func:`~gyrolab.record.source.chunks_in_file_order`:
+    files gyrolab writes); otherwise through the merge, as ``"log_time"`` does. One topic
+    asked for in ``"log_time"`` order reads the same way (its order is then the whole order).
+
+    Every chunk read is checked (:mod:`gyrolab.record.integrity`): a damaged one is an
+    :class:`~gyrolab.errors.InputError` naming its byte offset and time span."""
     prefix = ""
     if unit is not None:
         names = list(ALL_TOPICS) if topics is None else topics
         topics = [unit_topic(t, unit) for t in names]
         prefix = f"{UNIT_PREFIX}{unit}"
     per_topic = order == "topic" or (topics is not None and len(set(topics)) == 1)
-    with opened_file(path) as (reader, fh):
-        summary = reader.get_summary() if per_topic else None
-        chunks = chunks_in_file_order(summary, topics)
-        if chunks is not None:
-            messages = _iter_chunks(fh, summary, chunks, topics)
-        else:
-            messages = (
-                (c.topic, m.log_time, m.data) for _s, c, m in reader.iter_messages(topics=topics)
-            )
-        for topic, log_time, data in messages:
+    with opened(path) as src:
+        for topic, log_time, data, _c, _s, _p in src.messages(
+            topics, "topic" if per_topic else "log_time"
+        ):
             if prefix and topic.startswith(prefix):
                 topic = topic[len(prefix) :]
             yield topic, log_time, data

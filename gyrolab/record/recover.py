@@ -26,26 +26,28 @@ import io
 import json
 import os
 import struct
-import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gyrolab.errors import InputError
+from gyrolab.errors import InputError, existing_file
 from gyrolab.outputs import atomic_file
 from gyrolab.record.blocks import decode_block
+from gyrolab.record.integrity import (
+    MAGIC,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_METADATA,
+    OP_SCHEMA,
+    chunk_data,
+    records,
+)
 from gyrolab.record.writer import McapFile, json_strings
 
-MAGIC = b"\x89MCAP0\r\n"
-_OP_HEADER = 0x01
-_OP_FOOTER = 0x02
-_OP_SCHEMA = 0x03
-_OP_CHANNEL = 0x04
-_OP_MESSAGE = 0x05
-_OP_CHUNK = 0x06
-_OP_METADATA = 0x0C
-_OP_DATA_END = 0x0F
 # A single record larger than this is damage, not data (a 13-h run's chunks are ~kB).
 _MAX_RECORD = 1 << 31
 
@@ -289,38 +291,11 @@ def _parse_message(b: _Buf, length: int) -> _Message:
 
 
 def _chunk_records(body: memoryview) -> Iterator[tuple[int, _Buf, int]]:
-    """Decompress and CRC-check one chunk record; yield its inner records."""
-    b = _Buf(body)
-    b.u64()  # message_start_time
-    b.u64()  # message_end_time
-    usize = b.u64()
-    crc = b.u32()
-    compression = b.string()
-    data = b.take(b.u64())
-    if compression == "zstd":
-        import zstandard
-
-        raw = zstandard.ZstdDecompressor().decompress(bytes(data), max_output_size=usize)
-    elif compression == "lz4":
-        import lz4.frame  # type: ignore[import-not-found]
-
-        raw = lz4.frame.decompress(bytes(data))
-    elif compression == "":
-        raw = bytes(data)
-    else:
-        raise ValueError(f"unknown chunk compression {compression!r}")
-    if len(raw) != usize:
-        raise ValueError("chunk decompressed to the wrong size")
-    if crc and zlib.crc32(raw) != crc:
-        raise ValueError("chunk CRC mismatch")
-    inner = _Buf(raw)
-    # Parse everything first so that a chunk is taken whole or not at all.
-    out = []
-    while inner.i < len(raw):
-        op = inner.take(1)[0]
-        ln = inner.u64()
-        out.append((op, _Buf(inner.take(ln)), ln))
-    yield from out
+    """Decompress and check one chunk record (:func:`~gyrolab.record.integrity.chunk_data`:
+    size, CRC, framing); yield its inner records. Everything is framed before the first is
+    yielded, so that a chunk is taken whole or not at all."""
+    raw = chunk_data(body)
+    yield from [(op, _Buf(raw[at : at + ln]), ln) for op, at, ln in records(raw)]
 
 
 # ---------------------------------------------------------------------- recovery
@@ -328,9 +303,7 @@ def _chunk_records(body: memoryview) -> Iterator[tuple[int, _Buf, int]]:
 
 def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
     """Read every complete record of ``path``; return the report and the salvaged content."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "file not found")
+    p = existing_file(path)
     data = p.read_bytes()
     rep = RecoveryReport(source=str(p), size_bytes=len(data))
     if len(data) < len(MAGIC) or data[: len(MAGIC)] != MAGIC:
@@ -353,7 +326,7 @@ def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
         (ln,) = struct.unpack_from("<Q", mv, i + 1)
         if ln > _MAX_RECORD or i + 9 + ln > n:
             rep.truncated_tail_bytes = n - i
-            if op == _OP_CHUNK and n - i >= 9 + 16:
+            if op == OP_CHUNK and n - i >= 9 + 16:
                 # The chunk header (start/end log time) is the first thing in the record:
                 # it says which span of messages went with the cut.
                 a, b = struct.unpack_from("<QQ", mv, i + 9)
@@ -365,7 +338,7 @@ def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
         try:
             _take_record(op, body, ln, content, rep)
         except Exception as e:  # damage shows up as any of several decode errors
-            if op == _OP_CHUNK:
+            if op == OP_CHUNK:
                 rep.chunks_damaged += 1
                 with contextlib.suppress(struct.error):
                     a, b = struct.unpack_from("<QQ", body, 0)
@@ -375,7 +348,7 @@ def scan(path: str | os.PathLike[str]) -> tuple[RecoveryReport, dict[str, Any]]:
                 rep.problems.append(f"skipped a damaged record (opcode 0x{op:02x}): {e}")
         i += 9 + ln
         rep.salvaged_bytes = i
-        if op == _OP_FOOTER:
+        if op == OP_FOOTER:
             rep.complete = True
             if data[i : i + len(MAGIC)] == MAGIC:
                 rep.salvaged_bytes += len(MAGIC)
@@ -467,32 +440,32 @@ def _take_record(
     op: int, body: memoryview, ln: int, content: dict[str, Any], rep: RecoveryReport
 ) -> None:
     b = _Buf(body)
-    if op == _OP_HEADER:
+    if op == OP_HEADER:
         content["header"] = (b.string(), b.string())
-    elif op == _OP_SCHEMA:
+    elif op == OP_SCHEMA:
         s = _parse_schema(b)
         content["schemas"].setdefault(s.id, s)
-    elif op == _OP_CHANNEL:
+    elif op == OP_CHANNEL:
         c = _parse_channel(b)
         content["channels"].setdefault(c.id, c)
-    elif op == _OP_MESSAGE:
+    elif op == OP_MESSAGE:
         _add_message(_parse_message(b, ln), content, rep)
-    elif op == _OP_METADATA:
+    elif op == OP_METADATA:
         name = b.string()
         content["metadata"].append((name, b.string_map()))
         rep.metadata.append(name)
-    elif op == _OP_CHUNK:
+    elif op == OP_CHUNK:
         staged_s: dict[int, _Schema] = {}
         staged_c: dict[int, _Channel] = {}
         staged_m: list[_Message] = []
         for iop, ib, iln in _chunk_records(body):
-            if iop == _OP_SCHEMA:
+            if iop == OP_SCHEMA:
                 s = _parse_schema(ib)
                 staged_s[s.id] = s
-            elif iop == _OP_CHANNEL:
+            elif iop == OP_CHANNEL:
                 c = _parse_channel(ib)
                 staged_c[c.id] = c
-            elif iop == _OP_MESSAGE:
+            elif iop == OP_MESSAGE:
                 staged_m.append(_parse_message(ib, iln))
         for sid, s in staged_s.items():
             content["schemas"].setdefault(sid, s)

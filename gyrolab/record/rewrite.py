@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gyrolab.record.format import PROFILE
-from gyrolab.record.reader import opened
+from gyrolab.record.source import opened
 from gyrolab.record.writer import McapFile
 
 
@@ -50,9 +50,10 @@ def rewrite_recording(
     derived = dict(derived or {})
     metadata = dict(metadata or {})
     # dst is opened first: an error writing it is not the source's damage
-    with open(Path(dst), "wb") as out, opened(src, hint="") as reader:
-        header = reader.get_header()
+    with open(Path(dst), "wb") as out, opened(src) as source:
+        header = source.header()
         w = McapFile(out, profile=header.profile or PROFILE)
+        schemas, channels = source.schemas(), source.channels()
         sids: dict[int, int] = {}
         cids: dict[int, int] = {}
         by_topic: dict[str, int] = {}
@@ -62,27 +63,29 @@ def rewrite_recording(
                 raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
             w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
 
-        for schema, channel, msg in reader.iter_messages(log_time_order=True):
-            if channel.id not in cids:
+        for topic, log_time, data, cid, seq, pub in source.messages():
+            if cid not in cids:
+                channel = channels[cid]
                 sid = 0
-                if schema is not None:
-                    if schema.id not in sids:
-                        sids[schema.id] = w.register_schema(
+                if channel.schema_id:
+                    if channel.schema_id not in sids:
+                        schema = schemas[channel.schema_id]
+                        sids[channel.schema_id] = w.register_schema(
                             schema.name, schema.encoding, schema.data
                         )
-                    sid = sids[schema.id]
+                    sid = sids[channel.schema_id]
                 enc, meta = channel.message_encoding, dict(channel.metadata)
-                cids[channel.id] = w.register_channel(channel.topic, enc, sid, meta)
-                by_topic[channel.topic] = cids[channel.id]
-                for topic, like in derived.items():
-                    if like == channel.topic:
-                        by_topic[topic] = w.register_channel(topic, enc, sid, meta)
-            m = Message(channel.topic, msg.log_time, msg.publish_time, msg.sequence, msg.data)
+                cids[cid] = w.register_channel(topic, enc, sid, meta)
+                by_topic[topic] = cids[cid]
+                for name, like in derived.items():
+                    if like == topic:
+                        by_topic[name] = w.register_channel(name, enc, sid, meta)
+            m = Message(topic, log_time, pub, seq, bytes(data))
             for out_msg in [m] if transform is None else transform(m):
                 put(out_msg)
         for m in tail:
             put(m)
-        for rec in reader.iter_metadata():
+        for rec in source.metadata():
             if rec.name not in metadata:
                 w.add_metadata(rec.name, rec.metadata)
         for name, values in metadata.items():

@@ -52,7 +52,8 @@ def json_strings(values: Mapping[str, Any]) -> dict[str, str]:
 class McapFile:
     """An MCAP file written record by record: chunked (``chunk_size`` bytes), compressed
     (``"zstd"``, ``"lz4"`` or ``"none"``), with message indexes and a summary, so seeking
-    readers open it directly. Schema and channel ids are this file's own (1, 2, …)."""
+    readers open it directly, and with all three MCAP CRCs (chunks, data section, summary).
+    Schema and channel ids are this file's own (1, 2, …)."""
 
     def __init__(
         self,
@@ -70,7 +71,12 @@ class McapFile:
             "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE,
         }
-        self._w = Writer(fh, chunk_size=chunk_size, compression=comp[compression])
+        # enable_data_crcs: the data section's CRC-32 in the DataEnd record, so that a reader
+        # can check the bytes no chunk CRC covers (metadata records, the header):
+        # gyrolab/record/integrity.py
+        self._w = Writer(
+            fh, chunk_size=chunk_size, compression=comp[compression], enable_data_crcs=True
+        )
         self._w.start(profile=profile, library=library)
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
