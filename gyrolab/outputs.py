@@ -4,7 +4,8 @@ The one owner of output paths (docs/cli.md, "Outputs"). A reader never sees a
 half-written file, an interrupted command leaves nothing behind, and:
 
 * an output is never one of the command's inputs: not the same file (same inode, or the
-  same resolved path through links), and a directory output never contains an input;
+  same resolved path through links), a directory output never contains an input, and no
+  output lies inside an input directory (a model directory's files, say);
 * an existing output is replaced only with ``force``; an existing *directory* is replaced
   only if gyrolab wrote it (it holds the marker file :data:`MARKER`, naming the command
   that wrote it) — ``--force`` never deletes a directory of someone else's files;
@@ -57,8 +58,10 @@ def command_inputs(paths: Iterable[PathLike]) -> Iterator[None]:
         _COMMAND_INPUTS[:] = saved
 
 
-def _is_input(out: Path, inputs: Iterable[PathLike | None]) -> str | None:
-    """The first input that ``out`` is (same inode or resolved path) or contains."""
+def _input_clash(out: Path, inputs: Iterable[PathLike | None]) -> tuple[str, str] | None:
+    """``(input, how)`` for the first input that ``out`` is (same inode or resolved path:
+    ``"is"``), contains (``"contains"``) or lies inside (an input directory: ``"is inside"``);
+    None when it touches none. Paths are compared resolved, so no link leads around it."""
     out_r = out.resolve()
     for inp in inputs:
         if inp is None:
@@ -67,10 +70,12 @@ def _is_input(out: Path, inputs: Iterable[PathLike | None]) -> str | None:
         if not ip.exists():
             continue
         ip_r = ip.resolve()
-        if out.exists() and os.path.samefile(out, ip):
-            return str(inp)
-        if ip_r == out_r or out_r in ip_r.parents:
-            return str(inp)
+        if ip_r == out_r or (out.exists() and os.path.samefile(out, ip)):
+            return str(inp), "is"
+        if out_r in ip_r.parents:
+            return str(inp), "contains"
+        if ip.is_dir() and ip_r in out_r.parents:
+            return str(inp), "is inside"
     return None
 
 
@@ -89,10 +94,10 @@ def check_output(
     existing directory is replaced only if it holds :data:`MARKER`.
     """
     p = Path(path)
-    inp = _is_input(p, [*inputs, *_COMMAND_INPUTS])
-    if inp is not None:
-        what = "is" if Path(inp).resolve() == p.resolve() or not p.is_dir() else "contains"
-        raise InputError(p, f"{what} one of this command's inputs ({inp}); choose another --out")
+    clash = _input_clash(p, [*inputs, *_COMMAND_INPUTS])
+    if clash is not None:
+        inp, how = clash
+        raise InputError(p, f"{how} one of this command's inputs ({inp}); choose another --out")
     if p.exists() or p.is_symlink():
         if not force:
             raise InputError(p, "already exists (use --force to overwrite)")
@@ -113,7 +118,33 @@ def check_output(
         raise InputError(p, f"directory {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise InputError(p, f"directory {parent} is not writable")
+    _probe(parent, p)
     return p
+
+
+def _probe(parent: Path, p: Path) -> None:
+    """Create and remove a file where the output will be built (its temporary sibling):
+    a place that refuses files although it looks writable (``/proc``, ``/sys``, a read-only
+    mount, root's view of either) is found before any work starts, not at its end."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=parent)
+    except OSError as e:
+        raise InputError(p, f"cannot be written in {parent} ({e.strerror})") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def _temporary(final: Path, make: Any) -> Path:
+    """``make(prefix=…, suffix=".part", dir=…)`` (mkstemp or mkdtemp) beside ``final``; a
+    refusal of the file system is the output's one-line error."""
+    try:
+        made = make(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
+    except OSError as e:
+        raise InputError(final, f"cannot be written in {final.parent} ({e.strerror})") from None
+    if isinstance(made, tuple):  # mkstemp: (fd, path)
+        os.close(made[0])
+        made = made[1]
+    return Path(made)
 
 
 @contextlib.contextmanager
@@ -122,9 +153,7 @@ def atomic_file(
 ) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success fsync and rename it into place."""
     final = check_output(path, force, inputs=inputs, kind="file")
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    tmp_path = _temporary(final, tempfile.mkstemp)
     # mkstemp makes the file 0600; an output gets the usual umask-based mode
     os.chmod(tmp_path, 0o666 & ~umask())
     try:
@@ -164,7 +193,7 @@ def atomic_dir(
     An existing ``path`` is replaced only under the rules of :func:`check_output`.
     """
     final = check_output(path, force, inputs=inputs, kind="dir")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".part", dir=final.parent))
+    tmp = _temporary(final, tempfile.mkdtemp)
     os.chmod(tmp, 0o777 & ~umask())
     try:
         yield tmp

@@ -490,3 +490,24 @@ def test_c_export_with_dtdt_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     assert err.max() <= 1e-5 * scale
     big = np.abs(py) >= 0.1 * scale  # away from zero crossings (see the test above)
     assert np.all(err[big] <= 1e-5 * np.abs(py[big]))
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+def test_c_export_names_that_are_not_identifiers(unit: dict[str, Path]) -> None:
+    """`--out '1bad-name;x.c'` wrote `#define 1BAD_NAME_X_H` (a macro name may not start
+    with a digit: the header did not compile); a name an #include line cannot carry is
+    refused before anything is written."""
+    model = str(unit["model"])
+    out = unit["dir"] / "1bad-name;x.c"
+    assert main(["export", model, "--format", "c", "--kind", "poly", "--out", str(out)]) == 0
+    header = out.with_suffix(".h")
+    assert "#define GYROLAB_1BAD_NAME_X_H" in header.read_text()
+    cc = subprocess.run(
+        [str(CC), "-fsyntax-only", "-Wall", "-Werror", "-I", str(unit["dir"]), str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert cc.returncode == 0, cc.stderr
+    bad = unit["dir"] / 'q"uote.c'
+    assert main(["export", model, "--format", "c", "--kind", "poly", "--out", str(bad)]) == 2
+    assert not bad.exists() and not bad.with_suffix(".h").exists()

@@ -197,3 +197,80 @@ def test_command_line_inputs_are_a_safety_net_for_every_command(tmp_path: Path) 
     with atomic_file(run, force=True) as t:  # outside the command: an ordinary --force
         t.write_bytes(b"new")
     assert run.read_bytes() == b"new"
+
+
+def _model_dir(tmp_path: Path) -> Path:
+    """A directory holding what a model directory holds (the commands below refuse their
+    output before they read it)."""
+    m = tmp_path / "m"
+    m.mkdir()
+    for name in ("model.json", "arrays.npz", "metrics.json"):
+        (m / name).write_bytes(b"the model's own bytes")
+    return m
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["export", "{m}", "--format", "json", "--out", "{m}/model.json"],
+        ["export", "{m}", "--format", "c", "--out", "{m}/model.c"],
+        ["apply", "{m}", "{run}", "--out", "{m}/results.npz"],
+        ["apply", "{m}", "{run}", "--out", "{m}/sub/x.mcap"],
+        ["report", "{run}", "--model", "{m}", "--out", "{m}/report"],
+        ["fleet", "{m}", "--out", "{m}/fleet"],
+    ],
+    ids=lambda a: " ".join(a[:1] + a[-1:]),
+)
+def test_no_output_inside_an_input_directory(argv, run_mcap: Path, tmp_path, capsys) -> None:
+    """The issue's probe: `export m --format json --out m/model.json --force` and `apply m
+    run.mcap --out m/results.npz --force` overwrote the model's own files."""
+    m = _model_dir(tmp_path)
+    (m / "sub").mkdir()
+    args = [a.format(m=m, run=run_mcap) for a in argv]
+    err = _refused(capsys, [*args, "--force"], run_mcap, *sorted(m.glob("*.*")))
+    assert "is inside one of this command's inputs" in err
+    assert sorted(p.name for p in m.iterdir()) == [
+        "arrays.npz",
+        "metrics.json",
+        "model.json",
+        "sub",
+    ]
+
+
+@pytest.mark.parametrize("where", ["/proc/x.csv", "/sys/r"])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["convert", "{run}", "--to", "csv", "--out", "{out}"],
+        ["report", "{run}", "--out", "{out}"],
+        ["simulate", "--profile", "{prof}", "--rate", "10", "--out", "{out}"],
+        ["acquire", "--bench", "sim", "--profile", "{prof}", "--out", "{out}"],
+    ],
+    ids=lambda a: a[0],
+)
+def test_an_unwritable_output_is_one_line_before_any_work(
+    argv, where: str, run_mcap: Path, tmp_path, capsys
+) -> None:
+    """`--out /proc/x.csv` or `/sys/r` (directories that look writable to root and refuse
+    every file) was a traceback at the end of the work; now one line before it."""
+    if not Path(where).parent.is_dir():
+        pytest.skip(f"no {Path(where).parent} here")
+    prof = tmp_path / "p.toml"
+    prof.write_text(PROFILE)
+    args = [a.format(run=run_mcap, prof=prof, out=where) for a in argv]
+    err = _refused(capsys, args, run_mcap, says=where)
+    assert "cannot be written" in err or "not writable" in err
+
+
+def test_acquire_force_replaces_a_symlink_not_its_target(tmp_path: Path, capsys) -> None:
+    """`acquire --force` onto a symbolic link wrote the recording into the link's target."""
+    prof = tmp_path / "p.toml"
+    prof.write_text(PROFILE)
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("someone's file")
+    link = tmp_path / "run.mcap"
+    link.symlink_to(target)
+    argv = ["acquire", "--bench", "sim", "--profile", str(prof), "--out", str(link), "--force"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert target.read_text() == "someone's file"
+    assert not link.is_symlink() and link.read_bytes()[:8] == b"\x89MCAP0\r\n"

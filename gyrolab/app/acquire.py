@@ -243,13 +243,18 @@ def _trace_writer() -> Callable[[float], None] | None:
 
 @contextlib.contextmanager
 def _open_output(path: Path, force: bool) -> Iterator[Any]:
-    """The recording file, created in place: exclusive unless ``force``."""
+    """The recording file, created in place, always as a new file (``O_EXCL``): with
+    ``force`` the existing name is removed first — a symbolic link is replaced, not written
+    through to its target, and a hard link's other names keep their data."""
     check_output(path, force)
-    mode = "wb" if force else "xb"
+    if force and (path.is_symlink() or path.is_file()):
+        path.unlink()
     try:
-        fh = open(path, mode)  # noqa: SIM115 - closed below, after the writer
+        fh = open(path, "xb")  # noqa: SIM115 - closed below, after the writer
     except FileExistsError:
         raise InputError(path, "already exists (use --force to overwrite)") from None
+    except OSError as e:
+        raise InputError(path, f"cannot be written ({e.strerror})") from None
     try:
         yield fh
     finally:

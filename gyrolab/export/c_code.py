@@ -171,6 +171,25 @@ def _window(spec: dict[str, Any]) -> float | None:
     return ws.pop() if ws else None
 
 
+def include_guard(header_name: str) -> str:
+    """The header's include guard: its file name with every character that cannot be in a C
+    identifier replaced by ``_``, upper case, prefixed ``GYROLAB_`` when it would start with
+    a digit (``1bad-name;x.h`` → ``GYROLAB_1BAD_NAME_X_H``: a macro name must not, C11
+    6.4.2.1)."""
+    guard = re.sub(r"[^A-Za-z0-9]", "_", header_name).upper()
+    return f"GYROLAB_{guard}" if not guard or guard[0].isdigit() else guard
+
+
+def check_header_name(header_name: str) -> None:
+    """ValueError for a header name that ``#include "NAME"`` cannot carry: a double quote,
+    a backslash or a control character (C11 6.4.7)."""
+    if re.search(r'["\\\x00-\x1f\x7f]', header_name):
+        raise ValueError(
+            f"{header_name!r} cannot be named in an #include line (no quote, backslash or "
+            "control character)"
+        )
+
+
 def generate(spec: dict[str, Any], header_name: str) -> tuple[str, str]:
     """``(header text, source text)`` for the export ``spec``; the source includes
     ``header_name``."""
@@ -178,7 +197,8 @@ def generate(spec: dict[str, Any], header_name: str) -> tuple[str, str]:
     n_ax = len(axes)
     w = _window(spec)
     causal = [a["model"]["kind"] == "causal" for a in axes]
-    guard = re.sub(r"[^A-Za-z0-9]", "_", header_name).upper()
+    check_header_name(header_name)
+    guard = include_guard(header_name)
     kinds = ", ".join(f"{a['axis']}: {a['model']['kind']}" for a in axes)
     ranges = "; ".join(
         f"{a['axis']}: {a['calibration_range_c'][0]:.3f} .. {a['calibration_range_c'][1]:.3f} °C"

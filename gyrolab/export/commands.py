@@ -71,6 +71,13 @@ def export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     outs = [out] + ([out.with_suffix(".h")] if fmt == "c" else [])
     inputs = (args.model, args.run)
+    if fmt == "c":
+        from gyrolab.export.c_code import check_header_name
+
+        try:
+            check_header_name(outs[1].name)
+        except ValueError as e:
+            raise InputError(out, str(e)) from None
     for o in outs:
         check_output(o, args.force, inputs=inputs, kind="file")
     if fmt == "px4":
