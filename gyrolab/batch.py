@@ -43,6 +43,12 @@ from gyrolab.outputs import MARKER
 from gyrolab.progress import progress
 
 TASKS = ("compensate", "report", "discrepancy")
+#: The most local worker processes (and threads per item) a batch or a multi-unit
+#: compensate may be asked for: beyond it a value is a typo that would start a process per
+#: unit of it.
+MAX_WORKERS = 256
+#: How long ``--scheduler`` has to answer before the batch is refused (s).
+SCHEDULER_TIMEOUT_S = 10.0
 THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
@@ -323,6 +329,41 @@ def _client(scheduler: str | None, workers: int, threads: int):  # type: ignore[
         cluster.close()
 
 
+def check_scheduler(address: str, timeout_s: float | None = None) -> None:
+    """A one-line error (exit 2) for a ``--scheduler`` that is not an address or does not
+    answer within ``timeout_s`` (default :data:`SCHEDULER_TIMEOUT_S`), found before anything
+    is written (a Dask handshake: the address parsed, a connection opened and closed)."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def probe() -> None:
+        comm = await connect(address, timeout=timeout_s or SCHEDULER_TIMEOUT_S)
+        await comm.close()
+
+    try:
+        asyncio.run(probe())
+    except Exception as e:  # ValueError (not an address), OSError (no answer), and worse
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        raise GyrolabError(f"gyrolab batch: --scheduler {address!r}: {first}") from None
+
+
+def check_options(task: str, opt: BatchOptions) -> None:
+    """The options every item shares, checked once, before anything is written: a bad
+    ``--config``, ``--sim-model`` or ``--models`` is one error, not one per item."""
+    if opt.config_file:
+        from gyrolab.compensation.config import load_config
+
+        load_config(opt.config_file)
+    if opt.sim_model:
+        from gyrolab.sim.model import load_model
+
+        load_model(opt.sim_model)
+    if opt.models and not Path(opt.models).is_dir():
+        what = "is not a directory" if Path(opt.models).exists() else "directory not found"
+        raise InputError(opt.models, f"{what} (--models: MODELS_DIR/<stem> per run)")
+
+
 def run_batch(
     task: str,
     patterns: Iterable[str],
@@ -346,9 +387,15 @@ def run_batch(
     if not out_root.parent.is_dir():
         raise InputError(out_root, f"directory {out_root.parent} does not exist")
     items = plan(runs, out_root)
-    out_root.mkdir(exist_ok=True)  # mode 0777 & ~umask
-    for it in items:
-        it.out.parent.mkdir(exist_ok=True)  # DIR/<stem> of a multi-unit run
+    check_options(task, options or BatchOptions())
+    if scheduler:
+        check_scheduler(scheduler)
+    try:
+        out_root.mkdir(exist_ok=True)  # mode 0777 & ~umask
+        for it in items:
+            it.out.parent.mkdir(exist_ok=True)  # DIR/<stem> of a multi-unit run
+    except OSError as e:
+        raise InputError(out_root, f"cannot be written ({e.strerror})") from None
     return run_items(task, items, options, scheduler=scheduler, workers=workers)
 
 
@@ -365,6 +412,8 @@ def run_items(
     ``workers=1`` without a scheduler runs the items one after the other in this process
     (no cluster to start: what a one-core machine or a one-unit run wants)."""
     opt = options or BatchOptions()
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise GyrolabError(f"--workers must be 1..{MAX_WORKERS}, not {workers}")
     results: dict[int, ItemResult] = {}
     todo = []
     for i, it in enumerate(items):
@@ -429,10 +478,10 @@ def batch(args: argparse.Namespace) -> int:
             "gyrolab batch: --workers sizes the local cluster; with "
             "--scheduler the cluster's own workers run the items"
         )
-    if args.workers is not None and args.workers < 1:
-        raise GyrolabError("gyrolab batch: --workers must be at least 1")
-    if args.threads < 1:
-        raise GyrolabError("gyrolab batch: --threads must be at least 1")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise GyrolabError(f"gyrolab batch: --workers must be 1..{MAX_WORKERS}")
+    if not 1 <= args.threads <= MAX_WORKERS:
+        raise GyrolabError(f"gyrolab batch: --threads must be 1..{MAX_WORKERS}")
     opt = BatchOptions(
         seed=args.seed,
         config_file=args.config,

@@ -179,3 +179,45 @@ def test_tune_malloc_keeps_large_temporaries_off_mmap() -> None:
         mapped[how] = [int(v) for v in out.stdout.split()]
     assert all(v >= 16 << 20 for v in mapped["nanny"])  # each one mmap-ed
     assert all(v < 16 << 20 for v in mapped["tuned"])  # none of them
+
+
+@pytest.mark.parametrize(
+    "task, extra, says",
+    [
+        ("report", ["--scheduler", "not a url"], "--scheduler 'not a url'"),
+        ("report", ["--scheduler", "tcp://127.0.0.1:{port}"], "Timed out"),
+        ("compensate", ["--config", "{cfg}"], "cfg.toml: block_s must be a finite number"),
+        ("compensate", ["--config", "{missing}"], "missing.toml"),
+        ("discrepancy", ["--sim-model", "{missing}"], "missing.toml"),
+        ("report", ["--models", "{missing}"], "missing.toml: directory not found"),
+    ],
+    ids=["scheduler not an address", "scheduler unreachable", "bad config", "no config",
+         "no sim model", "no models dir"],
+)  # fmt: skip
+def test_a_bad_shared_option_is_one_error_and_writes_nothing(
+    task: str,
+    extra: list[str],
+    says: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A bad --scheduler, --config, --sim-model or --models was a traceback or one error per
+    item, and left an empty --out directory; now one line, exit 2, nothing written."""
+    import socket
+
+    monkeypatch.setattr(B, "SCHEDULER_TIMEOUT_S", 1.0)
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    (tmp_path / "cfg.toml").write_text("block_s = inf\n")
+    for name in ("a", "b"):
+        (tmp_path / f"{name}.mcap").write_bytes(b"")
+    fill = {"port": port, "cfg": tmp_path / "cfg.toml", "missing": tmp_path / "missing.toml"}
+    args = [a.format(**fill) for a in extra]
+    out = tmp_path / "o"
+    runs = [str(tmp_path / "a.mcap"), str(tmp_path / "b.mcap")]
+    assert main(["batch", task, *runs, "--out", str(out), *args]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("gyrolab: error: ") and says in err[0], err
+    assert not out.exists()
