@@ -7,16 +7,20 @@ subcommand runs, so ``gyrolab --help`` stays fast and a broken layer cannot brea
 :mod:`gyrolab.app`.
 
 Errors: a :class:`~gyrolab.errors.GyrolabError` becomes one line on stderr and exit 2;
-SIGINT exits 130. Anything else is a bug and shows its traceback.
+SIGINT, SIGTERM and SIGHUP exit 130, through the same clean-up. Anything else is a bug and
+shows its traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from gyrolab import __version__
@@ -59,6 +63,41 @@ def _unit_numbers(text: str) -> str:
     return text
 
 
+def _positive_int(text: str) -> int:
+    """A count (--units, --workers, --threads): an integer ≥ 1. Upper bounds belong to the
+    layer that knows them (``gyrolab.sim.commands.MAX_UNITS``, the simulated scanner's 10
+    units, ``gyrolab.batch.MAX_WORKERS``)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, not {v}")
+    return v
+
+
+def _seed(text: str) -> int:
+    """A random seed: an integer in [0, 2**63) (numpy's generators take no negative seed)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
+    if not 0 <= v < 2**63:
+        raise argparse.ArgumentTypeError(f"must be in [0, 2**63), not {v}")
+    return v
+
+
+def _positive_float(text: str) -> float:
+    """A rate or a speed: a finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
+    if not (v > 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, not {text}")
+    return v
+
+
 def _log_options(sp: argparse.ArgumentParser) -> None:
     """Options for runs that are users' logs (gyrolab/logs, docs/export.md)."""
     g = sp.add_argument_group("users' logs (ROS 2 MCAP, PX4 ULog, ArduPilot DataFlash)")
@@ -91,11 +130,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SIM_MODEL.toml",
         help="model of the next axis (y, then z): makes a 2- or 3-axis unit (repeatable)",
     )
-    s.add_argument("--rate", type=float, default=100.0, help="ADC sample rate, Hz (default 100)")
-    s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    s.add_argument(
+        "--rate", type=_positive_float, default=100.0, help="ADC sample rate, Hz (default 100)"
+    )
+    s.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
     s.add_argument(
         "--units",
-        type=int,
+        type=_positive_int,
         default=1,
         help="units in the chamber, dispersed as a unit family (default 1: single-unit layout)",
     )
@@ -115,14 +156,14 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--profile", default=None, help="paper | short | FILE.toml (default: bench's)")
     a.add_argument(
         "--speed",
-        type=float,
+        type=_positive_float,
         default=None,
         help="simulated-bench speed-up over real time (default: as fast as it goes)",
     )
-    a.add_argument("--seed", type=int, default=0, help="simulated bench seed (default 0)")
+    a.add_argument("--seed", type=_seed, default=0, help="simulated bench seed (default 0)")
     a.add_argument(
         "--units",
-        type=int,
+        type=_positive_int,
         default=None,
         metavar="N",
         help="--bench sim only: N units of a seeded family in the chamber, read by a scanner "
@@ -175,13 +216,17 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("run", metavar="RUN.mcap")
     c.add_argument("--out", required=True, help="output MODEL_DIR")
     c.add_argument("--validate", metavar="OTHER.mcap", help="held-out run for metrics")
-    c.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
+    c.add_argument(
+        "--seed", type=_seed, default=None, help="random seed (default: the config's, 0)"
+    )
     c.add_argument(
         "--config", metavar="FILE.toml", help="model settings (keys: docs/compensation.md)"
     )
     _log_options(c)
     c.add_argument("--unit", metavar="SERIAL", help="one unit of a multi-unit run (default: all)")
-    c.add_argument("--workers", type=int, help="multi-unit run: parallel fits (default: CPUs)")
+    c.add_argument(
+        "--workers", type=_positive_int, help="multi-unit run: parallel fits (default: CPUs)"
+    )
     c.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     ap = cmd("apply", "apply a fitted model to a run and write the compensated recording")
@@ -239,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
     dm.add_argument("--out", required=True, help="output DIR")
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
-    dm.add_argument("--seed", type=int, default=1)
+    dm.add_argument("--seed", type=_seed, default=1)
     dm.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     b = cmd("batch", "run compensate, report or discrepancy on many recordings (Dask)")
@@ -247,9 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("runs", nargs="+", metavar="RUNS", help="recordings or quoted glob patterns")
     b.add_argument("--out", required=True, help="output DIR (one directory per recording)")
     b.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: local)")
-    b.add_argument("--workers", type=int, help="local cluster size (default: CPUs)")
-    b.add_argument("--threads", type=int, default=1, help="threads per item (default 1)")
-    b.add_argument("--seed", type=int, help="compensate: seed (default: CONFIG.toml's, else 0)")
+    b.add_argument("--workers", type=_positive_int, help="local cluster size (default: CPUs)")
+    b.add_argument("--threads", type=_positive_int, default=1, help="threads per item (default 1)")
+    b.add_argument("--seed", type=_seed, help="compensate: seed (default: CONFIG.toml's, else 0)")
     b.add_argument("--config", metavar="CONFIG.toml", help="compensate: pipeline settings")
     b.add_argument("--models", metavar="MODELS_DIR", help="report: MODELS_DIR/<stem> per run")
     b.add_argument("--sim-model", metavar="SIM_MODEL.toml", help="discrepancy: start model")
@@ -322,7 +367,38 @@ def _input_paths(args: argparse.Namespace) -> list[str]:
     ]
 
 
+def _raise_interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+@contextlib.contextmanager
+def _stop_signals_like_sigint() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise ``KeyboardInterrupt`` where they land, as Python's SIGINT
+    does: every command then ends through the same clean-up (an atomic output's temporary
+    ``.NAME.*.part`` removed, exit 130) instead of dying at once. A signal the process was
+    told to ignore (``nohup``: SIGHUP) stays ignored; ``acquire`` defers all three to its own
+    safe points inside (gyrolab/acquisition/interrupts.py). Handlers are put back on exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None and signal.getsignal(sig) == signal.SIG_DFL:
+            old[sig] = signal.signal(sig, _raise_interrupt)
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    with _stop_signals_like_sigint():
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -336,8 +412,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except GyrolabError as e:
         print(f"gyrolab: error: {e}", file=sys.stderr)
         return e.exit_code
-    except KeyboardInterrupt:
-        print("gyrolab: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as e:
+        by = f" by {e.args[0]}" if e.args and str(e.args[0]).startswith("SIG") else ""
+        print(f"gyrolab: interrupted{by}", file=sys.stderr)
         return 130
 
 

@@ -1,0 +1,77 @@
+"""SIGTERM and SIGHUP end every command as SIGINT does (gyrolab/cli.py): exit 130 and the
+atomic output's hidden ``.NAME.*.part`` removed. Before, SIGTERM during ``simulate``,
+``report`` or a multi-unit ``compensate`` killed the process and left it behind.
+
+Each case runs the command in a subprocess and signals it once its temporary output exists
+(``acquire``'s own handling: tests/test_report_outcome.py).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from gyrolab.cli import main
+
+ENV = {**os.environ, "GYROLAB_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
+PROFILE = 'name = "p"\n' + "".join(
+    f"[[step]]\nsetpoint_c = {c}\nduration_s = 320\n" for c in (25, 60, 0)
+)
+
+
+def _parts(d: Path) -> list[Path]:
+    return sorted(d.glob(".*.part"))
+
+
+def _signal_once_writing(argv: list[str], where: Path, sig: signal.Signals) -> tuple[int, str]:
+    """Run ``gyrolab argv``; send ``sig`` as soon as a ``.*.part`` appears in ``where``."""
+    p = subprocess.Popen(
+        [sys.executable, "-m", "gyrolab", *argv], env=ENV, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 120
+    while not _parts(where):
+        assert p.poll() is None, f"ended before it wrote: {p.communicate()[1]}"
+        assert time.monotonic() < deadline, "never started writing"
+        time.sleep(0.005)
+    time.sleep(0.2)  # past the output check's own probe file: in the work itself
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=120)
+    return p.returncode, err
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("interrupts")
+    (d / "p.toml").write_text(PROFILE)
+    for name, units in (("one", "1"), ("two", "2")):
+        argv = ["simulate", "--profile", str(d / "p.toml"), "--rate", "10", "--units", units]
+        assert main([*argv, "--out", str(d / f"{name}.mcap")]) == 0
+    return {"dir": d, "one": d / "one.mcap", "two": d / "two.mcap"}
+
+
+@pytest.mark.parametrize(
+    "argv, sig",
+    [
+        (["simulate", "--profile", "paper", "--out", "{out}/x.mcap"], signal.SIGTERM),
+        (["report", "{one}", "--out", "{out}/rep"], signal.SIGHUP),
+        (["compensate", "{two}", "--workers", "2", "--out", "{out}/models"], signal.SIGTERM),
+    ],
+    ids=["simulate SIGTERM", "report SIGHUP", "multi-unit compensate SIGTERM"],
+)
+def test_a_stop_signal_cleans_up_like_sigint(
+    argv: list[str], sig: signal.Signals, runs: dict[str, Path], tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    args = [a.format(out=out, one=runs["one"], two=runs["two"]) for a in argv]
+    rc, err = _signal_once_writing(args, out, sig)
+    assert rc == 130, err
+    assert f"gyrolab: interrupted by {sig.name}" in err
+    assert "Traceback" not in err, err
+    assert list(out.iterdir()) == [], "left behind: " + ", ".join(p.name for p in out.iterdir())
