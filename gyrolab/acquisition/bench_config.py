@@ -25,6 +25,7 @@ from typing import Any
 
 from gyrolab.errors import InputError
 from gyrolab.instruments import registry
+from gyrolab.profiles.profile import SETPOINT_BOUNDS_C
 from gyrolab.tomlfile import read_toml
 
 
@@ -324,10 +325,9 @@ def _unit_temperature(u: dict[str, Any], where: str, source: str) -> tuple[str, 
 
 
 # Physical bounds a limit must lie within (docs/bench-config.md, "Limits"): beyond them a
-# value is a typo, not a bench. Setpoints: the widest range of the chambers MEMS tests use
-# (compressor chambers about -75...+180 °C, LN2-cooled ones down to about -100 °C).
-# PT100: the range of the Callendar-Van Dusen equations (IEC 60751), -200...+850 °C.
-SETPOINT_BOUNDS_C = (-100.0, 200.0)
+# value is a typo, not a bench. Setpoints: the profiles' own bound, the widest range of the
+# chambers MEMS tests use (gyrolab.profiles.profile.SETPOINT_BOUNDS_C). PT100: the range of
+# the Callendar-Van Dusen equations (IEC 60751), -200...+850 °C.
 PT100_BOUNDS_C = (-200.0, 850.0)
 # How far inside the PT100 watchdog window every setpoint must lie: the case settles at
 # the setpoint +- control error and meter noise, and must not trip the watchdog there.

@@ -273,6 +273,17 @@ def apply(args: argparse.Namespace) -> int:
     """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
     inputs = (args.model, args.run)
     check_output(args.out, args.force, inputs=inputs, kind="file")
+    from gyrolab.logs import detect_format
+
+    if detect_format(args.run) != "gyrolab":  # also checks the file (a damaged one: exit 2)
+        raise InputError(args.run, "apply writes a compensated copy of a gyrolab recording only")
+    units = list_units(args.run)
+    if units:
+        raise InputError(
+            args.run,
+            f"is a multi-unit recording (units {', '.join(units)}); apply writes a compensated "
+            "copy of a single-unit recording",
+        )
     if len(axis_dirs(args.model)) > 1:
         return _apply_axes(args)
     model = load_model(args.model)

@@ -19,6 +19,7 @@ The file is read through :mod:`gyrolab.tomlfile`, the project's one TOML reader.
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from dataclasses import asdict, dataclass
@@ -170,6 +171,8 @@ def _coerce(path: str, key: str, value: Any, tp: Any) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(path, f"{key} must be a number, not {value!r}")
+        if not math.isfinite(value):  # TOML has inf and nan; no setting means either
+            raise InputError(path, f"{key} must be a finite number, not {value!r}")
         return float(value)
     if tp is str:
         if not isinstance(value, str):

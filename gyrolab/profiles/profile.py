@@ -30,6 +30,16 @@ import numpy as np
 from gyrolab.errors import InputError
 from gyrolab.tomlfile import read_toml
 
+# Bounds every profile lies within (docs/profiles.md, "Bounds"): beyond them a value is a
+# typo, not a test. Setpoints: the widest range of the chambers MEMS tests use (compressor
+# chambers about -75...+180 °C, LN2-cooled ones down to about -100 °C); a bench's own
+# [limits] are checked on top (acquire). The room a run starts in: a lab, not a furnace.
+# Length: a week, the longest a profile may run with every stability hold used to the
+# full (the paper's is 13 h); 1e300 s would otherwise simulate or record until killed.
+SETPOINT_BOUNDS_C = (-100.0, 200.0)
+AMBIENT_BOUNDS_C = (-40.0, 60.0)
+MAX_PROFILE_S = 7 * 86400.0
+
 
 @dataclass(frozen=True)
 class Step:
@@ -43,14 +53,31 @@ class Step:
     max_extra_s: float = 3600.0
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.setpoint_c):
-            raise ValueError("setpoint_c must be finite")
-        if not (self.duration_s > 0 and math.isfinite(self.duration_s)):
-            raise ValueError("duration_s must be a positive number of seconds")
+        lo, hi = SETPOINT_BOUNDS_C
+        if not lo <= self.setpoint_c <= hi:
+            raise ValueError(
+                f"setpoint_c = {self.setpoint_c:g} °C is outside [{lo:g}, {hi:g}] °C, the "
+                "range of any test chamber"
+            )
+        if not 0 < self.duration_s <= MAX_PROFILE_S:
+            raise ValueError(
+                f"duration_s = {self.duration_s:g} must be a positive number of seconds, at "
+                f"most {MAX_PROFILE_S:g} (7 days)"
+            )
         if self.stable_slope_c_per_min is not None and not self.stable_slope_c_per_min > 0:
             raise ValueError("stable_slope_c_per_min must be positive")
-        if not self.stable_window_s > 0 or not self.max_extra_s >= 0:
-            raise ValueError("stable_window_s must be > 0 and max_extra_s >= 0")
+        window, extra = self.stable_window_s, self.max_extra_s
+        if not (0 < window <= MAX_PROFILE_S and 0 <= extra <= MAX_PROFILE_S):
+            raise ValueError(
+                f"stable_window_s must be in (0, {MAX_PROFILE_S:g}] s and max_extra_s in "
+                f"[0, {MAX_PROFILE_S:g}] s"
+            )
+
+    @property
+    def longest_s(self) -> float:
+        """The longest this step can last: with a stability rule, ``max_extra_s`` more."""
+        extra = self.max_extra_s if self.stable_slope_c_per_min is not None else 0.0
+        return self.duration_s + extra
 
 
 @dataclass(frozen=True)
@@ -66,6 +93,17 @@ class Profile:
     def __post_init__(self) -> None:
         if not self.steps:
             raise ValueError("a profile needs at least one step")
+        lo, hi = AMBIENT_BOUNDS_C
+        if not lo <= self.ambient_c <= hi:
+            raise ValueError(
+                f"ambient_c = {self.ambient_c:g} °C is outside [{lo:g}, {hi:g}] °C, a room's range"
+            )
+        longest = sum(s.longest_s for s in self.steps)
+        if longest > MAX_PROFILE_S:
+            raise ValueError(
+                f"the profile can last {longest:g} s with its holds, more than "
+                f"{MAX_PROFILE_S:g} s (7 days)"
+            )
 
     @property
     def duration_s(self) -> float:
@@ -190,7 +228,10 @@ def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
                 k: (str(v) if k == "label" else _number(v, f"step {i + 1}: {k}"))
                 for k, v in sd.items()
             }
-            steps.append(Step(**kw))
+            try:
+                steps.append(Step(**kw))
+            except ValueError as e:
+                raise InputError(source, f"step {i + 1}: {e}") from None
         return Profile(
             name=str(d.get("name", Path(source).stem)),
             steps=tuple(steps),

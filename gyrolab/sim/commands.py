@@ -27,7 +27,7 @@ def simulate(args: argparse.Namespace) -> int:
         axis_model_paths=tuple(getattr(args, "axis_model", None) or ()),
         rate_hz=args.rate,
         seed=args.seed,
-        units=int(getattr(args, "units", 1) or 1),
+        units=int(getattr(args, "units", 1)),
         effects=tuple(args.effect or ()),
         force=args.force,
     )
