@@ -15,12 +15,13 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from test_acquire import _profile, _run_in_process
 
-from gyrolab.acquisition.simdir import MARKER, PREFIX, sweep_stale
+from gyrolab.acquisition.simdir import MARKER, PREFIX, SCRATCH_ENV, scratch_root, sweep_stale
 from gyrolab.cli import main
 from gyrolab.record.reader import read_recording
 from gyrolab.report.build import build_report
@@ -28,6 +29,18 @@ from gyrolab.report.outcome import run_outcome
 from gyrolab.report.record_sections import run_log_rows
 
 ENV = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def own_scratch(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The simulated bench's scratch directories go in this module's own directory (in
+    process and in the subprocesses), not the machine's /tmp: another gyrolab run on the
+    machine sweeps /tmp's dead ones, and would take the kill -9 run's from under the test."""
+    root = tmp_path_factory.mktemp("scratch")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(SCRATCH_ENV, str(root))
+        mp.setitem(ENV, SCRATCH_ENV, str(root))
+        yield root
 
 
 def _acquire_cmd(prof: Path, out: Path) -> list[str]:
@@ -140,7 +153,7 @@ def test_recovered_run(runs: dict[str, Path], tmp_path: Path) -> None:
 def _scratch_dirs(pid: int) -> list[Path]:
     """The ``gyrolab-sim-*`` directories whose owner marker names ``pid``."""
     out = []
-    for d in glob.glob(os.path.join(tempfile.gettempdir(), PREFIX + "*")):
+    for d in glob.glob(os.path.join(scratch_root(), PREFIX + "*")):
         try:
             if int((Path(d) / MARKER).read_text()) == pid:
                 out.append(Path(d))
@@ -155,7 +168,7 @@ def test_scratch_directories_are_removed_on_every_exit_path(runs: dict[str, Path
     assert _scratch_dirs(int(str(runs["interrupted_pid"]))) == []
     # kill -9 runs no code: the directory stays until the next acquisition sweeps it
     (left,) = _scratch_dirs(int(str(runs["killed_pid"])))
-    foreign = Path(tempfile.mkdtemp(prefix=PREFIX))  # no marker: not gyrolab's, kept
+    foreign = Path(tempfile.mkdtemp(prefix=PREFIX, dir=scratch_root()))  # no marker: kept
     try:
         assert left in sweep_stale() and not left.exists() and foreign.exists()
     finally:

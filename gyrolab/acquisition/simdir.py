@@ -1,4 +1,5 @@
-"""The simulated bench's scratch directory (``/tmp/gyrolab-sim-*``), removed on every exit.
+"""The simulated bench's scratch directory (``/tmp/gyrolab-sim-*``, or under
+``$GYROLAB_SIM_SCRATCH``), removed on every exit.
 
 ``gyrolab acquire --bench sim`` keeps the simulated instruments' pseudo-terminal links in a
 temporary directory. It is removed
@@ -26,6 +27,15 @@ from pathlib import Path
 
 PREFIX = "gyrolab-sim-"
 MARKER = "owner.pid"
+#: Where the scratch directories are made (and swept): this variable's directory, else the
+#: system's temporary directory. Tests point it at their own, so that no other gyrolab
+#: run on the machine sweeps what they are looking at.
+SCRATCH_ENV = "GYROLAB_SIM_SCRATCH"
+
+
+def scratch_root() -> Path:
+    """The directory the ``gyrolab-sim-*`` scratch directories go in (:data:`SCRATCH_ENV`)."""
+    return Path(os.environ.get(SCRATCH_ENV) or tempfile.gettempdir())
 
 
 def _alive(pid: int) -> bool:
@@ -41,7 +51,7 @@ def _alive(pid: int) -> bool:
 def sweep_stale(tmp: str | os.PathLike[str] | None = None) -> list[Path]:
     """Remove ``gyrolab-sim-*`` directories left by processes that died (kill -9)."""
     removed = []
-    for d in Path(tmp or tempfile.gettempdir()).glob(PREFIX + "*"):
+    for d in Path(tmp or scratch_root()).glob(PREFIX + "*"):
         try:
             pid = int((d / MARKER).read_text().strip())
         except (OSError, ValueError):
@@ -55,8 +65,9 @@ def sweep_stale(tmp: str | os.PathLike[str] | None = None) -> list[Path]:
 @contextlib.contextmanager
 def sim_workdir() -> Iterator[Path]:
     """A fresh ``gyrolab-sim-*`` directory with its owner marker; removed on every exit."""
-    sweep_stale()
-    work = Path(tempfile.mkdtemp(prefix=PREFIX))
+    root = scratch_root()
+    sweep_stale(root)
+    work = Path(tempfile.mkdtemp(prefix=PREFIX, dir=root))
     (work / MARKER).write_text(f"{os.getpid()}\n")
 
     def remove() -> None:
