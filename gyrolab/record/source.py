@@ -139,7 +139,7 @@ class Source:
         try:
             summary = self.summary
             if summary is None or not summary.chunk_indexes:
-                yield from self._unindexed(topics, order)
+                yield from self._unindexed(topics)
                 return
             names = {
                 cid: ch.topic
@@ -260,10 +260,11 @@ class Source:
             msgs.append((channels[cid].topic, lt, data, cid, seq, pub))
         return channels, schemas, msgs
 
-    def _unindexed(self, topics: list[str] | None, order: Order) -> Iterator[Message]:
+    def _unindexed(self, topics: list[str] | None) -> Iterator[Message]:
+        """Messages of a file without a chunk index: sorted stably by log time (ties in file
+        order), which is each topic's log-time order too (either order)."""
         msgs = [m for m in self._linear()[2] if topics is None or m[0] in topics]
-        if order == "log_time" or topics is None or len(topics) > 1:
-            msgs.sort(key=lambda m: m[1])  # stable: ties in file order
+        msgs.sort(key=lambda m: m[1])
         yield from msgs
 
 
@@ -274,7 +275,6 @@ def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[S
     foreign file, a damaged one, and any error the mcap library raises on one is an
     :class:`InputError` (``hint`` appended), also from the :class:`Source`'s methods; an
     error of the caller's own code inside the ``with`` passes untouched."""
-
     p = existing_file(path)
     fh = open(p, "rb")
     try:
