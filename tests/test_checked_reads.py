@@ -235,3 +235,25 @@ def test_no_code_reads_mcap_around_the_checks() -> None:
                 if rel not in allowed:
                     offenders.append(f"{rel}:{n}: {line.strip()}")
     assert not offenders, offenders
+
+
+@pytest.mark.parametrize(
+    "topic, data",
+    [
+        ("/temperature/pt100", b'{"t": 1.0}'),
+        ("/temperature/pt100", b"\xff\xfe not json"),
+        ("/gyro/rate", b"\x22\xff\xff\xff\xff\x0f"),
+    ],
+    ids=["a field missing", "not text", "a block that runs past its message"],
+)
+def test_a_message_its_writer_got_wrong_is_one_line(
+    tmp_path: Path, topic: str, data: bytes
+) -> None:
+    """Its CRC is right (the writer wrote what it meant), its content is not: read_recording
+    says which message, instead of a KeyError or UnicodeDecodeError traceback."""
+    path = tmp_path / "odd.mcap"
+    with RecordingWriter(path, start_time_ns=START_NS, run={}) as w:
+        w.write_rate_block(0.0, 0.1, 0, np.zeros(10, "f4"))
+        w._put(topic, 1.0, data)
+    with pytest.raises(InputError, match=rf"a {topic} message \(log time \d+ ns\) does not decode"):
+        read_recording(path)

@@ -32,6 +32,8 @@ def _read_varint(mv: memoryview, i: int) -> tuple[int, int]:
     :func:`_varint`)."""
     v = shift = 0
     while True:
+        if i >= len(mv):
+            raise ValueError("a varint runs past the block")
         b = mv[i]
         i += 1
         v |= (b & 0x7F) << shift
@@ -73,7 +75,9 @@ def encode_block(
 
 def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]:
     """Inverse of :func:`encode_block`; accepts any valid field order. The values come back
-    ``(n,)`` for a single-axis block, ``(n, axes)`` for a multi-axis one."""
+    ``(n,)`` for a single-axis block, ``(n, axes)`` for a multi-axis one. Bytes that are not
+    such a block (a field past the end, a wire type it does not use) are a ValueError,
+    never a block made of what was there."""
     t0 = period = 0.0
     first = 0
     axes = 1
@@ -84,6 +88,8 @@ def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]
         key, i = _read_varint(mv, i)
         fno, wt = key >> 3, key & 7
         if wt == 1:
+            if i + 8 > n:
+                raise ValueError(f"field {fno} runs past the block")
             (val,) = struct.unpack_from("<d", mv, i)
             i += 8
             if fno == 1:
@@ -98,10 +104,14 @@ def decode_block(data: bytes, kind: str) -> tuple[float, float, int, np.ndarray]
                 axes = max(1, v)
         elif wt == 2:
             ln, i = _read_varint(mv, i)
+            if i + ln > n:
+                raise ValueError(f"field {fno} runs {i + ln - n} bytes past the block")
             if fno == 4:
                 arr = np.frombuffer(mv[i : i + ln], dtype=arr.dtype)
             i += ln
         elif wt == 5:
+            if i + 4 > n:
+                raise ValueError(f"field {fno} runs past the block")
             i += 4
         else:
             raise ValueError(f"unsupported protobuf wire type {wt}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -258,6 +259,22 @@ def _series(blocks: list[Block], dtype: type) -> Series:
     return Series(t, v, idx, float(np.median([b[1] for b in blocks])))
 
 
+def _decode(topic: str, data: bytes) -> Any:
+    """One message of ``topic`` as :func:`read_recording` keeps it: a block, a row
+    (PT100 ``(t, Ω, °C)``, internal ``(t, nan, °C)``, oven ``(t, setpoint, pv, mode)``) or
+    the JSON object (events, log)."""
+    if topic in (TOPIC_RATE, TOPIC_ADC):
+        return decode_block(data, "rate" if topic == TOPIC_RATE else "adc")
+    msg = json.loads(data)
+    if topic == TOPIC_PT100:
+        return (msg["t"], msg["resistance_ohm"], msg["temperature_c"])
+    if topic == TOPIC_TEMPERATURE_INTERNAL:
+        return (msg["t"], math.nan, msg["temperature_c"])
+    if topic == TOPIC_OVEN:
+        return (msg["t"], msg["setpoint_c"], msg["process_value_c"], msg["mode"])
+    return msg
+
+
 def read_recording(
     path: str | os.PathLike[str],
     topics: list[str] | None = None,
@@ -293,25 +310,30 @@ def read_recording(
         # A unit on its internal sensor has that topic instead of a PT100 (the bench said so)
         wanted.append(TOPIC_TEMPERATURE_INTERNAL)
     # each topic is kept apart, so only its own order matters
-    for topic, _ts, data in iter_messages(path, wanted, unit=unit, order="topic"):
+    for topic, ts, data in iter_messages(path, wanted, unit=unit, order="topic"):
         counts[topic] = counts.get(topic, 0) + 1
+        try:
+            item = _decode(topic, data)
+        except (ValueError, KeyError, TypeError, IndexError, struct.error) as e:
+            # a message its writer got wrong (its CRC checked): not silently skipped
+            raise InputError(
+                path, f"a {topic} message (log time {ts} ns) does not decode: {e!r}"
+            ) from None
         if topic == TOPIC_RATE:
-            keep_rate(decode_block(data, "rate"))
+            keep_rate(item)
         elif topic == TOPIC_ADC:
-            adc_blocks.append(decode_block(data, "adc"))
-        else:
-            msg = json.loads(data)
-            if topic == TOPIC_PT100:
-                pt.append((msg["t"], msg["resistance_ohm"], msg["temperature_c"]))
-            elif topic == TOPIC_TEMPERATURE_INTERNAL:
-                internal.append((msg["t"], math.nan, msg["temperature_c"]))
-            elif topic == TOPIC_OVEN:
-                oven.append((msg["t"], msg["setpoint_c"], msg["process_value_c"]))
-                rec.oven_mode.append(msg["mode"])
-            elif topic == TOPIC_EVENT:
-                rec.events.append(msg)
-            elif topic == TOPIC_LOG:
-                rec.logs.append(msg)
+            adc_blocks.append(item)
+        elif topic == TOPIC_PT100:
+            pt.append(item)
+        elif topic == TOPIC_TEMPERATURE_INTERNAL:
+            internal.append(item)
+        elif topic == TOPIC_OVEN:
+            oven.append(item[:3])
+            rec.oven_mode.append(item[3])
+        elif topic == TOPIC_EVENT:
+            rec.events.append(item)
+        elif topic == TOPIC_LOG:
+            rec.logs.append(item)
     rec.topic_counts = counts
     try:
         if TOPIC_RATE in topics and on_rate is None:
