@@ -76,7 +76,7 @@ class Damage(ValueError):
     def describe(self, origin_ns: int | None) -> str:
         """``damaged chunk at byte 1234 (messages at t=10.000–11.000 s): CRC mismatch``;
         times in seconds after ``origin_ns`` (the file's first message). Damage to the
-        file as a whole (``what="file"``) is its problem alone: ``cut short …``."""
+        file as a whole (``what="file"``) is its problem alone: ``truncated: …``."""
         if self.what == "file":
             return self.problem
         where = f"damaged {self.what}" + (
@@ -120,13 +120,14 @@ def check_layout(fh: BinaryIO) -> Layout:
     size = fh.seek(0, 2)
     footer_at = size - _FOOTER.size - len(MAGIC)
     if footer_at < len(MAGIC):
-        raise Damage(f"cut short: {size} bytes, no MCAP footer", what="file")
+        raise Damage(f"truncated: {size} bytes, no MCAP footer", what="file")
     fh.seek(footer_at)
     tail = fh.read(_FOOTER.size + len(MAGIC))
     op, length, ss, sos, scrc = _FOOTER.unpack_from(tail)
     if tail[_FOOTER.size :] != MAGIC or op != OP_FOOTER or length != _FOOTER.size - 9:
         raise Damage(
-            "cut short or damaged at its end: no MCAP footer (the writer never finished it)",
+            "truncated: no MCAP footer at its end (the writer never finished it, or its end "
+            "is damaged)",
             what="file",
         )
     if ss and not len(MAGIC) < ss <= footer_at or sos and not (ss or 0) <= sos <= footer_at:
