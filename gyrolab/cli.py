@@ -20,7 +20,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from gyrolab import __version__
@@ -63,28 +63,29 @@ def _unit_numbers(text: str) -> str:
     return text
 
 
-def _positive_int(text: str) -> int:
-    """A count (--units, --workers, --threads): an integer ≥ 1. Upper bounds belong to the
-    layer that knows them (``gyrolab.sim.commands.MAX_UNITS``, the simulated scanner's 10
-    units, ``gyrolab.batch.MAX_WORKERS``)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, not {v}")
-    return v
+def _int_in(lo: int, hi: int | None = None, span: str = "") -> Callable[[str], int]:
+    """An argparse type: an integer ≥ ``lo`` (and ≤ ``hi``; ``span`` says the range)."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(
+                f"must be {f'in {span}' if span else f'at least {lo}'}, not {v}"
+            )
+        return v
+
+    return parse
 
 
-def _seed(text: str) -> int:
-    """A random seed: an integer in [0, 2**63) (numpy's generators take no negative seed)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
-    if not 0 <= v < 2**63:
-        raise argparse.ArgumentTypeError(f"must be in [0, 2**63), not {v}")
-    return v
+#: A count (--units, --workers, --threads): ≥ 1. Upper bounds belong to the layer that
+#: knows them (``gyrolab.sim.commands.MAX_UNITS``, the simulated scanner's 10 units,
+#: ``gyrolab.batch.MAX_WORKERS``).
+_positive_int = _int_in(1)
+#: A random seed: numpy's generators take none below 0.
+_seed = _int_in(0, 2**63 - 1, "[0, 2**63)")
 
 
 def _positive_float(text: str) -> float:

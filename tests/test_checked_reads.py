@@ -72,11 +72,7 @@ def write_run(path: Path, seconds: int = 240, chunk_size: int = 4096) -> Path:
 
 def old_style(data: bytes) -> bytes:
     """The same file as gyrolab wrote it before the data section's CRC (DataEnd CRC 0)."""
-    footer = len(data) - 8 - 29
-    summary_start = struct.unpack_from("<Q", data, footer + 9)[0]
-    d = bytearray(data)
-    d[summary_start - 4 : summary_start] = b"\0\0\0\0"
-    return bytes(d)
+    return FZ.without_data_crc(data)
 
 
 def flipped(data: bytes, offset: int, bit: int = 2) -> bytes:
