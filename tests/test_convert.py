@@ -165,7 +165,10 @@ def test_streaming_memory_is_bounded(tmp_path: Path, monkeypatch: pytest.MonkeyP
         peaks.append(tracemalloc.get_traced_memory()[1])
         tracemalloc.stop()
     table_bytes = 480_000 * (8 + 8 + 4 + 4 + 8 + 8)
-    assert peaks[1] < 1.3 * peaks[0], peaks
+    # 4x the samples add at most 1 MiB: Parquet's footer keeps ~10 kB of metadata per row
+    # group until the file closes (0.6 MB here, the same before the checked reads); a ratio
+    # of the peaks would also fail whenever the reader's own baseline shrinks (it did)
+    assert peaks[1] < peaks[0] + (1 << 20), peaks
     assert peaks[1] < table_bytes / 4, (peaks, table_bytes)
 
 

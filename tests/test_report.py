@@ -169,8 +169,10 @@ def test_model_of_another_version_exits_2(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "format version 99" in err[0] and str(model) in err[0]
     assert not out.exists()
-    # a directory that is no model at all
-    assert main(["report", str(short_run), "--model", str(tmp_path), "--out", str(out)]) == 2
+    # a directory that is no model at all (the output not inside it: that is refused first)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["report", str(short_run), "--model", str(empty), "--out", str(out)]) == 2
     assert "model.json" in capsys.readouterr().err
 
 

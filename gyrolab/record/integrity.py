@@ -48,7 +48,7 @@ MESSAGE_HEAD = struct.Struct("<HIQQ")
 #: A chunk that claims more uncompressed bytes than this is damage (the mcap library's own
 #: record limit is 4 GiB; gyrolab's chunks are ≤ 1 MiB).
 MAX_CHUNK_BYTES = 1 << 32
-_BLOCK = 1 << 20  # bytes per read while summing the data section's CRC
+_BLOCK = 1 << 18  # bytes per read while summing the data section's CRC (one buffer)
 
 
 class Damage(ValueError):
