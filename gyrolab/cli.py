@@ -34,7 +34,8 @@ HANDLERS: dict[str, str] = {
     "convert": "gyrolab.convert:convert",
     "export": "gyrolab.export.commands:export",
     "batch": "gyrolab.batch:batch",
-    "fleet": "gyrolab.report.fleet:fleet",
+    "fleet": "gyrolab.cli:fleet",
+    "runs": "gyrolab.cli:runs",
 }
 
 
@@ -240,6 +241,12 @@ def build_parser() -> argparse.ArgumentParser:
     dm.add_argument("--out", required=True, help="output DIR")
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
     dm.add_argument("--seed", type=int, default=1)
+    dm.add_argument(
+        "--catalogue",
+        metavar="URL",
+        help="register the demo here (default: $GYROLAB_CATALOGUE if set, else "
+        "DIR/catalogue.sqlite; docs/catalogue.md)",
+    )
     dm.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     b = cmd("batch", "run compensate, report or discrepancy on many recordings (Dask)")
@@ -256,11 +263,50 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--force", action="store_true", help="redo items whose outputs exist")
 
     f = cmd("fleet", "fleet record of many units' models: tables, distributions, outliers, yield")
-    f.add_argument("models", nargs="+", metavar="MODEL_DIR", help="model dirs or dirs of them")
+    f.add_argument("models", nargs="*", metavar="MODEL_DIR", help="model dirs or dirs of them")
     f.add_argument("--out", required=True, help="output REPORT_DIR")
     f.add_argument("--spec", metavar="SPEC.toml", help="spec limits: yield against them")
+    f.add_argument(
+        "--part-number",
+        metavar="PN",
+        help="take the units of this part number from the catalogue (each one's latest model)",
+    )
+    f.add_argument(
+        "--since",
+        metavar="DATE",
+        help="take the units with a run since DATE (ISO 8601, UTC) from the catalogue",
+    )
+    _catalogue_option(f)
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    ru = cmd("runs", "the catalogue of units, runs, models, exports and verdicts")
+    rsub = ru.add_subparsers(dest="action", metavar="ACTION", parser_class=_Parser, required=True)
+    rl = rsub.add_parser("list", help="the runs, newest first, with their units")
+    rl.add_argument("--unit", metavar="SERIAL", help="only the runs of this unit")
+    rl.add_argument("--part-number", metavar="PN", help="only runs of units of this part number")
+    rl.add_argument("--since", metavar="DATE", help="only runs started since (ISO 8601, UTC)")
+    for name, help_ in (
+        ("show", "everything registered about one unit"),
+        ("trace", "unit -> runs -> model -> exported or flashed parameters -> verdict"),
+    ):
+        rs = rsub.add_parser(name, help=help_)
+        rs.add_argument("serial", metavar="SERIAL")
+    for sp in rsub.choices.values():
+        sp.add_argument("--json", action="store_true", help="print JSON")
+        _catalogue_option(sp)
+    rr = rsub.add_parser("rebuild", help="register every file under the directories again")
+    rr.add_argument("dirs", nargs="+", metavar="DIR")
+    _catalogue_option(rr)
     return p
+
+
+def _catalogue_option(sp: argparse.ArgumentParser) -> None:
+    sp.add_argument(
+        "--catalogue",
+        metavar="URL",
+        help="the catalogue: an SQLite file or a database URL (default: $GYROLAB_CATALOGUE, "
+        "else ~/.local/share/gyrolab/catalogue.sqlite; docs/catalogue.md)",
+    )
 
 
 def acquire(args: argparse.Namespace) -> int:
@@ -302,9 +348,67 @@ def demo(args: argparse.Namespace) -> int:
     """``gyrolab demo --out DIR``: :func:`gyrolab.app.demo.run_demo`, then its summary."""
     from gyrolab.app.demo import run_demo, summary
 
-    res = run_demo(args.out, args.profile, args.seed, args.force)
+    res = run_demo(args.out, args.profile, args.seed, args.force, catalogue=args.catalogue)
     print(summary(Path(args.out), res))
     return 0
+
+
+def fleet(args: argparse.Namespace) -> int:
+    """``gyrolab fleet``: the model directories given, and with ``--part-number`` /
+    ``--since`` the units the catalogue holds (each one's latest model)."""
+    from gyrolab.app.runs import catalogue_models
+    from gyrolab.report.fleet import fleet as run
+
+    if args.part_number is not None or args.since is not None:
+        found = catalogue_models(args.catalogue, args.part_number, args.since)
+        args.models = [*args.models, *found]
+    elif not args.models:
+        raise GyrolabError("fleet: give MODEL_DIR... or --part-number/--since (the catalogue)")
+    return run(args)
+
+
+def runs(args: argparse.Namespace) -> int:
+    """``gyrolab runs list|show|trace|rebuild`` (:mod:`gyrolab.app.runs`)."""
+    from gyrolab.app import runs as app
+
+    if args.action == "list":
+        return app.runs_list(args.catalogue, args.unit, args.part_number, args.since, args.json)
+    if args.action == "show":
+        return app.runs_show(args.catalogue, args.serial, args.json)
+    if args.action == "trace":
+        return app.runs_trace(args.catalogue, args.serial, args.json)
+    return app.runs_rebuild(args.catalogue, args.dirs)
+
+
+def register(args: argparse.Namespace, rc: int) -> None:
+    """Register what the command wrote in the catalogue (:mod:`gyrolab.app.register`:
+    never fails, warns once). ``demo`` registers its directory itself."""
+    if rc not in (0, 1, 130):
+        return
+    from gyrolab.app import register as reg
+
+    c, out = args.command, getattr(args, "out", None)
+    if c in ("simulate", "acquire", "recover"):
+        if out and Path(out).is_file():
+            reg.register_recording(out)
+    elif c == "compensate":
+        dirs = [Path(out)] if (Path(out) / "model.json").is_file() else sorted(
+            d for d in Path(out).glob("*") if (d / "model.json").is_file()
+        )
+        if dirs:
+            reg.register_models(dirs, args.run, args.validate)
+    elif c == "apply" and Path(out).is_file():
+        reg.register_application(args.model, args.run, out)
+    elif c == "export":
+        from gyrolab.export.commands import target
+
+        files = [Path(out)] + ([Path(out).with_suffix(".h")] if args.format == "c" else [])
+        if all(f.is_file() for f in files):
+            reg.register_export(args.model, args.format, target(args), files)
+    elif c == "report" and (Path(out) / "metrics.json").is_file():
+        reg.register_report(out, args.run, args.model, args.unit)
+    elif c == "batch" and Path(out).is_dir():
+        reg.register_tree(out)
 
 
 def _handler(command: str):  # type: ignore[no-untyped-def]
@@ -332,7 +436,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         from gyrolab.outputs import command_inputs
 
         with command_inputs(_input_paths(args)):
-            return int(_handler(args.command)(args) or 0)
+            rc = int(_handler(args.command)(args) or 0)
+        register(args, rc)
+        return rc
     except GyrolabError as e:
         print(f"gyrolab: error: {e}", file=sys.stderr)
         return e.exit_code

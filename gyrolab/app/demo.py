@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from gyrolab.app.acquire import AcquireOptions, acquire
+from gyrolab.app.register import register_tree
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
@@ -46,6 +47,7 @@ from gyrolab.progress import progress
 DEMO_ACQUIRE_SPEED = 600.0
 
 HELDOUT_SOURCE = "acquire --bench sim"
+DEMO_CATALOGUE = "catalogue.sqlite"  # inside DIR unless --catalogue / $GYROLAB_CATALOGUE
 
 
 def run_demo(
@@ -54,8 +56,14 @@ def run_demo(
     seed: int = 1,
     force: bool = False,
     rate_hz: float = 100.0,
+    catalogue: str | None = None,
 ) -> dict[str, Any]:
-    """Run the whole chain into ``out``; returns the report's metrics and stage timings."""
+    """Run the whole chain into ``out``; returns the report's metrics and stage timings.
+
+    Then ``out`` is registered (:func:`gyrolab.app.register.register_tree`, once it is in
+    place: the paths are final) in ``catalogue``, else in ``$GYROLAB_CATALOGUE`` where the
+    user set it, else in ``out/catalogue.sqlite``: a demo's simulated units stay out of a
+    lab's catalogue unless asked, and nothing is written outside ``out`` unless asked."""
     from gyrolab.compensation.commands import compensate
     from gyrolab.report.commands import write_report
     from gyrolab.sim.commands import simulate_file
@@ -134,7 +142,23 @@ def run_demo(
             (tmp / "demo.json").write_text(json.dumps(info, indent=2) + "\n")
     finally:
         bar.close()
-    return {"metrics": metrics, "timing_s": timings, "heldout_source": HELDOUT_SOURCE}
+    url = demo_catalogue(out_p, catalogue)
+    registered = url is not None and register_tree(out_p, url)
+    return {
+        "metrics": metrics,
+        "timing_s": timings,
+        "heldout_source": HELDOUT_SOURCE,
+        "catalogue": url if registered else None,
+    }
+
+
+def demo_catalogue(out: Path, option: str | None) -> str | None:
+    """Where the demo registers (:func:`run_demo`); None when registration is off."""
+    from gyrolab.catalogue.store import ENV, catalogue_url, sqlite_url
+
+    if option or os.environ.get(ENV, "").strip():
+        return catalogue_url(option)
+    return sqlite_url(out / DEMO_CATALOGUE)
 
 
 def summary(out: Path, res: dict[str, Any]) -> str:
@@ -174,4 +198,11 @@ def summary(out: Path, res: dict[str, Any]) -> str:
     if "oracle" not in m:
         lines.append("  (no oracle: the true drift of an acquired run is not known)")
     lines.append(f"report: {out / 'report' / 'index.html'} (PDF: report.pdf beside it)")
+    if res.get("catalogue"):
+        from gyrolab.catalogue.store import shown
+
+        lines.append(
+            f"catalogue: {shown(res['catalogue'])} (gyrolab runs list --catalogue "
+            f"{shown(res['catalogue'])})"
+        )
     return "\n".join(lines)

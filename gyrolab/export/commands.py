@@ -31,12 +31,37 @@ def _polys(model_dir: str) -> list[Any]:
     return [load_poly3(d) for _name, d in axis_dirs(model_dir)]
 
 
+def target(args: argparse.Namespace) -> dict[str, Any]:
+    """What the export was made for, as given: the gyro instance, device id, model kind,
+    kalibr's topic and run (the catalogue's ``target``; None where not given)."""
+    t = {
+        "instance": args.instance,
+        "device_id": args.device_id,
+        "kind": args.kind if args.format in ("c", "json") else None,
+        "rostopic": args.rostopic if args.format == "kalibr" else None,
+        "run": args.run if args.format == "kalibr" else None,
+    }
+    return {k: v for k, v in t.items() if v is not None}
+
+
+def provenance(args: argparse.Namespace) -> str:
+    """The line every export carries (a comment in the text formats): which model, by its
+    hash, in which format, for which target — what ``gyrolab runs rebuild`` reads back."""
+    from gyrolab.catalogue.digest import model_digest
+
+    return (
+        f"gyrolab export of model {model_digest(args.model)} as {args.format} target "
+        + json.dumps(target(args), sort_keys=True)
+    )
+
+
 def _header(args: argparse.Namespace) -> str:
     from gyrolab import __version__
 
     return (
         f"gyrolab {__version__} export of {args.model}: 3rd-order temperature polynomial "
-        "per axis\n(the firmware form; metrics.json 'firmware_poly3' gives its residual)"
+        "per axis\n(the firmware form; metrics.json 'firmware_poly3' gives its residual)\n"
+        + provenance(args)
     )
 
 
@@ -86,6 +111,10 @@ def export(args: argparse.Namespace) -> int:
 
         spec = export_spec(args.model, args.kind)
         if fmt == "json":
+            from gyrolab.catalogue.digest import model_digest
+
+            spec["model_sha256"] = model_digest(args.model)  # the catalogue's link
+            spec["target"] = target(args)
             texts = [json.dumps(spec, indent=2) + "\n"]
         else:
             from gyrolab.export.c_code import generate
@@ -96,9 +125,10 @@ def export(args: argparse.Namespace) -> int:
                 header, source = generate(spec, outs[1].name)
             except ValueError as e:
                 raise InputError(args.model, str(e)) from None
-            texts = [source, header]
+            line = f"/* {provenance(args)} */\n"
+            texts = [line + source, line + header]
     elif fmt == "kalibr":
-        texts = [kalibr_text(args)]
+        texts = [f"# {provenance(args)}\n" + kalibr_text(args)]
     else:  # argparse restricts the choices
         raise InputError("--format", f"unknown format {fmt!r}")
     for o, text in zip(outs, texts, strict=True):

@@ -1,0 +1,205 @@
+"""Registering what a command wrote, after it wrote it — never at the command's expense.
+
+Each ``register_*`` takes the paths a command read and wrote, builds the catalogue entries
+from the files (:mod:`gyrolab.app.index_files`) and adds them in the catalogue
+(``--catalogue`` / ``$GYROLAB_CATALOGUE`` / the default SQLite file). Registration is an
+index of files that already exist, so **nothing about it may fail a command**: a catalogue
+that cannot be reached, a file it cannot read, any error at all, costs one warning line on
+stderr (once per process) and the command's result is unchanged; ``gyrolab runs rebuild
+DIR`` registers the files later. ``GYROLAB_CATALOGUE=off`` turns it off.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from gyrolab.app.index_files import (
+    application_entry,
+    export_entry,
+    model_entry,
+    record_entry,
+    report_entry,
+    run_entry,
+)
+from gyrolab.catalogue.entries import RunEntry, UnitRef
+
+PathLike = str | Path
+Builder = Callable[[], Iterable[Any]]
+_warned: list[str] = []  # the process's one warning (kept for tests to read)
+
+
+def warn_once(url: str | None, reason: str) -> None:
+    """The one warning of the process about registration."""
+    if _warned:
+        return
+    from gyrolab.catalogue.store import shown
+
+    where = shown(url) if url else "the catalogue"
+    line = (
+        f"gyrolab: warning: not registered in {where}: {reason} "
+        "(the outputs are written; `gyrolab runs rebuild DIR` registers them later)"
+    )
+    _warned.append(line)
+    print(line, file=sys.stderr)
+
+
+def register(builders: Iterable[Builder], url: str | None = None) -> bool:
+    """Build every entry and add it; False (after the warning) on any failure."""
+    from gyrolab.catalogue import Catalogue
+    from gyrolab.catalogue.store import catalogue_url
+
+    try:
+        target = catalogue_url(url)
+        if target is None:
+            return False
+        with Catalogue.open(target) as cat:
+            for build in builders:
+                for entry in build():
+                    cat.add(entry)
+        return True
+    except Exception as e:  # registration must never fail the command (module docstring)
+        warn_once(
+            url or _safe_url(), f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+        )
+        return False
+
+
+def _safe_url() -> str | None:
+    try:
+        from gyrolab.catalogue.store import catalogue_url
+
+        return catalogue_url()
+    except Exception:  # a bad URL is already the reason being reported
+        return None
+
+
+def is_recording(path: PathLike | None) -> bool:
+    """A gyrolab MCAP recording (not a ROS 2 bag or an autopilot log)."""
+    if path is None or not Path(path).is_file():
+        return False
+    from gyrolab.logs import detect_format
+
+    try:
+        return detect_format(path) == "gyrolab"
+    except Exception:  # unreadable: nothing to register
+        return False
+
+
+def _run(path: PathLike | None) -> RunEntry | None:
+    return run_entry(path) if path is not None and is_recording(path) else None
+
+
+def _part_number(run: RunEntry | None, serial: str | None) -> UnitRef | None:
+    """The unit ``serial`` (default: the run's only unit) with the run's part number."""
+    if run is None:
+        return None
+    units = {u.serial: u for u in run.units}
+    if serial is None:
+        return run.units[0] if len(run.units) == 1 else None
+    return units.get(serial, UnitRef(serial))
+
+
+def register_recording(path: PathLike, url: str | None = None) -> bool:
+    """``simulate``, ``acquire``, ``recover``: the recording written."""
+    return register([lambda: [e for e in [_run(path)] if e is not None]], url)
+
+
+def register_models(
+    model_dirs: list[PathLike],
+    run: PathLike | None,
+    validate: PathLike | None = None,
+    url: str | None = None,
+) -> bool:
+    """``compensate``: the calibration (and validation) run, and each model directory
+    written (one per unit of a multi-unit run)."""
+
+    def build() -> list[Any]:
+        cal, val = _run(run), _run(validate)
+        out: list[Any] = [e for e in (cal, val) if e is not None]
+        for d in model_dirs:
+            out.append(
+                model_entry(
+                    d,
+                    None if cal is None else cal.segment.file_hash,
+                    None if val is None else val.segment.file_hash,
+                    _part_number(cal, None),
+                )
+            )
+            if cal is not None and out[-1].unit is not None:  # the serial from model.json
+                out[-1].unit = _part_number(cal, out[-1].unit.serial)
+        return out
+
+    return register([build], url)
+
+
+def register_application(
+    model_dir: PathLike, run: PathLike, out: PathLike, url: str | None = None
+) -> bool:
+    """``apply``: the input run, the model and the compensated recording."""
+
+    def build() -> list[Any]:
+        entry = _run(run)
+        model = model_entry(model_dir, None, None, _part_number(entry, None))
+        file = None if entry is None else entry.segment.file_hash
+        return [e for e in (entry, model) if e is not None] + [
+            application_entry(out, model.model_hash, file)
+        ]
+
+    return register([build], url)
+
+
+def register_export(
+    model_dir: PathLike,
+    fmt: str,
+    target: dict[str, Any],
+    files: list[PathLike],
+    url: str | None = None,
+) -> bool:
+    """``export``: the model and the files written."""
+
+    def build() -> list[Any]:
+        model = model_entry(model_dir)
+        return [model, export_entry(model.model_hash, fmt, target, files)]
+
+    return register([build], url)
+
+
+def register_report(
+    report_dir: PathLike,
+    run: PathLike,
+    model_dir: PathLike | None = None,
+    unit: str | None = None,
+    url: str | None = None,
+) -> bool:
+    """``report``: the run, the model shown, and the report's outcome and verdict."""
+
+    def build() -> list[Any]:
+        entry = _run(run)
+        ref = _part_number(entry, unit)
+        out: list[Any] = [] if entry is None else [entry]
+        model_hash = None
+        if model_dir is not None:
+            model = model_entry(model_dir, None, None, ref)
+            out.append(model)
+            model_hash = model.model_hash
+        file = None if entry is None else entry.segment.file_hash
+        out.append(report_entry(report_dir, file, model_hash, ref))
+        return out
+
+    return register([build], url)
+
+
+def register_record(path: PathLike, url: str | None = None) -> bool:
+    """A flash or verification record file (the flight-controller commands)."""
+    return register([lambda: [record_entry(path)]], url)
+
+
+def register_tree(directory: PathLike, url: str | None = None) -> bool:
+    """Every file under ``directory`` (``gyrolab batch``'s and ``gyrolab demo``'s outputs,
+    registered once they are in place): :func:`gyrolab.app.rebuild.rebuild_entries`."""
+    from gyrolab.app.rebuild import rebuild_entries
+
+    return register([lambda: rebuild_entries(directory).entries], url)
