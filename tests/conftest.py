@@ -1,8 +1,10 @@
-"""Shared test settings: no progress bars, headless matplotlib, ../shared located."""
+"""Shared test settings: no progress bars, headless matplotlib, ../shared located, and
+every command's catalogue registration going to the session's own catalogue file."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -25,3 +27,17 @@ def shared_dir() -> Path:
             "beside the repository as ../shared (see ../shared/README.md)"
         )
     return SHARED
+
+
+@pytest.fixture(scope="session", autouse=True)
+def session_catalogue(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """Every command a test runs (in process or as a subprocess) registers in this
+    session's own SQLite catalogue, never in the user's (docs/catalogue.md)."""
+    path = tmp_path_factory.mktemp("catalogue") / "catalogue.sqlite"
+    saved = os.environ.get("GYROLAB_CATALOGUE")
+    os.environ["GYROLAB_CATALOGUE"] = str(path)
+    yield path
+    if saved is None:
+        os.environ.pop("GYROLAB_CATALOGUE", None)
+    else:
+        os.environ["GYROLAB_CATALOGUE"] = saved

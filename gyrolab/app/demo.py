@@ -13,9 +13,12 @@ The README quick start in one command, using only the real pieces (nothing is fa
 3. report the held-out run with the model, so the report's metrics are held out
    (``"held_out": true``), plus the raw report of the calibration run.
 
-``DIR`` ends up holding ``calibration.mcap``, ``heldout.mcap``, ``model/``, ``report/``
-(the compensated report: ``index.html``, ``metrics.json``, ``report.pdf``),
-``calibration-report/`` (raw) and ``demo.json``. It appears atomically: the work happens
+``DIR`` ends up holding ``calibration.mcap``, ``heldout.mcap``, ``model/``, ``firmware/``
+(the model exported: ``gyro_comp.c``/``.h``, ``ardupilot.parm``), ``report/`` (the
+compensated report: ``index.html``, ``metrics.json``, ``report.pdf``),
+``calibration-report/`` (raw), ``demo.json`` and ``catalogue.sqlite`` (where the demo
+registered its units, runs, model, exports and reports, unless told another catalogue:
+:func:`run_demo`). It appears atomically: the work happens
 in a temporary sibling directory renamed into place at the end, and any failure removes
 it. Each stage is a library call (no command line, no change of directory) on the files
 in the temporary directory; the runs recorded inside the outputs (model.json's
@@ -74,7 +77,7 @@ def run_demo(
     prof_arg = str(Path(profile).resolve()) if Path(profile).is_file() else profile
     load_profile(prof_arg)
     timings: dict[str, float] = {}
-    bar = progress(total=5, desc="demo", unit="stage")
+    bar = progress(total=6, desc="demo", unit="stage")
     t_all = time.perf_counter()
 
     def stage(name: str) -> float:
@@ -124,6 +127,10 @@ def run_demo(
             )
             done("compensate", t0)
 
+            t0 = stage("export (C source, ArduPilot parameters)")
+            export_firmware(model, tmp / "firmware")
+            done("export", t0)
+
             t0 = stage("report (held-out run, with model)")
             metrics = write_report(held, report, model, label=held_label)
             done("report", t0)
@@ -150,6 +157,19 @@ def run_demo(
         "heldout_source": HELDOUT_SOURCE,
         "catalogue": url if registered else None,
     }
+
+
+def export_firmware(model: Path, out: Path) -> None:
+    """The model as firmware takes it: ``gyro_comp.c``/``.h`` (the chosen causal model,
+    float32 C99) and ``ardupilot.parm`` (the firmware cubic), as ``gyrolab export`` writes
+    them (each names its model by hash: the catalogue's trace goes model → export)."""
+    from gyrolab.export.commands import export
+
+    out.mkdir()
+    common = {"model": str(model), "force": False, "instance": 0, "device_id": None}
+    common.update(kind="chosen", run=None, rostopic="/imu0")
+    export(argparse.Namespace(format="c", out=str(out / "gyro_comp.c"), **common))
+    export(argparse.Namespace(format="ardupilot", out=str(out / "ardupilot.parm"), **common))
 
 
 def demo_catalogue(out: Path, option: str | None) -> str | None:

@@ -126,6 +126,9 @@ def trace_lines(t: dict[str, Any]) -> list[str]:
     """The trace as an indented tree (one line per thing)."""
     u = t["unit"]
     lines = [f"unit {u['serial']} (part number {u['part_number'] or '—'})"]
+    calibrated = {
+        m["model_hash"] for r in t["runs"] for m in r["models"] if m["role"] == "calibration"
+    }
 
     def model_lines(m: dict[str, Any], pad: str) -> None:
         held = "held out" if m.get("held_out") else "in sample"
@@ -134,8 +137,8 @@ def trace_lines(t: dict[str, Any]) -> list[str]:
             f"{pad}model {short(m['model_hash'])} ({role}{m.get('family') or '—'}, "
             f"{held}{_metric(m)}) {m['path']}"
         )
-        if m.get("role") == "validation":  # its exports are shown under its calibration run
-            return
+        if m.get("role") == "validation" and m["model_hash"] in calibrated:
+            return  # its exports are shown under its calibration run
         for e in m["exports"]:
             lines.append(f"{pad}  export {e['format']} {short(e['file_hash'])} {e['path']}")
             for f in e["flashes"]:

@@ -109,19 +109,29 @@ def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
     if u is None:
         return None
     runs = list_runs(conn, serial=serial)
-    models = _by(conn, T_MODEL, "unit_id", [u.id])
-    model_hashes = [m["model_hash"] for m in models]
     run_files = [s["file_hash"] for r in runs for s in r["segments"]]
+    # the unit's models, and the models fitted or validated on its runs (another serial's)
+    models = {m["model_hash"]: m for m in _by(conn, T_MODEL, "unit_id", [u.id])}
+    for column in ("calibration_file", "validation_file"):
+        for m in _by(conn, T_MODEL, column, run_files):
+            models.setdefault(m["model_hash"], m)
+    model_hashes = list(models)
+    # the unit's reports, and the reports of its models (on another unit's run too)
+    reports = {r["report_hash"]: r for r in _by(conn, T_REPORT, "unit_id", [u.id])}
+    for r in _by(conn, T_REPORT, "run_file", run_files):
+        if r["unit_id"] in (None, u.id):  # not another unit's of a multi-unit run
+            reports.setdefault(r["report_hash"], r)
+    for r in _by(conn, T_REPORT, "model_hash", model_hashes):
+        reports.setdefault(r["report_hash"], r)
     return {
-        "unit": _row(u),
+        "unit": _row(u, drop=()),
         "runs": runs,
-        "models": models,
+        "models": list(models.values()),
         "exports": _by(conn, T_EXPORT, "model_hash", model_hashes),
         "applications": _by(conn, T_APP, "model_hash", model_hashes),
         "flashes": _by(conn, T_FLASH, "unit_id", [u.id]),
         "verifications": _by(conn, T_VER, "unit_id", [u.id]),
-        "reports": _by(conn, T_REPORT, "unit_id", [u.id])
-        + [r for r in _by(conn, T_REPORT, "run_file", run_files) if r.get("unit_id") is None],
+        "reports": list(reports.values()),
     }
 
 
