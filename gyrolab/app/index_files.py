@@ -93,10 +93,12 @@ def run_entry(path: PathLike) -> RunEntry:
     outcome = run_outcome(read_recording(p, topics=["/profile/event"]))
     digest = file_digest(p)
     started = parse_time(run.start_time)
-    number = run.extra.get("segment", 1)
+    # a resumed run's files carry its id and their segment number (docs/recording-format.md)
+    raw = meta["run"]
+    number = raw.get("segment", 1)
     profile = run.profile if isinstance(run.profile, dict) else {}
     return RunEntry(
-        run_key=str(run.extra.get("run_id") or digest),
+        run_key=str(raw.get("run_id") or digest),
         source=run.source,
         station=run.bench_name or str(bench.get("name", "")),
         operator=run.operator,

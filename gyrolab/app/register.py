@@ -31,15 +31,12 @@ Builder = Callable[[], Iterable[Any]]
 _warned: list[str] = []  # the process's one warning (kept for tests to read)
 
 
-def warn_once(url: str | None, reason: str) -> None:
+def warn_once(reason: str) -> None:
     """The one warning of the process about registration."""
     if _warned:
         return
-    from gyrolab.catalogue.store import shown
-
-    where = shown(url) if url else "the catalogue"
     line = (
-        f"gyrolab: warning: not registered in {where}: {reason} "
+        f"gyrolab: warning: not registered in the catalogue: {reason} "
         "(the outputs are written; `gyrolab runs rebuild DIR` registers them later)"
     )
     _warned.append(line)
@@ -49,8 +46,9 @@ def warn_once(url: str | None, reason: str) -> None:
 def register(builders: Iterable[Builder], url: str | None = None) -> bool:
     """Build every entry and add it; False (after the warning) on any failure."""
     from gyrolab.catalogue import Catalogue
-    from gyrolab.catalogue.store import catalogue_url
+    from gyrolab.catalogue.store import CatalogueError, catalogue_url, shown
 
+    target = None
     try:
         target = catalogue_url(url)
         if target is None:
@@ -60,20 +58,12 @@ def register(builders: Iterable[Builder], url: str | None = None) -> bool:
                 for entry in build():
                     cat.add(entry)
         return True
+    except CatalogueError as e:  # names the catalogue and the problem
+        warn_once(str(e))
     except Exception as e:  # registration must never fail the command (module docstring)
-        warn_once(
-            url or _safe_url(), f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
-        )
-        return False
-
-
-def _safe_url() -> str | None:
-    try:
-        from gyrolab.catalogue.store import catalogue_url
-
-        return catalogue_url()
-    except Exception:  # a bad URL is already the reason being reported
-        return None
+        first = (str(e).splitlines() or [""])[0]
+        warn_once(f"{shown(target) if target else 'catalogue'}: {type(e).__name__}: {first}")
+    return False
 
 
 def is_recording(path: PathLike | None) -> bool:
