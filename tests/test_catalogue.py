@@ -328,6 +328,29 @@ def test_same_index_on_sqlite_and_postgresql(
     assert traces[0] == traces[1]
 
 
+def test_commands_register_what_rebuild_finds(
+    demo: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """What compensate, export and report register (from the paths they were given) is
+    what rebuild finds again in the files."""
+    by_commands, rebuilt = (f"sqlite:///{tmp_path / n}.sqlite" for n in ("a", "b"))
+    cal, held, model = demo / "calibration.mcap", demo / "heldout.mcap", demo / "model"
+    assert reg.register_models([model], cal, held, url=by_commands)
+    for name, fmt in (("gyro_comp.c", "c"), ("ardupilot.parm", "ardupilot")):
+        files = [demo / "firmware" / name]
+        if fmt == "c":
+            files.append(files[0].with_suffix(".h"))
+        target = {"instance": 0, "kind": "chosen"} if fmt == "c" else {"instance": 0}
+        assert reg.register_export(model, fmt, target, files, url=by_commands)
+    assert reg.register_report(demo / "report", held, model, url=by_commands)
+    assert reg.register_report(demo / "calibration-report", cal, url=by_commands)
+    assert run_cli(["runs", "rebuild", str(demo), "--catalogue", rebuilt], capsys)[0] == 0
+    traces = [
+        strip(_check_demo(demo, ["--catalogue", url], capsys)) for url in (by_commands, rebuilt)
+    ]
+    assert traces[0] == traces[1]
+
+
 def test_fleet_takes_its_units_from_the_catalogue(
     demo: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -76,6 +76,14 @@ def units_of(run: RunMetadata, bench: dict[str, Any]) -> list[UnitRef]:
     return out
 
 
+def named(serial: Any, unit: UnitRef | None) -> UnitRef | None:
+    """The unit a file names (its serial, with the part number the caller knew), else the
+    caller's."""
+    if not serial:
+        return unit
+    return UnitRef(str(serial), None if unit is None else unit.part_number)
+
+
 def run_entry(path: PathLike) -> RunEntry:
     """A recording (a segment of a run): its run's metadata, units, outcome and hash.
     Raises :class:`InputError` for a file that is not a readable gyrolab recording."""
@@ -160,9 +168,7 @@ def model_entry(
     cal = meta.get("calibration") if isinstance(meta.get("calibration"), dict) else {}
     runs = results.get("runs") if isinstance(results.get("runs"), dict) else {}
     val = runs.get("validation") if isinstance(runs.get("validation"), dict) else {}
-    serial = cal.get("unit") or metrics.get("unit")
-    if serial:
-        unit = UnitRef(str(serial), None if unit is None else unit.part_number)
+    unit = named(cal.get("unit") or metrics.get("unit"), unit)
     family = (metrics.get("causal_model") or {}).get("family") or (
         metrics.get("headline") or {}
     ).get("family")
@@ -239,9 +245,7 @@ def report_entry(
     if verdicts:  # a multi-axis unit passes when every axis passes
         verdict = "PASS" if all(v.get("verdict") == "PASS" for v in verdicts) else "FAIL"
     outcome = first.get("outcome") if isinstance(first.get("outcome"), dict) else {}
-    serial = first.get("unit")
-    if serial:
-        unit = UnitRef(str(serial), None if unit is None else unit.part_number)
+    unit = named(first.get("unit"), unit)
     return ReportEntry(
         report_hash=file_digest(metrics_path),
         path=absolute(d),

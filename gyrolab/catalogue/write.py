@@ -140,11 +140,20 @@ def add_run(conn: Connection, e: RunEntry) -> int:
     return run_id
 
 
-def add_model(conn: Connection, e: ModelEntry) -> int:
+def _values(conn: Connection, e: Any) -> dict[str, Any]:
+    """An entry's columns: its unit as the unit's id (added if new), JSON made safe."""
     values = asdict(e)
-    unit = values.pop("unit")
-    values["unit_id"] = unit_id(conn, None if unit is None else UnitRef(**unit))
-    values["metrics"] = json_safe(values["metrics"])
+    if "unit" in values:
+        unit = values.pop("unit")
+        values["unit_id"] = unit_id(conn, None if unit is None else UnitRef(**unit))
+    for k in ("metrics", "detail", "target"):
+        if k in values:
+            values[k] = json_safe(values[k])
+    return values
+
+
+def add_model(conn: Connection, e: ModelEntry) -> int:
+    values = _values(conn, e)
     values["registered_at"] = utc_now()
     t = schema.Model.__table__
     fill = [c.name for c in t.columns if c.nullable]
@@ -153,69 +162,33 @@ def add_model(conn: Connection, e: ModelEntry) -> int:
 
 def add_export(conn: Connection, e: ExportEntry) -> int:
     (path, digest), *_ = e.files
-    values = {
-        "model_hash": e.model_hash,
-        "format": e.format,
-        "target": json_safe(e.target),
-        "file_hash": digest,
-        "path": path,
-        "files": [{"path": p, "sha256": d} for p, d in e.files],
-        "created_at": e.created_at,
-    }
-    return upsert(
-        conn,
-        schema.Export.__table__,
-        values,
-        key=["file_hash"],
-        keep=["created_at"],
-        fill=["model_hash"],
-    )
+    values = _values(conn, e)
+    values.update(file_hash=digest, path=path, files=[{"path": p, "sha256": d} for p, d in e.files])
+    t = schema.Export.__table__
+    return upsert(conn, t, values, key=["file_hash"], keep=["created_at"], fill=["model_hash"])
 
 
 def add_application(conn: Connection, e: ApplicationEntry) -> int:
-    return upsert(
-        conn,
-        schema.Application.__table__,
-        asdict(e),
-        key=["file_hash"],
-        keep=["created_at"],
-        fill=["model_hash", "run_file"],
-    )
-
-
-def _with_unit(conn: Connection, e: Any) -> dict[str, Any]:
-    values = asdict(e)
-    unit = values.pop("unit")
-    values["unit_id"] = unit_id(conn, None if unit is None else UnitRef(**unit))
-    values["detail"] = json_safe(values.get("detail", {}))
-    values["host"] = HOST
-    return values
+    t = schema.Application.__table__
+    fill = ["model_hash", "run_file"]
+    return upsert(conn, t, _values(conn, e), key=["file_hash"], keep=["created_at"], fill=fill)
 
 
 def add_flash(conn: Connection, e: FlashEntry) -> int:
-    return upsert(
-        conn, schema.Flash.__table__, _with_unit(conn, e), key=["record_hash"], fill=["unit_id"]
-    )
+    values = {**_values(conn, e), "host": HOST}
+    return upsert(conn, schema.Flash.__table__, values, key=["record_hash"], fill=["unit_id"])
 
 
 def add_verification(conn: Connection, e: VerificationEntry) -> int:
-    t = schema.Verification.__table__
+    values = {**_values(conn, e), "host": HOST}
     fill = ["unit_id", "flash_record", "run_file"]
-    return upsert(conn, t, _with_unit(conn, e), key=["record_hash"], fill=fill)
+    return upsert(conn, schema.Verification.__table__, values, key=["record_hash"], fill=fill)
 
 
 def add_report(conn: Connection, e: ReportEntry) -> int:
-    values = asdict(e)
-    unit = values.pop("unit")
-    values["unit_id"] = unit_id(conn, None if unit is None else UnitRef(**unit))
-    return upsert(
-        conn,
-        schema.Report.__table__,
-        values,
-        key=["report_hash"],
-        keep=["created_at"],
-        fill=["unit_id", "run_file", "model_hash", "spec", "verdict", "outcome"],
-    )
+    fill = ["unit_id", "run_file", "model_hash", "spec", "verdict", "outcome"]
+    t = schema.Report.__table__
+    return upsert(conn, t, _values(conn, e), key=["report_hash"], keep=["created_at"], fill=fill)
 
 
 WRITERS = {
