@@ -29,7 +29,6 @@ report's software table) are named relative to ``DIR`` (``calibration.mcap``,
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -37,7 +36,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gyrolab.app.acquire import AcquireOptions, acquire
+from gyrolab.app.acquire import acquire
+from gyrolab.app.options import AcquireOptions, CompensateOptions, DemoOptions
 from gyrolab.app.register import register_tree
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
@@ -67,7 +67,7 @@ def run_demo(
     place: the paths are final) in ``catalogue``, else in ``$GYROLAB_CATALOGUE`` where the
     user set it, else in ``out/catalogue.sqlite``: a demo's simulated units stay out of a
     lab's catalogue unless asked, and nothing is written outside ``out`` unless asked."""
-    from gyrolab.compensation.commands import compensate
+    from gyrolab.app.compensate import compensate
     from gyrolab.report.commands import write_report
     from gyrolab.sim.commands import simulate_file
 
@@ -115,12 +115,11 @@ def run_demo(
 
             t0 = stage("compensate (GPSO-VMD, MPE, FLP, GA-BP)")
             compensate(
-                argparse.Namespace(
+                CompensateOptions(
                     run=str(cal),
                     out=str(model),
                     validate=str(held),
                     seed=seed,
-                    force=False,
                     run_label=cal_label,
                     validate_label=held_label,
                 )
@@ -166,10 +165,8 @@ def export_firmware(model: Path, out: Path) -> None:
     from gyrolab.export.commands import export
 
     out.mkdir()
-    common = {"model": str(model), "force": False, "instance": 0, "device_id": None}
-    common.update(kind="chosen", run=None, rostopic="/imu0")
-    export(argparse.Namespace(format="c", out=str(out / "gyro_comp.c"), **common))
-    export(argparse.Namespace(format="ardupilot", out=str(out / "ardupilot.parm"), **common))
+    export(model, "c", out / "gyro_comp.c")
+    export(model, "ardupilot", out / "ardupilot.parm")
 
 
 def demo_catalogue(out: Path, option: str | None) -> str | None:
@@ -221,8 +218,13 @@ def summary(out: Path, res: dict[str, Any]) -> str:
     if res.get("catalogue"):
         from gyrolab.catalogue.store import shown
 
-        lines.append(
-            f"catalogue: {shown(res['catalogue'])} (gyrolab runs list --catalogue "
-            f"{shown(res['catalogue'])})"
-        )
+        where = shown(res["catalogue"])
+        lines.append(f"catalogue: {where} (gyrolab runs list --catalogue {where})")
     return "\n".join(lines)
+
+
+def demo(opts: DemoOptions) -> int:
+    """The ``gyrolab demo`` command: :func:`run_demo`, then its :func:`summary`."""
+    res = run_demo(opts.out, opts.profile, opts.seed, opts.force, catalogue=opts.catalogue)
+    print(summary(Path(opts.out), res))
+    return 0

@@ -193,3 +193,45 @@ def register_tree(directory: PathLike, url: str | None = None) -> bool:
     from gyrolab.app.rebuild import rebuild_entries
 
     return register([lambda: rebuild_entries(directory).entries], url)
+
+
+def register_command(opts: object, rc: int) -> None:
+    """After a command (its typed options, :mod:`gyrolab.app.options`, and its exit code):
+    register what it wrote. A command that wrote nothing (exit 2) registers nothing;
+    ``acquire`` registers its recording on a fault (1) and an interrupt (130) too.
+    ``demo`` registers its directory itself; ``runs``, ``discrepancy``, ``convert`` and
+    ``fleet`` write nothing the catalogue indexes."""
+    from gyrolab.app import options as o
+
+    if rc not in (0, 1, 130):
+        return
+    out = Path(str(getattr(opts, "out", "")))
+    if isinstance(opts, (o.SimulateOptions, o.AcquireOptions, o.RecoverOptions)):
+        if out.is_file():
+            register_recording(out)
+    elif isinstance(opts, o.CompensateOptions):
+        # one model directory, or DIR/<serial> per unit of a multi-unit run
+        dirs = [out] if (out / "model.json").is_file() else sorted(out.glob("*/model.json"))
+        dirs = [d if d == out else d.parent for d in dirs]
+        if dirs:
+            register_models(dirs, opts.run, opts.validate)
+    elif isinstance(opts, o.ApplyOptions) and out.is_file():
+        register_application(opts.model, opts.run, out)
+    elif isinstance(opts, o.ExportOptions):
+        from gyrolab.export.commands import target
+
+        files = [out] + ([out.with_suffix(".h")] if opts.format == "c" else [])
+        what = target(
+            opts.format,
+            kind=opts.kind,
+            instance=opts.instance,
+            device_id=opts.device_id,
+            run=opts.run,
+            rostopic=opts.rostopic,
+        )
+        if all(f.is_file() for f in files):
+            register_export(opts.model, opts.format, what, files)
+    elif isinstance(opts, o.ReportOptions) and (out / "metrics.json").is_file():
+        register_report(out, opts.run, opts.model, opts.unit)
+    elif isinstance(opts, o.BatchCommandOptions) and out.is_dir():
+        register_tree(out)

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gyrolab.app.options import RunsOptions
 from gyrolab.catalogue import Catalogue
 from gyrolab.catalogue.digest import short
 from gyrolab.catalogue.entries import parse_time
@@ -233,3 +234,14 @@ def runs_rebuild(url: str | None, dirs: list[str]) -> int:
         + (f"; {len(skipped)} skipped" if skipped else "")
     )
     return 1 if skipped else 0
+
+
+def runs(opts: RunsOptions) -> int:
+    """The ``gyrolab runs`` command (module docstring)."""
+    if opts.action == "list":
+        return runs_list(opts.catalogue, opts.unit, opts.part_number, opts.since, opts.json)
+    if opts.action in ("show", "trace"):
+        assert opts.serial is not None  # the parser requires it
+        call = runs_show if opts.action == "show" else runs_trace
+        return call(opts.catalogue, opts.serial, opts.json)
+    return runs_rebuild(opts.catalogue, [str(d) for d in opts.dirs])
