@@ -96,17 +96,18 @@ def runs_show(url: str | None, serial: str, as_json: bool = False) -> int:
         print(f"{key}: {len(d[key])}")
         for row in d[key]:
             path = row.get("path") or row.get("record_path") or ""
-            if key == "runs":
-                path = ", ".join(s["path"] for s in row["segments"])
             digest = (
                 (row.get("model_hash") if key == "models" else None)
                 or row.get("file_hash")
                 or row.get("report_hash")
                 or row.get("record_hash")
             )
+            if key == "runs":  # a run is its segment files
+                path = ", ".join(s["path"] for s in row["segments"])
+                digest = row["segments"][0]["file_hash"] if row["segments"] else None
             extra = (
-                row.get("outcome")
-                or row.get("verdict")
+                row.get("verdict")
+                or row.get("outcome")
                 or row.get("result")
                 or row.get("format")
                 or row.get("family")
