@@ -101,9 +101,13 @@ def run_entry(path: PathLike) -> RunEntry:
     outcome = run_outcome(read_recording(p, topics=["/profile/event"]))
     digest = file_digest(p)
     started = parse_time(run.start_time)
-    # a resumed run's files carry its id and their segment number (docs/recording-format.md)
+    # a resumed run's files carry its id and their segment number (docs/recording-format.md,
+    # "Segments"); the reader gives the first segment's record with every segment listed
     raw = meta["run"]
     number = raw.get("segment", 1)
+    for seg in raw.get("segments") or []:
+        if isinstance(seg, dict) and seg.get("file") == p.name:
+            number = seg.get("segment", number)
     profile = run.profile if isinstance(run.profile, dict) else {}
     return RunEntry(
         run_key=str(raw.get("run_id") or digest),
@@ -131,6 +135,17 @@ def written(path: PathLike) -> dt.datetime:
     """When a file was written (its modification time, naive UTC)."""
     t = dt.datetime.fromtimestamp(Path(path).stat().st_mtime, dt.timezone.utc)
     return t.replace(tzinfo=None, microsecond=0)
+
+
+def earlier_segments(path: PathLike) -> list[Path]:
+    """The files of the segments before ``path`` in its run (a resumed run's record lists
+    them, beside it), those that exist."""
+    from gyrolab.record.reader import read_metadata
+
+    p = Path(path)
+    segs = read_metadata(p).get("run", {}).get("segments") or []
+    files = [p.parent / str(s["file"]) for s in segs if isinstance(s, dict) and s.get("file")]
+    return [f for f in files if f.name != p.name and f.is_file()]
 
 
 def _kept(metrics: dict[str, Any]) -> dict[str, Any]:

@@ -18,6 +18,7 @@ from typing import Any
 
 from gyrolab.app.index_files import (
     application_entry,
+    earlier_segments,
     export_entry,
     model_entry,
     record_entry,
@@ -93,8 +94,14 @@ def _part_number(run: RunEntry | None, serial: str | None) -> UnitRef | None:
 
 
 def register_recording(path: PathLike, url: str | None = None) -> bool:
-    """``simulate``, ``acquire``, ``recover``: the recording written."""
-    return register([lambda: [e for e in [_run(path)] if e is not None]], url)
+    """``simulate``, ``acquire``, ``recover``: the recording written (and, for the
+    continuation of a resumed run, the segments before it)."""
+
+    def build() -> list[Any]:
+        files = [*earlier_segments(path), Path(path)] if is_recording(path) else []
+        return [run_entry(f) for f in files]
+
+    return register([build], url)
 
 
 def register_models(
