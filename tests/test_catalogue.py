@@ -215,6 +215,29 @@ def test_flash_and_verification_complete_the_trace(catalogue: str) -> None:
     assert t["verdict"] == {"verdict": "PASS", "from": "verification"}
 
 
+def test_parameters_flashed_from_a_model_hang_under_it(catalogue: str) -> None:
+    """A flash of a model's parameters with no export file (the flight-controller command
+    writes the model's set itself) is traced model → flash → verification."""
+    cat = Catalogue.open(catalogue)
+    try:
+        cat.add(_run("run-8", "sha256:f008", UnitRef("SN8")))
+        cat.add(ModelEntry("sha256:m8", "/models/m8", UnitRef("SN8"), "sha256:f008"))
+        flash = FlashEntry(
+            "sha256:r8", "/x/flash.json", UnitRef("SN8"), "sha256:set8", "fc-2", "written",
+            model_hash="sha256:m8",
+        )  # fmt: skip
+        cat.add(flash)
+        cat.add(VerificationEntry("sha256:v8", "/x/v.json", UnitRef("SN8"), "FAIL", "sha256:r8"))
+        t = cat.trace("SN8")
+    finally:
+        cat.close()
+    assert t is not None
+    (model,) = t["runs"][0]["models"]
+    assert model["exports"] == [] and model["flashes"][0]["device"] == "fc-2"
+    assert model["flashes"][0]["verifications"][0]["verdict"] == "FAIL"
+    assert t["verdict"] == {"verdict": "FAIL", "from": "verification"}
+
+
 WRITER = """
 import sys, time
 from pathlib import Path

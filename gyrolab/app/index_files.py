@@ -291,6 +291,7 @@ def record_entry(path: PathLike) -> FlashEntry | VerificationEntry:
             record_path=absolute(p),
             unit=unit,
             params_hash=str(d.get("params_sha256", "")),
+            model_hash=d.get("model_sha256"),
             device=str(d.get("device", "")),
             result=str(d.get("result", "")),
             detail=detail,

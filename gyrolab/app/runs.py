@@ -149,6 +149,10 @@ def trace_lines(t: dict[str, Any]) -> list[str]:
                 )
                 for v in f["verifications"]:
                     lines.append(f"{pad}      verification {v['verdict']} {_when(v['created_at'])}")
+        for f in m["flashes"]:
+            lines.append(f"{pad}  flash {f['result']} to {f['device']} {_when(f['created_at'])}")
+            for v in f["verifications"]:
+                lines.append(f"{pad}    verification {v['verdict']} {_when(v['created_at'])}")
         for a in m["applications"]:
             lines.append(f"{pad}  applied {short(a['file_hash'])} {a['path']}")
         for r in m["reports"]:

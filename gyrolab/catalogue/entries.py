@@ -123,10 +123,11 @@ class ApplicationEntry:
 
 @dataclass
 class FlashEntry:
-    """Parameters written to a device: ``params_hash`` is the hash of the export file that
-    was written (so the trace finds the export and the model behind it), ``device`` the
-    device's identity as the command read it, ``result`` ``written`` | ``failed`` |
-    ``restored`` (the backup put back after a failure)."""
+    """Parameters written to a device: ``params_hash`` the hash of what was written (the
+    export file's, when an export was flashed: the trace then finds the export),
+    ``model_hash`` the model they came from (parameters flashed from a model directory
+    directly), ``device`` the device's identity as the command read it, ``result``
+    ``written`` | ``failed`` | ``restored`` (the backup put back after a failure)."""
 
     record_hash: str
     record_path: str
@@ -134,6 +135,7 @@ class FlashEntry:
     params_hash: str
     device: str
     result: str
+    model_hash: str | None = None
     detail: dict[str, Any] = field(default_factory=dict)
     created_at: dt.datetime = field(default_factory=utc_now)
 

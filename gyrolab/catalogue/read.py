@@ -123,13 +123,17 @@ def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
             reports.setdefault(r["report_hash"], r)
     for r in _by(conn, T_REPORT, "model_hash", model_hashes):
         reports.setdefault(r["report_hash"], r)
+    flashes = {f["record_hash"]: f for f in _by(conn, T_FLASH, "unit_id", [u.id])}
+    for f in _by(conn, T_FLASH, "model_hash", model_hashes):
+        if f["unit_id"] in (None, u.id):
+            flashes.setdefault(f["record_hash"], f)
     return {
         "unit": _row(u, drop=()),
         "runs": runs,
         "models": list(models.values()),
         "exports": _by(conn, T_EXPORT, "model_hash", model_hashes),
         "applications": _by(conn, T_APP, "model_hash", model_hashes),
-        "flashes": _by(conn, T_FLASH, "unit_id", [u.id]),
+        "flashes": list(flashes.values()),
         "verifications": _by(conn, T_VER, "unit_id", [u.id]),
         "reports": list(reports.values()),
     }
@@ -157,7 +161,13 @@ def trace(conn: Connection, serial: str) -> dict[str, Any] | None:
     for a in d["applications"]:
         apps_of[a["model_hash"]].append(a)
     reports = d["reports"]
+    exported = {e["file_hash"] for e in d["exports"]}
+    flashed_from: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for f in d["flashes"]:
+        if f["params_hash"] not in exported and f["model_hash"]:
+            flashed_from[f["model_hash"]].append(f)  # flashed from the model, no export file
     for m in d["models"]:
+        m["flashes"] = flashed_from.get(m["model_hash"], [])
         m["exports"] = exports_of.get(m["model_hash"], [])
         m["applications"] = apps_of.get(m["model_hash"], [])
         m["reports"] = [r for r in reports if r["model_hash"] == m["model_hash"]]

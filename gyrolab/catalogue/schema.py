@@ -5,6 +5,7 @@ What is linked to what (docs/catalogue.md draws it)::
     unit ─< run_unit >─ run ─< segment            a run: one or more segment files
     unit ─< model ── segment (calibration, validation)
     model ─< export ─< flash >─ unit ─< verification ── flash, segment
+    model ─< flash                                parameters flashed from the model itself
     model ─< application ── segment               gyrolab apply's compensated recording
     unit ─< report ── segment, model              gyrolab report's verdict
 
@@ -157,7 +158,10 @@ class Flash(Base):
     record_hash: Mapped[str] = mapped_column(HASH, unique=True)  # the flash's record file
     record_path: Mapped[str] = mapped_column(Text)
     unit_id: Mapped[int | None] = mapped_column(ForeignKey("units.id"), index=True)
-    params_hash: Mapped[str] = mapped_column(HASH, index=True)  # the export file written
+    # what was written: the parameter set's hash (an export file's, when one was flashed)
+    # and the model it came from
+    params_hash: Mapped[str] = mapped_column(HASH, index=True)
+    model_hash: Mapped[str | None] = mapped_column(HASH, index=True)
     device: Mapped[str] = mapped_column(Text)  # the device's identity (board, id, port)
     result: Mapped[str] = mapped_column(String(32))  # written | failed | restored
     detail: Mapped[Any] = mapped_column(JSON)

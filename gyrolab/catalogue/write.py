@@ -176,7 +176,8 @@ def add_application(conn: Connection, e: ApplicationEntry) -> int:
 
 def add_flash(conn: Connection, e: FlashEntry) -> int:
     values = {**_values(conn, e), "host": HOST}
-    return upsert(conn, schema.Flash.__table__, values, key=["record_hash"], fill=["unit_id"])
+    fill = ["unit_id", "model_hash"]
+    return upsert(conn, schema.Flash.__table__, values, key=["record_hash"], fill=fill)
 
 
 def add_verification(conn: Connection, e: VerificationEntry) -> int:

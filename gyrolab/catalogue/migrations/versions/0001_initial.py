@@ -83,6 +83,7 @@ def upgrade() -> None:
         sa.Column("record_path", sa.Text(), nullable=False),
         sa.Column("unit_id", sa.Integer(), nullable=True),
         sa.Column("params_hash", sa.String(length=80), nullable=False),
+        sa.Column("model_hash", sa.String(length=80), nullable=True),
         sa.Column("device", sa.Text(), nullable=False),
         sa.Column("result", sa.String(length=32), nullable=False),
         sa.Column("detail", sa.JSON(), nullable=False),
@@ -96,6 +97,7 @@ def upgrade() -> None:
         sa.UniqueConstraint("record_hash"),
     )
     with op.batch_alter_table("flashes", schema=None) as batch_op:
+        batch_op.create_index(batch_op.f("ix_flashes_model_hash"), ["model_hash"], unique=False)
         batch_op.create_index(batch_op.f("ix_flashes_params_hash"), ["params_hash"], unique=False)
         batch_op.create_index(batch_op.f("ix_flashes_unit_id"), ["unit_id"], unique=False)
 
@@ -256,6 +258,7 @@ def downgrade() -> None:
     with op.batch_alter_table("flashes", schema=None) as batch_op:
         batch_op.drop_index(batch_op.f("ix_flashes_unit_id"))
         batch_op.drop_index(batch_op.f("ix_flashes_params_hash"))
+        batch_op.drop_index(batch_op.f("ix_flashes_model_hash"))
 
     op.drop_table("flashes")
     op.drop_table("units")
