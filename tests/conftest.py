@@ -4,7 +4,8 @@ every command's catalogue registration going to the session's own catalogue file
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -29,15 +30,30 @@ def shared_dir() -> Path:
     return SHARED
 
 
-@pytest.fixture(scope="session", autouse=True)
-def session_catalogue(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """Every command a test runs (in process or as a subprocess) registers in this
-    session's own SQLite catalogue, never in the user's (docs/catalogue.md)."""
-    path = tmp_path_factory.mktemp("catalogue") / "catalogue.sqlite"
-    saved = os.environ.get("GYROLAB_CATALOGUE")
-    os.environ["GYROLAB_CATALOGUE"] = str(path)
-    yield path
-    if saved is None:
+_CATALOGUE_DIR: list[str] = []
+_SAVED: dict[str, str | None] = {}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Every command a test runs (in process, or as a subprocess with an environment copied
+    at import time) registers in this session's own SQLite catalogue, never in the user's
+    (docs/catalogue.md): set before the test modules are imported."""
+    d = tempfile.mkdtemp(prefix="gyrolab-test-catalogue-")
+    _CATALOGUE_DIR.append(d)
+    _SAVED["GYROLAB_CATALOGUE"] = os.environ.get("GYROLAB_CATALOGUE")
+    os.environ["GYROLAB_CATALOGUE"] = str(Path(d) / "catalogue.sqlite")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    for d in _CATALOGUE_DIR:
+        shutil.rmtree(d, ignore_errors=True)
+    if _SAVED.get("GYROLAB_CATALOGUE") is None:
         os.environ.pop("GYROLAB_CATALOGUE", None)
     else:
-        os.environ["GYROLAB_CATALOGUE"] = saved
+        os.environ["GYROLAB_CATALOGUE"] = str(_SAVED["GYROLAB_CATALOGUE"])
+
+
+@pytest.fixture(scope="session")
+def session_catalogue() -> Path:
+    """The session's catalogue file (pytest_configure)."""
+    return Path(os.environ["GYROLAB_CATALOGUE"])
