@@ -67,11 +67,14 @@ def sqlite_url(path: str | os.PathLike[str]) -> str:
 
 
 def shown(url: str) -> str:
-    """``url`` with any password hidden (for messages)."""
+    """``url`` for messages: an SQLite file as its path, any password hidden."""
     try:
-        return make_url(url).render_as_string(hide_password=True)
+        u = make_url(url)
     except ArgumentError:
         return url
+    if u.get_backend_name() == "sqlite" and u.database and u.database != ":memory:":
+        return u.database
+    return u.render_as_string(hide_password=True)
 
 
 def _sqlite_engine(u: URL) -> Engine:
