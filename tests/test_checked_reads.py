@@ -10,6 +10,7 @@ The fast in-process fuzz at the end is the suite's version of benchmarks/fuzz_re
 from __future__ import annotations
 
 import importlib.util
+import os
 import random
 import struct
 import sys
@@ -253,3 +254,28 @@ def test_a_message_its_writer_got_wrong_is_one_line(
         w._put(topic, 1.0, data)
     with pytest.raises(InputError, match=rf"a {topic} message \(log time \d+ ns\) does not decode"):
         read_recording(path)
+
+
+def test_a_file_is_checked_once_per_process_until_it_changes(
+    run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A command opens its recording several times; the data section's CRC is summed on the
+    first open only, and again as soon as the file's stamps show any change."""
+    import gyrolab.record.source as source
+
+    f = tmp_path / "run.mcap"
+    f.write_bytes(run.read_bytes())
+    sums = []
+    real = source.check_data_section
+    monkeypatch.setattr(source, "check_data_section", lambda *a: sums.append(1) or real(*a))
+    now = source.time.time_ns
+    monkeypatch.setattr(source.time, "time_ns", lambda: now() + 10**10)  # as if it settled
+    read_metadata(f)
+    list(iter_blocks(f))
+    assert len(sums) == 1
+    st = f.stat()
+    f.write_bytes(flipped(f.read_bytes(), len(f.read_bytes()) // 2))
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # a stamp that surely differs
+    with pytest.raises(InputError, match="damaged"):
+        read_metadata(f)
+    assert len(sums) == 2

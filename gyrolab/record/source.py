@@ -15,6 +15,7 @@ import contextlib
 import heapq
 import io
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
@@ -284,6 +285,29 @@ def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[S
         fh.close()
 
 
+#: Files whose data section's CRC this process has checked, by (device, inode, size,
+#: mtime, ctime): a command opens its recording several times (metadata, units, each pass),
+#: and reading one unit of a many-unit file would otherwise check every unit's bytes each
+#: time. Any write changes the ctime, which nobody can set back; a file changed within
+#: :data:`_SETTLE_NS` of the check is not remembered, as its stamps may not show a change
+#: that follows at once (file-system timestamps have a granularity).
+_CHECKED: set[tuple[int, ...]] = set()
+_SETTLE_NS = 2_000_000_000
+_CHECKED_MAX = 4096
+
+
+def _file_key(fh: BinaryIO) -> tuple[int, ...]:
+    st = os.fstat(fh.fileno())
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+def _remember(key: tuple[int, ...]) -> None:
+    if time.time_ns() - max(key[3], key[4]) > _SETTLE_NS:
+        if len(_CHECKED) >= _CHECKED_MAX:
+            _CHECKED.clear()
+        _CHECKED.add(key)
+
+
 def _open(p: Path, fh: BinaryIO, hint: str) -> Source:
     from mcap.reader import make_reader
 
@@ -294,8 +318,12 @@ def _open(p: Path, fh: BinaryIO, hint: str) -> Source:
         layout = check_layout(fh)
         fh.seek(0)
         src = Source(p, fh, make_reader(fh), layout, hint)
-        check_data_section(fh, layout, src.spans)
-        src.verified = layout.data_crc != 0
+        if layout.data_crc:
+            key = _file_key(fh)
+            if key not in _CHECKED:
+                check_data_section(fh, layout, src.spans)
+                _remember(key)
+            src.verified = True
         return src
     except InputError:
         raise
