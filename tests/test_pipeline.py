@@ -229,7 +229,7 @@ def test_model_dir_round_trip(
     with np.load(d / "arrays.npz", allow_pickle=False) as z:
         assert "calib_modes" in z.files and z["calib_modes"].shape[0] == model.K
     sd = torch.load(d / "drift_gabp.pt", weights_only=True)
-    assert sd["0.weight"].shape == (model.drift.hidden, model.drift.n_in)
+    assert sd["0.weight"].shape == (model.drift.regressor.hidden, model.drift.regressor.n_in)
     back = load_model(str(d))
     assert back.config == model.config and (back.K, back.alpha) == (model.K, model.alpha)
     run = load(runs["val"])

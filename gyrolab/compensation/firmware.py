@@ -39,8 +39,11 @@ class Poly3:
     t_max: float
 
     def predict(self, temp_c: np.ndarray) -> np.ndarray:
-        """Bias in °/s at temperatures ``temp_c`` (clamped to the calibrated range)."""
-        d = np.clip(np.asarray(temp_c, dtype=float), self.t_min, self.t_max) - self.t_ref
+        """Bias in °/s at temperatures ``temp_c`` (clamped to the calibrated range): a 1-D
+        array, or inputs ``(N, k)`` whose column 0 is the temperature."""
+        T = np.asarray(temp_c, dtype=float)
+        T = T[:, 0] if T.ndim == 2 else T
+        d = np.clip(T, self.t_min, self.t_max) - self.t_ref
         c0, c1, c2, c3 = self.coef
         return c0 + d * (c1 + d * (c2 + d * c3))
 
@@ -51,6 +54,17 @@ class Poly3:
         c = np.zeros(4)
         c[: q.coef.size] = q.coef
         return tuple(float(v) for v in c)  # type: ignore[return-value]
+
+    def spec(self, inputs: list[str], window_s: float | None) -> dict[str, Any]:
+        """The exported form (``poly3``, :mod:`gyrolab.compensation.regressors`; its one
+        input is T)."""
+        return {
+            "kind": "poly3",
+            "coef": list(self.coef),
+            "t_ref": self.t_ref,
+            "t_min": self.t_min,
+            "t_max": self.t_max,
+        }
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -121,17 +135,13 @@ def poly3_metrics(p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str
     }
 
 
-def firmware_metrics_for_dir(model_dir: Any, run: PreparedRun, metrics: dict[str, Any]) -> None:
-    """Add ``firmware_poly3`` to a report's ``metrics`` when the model directory has the
-    firmware cubic (models fitted before it existed have none: nothing is added)."""
-    import json
-    from pathlib import Path
-
-    p = Path(model_dir) / "firmware.json"
-    if not p.is_file():
-        return
-    p3 = Poly3.from_dict(json.loads(p.read_text())["poly3"])
-    metrics["firmware_poly3"] = poly3_metrics(p3, run, float(metrics["sample_period_s"]), metrics)
+def add_firmware_metrics(p3: Poly3 | None, run: PreparedRun, metrics: dict[str, Any]) -> None:
+    """Add ``firmware_poly3`` to a report's ``metrics`` for the model's firmware cubic
+    (``None``: a model fitted before it existed; nothing is added)."""
+    if p3 is not None:
+        metrics["firmware_poly3"] = poly3_metrics(
+            p3, run, float(metrics["sample_period_s"]), metrics
+        )
 
 
 def firmware_sentence(metrics: dict[str, Any]) -> str:

@@ -15,15 +15,12 @@
   fitted on (``calibration.temperature_source``: the unit's PT100, or its internal die
   sensor) against the run's. A mismatch is not refused (the die–case offset and lag may be
   acceptable) but flagged the same way: a stderr line and ``temperature_source_mismatch``.
-* :func:`check_finite` — a model whose parameters are not all finite is refused when
-  loaded (one line naming the file, exit 2) instead of producing an all-NaN output.
 """
 
 from __future__ import annotations
 
 import hashlib
 import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -208,33 +205,3 @@ def warn_outside(path: str, t: dict[str, Any]) -> None:
     for msg in (range_warning(path, t), source_warning(path, t)):
         if msg:
             print(msg, file=sys.stderr)
-
-
-def check_finite(directory: str | Path, meta: dict[str, Any], arrays: dict[str, Any]) -> None:
-    """Refuse a model whose parameters are not all finite: the network weights, scalers,
-    ranges and polynomial coefficients (``drift.*``, ``baseline.*``, ``causal.*`` in arrays.npz, the
-    scalers in model.json) and the FLP coefficients. One line naming the file."""
-    npz = Path(directory) / "arrays.npz"
-    for k, v in arrays.items():
-        if not k.startswith(("drift.", "baseline.", "causal.")) or k.endswith("_history"):
-            continue
-        a = np.asarray(v)
-        if a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
-            bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
-            raise InputError(
-                npz, f"model parameter {k} has {bad} non-finite value(s) of {a.size}: refused"
-            )
-    mj = Path(directory) / "model.json"
-    scal = [("drift_model", meta.get("drift_model") or {})]
-    scal += [(f"baselines.{n}", b) for n, b in (meta.get("baselines") or {}).items()]
-    for where, d in scal:
-        for key in ("y_mean", "y_std", "t_lo", "t_hi"):
-            if key in d and not (d[key] is not None and np.isfinite(float(d[key]))):
-                raise InputError(mj, f"model parameter {where}.{key} is not finite: refused")
-    for name, f in (meta.get("flp") or {}).items():
-        if not isinstance(f, dict):
-            continue
-        vals = list(f.get("coef") or []) + [f.get("mean", 0.0)]
-        # JSON has no NaN: a non-finite value was written as null
-        if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in vals):
-            raise InputError(mj, f"FLP parameters flp.{name} are not finite: refused")

@@ -22,6 +22,7 @@ import numpy as np
 from gyrolab.compensation.causal_features import hold
 from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.guards import RunHasher, content_hash
+from gyrolab.compensation.temperature_model import temperature_inputs
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
@@ -76,12 +77,7 @@ def features(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineCon
     """Drift-model inputs at times ``t``: T (°C) and, with ``use_dtdt``, the backward
     difference ``(T(t) − T(t − w)) / w`` (°C/s, w = ``dtdt_window_s``). Causal, and the same
     function for fitting, offline and streaming application."""
-    T = causal_temperature(t, pt_t, pt_c)
-    if not cfg.use_dtdt:
-        return T[:, None]
-    w = cfg.dtdt_window_s
-    Tp = causal_temperature(t - w, pt_t, pt_c)
-    return np.column_stack([T, (T - Tp) / w])
+    return temperature_inputs(t, pt_t, pt_c, cfg.dtdt_window_s if cfg.use_dtdt else None)
 
 
 def _check_temperature(path: str, pt_t: np.ndarray, pt_c: np.ndarray) -> tuple[np.ndarray, ...]:

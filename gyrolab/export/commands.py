@@ -26,9 +26,9 @@ FORMATS = ("px4", "ardupilot", "c", "json", "kalibr")
 
 
 def _polys(model_dir: str) -> list[Any]:
-    from gyrolab.compensation.axes import axis_dirs, load_poly3
+    from gyrolab.compensation.model_dir import ModelDir
 
-    return [load_poly3(d) for _name, d in axis_dirs(model_dir)]
+    return [d.require_firmware() for _name, d in ModelDir(model_dir).axes()]
 
 
 def _header(args: argparse.Namespace) -> str:
@@ -43,22 +43,21 @@ def _header(args: argparse.Namespace) -> str:
 def kalibr_text(args: argparse.Namespace) -> str:
     """``imu.yaml`` for ``args.model`` applied to ``args.run`` (every axis)."""
     from gyrolab.compensation.apply import streaming_compensate
-    from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.export.kalibr import axis_noise, imu_yaml
     from gyrolab.logs import log_options, read_log
 
     if not args.run:
         raise InputError("--run", "the kalibr format needs a run to analyse (--run RUN)")
     rec = read_log(args.run, **log_options(args))
-    dirs = axis_dirs(args.model)
+    dirs = ModelDir(args.model).axes()
     if rec.axes != len(dirs):
         raise InputError(args.run, f"has {rec.axes} axes, the model {len(dirs)}")
     pt_t, pt_c = rec.require_temperature()
     axes = {}
     for k, (name, d) in enumerate(dirs):
         s = rec.axis(k).require_rate()
-        y = streaming_compensate(load_model(str(d)), s.t, s.values, pt_t, pt_c)
+        y = streaming_compensate(d.load(), s.t, s.values, pt_t, pt_c)
         axes[name] = axis_noise(y, s.rate_hz)
     return imu_yaml(axes, rec.require_rate().rate_hz, args.rostopic, str(args.run))
 
@@ -94,7 +93,7 @@ def export(args: argparse.Namespace) -> int:
                 raise InputError(out, "the C output must be NAME.c (NAME.h is written beside it)")
             try:
                 header, source = generate(spec, outs[1].name)
-            except ValueError as e:
+            except ValueError as e:  # e.g. a non-finite constant, axes' windows that differ
                 raise InputError(args.model, str(e)) from None
             texts = [source, header]
     elif fmt == "kalibr":
