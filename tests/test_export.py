@@ -150,6 +150,27 @@ def test_apply_three_axes(unit: dict[str, Path]) -> None:
         np.testing.assert_array_equal(got.rate.values[:, a], want.astype(np.float32))
 
 
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+def test_apply_three_axes_runs_the_model_the_c_export_runs(unit: dict[str, Path]) -> None:
+    """Issue 24: on three axes as on one (test_model_dir), /gyro/rate of `apply` is raw −
+    the drift the C export (default kind) computes, within float32."""
+    out = unit["dir"] / "applied_c.mcap"
+    assert main(["apply", str(unit["model"]), str(unit["val"]), "--out", str(out)]) == 0
+    c = unit["dir"] / "chosen.c"
+    assert main(["export", str(unit["model"]), "--format", "c", "--out", str(c)]) == 0
+    rec = read_recording(unit["val"])
+    tmp = unit["dir"] / "cbuild_apply"
+    tmp.mkdir()
+    ok, drift_c = run_c(tmp, c, rec, 3)
+    assert ok.all()
+    raw = rec.rate.values.astype(float)
+    d_apply = raw - read_recording(out).rate.values.astype(float)
+    ulp = 2 * np.spacing(np.float32(np.abs(raw).max()))
+    for a in range(3):
+        err = np.abs(d_apply[:, a] - drift_c[:, a])
+        assert err.max() <= 1e-5 * np.abs(d_apply[:, a]).max() + ulp, a
+
+
 def test_three_axis_report_shows_every_axis(unit: dict[str, Path]) -> None:
     from gyrolab.report.axes import build_axes_report
 

@@ -255,6 +255,8 @@ def fit(
             "content_hash": run.content_hash,
             # the model's input: the PT100 or the unit's internal sensor (guards.source_check)
             "temperature_source": run.temperature_source,
+            # the unit it was fitted on, as its recording names it (guards.unit_check)
+            **({"unit_serial": run.serial} if run.serial else {}),
         },
         flp_mixed=flp_mixed,
         flp_stream=flp_stream,

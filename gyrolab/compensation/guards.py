@@ -15,6 +15,10 @@
   fitted on (``calibration.temperature_source``: the unit's PT100, or its internal die
   sensor) against the run's. A mismatch is not refused (the die–case offset and lag may be
   acceptable) but flagged the same way: a stderr line and ``temperature_source_mismatch``.
+* :func:`unit_check` / :func:`unit_warning` — the unit the model was fitted on
+  (``calibration.unit_serial``, the serial its calibration recording names) against the
+  run's: a model applied to another unit's run is flagged (stderr line, ``unit_mismatch``),
+  not refused (a fleet prior is applied to other units on purpose).
 """
 
 from __future__ import annotations
@@ -119,6 +123,30 @@ def source_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     }
 
 
+def unit_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
+    """The serial of the unit the model was fitted on (``calibration.unit_serial``, else
+    the multi-unit ``calibration.unit``) against the run's (``PreparedRun.serial``), and
+    whether they differ — only where both are known (a model or a recording without a
+    serial is not flagged)."""
+    fitted = str(calibration.get("unit_serial") or calibration.get("unit") or "")
+    used = str(getattr(run, "serial", "") or "")
+    return {
+        "unit_serial": used or None,
+        "calibration_unit_serial": fitted or None,
+        "unit_mismatch": bool(fitted and used and fitted != used),
+    }
+
+
+def unit_warning(path: str, t: dict[str, Any]) -> str | None:
+    """One stderr line for a run of another unit than the model's (``None`` otherwise)."""
+    if not t.get("unit_mismatch"):
+        return None
+    return (
+        f"warning: {path}: the model was fitted on unit {t['calibration_unit_serial']}, "
+        f"this run is unit {t['unit_serial']}: its drift is not this unit's"
+    )
+
+
 SOURCE_NAMES = {"pt100": "PT100 (case)", "internal": "internal (die) sensor"}
 
 
@@ -144,7 +172,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     keys only."""
     lo, hi = calibration.get("temp_min_c"), calibration.get("temp_max_c")
     if lo is None or hi is None:
-        return source_check(calibration, run)
+        return {**source_check(calibration, run), **unit_check(calibration, run)}
     strict = (run.temp < lo) | (run.temp > hi)
     frac_t, margin_t = _outside(run.temp, lo, hi, TEMP_MARGIN_C)
     out: dict[str, Any] = {
@@ -176,6 +204,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
         flag = flag or frac_r > 0
     out["outside_calibration_range"] = bool(flag)
     out.update(source_check(calibration, run))
+    out.update(unit_check(calibration, run))
     return out
 
 
@@ -201,7 +230,8 @@ def range_warning(path: str, t: dict[str, Any]) -> str | None:
 
 
 def warn_outside(path: str, t: dict[str, Any]) -> None:
-    """The stderr lines of a ``temperature`` block: outside the range, another source."""
-    for msg in (range_warning(path, t), source_warning(path, t)):
+    """The stderr lines of a ``temperature`` block: outside the range, another source,
+    another unit."""
+    for msg in (range_warning(path, t), source_warning(path, t), unit_warning(path, t)):
         if msg:
             print(msg, file=sys.stderr)

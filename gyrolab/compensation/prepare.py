@@ -53,6 +53,7 @@ class PreparedRun:
     unit: str | None = None  # the unit of a multi-unit recording (docs/fleet.md)
     # what pt_c is: the PT100, or the unit's internal sensor (Recording.temperature_source)
     temperature_source: str = "pt100"
+    serial: str = ""  # the unit's serial as the recording names it ("": not recorded)
     label: str = ""  # the caller's stable name for the run ("": the path as given)
     # prepare_file's full-rate batches, kept for the later passes (run_rate_batches) when the
     # run has at most RATE_KEEP_MAX_SAMPLES samples; None: those passes stream the file
@@ -144,6 +145,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit)
     run.content_hash = content_hash(x, pt_t, pt_c)
     run.temperature_source = rec.temperature_source
+    run.serial = str(rec.run.get("unit_serial") or "")
     return run
 
 
@@ -263,5 +265,6 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
     run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit)
     run.content_hash = hasher.hexdigest(pt_t, pt_c)
     run.temperature_source = rec.temperature_source
+    run.serial = str(rec.run.get("unit_serial") or "")
     run.rate_batches = kept
     return run

@@ -94,10 +94,10 @@ def plateau_rows(rec: Recording) -> list[Any]:
 
 
 def range_note(metrics: dict[str, Any]) -> str:
-    """The sentences for a run outside the model's calibrated range and for one whose
-    temperature source is not the model's ('' when neither)."""
+    """The sentences for a run outside the model's calibrated range, for one whose
+    temperature source is not the model's and for another unit's run ('' when none)."""
     rng = metrics.get("temperature") or {}
-    from gyrolab.compensation.guards import range_warning, source_warning
+    from gyrolab.compensation.guards import range_warning, source_warning, unit_warning
 
     name = Path(str(metrics.get("run", "this run"))).name
     notes = []
@@ -107,16 +107,20 @@ def range_note(metrics: dict[str, Any]) -> str:
     line = source_warning(name, rng)
     if line:
         notes.append(line.replace("warning: ", "Another temperature source — ", 1) + ".")
+    line = unit_warning(name, rng)
+    if line:
+        notes.append(line.replace("warning: ", "Another unit — ", 1) + ".")
     return " ".join(notes)
 
 
 def warn_source(metrics: dict[str, Any]) -> None:
-    """The stderr line of a run whose temperature source is not the model's."""
-    from gyrolab.compensation.guards import source_warning
+    """The stderr lines of a run whose temperature source or unit is not the model's."""
+    from gyrolab.compensation.guards import source_warning, unit_warning
 
-    line = source_warning(str(metrics.get("run", "this run")), metrics.get("temperature") or {})
-    if line:
-        print(line, file=sys.stderr)
+    name, rng = str(metrics.get("run", "this run")), metrics.get("temperature") or {}
+    for line in (source_warning(name, rng), unit_warning(name, rng)):
+        if line:
+            print(line, file=sys.stderr)
 
 
 def firmware_note(metrics: dict[str, Any]) -> str:
