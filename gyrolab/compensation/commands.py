@@ -39,8 +39,8 @@ from gyrolab import __version__
 from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
 from gyrolab.compensation.axes import load_runs
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
-from gyrolab.compensation.evaluate import evaluate
-from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
+from gyrolab.compensation.evaluate import evaluate, poly3_metrics
+from gyrolab.compensation.firmware import fit_poly3
 from gyrolab.compensation.fit import fit
 from gyrolab.compensation.guards import check_not_calibration, range_check, warn_outside
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, ModelDir

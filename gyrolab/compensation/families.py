@@ -16,6 +16,7 @@ Lookups by name: :func:`family` (a family in the selection and in model.json's
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 from gyrolab.compensation import causal_models, temperature_model
 from gyrolab.compensation.drift_model import Family, SpecKind
@@ -56,24 +57,21 @@ def names() -> tuple[str, ...]:
     return tuple(sorted(_FAMILIES, key=lambda n: (_FAMILIES[n].rank, n)))
 
 
+def _lookup(table: dict[str, Any], name: str, what: str) -> Any:
+    try:
+        return table[name]
+    except KeyError:
+        raise ValueError(f"unknown {what} {name!r} (known: {', '.join(sorted(table))})") from None
+
+
 def family(name: str) -> Family:
     """The family ``name`` (``ValueError`` naming the known ones when there is none)."""
-    try:
-        return _FAMILIES[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown drift-model family {name!r} (known: {', '.join(names())})"
-        ) from None
+    return _lookup(_FAMILIES, name, "drift-model family")
 
 
 def spec_kind(kind: str) -> SpecKind:
-    """The exported kind ``kind`` (``ValueError`` when there is none)."""
-    try:
-        return _KINDS[kind]
-    except KeyError:
-        raise ValueError(
-            f"unknown exported model kind {kind!r} (known: {', '.join(sorted(_KINDS))})"
-        ) from None
+    """The exported kind ``kind`` (``ValueError`` naming the known ones)."""
+    return _lookup(_KINDS, kind, "exported model kind")
 
 
 __all__ = ["MODULES", "family", "names", "register", "spec_kind", "unregister"]

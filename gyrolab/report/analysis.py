@@ -172,8 +172,7 @@ def model_run(
 def _apply(model_dir: str | Path, model: Any, run: Any, rec: Recording, why: str) -> ModelRun:
     """Apply the model to the run as ``compensate`` does (fixed K and α, no search)."""
     from gyrolab.compensation.apply import compensate_offline
-    from gyrolab.compensation.evaluate import evaluate
-    from gyrolab.compensation.firmware import add_firmware_metrics
+    from gyrolab.compensation.evaluate import add_firmware_metrics, evaluate
     from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.compensation.results import run_results
 
