@@ -277,8 +277,14 @@ MODEL_DIR_FILES = (
     "results.npz",
 )
 MODEL_DIR_NAMES = ("MODEL_JSON", "ARRAYS_NPZ", "METRICS_JSON", "FIRMWARE_JSON", "RESULTS_JSON")
-#: A report directory has a metrics.json of its own (docs/report.md), written there.
-OWN_FILES_ELSEWHERE = {("gyrolab.report.commands", "metrics.json")}
+#: A report directory has a metrics.json of its own (docs/report.md): written by the report,
+#: read by the catalogue's indexing of reports.
+OWN_FILES_ELSEWHERE = {
+    ("gyrolab.report.commands", "metrics.json"),
+    ("gyrolab.app.index_files", "metrics.json"),
+    ("gyrolab.app.rebuild", "metrics.json"),
+    ("gyrolab.app.register", "metrics.json"),
+}
 
 
 def _docstrings(tree: ast.AST) -> set[int]:

@@ -41,6 +41,7 @@ field (one line, exit 2) — never a model that runs with a guard silently off.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import time
@@ -389,6 +390,34 @@ class ModelDir:
                 "timing_s": float(sum(m["timing_s"] for m in axis_metrics)),
             }
         )
+
+    def digest(self) -> str:
+        """The model's identity, ``sha256:<hex>``: the SHA-256 of its ``model.json`` (which
+        holds every setting and no clock reading: the same fit gives the same bytes); for a
+        2–3-axis model, of the head ``model.json`` followed by each axis's, in the head's
+        order (the catalogue's key, docs/fleet.md)."""
+        data = self._file(self.MODEL_JSON).read_bytes()
+        h = hashlib.sha256(data)
+        try:
+            dirs = json.loads(data).get("axis_dirs")
+        except (ValueError, AttributeError):
+            dirs = None
+        for name in dirs if isinstance(dirs, list) else []:
+            h.update((self.path / str(name) / self.MODEL_JSON).read_bytes())
+        return "sha256:" + h.hexdigest()
+
+    def run_records(self) -> dict[str, dict[str, Any]]:
+        """results.json's record of each run ``compensate`` evaluated (``path``,
+        ``content_hash``, ``held_out``, …) by role, without the arrays; ``{}`` when there
+        are none. Checked as :meth:`results` checks it."""
+        rj = self._file(self.RESULTS_JSON)
+        if not rj.is_file():
+            return {}
+        meta = _read_json(rj)
+        runs = meta.get("runs") if isinstance(meta, dict) else None
+        if meta.get("format") != RESULTS_FORMAT or not isinstance(runs, dict):
+            raise InputError(rj, "not a gyrolab results file")
+        return runs
 
     def files(self) -> Iterator[Path]:
         """Every file of the directory (and of its axis directories)."""

@@ -123,8 +123,7 @@ def export(
     """Write ``model_dir`` in format ``fmt`` to ``out`` (module docstring); returns the
     files written. ``device_id`` is required for ``px4``, ``run`` for ``kalibr``
     (:func:`check_request`)."""
-    from gyrolab.catalogue.digest import model_digest
-    from gyrolab.compensation.axes import axis_dirs
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.export.params import ardupilot_parm, px4_params
 
     check_request(fmt, device_id=device_id, run=run)
@@ -136,8 +135,9 @@ def export(
     what = target(
         fmt, kind=kind, instance=instance, device_id=device_id, run=run, rostopic=rostopic
     )
-    axis_dirs(model)  # a model directory (one line, exit 2 otherwise) before it is hashed
-    model_hash = model_digest(model)
+    md = ModelDir(model)
+    md.axes()  # a model directory (one line, exit 2 otherwise) before it is hashed
+    model_hash = md.digest()
     line = provenance(model_hash, fmt, what)
     if fmt == "px4":
         assert device_id is not None  # check_request
