@@ -52,6 +52,8 @@ from breakfam.score import coverage, score, window_means  # noqa: E402
 from breakfam.trajectories import NAMES  # noqa: E402
 from docsections import write_section  # noqa: E402
 
+from gyrolab.compensation.band import grade  # noqa: E402
+
 CACHE = REPO / "benchmarks" / "results" / "break_suite"
 BLOCK_S = 3.6
 
@@ -97,6 +99,7 @@ def fit_and_apply(
             if band is not None and key == "causal":
                 lo, hi = band(r.t, r.pt_t, r.pt_c)
                 o["causal.band_lo"], o["causal.band_hi"] = lo, hi
+                o["causal.band_ratio"] = hi / m.band.half_width
         out[name] = o
     return out, info
 
@@ -132,6 +135,8 @@ def run_unit(u: int, protocol: str, families: tuple[str, ...], noise: str, quick
             rr["causal"]["band_coverage"] = coverage(
                 o["causal"], window_means(o["causal.band_lo"]), hw
             )
+            p90 = float(np.quantile(o["causal.band_ratio"], 0.9))
+            rr["causal"]["expected_error"] = {"grade": grade(p90), "ratio_p90": p90}
             yw = window_means(o["causal"])[: hw.size]
             rr["causal"]["band_ratios"] = [round(float(v), 4) for v in np.abs(yw) / hw[: yw.size]]
         rr["_case_range_c"] = [float(r.pt_c.min()), float(r.pt_c.max())]
@@ -221,6 +226,28 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             f"{100 * cov.mean():.1f} % (runs: median {100 * np.median(cov):.0f} %, "
             f"lowest {100 * cov.min():.0f} %) | {v(cov.mean() >= 0.85)} |"
         )
+    if all("expected_error" in r["runs"][n]["causal"] for r in results for n in held):
+        L += [
+            "",
+            "| expected error (graded, per held-out run) | runs | causal ÷ oracle (median, "
+            "worst) | band coverage (pooled) |",
+            "| --- | ---: | ---: | ---: |",
+        ]
+        for g in ("none", "mild", "severe"):
+            sel = [
+                (i, j)
+                for i, r in enumerate(results)
+                for j, n in enumerate(held)
+                if r["runs"][n]["causal"]["expected_error"]["grade"] == g
+            ]
+            if not sel:
+                L.append(f"| {g} | 0 | — | — |")
+                continue
+            rs = np.array([ratio[i, j] for i, j in sel])
+            cv = np.mean([results[i]["runs"][held[j]]["causal"]["band_coverage"] for i, j in sel])
+            L.append(
+                f"| {g} | {len(sel)} | {np.median(rs):.3f}, {rs.max():.2f} | {100 * cv:.0f} % |"
+            )
     L += [
         "",
         "| method | bias stability °/h | ÷ oracle (median, worst) | 100 s p-p °/s | "
@@ -279,6 +306,46 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     return "\n".join(L)
 
 
+def paired_table(results: list[dict[str, Any]], before: list[dict[str, Any]], tag: str) -> str:
+    """Paired differences, per unit (mean over its held-out runs), of this run's causal
+    headline against the same units' results of an earlier run (today's models)."""
+    units_b = {r["unit"]: r for r in before}
+    both = [r for r in results if r["unit"] in units_b]
+    rows = []
+    for key, lab in ((BS, "bias stability °/h"), (PP, "100 s p-p °/s"), (MB, "|mean bias| °/h")):
+        now = np.array([[abs(x["causal"][key]) for x in r["runs"].values()] for r in both])
+        was = np.array(
+            [[abs(x["causal"][key]) for x in units_b[r["unit"]]["runs"].values()] for r in both]
+        )
+        d = (now - was).mean(axis=1)
+        rows.append(
+            f"| {lab} | {_ms(was.mean(axis=1))} | {_ms(now.mean(axis=1))} | {_ms(d)} | "
+            f"{int(np.sum(d < 0))}/{d.size} |"
+        )
+    ratio_now = np.array(
+        [[x["causal"][BS] / x["oracle"][BS] for x in r["runs"].values()] for r in both]
+    )
+    ratio_was = np.array(
+        [
+            [x["causal"][BS] / x["oracle"][BS] for x in units_b[r["unit"]]["runs"].values()]
+            for r in both
+        ]
+    )
+    return "\n".join(
+        [
+            f"Paired against today's models (run `{tag}`, same units, same runs), per unit mean "
+            "over its held-out runs:",
+            "",
+            "| metric | before | now | Δ (now − before) | units better |",
+            "| --- | ---: | ---: | ---: | ---: |",
+            *rows,
+            "",
+            f"Causal ÷ oracle: median {np.median(ratio_was):.3f} → {np.median(ratio_now):.3f}, "
+            f"worst {ratio_was.max():.2f} → {ratio_now.max():.2f}.",
+        ]
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=12)
@@ -292,6 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="", help="docs page to write the section into")
     ap.add_argument("--tag", default="", help="cache name suffix (a variant's results)")
     ap.add_argument("--tables-only", action="store_true")
+    ap.add_argument("--before", default="", help="cache tag of an earlier run to pair with")
     ap.add_argument("--quick", action="store_true", help="tiny network settings")
     args = ap.parse_args(argv)
     fams = tuple(args.families.split(","))
@@ -326,6 +394,9 @@ def main(argv: list[str] | None = None) -> int:
         CACHE.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"meta": meta, "units": results}, indent=1, default=float))
     body = tables(results, meta)
+    if args.before:
+        prev = json.loads((CACHE / f"{args.protocol}-{args.before}.json").read_text())["units"]
+        body += "\n\n" + paired_table(results, prev, args.before)
     print(body)
     if args.out:
         write_section(Path(args.out), f"break_suite_{name}", body)
