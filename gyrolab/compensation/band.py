@@ -35,11 +35,12 @@ needs to be covered (0 for those already inside ``h₀``): the law is scaled so 
 covers ``level`` of the measured extrapolations. A direction in which fewer than three CV
 windows went beyond the margins (0.5 °C, 0.1 °C/min) is not measured — a cooling
 staircase never heats faster than its one power-on heat — and its slope is then the
-default :data:`DEFAULT_PER_C` · h₀ or :data:`DEFAULT_PER_C_PER_MIN` · h₀
-(``law_measured_c``, ``law_measured_c_per_min`` false; how the defaults were chosen:
-docs/compensation.md). Nowhere is ``h`` wider than the calibration run's raw 100 s peak-to-peak
-(``max_half_width``): a linear law measured on small excursions is not carried past what
-no compensation at all leaves.
+prior :data:`DEFAULT_PER_C` · h₀ or :data:`DEFAULT_PER_C_PER_MIN` · h₀ (the band doubles
+5 °C or 1 °C/min beyond the range; ``law_measured_c``, ``law_measured_c_per_min`` false);
+a measured slope is never flatter than that prior — a CV whose excursions were a few °C
+cannot show what 25 °C beyond costs. Nowhere is ``h`` wider than the calibration run's
+raw 100 s peak-to-peak (``max_half_width``): a linear law measured on small excursions is
+not carried past what no compensation at all leaves.
 
 **Graded expected error.** On a run, ``ρ(t) = h(t)/h₀ ≥ 1`` is the factor by which the
 expected error at t exceeds the in-range one. The grade is that of its 90th percentile
@@ -62,7 +63,9 @@ from gyrolab.compensation.guards import temperature_rate
 LEVEL = 0.9
 WINDOW_BLOCKS = 28  # 3.6 s blocks in a 100 s window (100.8 s), as the 100 s p-p metric
 RATE_WINDOW_S = 300.0
-#: fallback law (per unit of h₀) where the calibration's CV never extrapolated
+#: the prior law (per unit of h₀): the slope where the calibration's CV never
+#: extrapolated in a direction, and the floor of a measured one. A stated prior, not a
+#: measurement: the band doubles 5 °C or 1 °C/min beyond the calibrated range
 DEFAULT_PER_C = 0.2
 DEFAULT_PER_C_PER_MIN = 1.0
 GRADES = ((1.1, "none"), (2.0, "mild"), (float("inf"), "severe"))
@@ -120,7 +123,8 @@ class PredictionBand:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> PredictionBand:
-        return cls(**{k: d[k] for k in cls.__dataclass_fields__ if k in d})
+        # JSON has no inf: an uncapped band was written as null (gyrolab.outputs.json_safe)
+        return cls(**{k: d[k] for k in cls.__dataclass_fields__ if d.get(k) is not None})
 
 
 def _windows(mask: np.ndarray, n: int = WINDOW_BLOCKS) -> list[np.ndarray]:
@@ -195,7 +199,9 @@ def fit_band(
         if np.any(lin > 0):
             need = np.where(e > 0, e / np.where(lin > 0, lin, np.inf), 0.0)
             k = float(np.quantile(need, level))
-        slopes[seen] = k * a
+        # never flatter than the prior: a CV whose excursions were a few °C cannot show
+        # what 25 °C beyond costs (a polynomial's error grows faster than linearly)
+        slopes[seen] = np.maximum(k * a, slopes[seen])
     per_c, per_r = float(slopes[0]), float(slopes[1])
     measured = bool(seen.all())
     return PredictionBand(
@@ -252,7 +258,7 @@ def band_metrics(
     causal output ``y`` (3.6 s means at block centres ``t``), its coverage, and the graded
     expected error."""
     h = band.half_width_at(t, pt_t, pt_c)
-    n = (y.size // WINDOW_BLOCKS) * WINDOW_BLOCKS
+    n = (min(y.size, h.size) // WINDOW_BLOCKS) * WINDOW_BLOCKS
     hw = h[:n].reshape(-1, WINDOW_BLOCKS).mean(axis=1)
     yw = y[:n].reshape(-1, WINDOW_BLOCKS).mean(axis=1)
     ratio = h / band.half_width if band.half_width > 0 else np.ones_like(h)
