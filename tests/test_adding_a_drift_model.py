@@ -115,10 +115,11 @@ def fit_lagline(ctx: FitContext) -> Candidate:
 
         return fit
 
-    cv = {tau: ctx.cv_rmse(fitter(tau)) for tau in TAU_GRID_S}
-    tau = min(cv, key=lambda k: cv[k])
+    cv = {tau: ctx.cross_validate(fitter(tau)) for tau in TAU_GRID_S}
+    tau = min(cv, key=lambda k: cv[k][0])
     model = fitter(tau)(np.ones(cal.t.size, dtype=bool))
-    return Candidate(model, cv[tau], {"tau_s": tau})
+    err, pred = cv[tau]
+    return Candidate(model, err, {"tau_s": tau}, pred)
 
 
 def load_lagline(meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str) -> LagLine:

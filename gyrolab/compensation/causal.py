@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.compensation import families as registry
+from gyrolab.compensation.band import PredictionBand, fit_band
 from gyrolab.compensation.baselines import blocked_folds
 from gyrolab.compensation.drift_model import (
     TIE,
@@ -89,6 +90,9 @@ def fit_causal(
     model.cv_rmse = {f: c.cv_rmse for f, c in fitted.items()}
     model.selection = selection
     model.alternatives = {f: c.model for f, c in fitted.items()}
+    pred = fitted[win].cv_pred
+    if pred is not None:  # the winner's 90 % band, from its own held-out predictions
+        model.band = fit_band(cal.t, y, pred, ctx.folds, cal.pt_t, cal.pt_c)
     return model
 
 
@@ -115,6 +119,7 @@ def causal_from_state(
     m = registry.family(str(meta["family"])).load(meta, arrays, prefix)
     m.cv_rmse = {k: float(v) for k, v in meta.get("cv_rmse_deg_per_s", {}).items()}
     m.selection = dict(meta.get("selection", {}))
+    m.band = PredictionBand.from_dict(meta["band"]) if meta.get("band") else None
     return m
 
 

@@ -108,6 +108,7 @@ class CausalDriftModel(DriftModel):
             "cv_rmse_deg_per_s": self.cv_rmse,
             "selection": self.selection,
             **self.parameters(),
+            **self.band_entry(),
         }
 
     # -- firmware
@@ -176,9 +177,10 @@ def _fit_poly(ctx: FitContext) -> Candidate:
     y = ctx.cal.rate
     cv = {o: cv_linear(X0, y, o, (), ctx.folds) for o in ORDERS}
     o0 = min(cv, key=lambda o: cv[o])
-    return Candidate(
-        StructuredCausalModel("poly", p0, fit_structured(X0, y, o0, ())), cv[o0], {"order": o0}
-    )
+    pred = np.empty_like(y)
+    err = cv_linear(X0, y, o0, (), ctx.folds, pred)
+    model = StructuredCausalModel("poly", p0, fit_structured(X0, y, o0, ()))
+    return Candidate(model, err, {"order": o0}, pred)
 
 
 def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
@@ -193,11 +195,14 @@ def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
 
 
 def _fit_structured(ctx: FitContext) -> Candidate:
-    ps, order, terms, err, log, Xs = structured_choice(ctx)
-    model = fit_structured(Xs, ctx.cal.rate, order, terms)
-    return Candidate(
-        StructuredCausalModel("structured", ps, model), err, {**log, "features": ps.to_dict()}
-    )
+    ps, order, terms, _err, log, Xs = structured_choice(ctx)
+    y = ctx.cal.rate
+    # the CV RMSE of the terms kept (the term search's running error may be that of a
+    # set within the tie margin), with every block's held-out prediction
+    pred = np.empty_like(y)
+    err = cv_linear(Xs, y, order, terms, ctx.folds, pred)
+    model = StructuredCausalModel("structured", ps, fit_structured(Xs, y, order, terms))
+    return Candidate(model, err, {**log, "features": ps.to_dict()}, pred)
 
 
 def _fit_network(ctx: FitContext, name: str, init: str) -> Candidate:
@@ -213,11 +218,14 @@ def _fit_network(ctx: FitContext, name: str, init: str) -> Candidate:
         return fit_mlp(X, yy, init=init, bp=bp, ga=ga, seed=ctx.seed)
 
     sq, n = 0.0, 0
+    pred = np.empty_like(y)
     for held in ctx.folds:
-        r = fit(Xs[~held], y[~held]).predict(Xs[held]) - y[held]
+        pred[held] = fit(Xs[~held], y[~held]).predict(Xs[held])
+        r = pred[held] - y[held]
         sq += float(r @ r)
         n += int(held.sum())
-    return Candidate(NetworkCausalModel(name, ps, fit(Xs, y)), float(np.sqrt(sq / n)))
+    model = NetworkCausalModel(name, ps, fit(Xs, y))
+    return Candidate(model, float(np.sqrt(sq / n)), None, pred)
 
 
 FAMILIES = (

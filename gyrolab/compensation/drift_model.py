@@ -63,13 +63,16 @@ class DriftModel(ABC):
     ``family`` — the registered name, a class attribute or (for a class that serves
     several families) a field — and implement the abstract methods.
 
-    ``cv_rmse``, ``selection`` and ``alternatives`` are the causal selection's record of
-    how this model was chosen (:func:`gyrolab.compensation.causal.fit_causal`): every
-    candidate family's CV RMSE (°/s), the selection log, and the other fitted candidates
-    (not saved)."""
+    ``cv_rmse``, ``selection``, ``band`` and ``alternatives`` are the causal selection's
+    record of how this model was chosen (:func:`gyrolab.compensation.causal.fit_causal`):
+    every candidate family's CV RMSE (°/s), the selection log, the winner's 90 %
+    prediction band (:class:`~gyrolab.compensation.band.PredictionBand`, from its held-out
+    CV predictions; ``None`` without them or for a model written before), and the other
+    fitted candidates (not saved)."""
 
     cv_rmse: dict[str, float] = field(default_factory=dict, kw_only=True, repr=False)
     selection: dict[str, Any] = field(default_factory=dict, kw_only=True, repr=False)
+    band: Any = field(default=None, kw_only=True, repr=False)
     alternatives: dict[str, DriftModel] = field(
         default_factory=dict, kw_only=True, repr=False, compare=False
     )
@@ -116,7 +119,22 @@ class DriftModel(ABC):
             **self.parameters(),
             "cv_rmse_deg_per_s": self.cv_rmse,
             "selection": self.selection,
+            **self.band_entry(),
         }
+
+    def band_entry(self) -> dict[str, Any]:
+        """``{"band": ...}`` of :meth:`describe` (empty without a band)."""
+        return {} if self.band is None else {"band": self.band.to_dict()}
+
+    def band_at(
+        self, t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The 90 % band ``(lo, hi)`` (°/s) of the compensated output's 100 s means at
+        times ``t`` (:mod:`gyrolab.compensation.band`); raises for a model without one."""
+        if self.band is None:
+            raise ValueError("this causal model has no prediction band")
+        h = self.band.half_width_at(t, pt_t, pt_c)
+        return -h, h
 
     def save(self, prefix: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """What model.json needs beyond :meth:`describe` to load the model again, and the
@@ -169,12 +187,14 @@ class CausalCalibration:
 @dataclass
 class Candidate:
     """A family fitted on the whole calibration run: the model, its blocked-CV RMSE
-    (°/s, held-out 3.6 s block means) and what model.json's ``selection`` records of it
-    (``None``: nothing)."""
+    (°/s, held-out 3.6 s block means), what model.json's ``selection`` records of it
+    (``None``: nothing), and its held-out prediction of every block (the CV's; the
+    winner's prediction band is measured on them — ``None``: no band)."""
 
     model: DriftModel
     cv_rmse: float
     log: dict[str, Any] | None = None
+    cv_pred: np.ndarray | None = None
 
 
 @dataclass
@@ -197,18 +217,17 @@ class FitContext:
             self.cache[key] = make()
         return self.cache[key]
 
-    def cv_rmse(self, fit: Callable[[np.ndarray], DriftModel]) -> float:
-        """Blocked-CV RMSE (°/s) of a family: ``fit(train)`` (a boolean mask over the
-        blocks) fitted on each fold's training blocks, its :meth:`DriftModel.drift_at`
-        at the held-out block centres against their block means."""
+    def cross_validate(self, fit: Callable[[np.ndarray], DriftModel]) -> tuple[float, np.ndarray]:
+        """Blocked CV of a family: ``fit(train)`` (a boolean mask over the blocks) fitted
+        on each fold's training blocks, its :meth:`DriftModel.drift_at` at the held-out
+        block centres against their block means → ``(RMSE °/s, the held-out prediction
+        of every block)``."""
         cal = self.cal
-        sq, n = 0.0, 0
+        pred = np.empty(cal.t.size)
         for held in self.folds:
-            m = fit(~held)
-            r = m.drift_at(cal.t[held], cal.pt_t, cal.pt_c) - cal.rate[held]
-            sq += float(r @ r)
-            n += int(held.sum())
-        return float(np.sqrt(sq / n))
+            pred[held] = fit(~held).drift_at(cal.t[held], cal.pt_t, cal.pt_c)
+        r = pred - cal.rate
+        return float(np.sqrt(float(r @ r) / r.size)), pred
 
 
 @dataclass(frozen=True)

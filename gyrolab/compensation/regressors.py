@@ -15,8 +15,10 @@ The forms (docs/export.md has the JSON reference):
 * ``legendre``: ``Σ c_k P_k(u)`` (+ ``rate_coef``·x_1), ``u = (2 x_0 − lo − hi)/(hi −
   lo)``, not clamped;
 * ``poly3``: ``Σ c_k Δ^k``, ``Δ = clamp(x_0, t_min, t_max) − t_ref``;
-* ``structured``: ``Σ c_i L_i(u) + k x_1 + h x_2 + A x_3``, ``u`` as above in x_0 = F,
-  the Legendre part continued linearly beyond u = ±1.
+* ``structured``: ``Σ c_i L_i(u) + k x_1 + h x_2 + A x_3 + kp max(x_1, 0) + k2 x_1|x_1| +
+  hT x_2 v``, ``u`` as above in x_0 = F, ``v`` = u clipped to [−1, 1], the Legendre part
+  continued linearly beyond u = ±1 (``kp``, ``k2``, ``hT`` absent = 0: models written
+  before issue 23).
 """
 
 from __future__ import annotations
@@ -65,7 +67,14 @@ def _eval_structured(m: dict[str, Any], X: np.ndarray) -> np.ndarray:
     c = np.asarray(m["coef"], dtype=float)
     y = np.polynomial.legendre.legval(uc, c)
     y = y + np.polynomial.legendre.legval(uc, np.polynomial.legendre.legder(c)) * (u - uc)
-    return y + m["k"] * X[:, 1] + m["h"] * X[:, 2] + m["A"] * X[:, 3]
+    y = y + m["k"] * X[:, 1] + m["h"] * X[:, 2] + m["A"] * X[:, 3]
+    R = X[:, 1]
+    return (
+        y
+        + m.get("kp", 0.0) * np.maximum(R, 0.0)
+        + m.get("k2", 0.0) * R * np.abs(R)
+        + m.get("hT", 0.0) * X[:, 2] * uc
+    )
 
 
 _EVALUATE: dict[str, Callable[[dict[str, Any], np.ndarray], np.ndarray]] = {
@@ -134,6 +143,13 @@ def _c_legendre(name: str, m: dict[str, Any]) -> list[str]:
             f"    y += {c_float(m['k'])} * x[1] + {c_float(m['h'])} * x[2] + "
             f"{c_float(m['A'])} * x[3];"
         )
+        if m.get("kp") or m.get("k2") or m.get("hT"):
+            # issue 23 terms: heating-only rate, R|R|, hysteresis amplitude across T
+            out.append(
+                f"    y += {c_float(m.get('kp', 0.0))} * fmaxf(x[1], 0.0f) + "
+                f"{c_float(m.get('k2', 0.0))} * x[1] * fabsf(x[1]) + "
+                f"{c_float(m.get('hT', 0.0))} * x[2] * v;"
+            )
     else:
         out.append("    (void)dy;")
         if m["rate_coef"] is not None:
