@@ -37,7 +37,14 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
-__all__ = ["STOP_SIGNALS", "check", "deferred_stop_signals", "pending", "take"]
+__all__ = [
+    "STOP_SIGNALS",
+    "check",
+    "deferred_stop_signals",
+    "pending",
+    "stop_requests",
+    "take",
+]
 
 # SIGHUP does not exist on Windows.
 STOP_SIGNALS: tuple[signal.Signals, ...] = tuple(
@@ -109,3 +116,27 @@ def deferring_stop_signals(fn: F) -> F:
             return fn(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+@contextlib.contextmanager
+def stop_requests(stop: Callable[[str], None]) -> Iterator[None]:
+    """During a run: each stop signal is ``stop("interrupted by SIGx")`` (the runner's
+    clean stop: safe state, never an exception mid-run), and so is one noted just before
+    (by :func:`deferred_stop_signals`). Only in the main thread; the previous handlers
+    are restored on exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_signal(signum: int, _frame: object) -> None:
+        stop(f"interrupted by {signal.Signals(signum).name}")
+
+    old = {sig: signal.signal(sig, on_signal) for sig in STOP_SIGNALS}
+    name = take()
+    if name is not None:
+        stop(f"interrupted by {name}")
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)

@@ -7,7 +7,10 @@ cause), repeated samples (dropped, never written twice), damaged frames, and the
 stream that stopped before the run ended. The run engine
 (:class:`gyrolab.acquisition.runner.Acquisition`) keeps one per unit: the single-unit
 bench's one stream is written to the single-unit topics (``unit=None``), a multi-unit
-bench's to ``/unit/<serial>/…`` (docs/recording-format.md).
+bench's to ``/unit/<serial>/…`` (docs/recording-format.md). A unit read by its internal
+sensor also has its temperature readings recorded here, and handed to the engine's
+temperature intake by :meth:`RateRecorder.take_readings` (the engine asks; the recorder
+never calls back).
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ class RateRecorder:
         *,
         unit: str | None = None,
         on_samples: Callable[[float], None] | None = None,
-        on_temperature: Callable[[float, float], None] | None = None,
+        internal: bool = False,
     ) -> None:
         self.dev = device
         self.adc = adc
@@ -55,9 +58,10 @@ class RateRecorder:
         self.on_samples = on_samples
         # A unit on its internal sensor (a multi-unit recording's unit): the readings its
         # blocks carry go to /unit/<serial>/temperature/internal, averaged per recorded
-        # block, and each average to ``on_temperature(t, c)`` (the engine's watchdog, plan).
-        self.on_temperature = on_temperature
+        # block, and each average to ``readings`` until the engine takes it.
+        self.internal = internal and unit is not None
         self._temps: list[tuple[float, float]] = []  # (run time, °C) not yet written
+        self._readings: list[tuple[float, float]] = []  # written, not yet taken
         self.dropped = False  # a multi-unit run gave up on this stream
         # Device index of run sample 0, next expected index, block buffer.
         self.idx0: int | None = None
@@ -144,7 +148,7 @@ class RateRecorder:
             # on sample times follow the ADC's own clock (frame timestamps), not arrival.
             self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self.period)
         assert self._next_idx is not None
-        if self.on_temperature is not None and blk.temperature_c is not None:
+        if self.internal and blk.temperature_c is not None:
             self._take_temperatures(blk)
         if idx < self._next_idx:
             # Some or all of these samples were written already: never write one twice.
@@ -212,14 +216,20 @@ class RateRecorder:
 
     def _emit_temperature(self) -> None:
         """Write the readings kept since the last block as one message (their mean) and
-        hand it to ``on_temperature``."""
-        if not self._temps or self.unit is None or self.on_temperature is None:
+        keep it for :meth:`take_readings`."""
+        if not self._temps or not self.internal:
             return
         t, c = np.mean(np.asarray(self._temps), axis=0)
         n = len(self._temps)
         self._temps = []
         self.w.write_internal_temperature(float(t), float(c), n, unit=self.unit)
-        self.on_temperature(float(t), float(c))
+        self._readings.append((float(t), float(c)))
+
+    def take_readings(self) -> list[tuple[float, float]]:
+        """The internal-sensor readings recorded since the last call, ``(run time, °C)``
+        each (one per recorded block), for the engine's temperature intake."""
+        out, self._readings = self._readings, []
+        return out
 
     def emit_block(self) -> None:
         """Write the block being filled (``/gyro/adc`` and ``/gyro/rate``), and the unit's

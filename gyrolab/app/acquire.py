@@ -210,13 +210,16 @@ def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], Non
             units = f" units {ok}/{len(st.units)} ok"
         bar.set_postfix_str(
             f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
-            f"oven {st.chamber_c:.2f} PT100 {st.pt100_c:.2f} °C "
+            f"oven {st.chamber_c:.2f} {_SENSOR[st.temperature_source]} {st.temperature_c:.2f} °C "
             f"ETA(run) {_hms(st.remaining_s)} lost {st.frames_lost} bad {st.frames_bad}"
             f"{units}{speed_note}",
             refresh=False,
         )
 
     return show, bar
+
+
+_SENSOR = {"pt100": "PT100", "internal": "internal"}  # the progress line's name for it
 
 
 def _hms(s: float) -> str:
