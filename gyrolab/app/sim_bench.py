@@ -60,8 +60,9 @@ class SimRunClock:
 
 
 class SimSilence:
-    """The watchdog's rule on a simulated bench (runner.SilencePolicy): silent longer than
-    ``comm_timeout_s`` simulated seconds AND ``min_wall_s`` wall seconds.
+    """The watchdog's rule on a simulated bench (a ``SilencePolicy``,
+    gyrolab/acquisition/watchdog.py): silent longer than ``comm_timeout_s`` simulated
+    seconds AND ``min_wall_s`` wall seconds.
 
     The bench shares this process with the drivers: a hiccup of a few hundred ms wall (a
     GC, an import, a long physics step) is many simulated seconds at 200x, and must not pass
