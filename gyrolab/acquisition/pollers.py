@@ -15,10 +15,28 @@ import queue
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from gyrolab.clock import Clock
 from gyrolab.instruments.roles import RateStream, is_transient
+
+
+@dataclass(frozen=True)
+class UnitDevices:
+    """One unit of a multi-unit run: its ``serial``, its connected rate ``stream`` (whose
+    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``adc`` and the
+    scanner ``channel`` of its PT100 — None for a unit read by its internal sensor, whose
+    stream delivers its temperature (``AdcBlock.temperature_c``)."""
+
+    serial: str
+    stream: RateStream
+    adc: Any
+    channel: int | None
+
+    @property
+    def internal(self) -> bool:
+        return self.channel is None
 
 
 class Poller(threading.Thread):

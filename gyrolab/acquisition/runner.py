@@ -32,16 +32,16 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 from gyrolab.acquisition import interrupts
-from gyrolab.acquisition.bench_config import Limits, SafeState
+from gyrolab.acquisition.bench_config import Limits, SafeState, Suspend
 from gyrolab.acquisition.journal import Journal
-from gyrolab.acquisition.pollers import StreamReader, instrument_pollers
+from gyrolab.acquisition.pollers import StreamReader, UnitDevices, instrument_pollers
 from gyrolab.acquisition.safe_state import command_safe_state, record_safe_state
 from gyrolab.acquisition.status import RunResult, Status, UnitStatus
 from gyrolab.acquisition.streams import RateRecorder
+from gyrolab.acquisition.suspend import NO_SUSPENDERS, TEMPERATURE_LOST, Suspenders, conditions
 from gyrolab.acquisition.temperature import INTERNAL, PT100, Sensor, TemperatureIntake
 from gyrolab.acquisition.watchdog import CommWatch, RunTimeSilence, SilencePolicy
 from gyrolab.clock import Clock
@@ -52,35 +52,11 @@ from gyrolab.instruments.roles import (
     RateStreamConfig,
     Thermometer,
 )
-from gyrolab.profiles.plan import (
-    Action,
-    Event,
-    Log,
-    ProfilePlan,
-    SetSetpoint,
-    check_profile_limits,
-)
+from gyrolab.profiles.plan import Action, Event, Log, ProfilePlan, SetSetpoint, check_profile_limits
 from gyrolab.profiles.profile import Profile
 from gyrolab.record.writer import RecordingWriter
 
 __all__ = ["Acquisition", "RunResult", "Status", "UnitDevices", "UnitStatus"]
-
-
-@dataclass(frozen=True)
-class UnitDevices:
-    """One unit of a multi-unit run: its ``serial``, its connected rate ``stream`` (whose
-    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``adc`` and the
-    scanner ``channel`` of its PT100 — None for a unit read by its internal sensor, whose
-    stream delivers its temperature (``AdcBlock.temperature_c``)."""
-
-    serial: str
-    stream: RateStream
-    adc: Any
-    channel: int | None
-
-    @property
-    def internal(self) -> bool:
-        return self.channel is None
 
 
 class Acquisition:
@@ -104,6 +80,11 @@ class Acquisition:
     (an open lead) stays in the run with a gap in its temperature topic (logged when lost
     and when back); when no unit's temperature reads for longer than ``comm_timeout_s`` the run
     ends as for a silent thermometer (docs/fleet.md, "Acquisition").
+
+    ``suspend`` (BENCH.toml ``[suspend]``; None: none) says which conditions hold the run
+    instead of ending it, and for how long (gyrolab/acquisition/suspend.py): a chamber
+    alarm, the watched temperature lost, a stalled rate stream, an operator pause
+    (:meth:`request_pause`, :meth:`request_resume`; SIGUSR1, SIGUSR2).
     """
 
     def __init__(
@@ -127,6 +108,7 @@ class Acquisition:
         silence: SilencePolicy | None = None,
         threaded: bool = True,
         turn_s: float = 0.1,
+        suspend: Suspend | None = None,
     ) -> None:
         check_profile_limits(profile, limits)
         if (units is None) == (gyro is None) or (units is None) == (adc is None):
@@ -173,6 +155,11 @@ class Acquisition:
             silence=self.silence,
         )
         self.status.temperature_source = self.temps.plan_source
+        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal)
+        if self.suspend.enabled(TEMPERATURE_LOST) and thermometer is not None:
+            self.comm.unjudged.add(thermometer.name)  # lost: the suspender's limit decides
+        self._chamber_alarm = ""
+        self._pause: str | None = None  # the operator's pause request
         self._setpoint_pending: float | None = None
         # One recorder per rate stream, by its source name in /log.
         if units is None:
@@ -212,10 +199,22 @@ class Acquisition:
         """Ask the run to end cleanly (thread-safe; what SIGINT does)."""
         self._interrupt = reason
 
+    def request_pause(self, reason: str = "paused by the operator") -> None:
+        """Hold the run until :meth:`request_resume` (thread-safe; SIGUSR1)."""
+        self._pause = reason
+
+    def request_resume(self) -> None:
+        """End the operator's pause (thread-safe; SIGUSR2)."""
+        self._pause = None
+
     # -- the run
     def run(self) -> RunResult:
-        # SIGINT, SIGTERM, SIGHUP (and one that came just before): a clean stop.
-        with interrupts.stop_requests(self.request_stop):
+        # SIGINT, SIGTERM, SIGHUP (and one that came just before): a clean stop;
+        # SIGUSR1, SIGUSR2: the operator's pause and resume.
+        with (
+            interrupts.stop_requests(self.request_stop),
+            interrupts.pause_requests(self.request_pause, self.request_resume),
+        ):
             return self._run()
 
     def _start(self) -> list[Any]:
@@ -283,6 +282,7 @@ class Acquisition:
                         except queue.Empty:
                             break
                 t = self.t()
+                self._suspenders(t)
                 self._do(self.plan.update(t))
                 self._watchdog(t)
                 self.w.maybe_flush(t)
@@ -307,7 +307,10 @@ class Acquisition:
             self.status.update(self.t(), self.plan, self.temps, self.streams.values())
             self.on_status(self.status)
         faults = self.journal.faults
-        return RunResult.of(outcome, reason, self.t(), list(self.streams.values()), faults, safe_ok)
+        recs = list(self.streams.values())
+        res = RunResult.of(outcome, reason, self.t(), recs, faults, safe_ok)
+        res.suspensions = self.suspend.count
+        return res
 
     def _drain_adc_to(self, t_end: float, wall_s: float = 1.0) -> None:
         """A completed run records the gyro up to the profile's end: keep handling what
@@ -398,9 +401,10 @@ class Acquisition:
             self._take(t, None, c, PT100)
         elif source == self.oven.name:
             sp, pv = payload[:2]
+            self._chamber_alarm = getattr(payload, "alarm", "")
             self.status.chamber_c = pv
-            mode = "run" if self.plan.state == "step" else "hold"
-            self.w.write_oven(t, sp, pv, mode)
+            running = self.plan.state == "step" and self.plan.held_at is None
+            self.w.write_oven(t, sp, pv, "run" if running else "hold")
 
     def _take(self, t: float, serial: str | None, c: float, source: str) -> None:
         """A temperature reading into the intake, and to the plan if it watches it."""
@@ -471,6 +475,27 @@ class Acquisition:
         if rep.fatal:
             self.journal.end(msg)  # names the instrument already
 
+    def _suspenders(self, t: float) -> None:
+        """The conditions that hold now, to the suspenders; the plan held or resumed as
+        they say (gyrolab/acquisition/suspend.py)."""
+        holding = conditions(
+            self._chamber_alarm,
+            self.oven.name,
+            self.thermo.name if self.thermo is not None else None,
+            self.comm,
+            self.temps,
+            [s for s, rec in self.streams.items() if not rec.dropped],
+            self.suspend.cfg.stall_after_s,
+            self._pause,
+        )
+        c = self.temps.last_c.get(self.temps.plan_sensor.serial, math.nan)
+        change = self.suspend.update(t, holding, c)
+        if change == "suspend":
+            self._do(self.plan.hold(t, self.suspend.describe()))
+        elif change == "resume":
+            self._do(self.plan.resume(t, self.suspend.resumed(t)[1]))
+        self.status.suspended = list(self.suspend.active)
+
     def _watchdog(self, t: float) -> None:
         for source, silent in self.comm.silent():
             message = (
@@ -482,7 +507,7 @@ class Acquisition:
                 continue
             self.journal.fail("watchdog", message, t)
             return
-        if self.units is not None:
+        if self.units is not None and not self.suspend.enabled(TEMPERATURE_LOST):
             self.temps.check_blind(t)
 
     # -- ending

@@ -28,7 +28,9 @@ class Status:
     """A snapshot for the progress display. ``temperature_c`` is the temperature the
     profile's stability rule watches (a multi-unit run: the first unit's), read by
     ``temperature_source`` (``pt100`` or ``internal``: the unit's own sensor); NaN while
-    that sensor gives no reading. ``units``: a multi-unit run's, in bench order."""
+    that sensor gives no reading. ``units``: a multi-unit run's, in bench order.
+    ``suspended``: the conditions holding the run now (gyrolab/acquisition/suspend.py),
+    empty while it runs."""
 
     t: float = 0.0
     step: int = -1
@@ -42,6 +44,7 @@ class Status:
     frames_bad: int = 0
     samples: int = 0
     units: list[UnitStatus] = field(default_factory=list)
+    suspended: list[str] = field(default_factory=list)
 
     def update(self, t: float, plan: Any, temps: Any, recorders: Iterable[Any]) -> None:
         """This snapshot at run time ``t``: the ``plan``'s step
@@ -88,6 +91,7 @@ class RunResult:
     safe_state_ok: bool
     first_device_index: int | None = None
     units_dropped: list[str] = field(default_factory=list)  # multi-unit: streams given up
+    suspensions: int = 0  # times the run was held (gyrolab/acquisition/suspend.py)
 
     @classmethod
     def of(

@@ -56,6 +56,9 @@ class CommWatch:
         self.silence = silence
         self.timeout_s = timeout_s
         self.last_ok: dict[str, float] = {}
+        self.last_error: dict[str, str] = {}  # each source's latest failure
+        # Sources whose silence another part judges (the temperature suspender).
+        self.unjudged: set[str] = set()
         self._down_since: dict[str, float] = {}
         self._down_errors: dict[str, int] = {}
 
@@ -83,6 +86,7 @@ class CommWatch:
 
     def failed(self, source: str, t: float, message: str) -> None:
         """An exchange with ``source`` failed at run time ``t`` (to be retried)."""
+        self.last_error[source] = message
         if source not in self._down_since:
             self._down_since[source] = t
             self._down_errors[source] = 1
@@ -99,11 +103,14 @@ class CommWatch:
         for d in (self.last_ok, self._down_since, self._down_errors):
             d.pop(source, None)
 
-    def silent(self) -> list[tuple[str, float]]:
-        """``(source, silent seconds)`` of every source the silence policy calls lost."""
+    def silent(self, timeout_s: float | None = None) -> list[tuple[str, float]]:
+        """``(source, silent seconds)`` of every source the silence policy calls lost
+        after ``timeout_s`` (default: the watchdog's; ``unjudged`` sources left out)."""
         now = self.clock.now()
+        limit = self.timeout_s if timeout_s is None else timeout_s
         return [
             (source, now - last)
             for source, last in list(self.last_ok.items())
-            if self.silence.lost(source, now - last, self.timeout_s)
+            if (timeout_s is not None or source not in self.unjudged)
+            and self.silence.lost(source, now - last, limit)
         ]

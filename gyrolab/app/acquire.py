@@ -208,6 +208,8 @@ def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], Non
         if st.units:  # a multi-unit run: how many units are fully recorded
             ok = sum(u.state == "recording" for u in st.units)
             units = f" units {ok}/{len(st.units)} ok"
+        if st.suspended:
+            units += f" SUSPENDED ({', '.join(st.suspended)})"
         bar.set_postfix_str(
             f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
             f"oven {st.chamber_c:.2f} {_SENSOR[st.temperature_source]} {st.temperature_c:.2f} °C "
@@ -311,7 +313,7 @@ def run_acquisition(
             safe_state=tables["safe_state"],
             recorder=tables["recorder"],
             units=ident.pop("units", None),  # multi-unit: each unit's ADC
-            extra=ident,  # e.g. a multi-unit bench's scanner
+            extra={**ident, "suspend": tables["suspend"]},  # e.g. a multi-unit bench's scanner
         )
         r = cfg.recorder
         with _open_output(out, force) as fh:
@@ -365,6 +367,7 @@ def run_acquisition(
                     on_status=on_status,
                     on_samples=on_samples,
                     silence=None if sim is None else sim.silence,
+                    suspend=cfg.suspend,
                 )
                 if sim is not None:
                     sim.go()  # connected: now run at the asked speed
@@ -438,7 +441,11 @@ def acquire(opts: AcquireOptions) -> RunResult:
         from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults
 
         faults = load_faults(opts.faults)
-        check_plan_for_bench(faults, opts.units, str(opts.faults), opts.internal_temperature)
+        # the F4 reports its alarm through [chamber] alarm_input, the ESPEC always
+        alarm = cfg.oven.driver != "watlowf4" or bool(getattr(cfg.oven, "alarm_input", 0))
+        check_plan_for_bench(
+            faults, opts.units, str(opts.faults), opts.internal_temperature, chamber_alarm=alarm
+        )
     profile_spec = opts.profile or cfg.profile_path()
     profile = load_profile(profile_spec)
     if opts.profile:
@@ -471,6 +478,10 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 faults=faults,
                 axis_models=axis_models,
             )
+        print(
+            f"gyrolab acquire: pid {os.getpid()} (kill -USR1 pauses the run, -USR2 resumes it)",
+            file=sys.stderr,
+        )
         speed_note = "" if sim is None else f" ×{opts.speed or 'max'}"
         show, bar = _progress(profile, speed_note)
         t0 = time.monotonic()
@@ -506,7 +517,8 @@ def acquire(opts: AcquireOptions) -> RunResult:
     msg = (
         f"gyrolab acquire: {result.outcome} ({result.reason}); {result.t_end:.0f} s recorded in "
         f"{wall:.1f} s wall, {result.samples} samples, {result.gaps} gap(s) "
-        f"({result.samples_missing} samples missing), {result.faults} fault(s); "
+        f"({result.samples_missing} samples missing), {result.faults} fault(s), "
+        f"{result.suspensions} suspension(s); "
         f"oven safe state {'verified' if result.safe_state_ok else 'NOT verified'}; {out}"
     )
     if cfg.units:

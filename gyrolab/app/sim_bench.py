@@ -131,6 +131,9 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
     instead (``[[unit]] temperature = "internal"``; no scanner when that is every unit)."""
     cfg = BenchConfig(
         name="sim",
+        # The simulated F4's limit controller is wired to its digital input 1 (as ESPEC
+        # wires an F4 chamber's), so the chamber_alarm fault reaches the driver.
+        oven=replace(registry.default_config("chamber"), alarm_input=1),
         run=RunInfo(
             operator="simulated",
             unit_serial=f"SIM-{seed}" if not units else "",
@@ -253,6 +256,7 @@ def start_sim_bench(
         dmm_model=dmm_spec.sim_backend if dmm_spec is not None else "34401A",
         chamber_model=specs["chamber"].sim_backend,
         oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
+        oven_alarm_input=getattr(cfg.oven, "alarm_input", 0) or None,
         model=model,
         axis_physics=extra_axes,
         unit_physics=unit_physics,

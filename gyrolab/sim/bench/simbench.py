@@ -85,6 +85,7 @@ class SimBench:
         dmm_model: str = "34401A",
         chamber_model: str = "F4",
         oven_control_event: int | None = None,
+        oven_alarm_input: int | None = None,
         axis_physics: list[Any] | None = None,
         unit_physics: list[Any] | None = None,
         unit_internal_temperature: list[bool] | None = None,
@@ -161,6 +162,7 @@ class SimBench:
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
             control_event=oven_control_event,
+            alarm_input=oven_alarm_input,
             decimals=oven_decimals,
             units_c=oven_units_c,
             faults=self.faults.oven,
@@ -343,6 +345,15 @@ class SimBench:
         elif ev.kind == "open_channel":
             assert self.scanner is not None
             self.scanner.open_channel(101 + ev.unit, end)
+        elif ev.kind == "chamber_alarm":
+            # The chamber in use: the ESPEC when there is one, else the F4 (its limit
+            # controller on its alarm input).
+            # Not under self.lock: the ESPEC's own lock is taken before it in its replies.
+            chamber = self.espec if self.espec is not None else self.oven
+            chamber.set_alarm(phase == "start")
+            if phase == "start":
+                with self.lock:
+                    heapq.heappush(self._events, (end, next(self._tie), "end", ev))
         else:  # modbus_exception | modbus_crc | modbus_no_reply
             self.faults.oven.burst(ev.kind, ev.count)
 
