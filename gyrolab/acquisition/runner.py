@@ -38,6 +38,7 @@ from gyrolab.acquisition import interrupts
 from gyrolab.acquisition.bench_config import Limits, SafeState, Suspend
 from gyrolab.acquisition.journal import Journal
 from gyrolab.acquisition.pollers import StreamReader, UnitDevices, instrument_pollers
+from gyrolab.acquisition.resume import ResumePoint
 from gyrolab.acquisition.safe_state import command_safe_state, record_safe_state
 from gyrolab.acquisition.status import RunResult, Status, UnitStatus
 from gyrolab.acquisition.streams import RateRecorder
@@ -84,7 +85,10 @@ class Acquisition:
     ``suspend`` (BENCH.toml ``[suspend]``; None: none) says which conditions hold the run
     instead of ending it, and for how long (gyrolab/acquisition/suspend.py): a chamber
     alarm, the watched temperature lost, a stalled rate stream, an operator pause
-    (:meth:`request_pause`, :meth:`request_resume`; SIGUSR1, SIGUSR2).
+    (:meth:`request_pause`, :meth:`request_resume`; SIGUSR1, SIGUSR2). ``resume``: this
+    run continues an interrupted one (gyrolab/acquisition/resume.py): its clock starts at
+    ``resume.at_t``, the profile at ``resume.step`` (re-soaked), each stream's samples at
+    the run index its time says (the interruption: a gap).
     """
 
     def __init__(
@@ -109,6 +113,7 @@ class Acquisition:
         threaded: bool = True,
         turn_s: float = 0.1,
         suspend: Suspend | None = None,
+        resume: ResumePoint | None = None,
     ) -> None:
         check_profile_limits(profile, limits)
         if (units is None) == (gyro is None) or (units is None) == (adc is None):
@@ -160,11 +165,14 @@ class Acquisition:
             self.comm.unjudged.add(thermometer.name)  # lost: the suspender's limit decides
         self._chamber_alarm = ""
         self._pause: str | None = None  # the operator's pause request
+        self.resume = resume
+        t_start = 0.0 if resume is None else resume.at_t
         self._setpoint_pending: float | None = None
         # One recorder per rate stream, by its source name in /log.
         if units is None:
             assert gyro is not None and adc is not None
             recs = [RateRecorder(gyro, adc, writer, self.log, on_samples=on_samples)]
+            resume_index = [None if resume is None else resume.next_index.get(None, (0, 0.0))]
         else:
             recs = [
                 RateRecorder(
@@ -178,6 +186,11 @@ class Acquisition:
                 )
                 for k, u in enumerate(units)
             ]
+            resume_index = [
+                None if resume is None else resume.next_index.get(u.serial, (0, 0.0)) for u in units
+            ]
+        for rec, index in zip(recs, resume_index, strict=True):
+            rec.resume_index, rec.t_start = index, t_start
         self.streams: dict[str, RateRecorder] = {r.name: r for r in recs}
         if len(self.streams) != len(recs):
             raise ValueError("every unit's rate stream needs its own name")
@@ -222,7 +235,8 @@ class Acquisition:
         # Samples that arrived before the run started are not part of it: drop them so
         # that sample 0 is the first one after t = 0.
         stale = {name: rec.dev.read(0.0) for name, rec in self.streams.items()}
-        self._t0 = self.clock.now()
+        t_start = 0.0 if self.resume is None else self.resume.at_t
+        self._t0 = self.clock.now() - t_start
         for name, got in stale.items():
             n_stale = sum(int(b.counts.size) for b in got.blocks)
             if n_stale:
@@ -232,12 +246,18 @@ class Acquisition:
                     f"discarded {n_stale} ADC samples received before the run started",
                     "startup",
                     {"samples": n_stale},
-                    0.0,
+                    t_start,
                 )
         thermo = [] if self.thermo is None else [self.thermo.name]
-        self.comm.start([*thermo, self.oven.name, *self.streams], self._t0)
-        self.temps.start(self._t0)
-        self._do(self.plan.start(0.0))
+        now = self.clock.now()
+        self.comm.start([*thermo, self.oven.name, *self.streams], now)
+        self.temps.start(now)
+        r = self.resume
+        if r is None:
+            self._do(self.plan.start(0.0))
+        else:
+            why = f"segment {r.segment} of run {r.run_id}, after {r.previous.name}"
+            self._do(self.plan.start(t_start, r.step, why))
         self._readers = {
             name: StreamReader(rec.dev, self.q.put, self.stop_ev, self.clock)
             for name, rec in self.streams.items()

@@ -63,7 +63,15 @@ class RateRecorder:
         self._temps: list[tuple[float, float]] = []  # (run time, °C) not yet written
         self._readings: list[tuple[float, float]] = []  # written, not yet taken
         self.dropped = False  # a multi-unit run gave up on this stream
-        # Device index of run sample 0, next expected index, block buffer.
+        # A resumed run's continuation (acquire --resume; the engine sets both): the run
+        # index after the last sample the segments before it hold with its run time, and
+        # the run time the continuation starts. Its first sample's run index is that index
+        # plus the periods between the two times: the samples between are the
+        # interruption's gap.
+        self.resume_index: tuple[int, float] | None = None
+        self.t_start = 0.0
+        self._base = 0  # run index of device sample idx0
+        # Device index of the first sample, next expected index, block buffer.
         self.idx0: int | None = None
         self._adc_offset = 0.0  # ADC clock minus run time
         self._blk_t0 = 0.0
@@ -133,20 +141,27 @@ class RateRecorder:
         if n == 0:
             return
         if self.idx0 is None:
+            # Run time of sample 0: its block's arrival less the block's length; from then
+            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
+            t_first = max(self.t_start, t_arrival - n * self.period)
+            self._adc_offset = float(blk.t0) - t_first
+            if self.resume_index is not None:
+                nxt, t_next = self.resume_index
+                self._base = nxt + max(0, int(round((t_first - t_next) / self.period)))
             self.idx0 = idx
             self._next_idx = idx
-            self._blk_first = 0
+            self._blk_first = self._base
             self.log(
                 "info",
                 self.name,
-                f"ADC stream: run sample 0 is device sample {idx}",
+                f"ADC stream: run sample {self._base} is device sample {idx}",
                 "startup",
-                {"device_index": idx},
+                {"device_index": idx}
+                | ({"run_index": self._base} if self.resume_index is not None else {}),
                 t_arrival,
             )
-            # Run time of sample 0: its block's arrival less the block's length; from then
-            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
-            self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self.period)
+            if self.resume_index is not None and self._base > self.resume_index[0]:
+                self._interrupted(t_first, t_arrival)
         assert self._next_idx is not None
         if self.internal and blk.temperature_c is not None:
             self._take_temperatures(blk)
@@ -157,9 +172,9 @@ class RateRecorder:
             self.log(
                 "warning",
                 self.name,
-                f"dropped {dup} repeated ADC sample(s) at index {idx - self.idx0}",
+                f"dropped {dup} repeated ADC sample(s) at index {self._run(idx)}",
                 "duplicate",
-                {"index": idx - self.idx0, "samples": dup},
+                {"index": self._run(idx), "samples": dup},
                 t_arrival,
             )
             if dup == n:
@@ -175,7 +190,7 @@ class RateRecorder:
             self.emit_block()
             self.gaps += 1
             self.missing += missing
-            first = self._next_idx - self.idx0
+            first = self._run(self._next_idx)
             self.log(
                 "warning",
                 self.name,
@@ -189,7 +204,7 @@ class RateRecorder:
                 },
                 t_arrival,
             )
-            self._blk_first = idx - self.idx0
+            self._blk_first = self._run(idx)
         if not self._blk_n:
             self._blk_t0 = t0_dev - self._adc_offset
         self._blk.append(counts)
@@ -202,6 +217,35 @@ class RateRecorder:
             self.on_samples(self.received_to)
         if self._blk_n >= self._block_len:
             self.emit_block()
+
+    def _run(self, device_index: int) -> int:
+        """The run index of device sample ``device_index``."""
+        assert self.idx0 is not None
+        return device_index - self.idx0 + self._base
+
+    def _interrupted(self, t_first: float, t: float) -> None:
+        """A continuation's first sample: the run's samples since the last one the
+        segments before it hold are a gap, logged as such (never filled in)."""
+        assert self.resume_index is not None
+        nxt, t_next = self.resume_index
+        missing = self._base - nxt
+        self.gaps += 1
+        self.missing += missing
+        self.log(
+            "warning",
+            self.name,
+            f"ADC gap: {missing} sample(s) missing from index {nxt}: the run was "
+            "interrupted and resumed",
+            "gap",
+            {
+                "first_missing_index": nxt,
+                "n_missing": missing,
+                "t_first_missing": round(t_next, 6),
+                "t_resumed": round(t_first, 6),
+                "cause": "run interrupted",
+            },
+            t,
+        )
 
     def _take_temperatures(self, blk: AdcBlock) -> None:
         """Keep the internal-temperature readings of samples not recorded yet (a repeated
@@ -275,13 +319,13 @@ class RateRecorder:
         A tail within the stream's normal latency (``TAIL_LATENCY_FACTOR`` × its median
         arrival lag, at least ``TAIL_MIN_S``) is samples in flight when the run stopped,
         not a stopped stream, and is not counted."""
-        start = 0.0 if self.idx0 is None else self.received_to
+        start = self.t_start if self.idx0 is None else self.received_to
         lag = float(np.median(self._adc_lags)) if self._adc_lags else 0.0
         tail = t_stop - start
         if not math.isfinite(tail) or tail <= max(TAIL_MIN_S, TAIL_LATENCY_FACTOR * lag):
             return
         missing = int(round(tail / self.period))
-        first = 0 if self.idx0 is None or self._next_idx is None else self._next_idx - self.idx0
+        first = self._base if self._next_idx is None else self._run(self._next_idx)
         self.gaps += 1
         self.missing += missing
         what = "never started" if self.idx0 is None else "stopped"

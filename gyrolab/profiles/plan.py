@@ -113,11 +113,20 @@ class ProfilePlan:
             return self.profile.steps[self.step_index]
         return None
 
-    def start(self, t: float) -> list[Action]:
+    def start(self, t: float, first_step: int = 0, resumed: str = "") -> list[Action]:
+        """Start at run time ``t`` with step ``first_step``. ``resumed`` (a continuation of
+        an interrupted run, gyrolab acquire --resume: what it continues): the run resumes
+        there instead of starting (``run_resumed``) and that step, which was running when
+        the run was interrupted, is soaked again from its beginning."""
         if self.state != "idle":
             raise RuntimeError("plan already started")
-        acts: list[Action] = [Event("run_started", detail=f"profile {self.profile.name}", t=t)]
-        acts += self._begin(0, t)
+        if not 0 <= first_step < len(self.profile.steps):
+            raise ValueError(f"no step {first_step} in profile {self.profile.name}")
+        if resumed:
+            acts: list[Action] = [Event("run_resumed", first_step, detail=resumed, t=t)]
+            return acts + self._begin(first_step, t, " (re-soak)")
+        acts = [Event("run_started", detail=f"profile {self.profile.name}", t=t)]
+        acts += self._begin(first_step, t)
         return acts
 
     def _begin(self, i: int, t: float, again: str = "") -> list[Action]:
