@@ -495,9 +495,9 @@ def acquire(opts: AcquireOptions) -> RunResult:
 
     old_switch = sys.getswitchinterval()
     if sim_only:
-        # The simulated instruments share this process (and its GIL) with the drivers:
-        # hand the GIL over sooner so that a waiting driver thread is not held 5 ms per
-        # switch by the busy ones (a Modbus transaction needs several switches).
+        # The drivers' threads (a reader per unit, the pollers) share this process's GIL:
+        # hand it over sooner so that a waiting driver thread is not held 5 ms per switch
+        # by the busy ones (a Modbus transaction needs several switches).
         sys.setswitchinterval(0.0005)
 
     with sim_workdir() as work:
@@ -510,6 +510,7 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 workdir=Path(work),
                 faults=faults,
                 axis_models=axis_models,
+                own_process=True,  # the instruments on a core of their own
             )
         print(
             f"gyrolab acquire: pid {os.getpid()} (kill -USR1 pauses the run, -USR2 resumes it)",
