@@ -167,25 +167,27 @@ def test_without_the_suspender_a_chamber_alarm_ends_the_run_at_once(tmp_path: Pa
 
 
 def test_a_lost_pt100_holds_the_step_without_a_re_soak(tmp_path: Path) -> None:
-    """No reading 70-80 s (step 2 ramping to 40 °C): held 10 s, then step 2 goes on for
-    what it had left (its clock stopped): it ends 10 s later than it would have."""
+    """No reading 70-80 s (step 2 ramping to 40 °C): held from 5 s after the last
+    reading (69 s) to the next (80 s), then step 2 goes on for what it had left (its clock
+    stopped): it ends that much later than it would have."""
     res, rec, _ = _run(tmp_path, Suspend(resoak_band_c=5.0), therm_faults=[(70.0, 80.0, "timeout")])
     assert res.outcome == "completed" and res.suspensions == 1
     (sus,) = _events(rec, "suspended")
     (back,) = _events(rec, "resumed")
     assert "temperature lost" in sus["detail"] and "goes on" in back["detail"]
     held = back["t"] - sus["t"]
-    assert held == pytest.approx(10.0, abs=0.3)
+    assert sus["t"] == pytest.approx(74.125) and back["t"] == pytest.approx(80.0)
     assert _starts(rec) == [(0, 0.0), (1, 60.0), (2, round(180.0 + held, 3))]
 
 
 def test_a_pt100_lost_past_its_limit_ends_the_run(tmp_path: Path) -> None:
-    """Limit 30 s < comm_timeout_s 60 s: the suspender, not the watchdog, ends it."""
+    """Limit 30 s < comm_timeout_s 60 s: the suspender, not the watchdog, ends it (held
+    from 74.125 s: 5 s without a reading)."""
     res, rec, chamber = _run(
         tmp_path, Suspend(temperature_lost_s=30.0), therm_faults=[(70.0, 1e9, "timeout")]
     )
     assert res.outcome == "fault" and "temperature lost for" in res.reason
-    assert _events(rec, "aborted")[0]["t"] == pytest.approx(100.0, abs=0.2)
+    assert _events(rec, "aborted")[0]["t"] == pytest.approx(104.25, abs=0.2)
     assert res.safe_state_ok
 
 

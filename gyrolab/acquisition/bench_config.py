@@ -89,7 +89,9 @@ class Suspend:
 
     chamber_alarm_s: float = 300.0  # a chamber alarm or open door (where the driver sees it)
     temperature_lost_s: float = 60.0  # the watched temperature gives no reading
-    stall_after_s: float = 5.0  # a rate stream silent this long holds the run (0: never)
+    # a rate stream, or the watched temperature, silent this long holds the run (0: a
+    # stream's silence never does; the temperature's at once)
+    hold_after_s: float = 5.0
     operator_pause_s: float = 1800.0  # SIGUSR1 (pause) ... SIGUSR2 (resume)
     resoak_band_c: float = 1.0  # the temperature leaving +- this while held: the step re-soaks
 
@@ -405,7 +407,7 @@ def validate(cfg: BenchConfig) -> None:
             raise InputError(s, f"{where} sample_rate_hz and block_s must be > 0")
     _check_units(cfg)
     sus = cfg.suspend
-    for key in ("chamber_alarm_s", "temperature_lost_s", "stall_after_s", "operator_pause_s"):
+    for key in ("chamber_alarm_s", "temperature_lost_s", "hold_after_s", "operator_pause_s"):
         if getattr(sus, key) < 0:
             raise InputError(s, f"[suspend] {key} must be >= 0 (0: not a suspender)")
     if not sus.resoak_band_c > 0:

@@ -160,7 +160,7 @@ class Acquisition:
             silence=self.silence,
         )
         self.status.temperature_source = self.temps.plan_source
-        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal)
+        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal, self.silence)
         if self.suspend.enabled(TEMPERATURE_LOST) and thermometer is not None:
             self.comm.unjudged.add(thermometer.name)  # lost: the suspender's limit decides
         self._chamber_alarm = ""
@@ -505,7 +505,8 @@ class Acquisition:
             self.comm,
             self.temps,
             [s for s, rec in self.streams.items() if not rec.dropped],
-            self.suspend.cfg.stall_after_s,
+            self.suspend.cfg.hold_after_s,
+            t,
             self._pause,
         )
         c = self.temps.last_c.get(self.temps.plan_sensor.serial, math.nan)

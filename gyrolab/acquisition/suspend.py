@@ -10,10 +10,10 @@ BENCH.toml, docs/bench-config.md; a limit of 0 switches one off):
 
 * ``chamber alarm`` — the chamber reports an alarm (or an open door) where its driver can
   tell (``ChamberReading.alarm``; docs/instruments.md); limit ``chamber_alarm_s``;
-* ``temperature lost`` — the temperature the profile watches gives no reading (the
-  thermometer or scanner fails, the PT100 channel overloads); limit ``temperature_lost_s``,
-  which then replaces ``comm_timeout_s`` for that sensor;
-* ``stream stall`` — a rate stream silent for more than ``stall_after_s``; its limit stays
+* ``temperature lost`` — the temperature the profile watches has given no reading for
+  ``hold_after_s`` (the thermometer or scanner fails, the PT100 channel overloads); limit
+  ``temperature_lost_s``, which then replaces ``comm_timeout_s`` for that sensor;
+* ``stream stall`` — a rate stream silent for more than ``hold_after_s``; its limit stays
   the stream's own, ``comm_timeout_s`` (then the run ends, or a multi-unit run drops it);
 * ``operator pause`` — SIGUSR1 (``Acquisition.request_pause``) until SIGUSR2
   (``request_resume``); limit ``operator_pause_s``.
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from gyrolab.acquisition.bench_config import Suspend
 from gyrolab.acquisition.journal import Journal
 from gyrolab.acquisition.temperature import PT100, TemperatureIntake
-from gyrolab.acquisition.watchdog import CommWatch
+from gyrolab.acquisition.watchdog import CommWatch, RunTimeSilence, SilencePolicy
 
 CHAMBER_ALARM = "chamber alarm"
 TEMPERATURE_LOST = "temperature lost"
@@ -46,13 +46,15 @@ CONDITIONS = (CHAMBER_ALARM, TEMPERATURE_LOST, STREAM_STALL, OPERATOR_PAUSE)
 KEYS = {
     CHAMBER_ALARM: "chamber_alarm_s",
     TEMPERATURE_LOST: "temperature_lost_s",
-    STREAM_STALL: "stall_after_s",
+    STREAM_STALL: "hold_after_s",
     OPERATOR_PAUSE: "operator_pause_s",
 }
 
+_HELD = "held: "  # the silence rule's name for a condition holding the run
+
 #: An engine without suspenders: every condition is what it was before there were any.
 NO_SUSPENDERS = Suspend(
-    chamber_alarm_s=0.0, temperature_lost_s=0.0, stall_after_s=0.0, operator_pause_s=0.0
+    chamber_alarm_s=0.0, temperature_lost_s=0.0, hold_after_s=0.0, operator_pause_s=0.0
 )
 
 
@@ -72,27 +74,32 @@ def conditions(
     comm: CommWatch,
     temps: TemperatureIntake,
     streams: list[str],
-    stall_after_s: float,
+    hold_after_s: float,
+    t: float,
     pause: str | None,
 ) -> dict[str, Holding]:
-    """The conditions that hold now: the ``chamber``'s alarm (its last reading's); the
-    watched temperature lost (a PT100's: its ``thermometer`` failing, or its channel
-    reading overload; a unit's internal sensor stops with its stream: a stall); the first
-    of the ``streams`` silent for more than ``stall_after_s`` (0: never looked at); the
+    """The conditions that hold at run time ``t``: the ``chamber``'s alarm (its last
+    reading's); the watched temperature lost for ``hold_after_s`` (a PT100's: its
+    ``thermometer`` silent — by the bench's silence rule — or its channel reading
+    overload; a unit's internal sensor stops with its stream: a stall); the first of the
+    ``streams`` silent for more than ``hold_after_s`` (0: never looked at); the
     operator's ``pause``."""
     holding: dict[str, Holding] = {}
     if chamber_alarm:
         holding[CHAMBER_ALARM] = Holding(chamber, chamber_alarm)
+    silent = dict(comm.silent(hold_after_s)) if hold_after_s > 0 else {}
+    if thermometer is not None and hold_after_s <= 0 and comm.down(thermometer):
+        silent[thermometer] = 0.0  # no wait: its first failed reading holds the run
     plan = temps.plan_sensor
-    if plan.source == PT100 and thermometer is not None and comm.down(thermometer):
-        why = f"no reading ({comm.last_error.get(thermometer, '')})"
+    since = temps.lost_since(plan.serial)
+    if plan.source == PT100 and thermometer is not None and thermometer in silent:
+        why = f"no reading for {silent[thermometer]:.0f} s ({comm.last_error.get(thermometer, '')})"
         holding[TEMPERATURE_LOST] = Holding(thermometer, why)
-    elif plan.source == PT100 and temps.lost(plan.serial):
+    elif plan.source == PT100 and since is not None and t - since >= hold_after_s:
         holding[TEMPERATURE_LOST] = Holding(temps.scanner, "the watched PT100 reads overload")
-    if stall_after_s > 0:
-        silent = [s for s, _ in comm.silent(stall_after_s) if s in streams]
-        if silent:
-            holding[STREAM_STALL] = Holding(silent[0], f"no samples for > {stall_after_s:g} s")
+    stalled = [s for s in streams if s in silent] if hold_after_s > 0 else []
+    if stalled:
+        holding[STREAM_STALL] = Holding(stalled[0], f"no samples for > {hold_after_s:g} s")
     if pause:
         holding[OPERATOR_PAUSE] = Holding("operator", pause)
     return holding
@@ -109,9 +116,15 @@ class Suspenders:
     the engine (:meth:`update`), it logs them, says when the run is to be held and
     resumed, and fails the run through the ``journal`` when one outlasts its limit."""
 
-    def __init__(self, cfg: Suspend, journal: Journal) -> None:
+    def __init__(
+        self, cfg: Suspend, journal: Journal, silence: SilencePolicy | None = None
+    ) -> None:
         self.cfg = cfg
         self.journal = journal
+        # When a condition held for so many run seconds has outlasted its limit: the
+        # bench's silence rule (a simulated bench also wants wall time: a stall of its
+        # process is not a condition lasting).
+        self.silence: SilencePolicy = silence or RunTimeSilence()
         self.active: dict[str, _Active] = {}
         self._refused = False  # an operator pause refused (logged once)
         self.suspended_at: float | None = None
@@ -171,6 +184,7 @@ class Suspenders:
                     self.active[name].holding = h  # the same condition, said otherwise
                 continue
             self.active[name] = _Active(t, h)
+            self.silence.heard(_HELD + name)
             self.journal.log(
                 "warning",
                 h.source,
@@ -181,7 +195,7 @@ class Suspenders:
             )
         for name, a in self.active.items():
             held = t - a.since
-            if held > self.limit_s(name):
+            if self.silence.lost(_HELD + name, held, self.limit_s(name)):
                 self.journal.fail(
                     "suspender",
                     f"{name} for {held:.1f} s (> {KEYS[name]} "

@@ -109,6 +109,10 @@ class TemperatureIntake:
         """Whether unit ``serial``'s sensor gives no reading now."""
         return serial in self._missing
 
+    def lost_since(self, serial: str | None) -> float | None:
+        """The run time unit ``serial``'s sensor last failed to read since (None: it reads)."""
+        return self._missing[serial][0] if serial in self._missing else None
+
     def blind_for(self) -> float:
         """Clock seconds since any unit's sensor last gave a reading."""
         return self.clock.now() - self._heard_at

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from gyrolab.sim.bench.clock import SharedTime
+from gyrolab.sim.bench.simbench import PREFETCH_LEAD_S
 
 CLOCK_FILE = "clock"
 _LEN = struct.Struct("<Q")
@@ -188,6 +189,11 @@ def serve() -> None:
     recipe: BenchRecipe = pickle.loads(stdin.read(n))
     try:
         bench = recipe.build()
+        # The first hour of flicker noise now, before the drivers connect: made by the
+        # prefetch thread, it would hold this process's GIL while they wait for replies.
+        lead = round(PREFETCH_LEAD_S * bench.rate_hz)
+        for p in (*bench.unit_physics, *bench.axis_physics):
+            p.prefetch(lead)
         shared = SharedTime(Path(recipe.settings["workdir"]) / CLOCK_FILE, create=True)
         bench.clock.on_change = shared.publish
         bench.start()
