@@ -32,7 +32,14 @@ from typing import Any
 
 from gyrolab.errors import InputError
 from gyrolab.record.format import TOPIC_EVENT, TOPIC_RATE
-from gyrolab.record.reader import iter_blocks, iter_messages, list_units, opened, read_metadata
+from gyrolab.record.reader import (
+    file_metadata,
+    iter_blocks,
+    iter_messages,
+    list_units,
+    opened,
+    read_metadata,
+)
 from gyrolab.record.reader import segments as run_segments
 
 #: The shortest interruption put on the run clock between two segments (s).
@@ -82,7 +89,7 @@ def resume_point(path: str | os.PathLike[str], now_s: float | None = None) -> Re
     run, bench = meta.get("run", {}), meta.get("bench", {})
     if run.get("source") != "acquire":
         raise InputError(p, "is not an acquired run (gyrolab acquire wrote none of it)")
-    last_run = _own_run(p)
+    last_run = file_metadata(p).get("run", {})  # this segment's own record
     steps = (run.get("profile") or {}).get("step") or (run.get("profile") or {}).get("steps")
     if not isinstance(steps, list) or not steps:
         raise InputError(p, "its run record has no profile steps to resume")
@@ -131,22 +138,6 @@ def resume_point(path: str | os.PathLike[str], now_s: float | None = None) -> Re
         bench=bench,
         events=events,
     )
-
-
-def _own_run(path: Path) -> dict[str, Any]:
-    """``path``'s own ``run`` record (not the merged one of its run)."""
-    with opened(path) as reader:
-        for m in reader.iter_metadata():
-            if m.name == "run":
-                return {k: _json(v) for k, v in m.metadata.items()}
-    return {}
-
-
-def _json(v: str) -> Any:
-    try:
-        return json.loads(v)
-    except (json.JSONDecodeError, TypeError):
-        return v
 
 
 def _last_written(path: Path, meta: dict[str, Any]) -> float:

@@ -187,8 +187,9 @@ def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[A
         yield reader
 
 
-def _records(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
-    """One file's metadata records, values JSON-decoded where possible, as written."""
+def file_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
+    """One file's metadata records as written (not normalised, not merged with the other
+    segments of its run: :func:`read_metadata`), values JSON-decoded where possible."""
     with opened(path) as reader:
         return {m.name: _parse_meta(m.metadata) for m in reader.iter_metadata()}
 
@@ -203,14 +204,14 @@ def segments(path: str | os.PathLike[str]) -> list[Path]:
     beside it), which must hold the same ``run_id`` and the segment before. A missing or
     foreign previous segment is an :class:`InputError` naming it: the run is not whole."""
     chain = [Path(path)]
-    run = _records(path).get("run", {})
+    run = file_metadata(path).get("run", {})
     while isinstance(run.get("segment"), int) and run["segment"] > 1:
         prev = run.get("previous_segment") or {}
         p = chain[0].parent / str(prev.get("file", ""))
         want = f"segment {run['segment'] - 1} of run {run.get('run_id')}"
         if not prev.get("file") or not p.is_file():
             raise InputError(chain[0], f"continues {p.name} ({want}), which is not beside it")
-        before = _records(p).get("run", {})
+        before = file_metadata(p).get("run", {})
         if before.get("run_id") != run.get("run_id") or before.get("segment", 1) != (
             run["segment"] - 1
         ):
@@ -238,14 +239,14 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     ``at_t``, ``step`` (where it resumed), and a segment's ``recovery`` record if it went
     through ``gyrolab recover``."""
     paths = segments(path)
-    records = _records(paths[0])
+    records = file_metadata(paths[0])
     if len(paths) > 1:
         first: dict[str, Any] = {"segment": 1, "file": paths[0].name}
         if "recovery" in records:
             first["recovery"] = records.pop("recovery")
         segs = [first]
         for p in paths[1:]:
-            later = _records(p)
+            later = file_metadata(p)
             run = later.get("run", {})
             seg = {"segment": run.get("segment"), "file": p.name, **(run.get("resumed") or {})}
             if "recovery" in later:
@@ -323,9 +324,7 @@ def chunks_in_file_order(summary: Any, topics: list[str] | None) -> list[Any] | 
     by log time, give that same order for the topic."""
     if summary is None or not summary.chunk_indexes:
         return None
-    wanted = {
-        cid for cid, ch in summary.channels.items() if topics is None or ch.topic in topics
-    }
+    wanted = {cid for cid, ch in summary.channels.items() if topics is None or ch.topic in topics}
     chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
     last_end: dict[int, int] = {}
     out = []
