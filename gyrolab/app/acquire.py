@@ -21,7 +21,7 @@ import sys
 import time
 import uuid
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ from gyrolab.acquisition.runner import (
     Status,
     UnitDevices,
 )
+from gyrolab.app.options import AcquireOptions, RecoverOptions
 from gyrolab.app.sim_bench import SimHandle, sim_bench_config, sim_drivers, start_sim_bench
 from gyrolab.clock import Clock, WallClock
 from gyrolab.errors import GyrolabError, InputError
@@ -49,34 +50,6 @@ from gyrolab.profiles.profile import Profile, load_profile, profile_from_dict
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
 from gyrolab.record.reader import segments
 from gyrolab.record.writer import RecordingWriter
-
-
-@dataclass(frozen=True)
-class AcquireOptions:
-    """What ``gyrolab acquire`` is asked to do (docs/cli.md).
-
-    ``bench``: ``"sim"`` or a BENCH.toml; ``profile``: paper | short | FILE.toml (None: the
-    bench's); ``speed``/``seed``/``drivers``/``faults``/``axis_models``: the simulated bench
-    only; ``live_port``: serve the run to Foxglove (0: any free port)."""
-
-    bench: str
-    out: Path | None
-    profile: str | None = None
-    speed: float | None = None
-    seed: int = 0
-    drivers: tuple[str, ...] = ()
-    faults: str | None = None
-    axis_models: tuple[str, ...] = ()
-    force: bool = False
-    live_port: int | None = None
-    live_host: str = "127.0.0.1"
-    units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
-    # --units only: the units (1-based) read by their internal temperature sensor
-    internal_temperature: tuple[int, ...] = ()
-    # --resume RUN.mcap: continue that interrupted run (gyrolab/app/resume.py); ``bench``
-    # "" then means the simulated bench that ran it, ``out`` None its default name
-    resume: Path | None = None
-
 
 # --------------------------------------------------------------------- instruments
 
@@ -618,3 +591,14 @@ def recover(broken: str | Path, out: str | Path, force: bool = False) -> str:
     from gyrolab.record.recover import recover_recording
 
     return str(recover_recording(broken, out, force=force).summary())
+
+
+def acquire_command(opts: AcquireOptions) -> int:
+    """The ``gyrolab acquire`` command: :func:`acquire`, its exit code (docs/cli.md)."""
+    return acquire(opts).exit_code
+
+
+def recover_command(opts: RecoverOptions) -> int:
+    """The ``gyrolab recover`` command: :func:`recover`, its summary printed."""
+    print(recover(opts.broken, opts.out, force=opts.force))
+    return 0
