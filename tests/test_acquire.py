@@ -54,9 +54,23 @@ def test_short_profile_completes_with_every_transition_recorded(short_run) -> No
     assert names[-2:] == ["run_ended", "safe_state"]
     starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
     # Steps start on the run clock, on the 240 s schedule exactly, however late the busy
-    # engine noticed the boundary (docs/reliability.md, "Timing").
-    assert starts == pytest.approx([240.0 * k for k in range(12)], abs=1e-6)
-    assert [e["t"] for e in rec.events if e["event"] == "run_ended"] == [pytest.approx(2880.0)]
+    # engine noticed the boundary (docs/reliability.md, "Timing") — later only by the
+    # time the run was held before them: a simulated bench starved of the CPU for a wall
+    # second (a loaded machine) holds the run as a stalled stream would
+    # (docs/reliability.md, "Suspenders"); the held step goes on, no re-soak.
+    held = [0.0] * 12
+    for sus, back in zip(
+        [e for e in rec.events if e["event"] == "suspended"],
+        [e for e in rec.events if e["event"] == "resumed"],
+        strict=True,
+    ):
+        assert "goes on" in back["detail"]
+        held[sus["step"]] += back["t"] - sus["t"]
+    schedule = np.cumsum([0.0] + [240.0 + h for h in held])
+    assert starts == pytest.approx(list(schedule[:12]), abs=1e-6)
+    assert [e["t"] for e in rec.events if e["event"] == "run_ended"] == [
+        pytest.approx(schedule[12])
+    ]
     assert "verified" in rec.events[-1]["detail"] and rec.oven_mode[-1] == "safe"
     assert rec.oven_setpoint_c[-1] == 25.0
     # Every setpoint of the profile was written and read back by the oven driver at the
@@ -64,6 +78,8 @@ def test_short_profile_completes_with_every_transition_recorded(short_run) -> No
     # machine) is seconds at 200x, up to 18 s seen with two CPU hogs. Each is verified
     # well inside the first quarter of its step, and typically within a few seconds.
     cmds = [m for m in rec.logs if m.get("kind") == "command"]
+    # (a held step's setpoint is commanded again when the run resumes)
+    cmds = [m for i, m in enumerate(cmds) if i == 0 or m["data"] != cmds[i - 1]["data"]]
     verified = [m["data"]["setpoint_c"] for m in cmds]
     assert verified == [25.0, 60.0, 50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0, -30.0, -40.0]
     lag = np.array([m["t"] for m in cmds]) - np.array(starts)

@@ -32,13 +32,17 @@ def test_eight_units_each_recorded_whole_and_read_back_per_unit(eight: Path) -> 
     assert list_units(eight) == SERIALS
     topics = [TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN, TOPIC_EVENT, TOPIC_LOG]
     recs = [read_recording(eight, topics=topics, unit=s) for s in SERIALS]
+    # the profile's end: 960 s, later by any time the run was held (a loaded machine
+    # starving the simulated bench: docs/reliability.md, "Suspenders")
+    (end,) = [e["t"] for e in recs[0].events if e["event"] == "run_ended"]
+    assert end >= 960.0
     means = []
     for s, rec in zip(SERIALS, recs, strict=True):
         rate = rec.require_rate()
         assert rec.unit == s and rec.run["units"] == SERIALS
         # Every unit's stream from run sample 0 to the profile's end, without a gap.
         assert rate.gaps() == [] and rate.index[0] == 0
-        assert 960.0 <= rate.t[-1] + rate.period < 964.0  # to the profile's end
+        assert end <= rate.t[-1] + rate.period < end + 4.0  # to the profile's end
         assert rec.pt100_t.size >= 300  # a sweep every 2 s, every unit's own PT100
         assert rec.bench["units"][s]["temperature_channel"] == 101 + SERIALS.index(s)
         means.append(float(np.mean(rate.values)))

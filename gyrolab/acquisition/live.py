@@ -60,6 +60,12 @@ LIVE_STATUS_SCHEMA: dict[str, Any] = {
         "frames_bad": {"type": "integer"},
         "live_published": {"type": "integer", "description": "messages sent to the server"},
         "live_dropped": {"type": "integer", "description": "messages the live view dropped"},
+        "suspended": {
+            "type": "array",
+            "items": {"type": "string"},
+            "description": "the conditions holding the run now (chamber alarm, temperature "
+            "lost, stream stall, operator pause); absent while it runs",
+        },
         "units": {
             "type": "array",
             "description": "multi-unit runs only: each unit, in bench order",
@@ -204,6 +210,8 @@ class LiveServer:
             "live_dropped": self.dropped,
         }
         msg = {k: v for k, v in msg.items() if v is not None}
+        if getattr(st, "suspended", None):
+            msg["suspended"] = list(st.suspended)
         units = [
             {
                 k: v
