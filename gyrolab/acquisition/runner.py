@@ -110,6 +110,7 @@ class Acquisition:
         status_every_s: float = 0.5,
         on_samples: Callable[[float], None] | None = None,
         silence: SilencePolicy | None = None,
+        hold_silence: SilencePolicy | None = None,
         threaded: bool = True,
         turn_s: float = 0.1,
         suspend: Suspend | None = None,
@@ -160,7 +161,9 @@ class Acquisition:
             silence=self.silence,
         )
         self.status.temperature_source = self.temps.plan_source
-        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal, self.silence)
+        # when a silence is long enough to hold the run, and a hold to outlast its limit
+        self.hold_silence: SilencePolicy = hold_silence or self.silence
+        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal, self.hold_silence)
         if self.suspend.enabled(TEMPERATURE_LOST) and thermometer is not None:
             self.comm.unjudged.add(thermometer.name)  # lost: the suspender's limit decides
         self._chamber_alarm = ""
@@ -508,6 +511,7 @@ class Acquisition:
             self.suspend.cfg.hold_after_s,
             t,
             self._pause,
+            self.hold_silence,
         )
         c = self.temps.last_c.get(self.temps.plan_sensor.serial, math.nan)
         change = self.suspend.update(t, holding, c)

@@ -77,17 +77,18 @@ def conditions(
     hold_after_s: float,
     t: float,
     pause: str | None,
+    silence: SilencePolicy | None = None,
 ) -> dict[str, Holding]:
     """The conditions that hold at run time ``t``: the ``chamber``'s alarm (its last
     reading's); the watched temperature lost for ``hold_after_s`` (a PT100's: its
     ``thermometer`` silent — by the bench's silence rule — or its channel reading
     overload; a unit's internal sensor stops with its stream: a stall); the first of the
     ``streams`` silent for more than ``hold_after_s`` (0: never looked at); the
-    operator's ``pause``."""
+    operator's ``pause``. Silence is judged by ``silence`` (default: the watchdog's rule)."""
     holding: dict[str, Holding] = {}
     if chamber_alarm:
         holding[CHAMBER_ALARM] = Holding(chamber, chamber_alarm)
-    silent = dict(comm.silent(hold_after_s)) if hold_after_s > 0 else {}
+    silent = dict(comm.silent(hold_after_s, silence)) if hold_after_s > 0 else {}
     if thermometer is not None and hold_after_s <= 0 and comm.down(thermometer):
         silent[thermometer] = 0.0  # no wait: its first failed reading holds the run
     plan = temps.plan_sensor

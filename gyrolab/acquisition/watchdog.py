@@ -103,14 +103,18 @@ class CommWatch:
         for d in (self.last_ok, self._down_since, self._down_errors):
             d.pop(source, None)
 
-    def silent(self, timeout_s: float | None = None) -> list[tuple[str, float]]:
-        """``(source, silent seconds)`` of every source the silence policy calls lost
-        after ``timeout_s`` (default: the watchdog's; ``unjudged`` sources left out)."""
+    def silent(
+        self, timeout_s: float | None = None, policy: SilencePolicy | None = None
+    ) -> list[tuple[str, float]]:
+        """``(source, silent seconds)`` of every source the silence ``policy`` (default:
+        the watchdog's) calls lost after ``timeout_s`` (default: the watchdog's, and then
+        ``unjudged`` sources left out)."""
         now = self.clock.now()
         limit = self.timeout_s if timeout_s is None else timeout_s
+        rule = policy or self.silence
         return [
             (source, now - last)
             for source, last in list(self.last_ok.items())
             if (timeout_s is not None or source not in self.unjudged)
-            and self.silence.lost(source, now - last, limit)
+            and rule.lost(source, now - last, limit)
         ]

@@ -360,6 +360,7 @@ def run_acquisition(
                     on_status=on_status,
                     on_samples=on_samples,
                     silence=None if sim is None else sim.silence,
+                    hold_silence=None if sim is None else sim.hold_silence,
                     suspend=cfg.suspend,
                     resume=resume,
                 )

@@ -39,6 +39,15 @@ CONNECT_SPEED = 10.0
 # silence (see SimSilence); a real bench runs in real time and needs none.
 SIM_COMM_MIN_WALL_S = 1.0
 
+# A simulated bench in its own process: how long a unit's ADC waits for its reader to
+# drain the port before frames are lost (wall s; see start_sim_bench).
+SIM_ADC_BACKPRESSURE_S = 1.0
+
+# A hold (a suspender: a stream or the temperature silent) on a simulated bench also needs
+# this much wall time of silence: a process starved of the CPU for a second on a loaded
+# machine must not hold the run as a stalled instrument would (SimSilence).
+SIM_HOLD_MIN_WALL_S = 3.0
+
 # Timeouts of a free-running simulated bench are scaled as if it ran this much faster
 # than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
 SIM_FAST_SCALE = 200.0
@@ -101,7 +110,8 @@ class SimHandle:
 
     ``addresses``: the address of each role's instrument (``registry`` role names);
     ``clock``/``silence``/``timeout``: the run clock, the watchdog's silence rule and the
-    drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict)."""
+    drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict);
+    ``hold_silence``: when a silence holds the run (a suspender), ``SIM_HOLD_MIN_WALL_S``."""
 
     addresses: dict[str, str]
     clock: SimRunClock
@@ -111,6 +121,7 @@ class SimHandle:
     bench: Any
     stop: Callable[[], None]
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+    hold_silence: SimSilence = field(default_factory=lambda: SimSilence(SIM_HOLD_MIN_WALL_S))
 
     @property
     def provenance(self) -> dict[str, Any]:
@@ -265,6 +276,11 @@ def start_sim_bench(
             keep_truth=keep_truth,
             tcp=dmm_spec is not None and dmm_spec.sim_address == "dmm_tcp_resource",
             tick_s=sim_tick_s(speed),
+            # In a process of its own the bench keeps producing while the run engine's
+            # process waits for a core: a unit's ADC waits up to a wall second for its
+            # reader to drain the port (the clock slips) before it overruns, as one
+            # process, starved whole, never did (docs/performance.md).
+            adc_write_timeout_s=SIM_ADC_BACKPRESSURE_S if own_process else None,
             # Slow while the drivers connect (imports, port set-up: wall seconds that would
             # be hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall
             # so that the change to ``speed`` (SimHandle.go) takes effect at once.

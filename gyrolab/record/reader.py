@@ -198,20 +198,40 @@ def file_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
 MAX_SEGMENTS = 1000
 
 
+def _run_record(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The ``run`` record of one file, and no other: read through the summary's metadata
+    index, so that following a run's segments opens no other record (a workflow that
+    must not see ``sim_provenance`` may read runs; tests/test_discrepancy_workflow.py)."""
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
+
+    with opened_file(path) as (reader, fh):
+        summary = reader.get_summary()
+        if summary is None:  # no index: the records in file order
+            return file_metadata(path).get("run", {})
+        for idx in summary.metadata_indexes:
+            if idx.name == "run":
+                fh.seek(idx.offset)
+                record = next(StreamReader(fh, skip_magic=True).records)
+                if isinstance(record, Metadata):
+                    return _parse_meta(record.metadata)
+    return {}
+
+
 def segments(path: str | os.PathLike[str]) -> list[Path]:
     """The files of the run ``path`` belongs to, first to ``path``: a continuation (its
     ``run`` record's ``segment`` > 1) names the file it continues (``previous_segment``,
     beside it), which must hold the same ``run_id`` and the segment before. A missing or
     foreign previous segment is an :class:`InputError` naming it: the run is not whole."""
     chain = [Path(path)]
-    run = file_metadata(path).get("run", {})
+    run = _run_record(path)
     while isinstance(run.get("segment"), int) and run["segment"] > 1:
         prev = run.get("previous_segment") or {}
         p = chain[0].parent / str(prev.get("file", ""))
         want = f"segment {run['segment'] - 1} of run {run.get('run_id')}"
         if not prev.get("file") or not p.is_file():
             raise InputError(chain[0], f"continues {p.name} ({want}), which is not beside it")
-        before = file_metadata(p).get("run", {})
+        before = _run_record(p)
         if before.get("run_id") != run.get("run_id") or before.get("segment", 1) != (
             run["segment"] - 1
         ):

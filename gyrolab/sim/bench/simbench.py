@@ -86,6 +86,7 @@ class SimBench:
         chamber_model: str = "F4",
         oven_control_event: int | None = None,
         oven_alarm_input: int | None = None,
+        adc_write_timeout_s: float | None = None,
         axis_physics: list[Any] | None = None,
         unit_physics: list[Any] | None = None,
         unit_internal_temperature: list[bool] | None = None,
@@ -154,7 +155,13 @@ class SimBench:
                 keep_truth=keep_truth,
                 # Back-pressure only when running as fast as possible; paced, a slow reader
                 # overruns like a real UART receiver would.
-                write_timeout_s=0.5 if speed is None else 0.05,
+                write_timeout_s=(
+                    adc_write_timeout_s
+                    if adc_write_timeout_s is not None
+                    else 0.5
+                    if speed is None
+                    else 0.05
+                ),
             )
             for pty, internal in zip(self.unit_ptys, self.unit_internal, strict=True)
         ]
