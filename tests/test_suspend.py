@@ -286,7 +286,8 @@ def test_faults_file_chamber_alarm_past_its_limit_ends_in_the_verified_safe_stat
     rec = read_recording(out)
     (sus,) = _events(rec, "suspended")
     (ab,) = _events(rec, "aborted")
-    assert ab["t"] - sus["t"] == pytest.approx(300.0, abs=3.0)
+    # 300 s, and the engine's reaction time: a turn or two, seconds at 100x when loaded
+    assert 300.0 <= ab["t"] - sus["t"] <= 315.0
     assert _events(rec, "safe_state")[0]["detail"].startswith("setpoint 25")
 
 

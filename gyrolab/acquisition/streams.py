@@ -60,7 +60,8 @@ class RateRecorder:
         # blocks carry go to /unit/<serial>/temperature/internal, averaged per recorded
         # block, and each average to ``readings`` until the engine takes it.
         self.internal = internal and unit is not None
-        self._temps: list[tuple[float, float]] = []  # (run time, °C) not yet written
+        # (run time, °C, run index of its sample) not yet written
+        self._temps: list[tuple[float, float, float]] = []
         self._readings: list[tuple[float, float]] = []  # written, not yet taken
         self.dropped = False  # a multi-unit run gave up on this stream
         # A resumed run's continuation (acquire --resume; the engine sets both): the run
@@ -256,18 +257,26 @@ class RateRecorder:
         new = first >= self._next_idx
         t = float(blk.t0) + (first - int(blk.first_index)) * self.period - self._adc_offset
         vals = np.asarray(blk.temperature_c, dtype=float)
-        self._temps += [(float(a), float(b)) for a, b in zip(t[new], vals[new], strict=True)]
+        run = first - self.idx0 + self._base if self.idx0 is not None else first
+        self._temps += [
+            (float(a), float(b), float(r))
+            for a, b, r in zip(t[new], vals[new], run[new], strict=True)
+        ]
 
     def _emit_temperature(self) -> None:
-        """Write the readings kept since the last block as one message (their mean) and
-        keep it for :meth:`take_readings`."""
+        """Write the readings kept since the last block, one message (their mean) per
+        ``block_s`` of samples they were taken at — however many samples one read brought
+        — and keep each for :meth:`take_readings`."""
         if not self._temps or not self.internal:
             return
-        t, c = np.mean(np.asarray(self._temps), axis=0)
-        n = len(self._temps)
+        a = np.asarray(self._temps)
         self._temps = []
-        self.w.write_internal_temperature(float(t), float(c), n, unit=self.unit)
-        self._readings.append((float(t), float(c)))
+        span = a[:, 2] // self._block_len
+        for b in np.unique(span):
+            group = a[span == b]
+            t, c = group[:, :2].mean(axis=0)
+            self.w.write_internal_temperature(float(t), float(c), len(group), unit=self.unit)
+            self._readings.append((float(t), float(c)))
 
     def take_readings(self) -> list[tuple[float, float]]:
         """The internal-sensor readings recorded since the last call, ``(run time, °C)``
