@@ -146,15 +146,20 @@ def _is_adc(name: str) -> bool:
 
 
 def _summary(path: Path) -> dict[str, int]:
-    """Message count per topic, from the summary section."""
+    """Message count per topic, from the summary sections of the run's files (a resumed
+    run's segments, gyrolab.record.reader.segments), each read checked."""
+    from gyrolab.record.reader import segments
     from gyrolab.record.source import opened
 
-    with opened(path) as src:
-        s = src.summary
-    if s is None or s.statistics is None:
-        raise InputError(path, "MCAP without a summary section; try `gyrolab recover`")
-    topics = {c.id: c.topic for c in s.channels.values()}
-    counts = {topics[c]: int(n) for c, n in s.statistics.channel_message_counts.items()}
+    counts: dict[str, int] = {}
+    for p in segments(path):
+        with opened(p) as src:
+            s = src.summary
+        if s is None or s.statistics is None:
+            raise InputError(p, "MCAP without a summary section; try `gyrolab recover`")
+        topics = {c.id: c.topic for c in s.channels.values()}
+        for c, n in s.statistics.channel_message_counts.items():
+            counts[topics[c]] = counts.get(topics[c], 0) + int(n)
     return counts
 
 

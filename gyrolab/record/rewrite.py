@@ -15,8 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gyrolab.record.format import PROFILE
+from gyrolab.record.reader import read_metadata, segments
 from gyrolab.record.source import opened
-from gyrolab.record.writer import McapFile
+from gyrolab.record.writer import McapFile, json_strings
 
 
 @dataclass(frozen=True)
@@ -46,48 +47,61 @@ def rewrite_recording(
     takes; registered right after that topic's channel. ``tail``: messages written after
     the copy (on any topic registered by then). ``metadata``: records (MCAP string maps)
     written after the source's, replacing any of the same name. A damaged ``src`` is an
-    :class:`InputError`."""
+    :class:`InputError`.
+
+    A resumed run (its segments, docs/recording-format.md) is copied whole into one file:
+    every segment's messages in turn, each topic on one channel, and the run's metadata as
+    :func:`~gyrolab.record.reader.read_metadata` gives it (``run`` with its ``segments``)."""
     derived = dict(derived or {})
     metadata = dict(metadata or {})
+    paths = segments(src)
+    merged = read_metadata(src) if len(paths) > 1 else None
+    w: McapFile | None = None
+    sids: dict[tuple[str, str, bytes], int] = {}
+    by_topic: dict[str, int] = {}
+    records: list[tuple[str, Mapping[str, str]]] = []
+
+    def put(m: Message) -> None:
+        if m.topic not in by_topic:
+            raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
+        assert w is not None
+        w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
+
     # dst is opened first: an error writing it is not the source's damage
-    with open(Path(dst), "wb") as out, opened(src) as source:
-        header = source.header()
-        w = McapFile(out, profile=header.profile or PROFILE)
-        schemas, channels = source.schemas(), source.channels()
-        sids: dict[int, int] = {}
-        cids: dict[int, int] = {}
-        by_topic: dict[str, int] = {}
-
-        def put(m: Message) -> None:
-            if m.topic not in by_topic:
-                raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
-            w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
-
-        for topic, log_time, data, cid, seq, pub in source.messages():
-            if cid not in cids:
-                channel = channels[cid]
-                sid = 0
-                if channel.schema_id:
-                    if channel.schema_id not in sids:
-                        schema = schemas[channel.schema_id]
-                        sids[channel.schema_id] = w.register_schema(
-                            schema.name, schema.encoding, schema.data
-                        )
-                    sid = sids[channel.schema_id]
-                enc, meta = channel.message_encoding, dict(channel.metadata)
-                cids[cid] = w.register_channel(topic, enc, sid, meta)
-                by_topic[topic] = cids[cid]
-                for name, like in derived.items():
-                    if like == topic:
-                        by_topic[name] = w.register_channel(name, enc, sid, meta)
-            m = Message(topic, log_time, pub, seq, bytes(data))
-            for out_msg in [m] if transform is None else transform(m):
-                put(out_msg)
+    with open(Path(dst), "wb") as out:
+        for path in paths:
+            with opened(path) as source:  # each segment checked
+                if w is None:
+                    w = McapFile(out, profile=source.header().profile or PROFILE)
+                schemas, channels = source.schemas(), source.channels()
+                for topic, log_time, data, cid, seq, pub in source.messages():
+                    if topic not in by_topic:
+                        channel = channels[cid]
+                        sid = 0
+                        if channel.schema_id:
+                            schema = schemas[channel.schema_id]
+                            key = (schema.name, schema.encoding, bytes(schema.data))
+                            if key not in sids:
+                                sids[key] = w.register_schema(*key)
+                            sid = sids[key]
+                        enc, meta = channel.message_encoding, dict(channel.metadata)
+                        by_topic[topic] = w.register_channel(topic, enc, sid, meta)
+                        for name, like in derived.items():
+                            if like == topic:
+                                by_topic[name] = w.register_channel(name, enc, sid, meta)
+                    m = Message(topic, log_time, pub, seq, bytes(data))
+                    for out_msg in [m] if transform is None else transform(m):
+                        put(out_msg)
+                if merged is None:  # one file: its records as they are
+                    records = [(r.name, r.metadata) for r in source.metadata()]
+        assert w is not None
         for m in tail:
             put(m)
-        for rec in source.metadata():
-            if rec.name not in metadata:
-                w.add_metadata(rec.name, rec.metadata)
+        if merged is not None:
+            records = [(name, json_strings(record)) for name, record in merged.items()]
+        for name, values in records:
+            if name not in metadata:
+                w.add_metadata(name, values)
         for name, values in metadata.items():
             w.add_metadata(name, values)
         w.finish()

@@ -116,6 +116,29 @@ class Source:
         except Exception as e:
             raise self.error(e) from None
 
+    def metadata_record(self, name: str) -> dict[str, str] | None:
+        """The string map of the metadata record ``name`` (the first of that name), read
+        alone through the summary's metadata index: no other record is opened (a file
+        without a summary: the records in file order). None when there is none."""
+        try:
+            if self.summary is None:
+                return next(
+                    (m.metadata for m in self.reader.iter_metadata() if m.name == name), None
+                )
+            from mcap.records import Metadata
+            from mcap.stream_reader import StreamReader
+
+            for idx in self.summary.metadata_indexes:
+                if idx.name == name:
+                    self.fh.seek(idx.offset)
+                    record = next(StreamReader(self.fh, skip_magic=True).records)
+                    if not isinstance(record, Metadata) or record.name != name:
+                        raise ValueError(f"metadata index of {name!r} points at no such record")
+                    return dict(record.metadata)
+            return None
+        except Exception as e:
+            raise self.error(e) from None
+
     def channels(self) -> dict[int, Any]:
         """Channel id → the mcap library's Channel record (``topic``, ``schema_id``, …)."""
         if self.summary is not None:
