@@ -496,6 +496,11 @@ def _main(argv: Sequence[str] | None) -> int:
         by = f" by {e.args[0]}" if e.args and str(e.args[0]).startswith("SIG") else ""
         print(f"gyrolab: interrupted{by}", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (`gyrolab runs list --json | head`): stop quietly, as a
+        # shell tool does; stdout to /dev/null so the interpreter's flush at exit is silent
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":  # pragma: no cover
