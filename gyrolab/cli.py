@@ -302,7 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["chosen", "causal", "gabp", "bp", "poly", "poly3"],
         help="c/json: which fitted drift model (default chosen: causal if fitted, else gabp)",
     )
-    ex.add_argument("--instance", type=int, default=0, help="px4/ardupilot gyro instance (0)")
+    ex.add_argument(
+        "--instance", type=_int_in(0), default=0, help="px4 (0..3), ardupilot (0..2) gyro instance"
+    )
     req = ex.add_argument_group("required by one format")
     req.add_argument(
         "--device-id",

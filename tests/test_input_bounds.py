@@ -2,9 +2,10 @@
 the right file: each is one line, exit 2, before anything is written.
 
 Before: ``duration_s = 1e300`` simulated until killed, ``--units 0`` and ``--workers 0/-2``
-ran and wrote, 500 °C setpoints and ``ambient_c = 500`` were simulated; a model directory
-given as the run said "file not found", a multi-unit run given to ``apply`` said "no
-/temperature/pt100", and ``block_s = inf`` in ``--config`` was blamed on the run.
+ran and wrote, ``export --instance -1/99`` was a traceback, 500 °C setpoints and
+``ambient_c = 500`` were simulated; a model directory given as the run said "file not
+found", a multi-unit run given to ``apply`` said "no /temperature/pt100", and
+``block_s = inf`` in ``--config`` was blamed on the run.
 """
 
 from __future__ import annotations
@@ -62,6 +63,11 @@ def test_a_profile_beyond_the_bounds_is_refused(
         (["simulate", "--seed", "-1"], "--seed: must be in [0, 2**63)"),
         (["simulate", "--rate", "inf"], "--rate: must be a finite number > 0"),
         (["acquire", "--bench", "sim", "--speed", "0"], "--speed: must be a finite number > 0"),
+        (["export", "{run}", "--format", "json", "--instance", "-1"], "--instance: must be at"),
+        (["export", "{run}", "--format", "px4", "--device-id", "1", "--instance", "4"],
+         "--instance: px4 has gyro instances 0..3, not 4"),
+        (["export", "{run}", "--format", "ardupilot", "--instance", "99"],
+         "--instance: ardupilot has gyro instances 0..2, not 99"),
     ],
     ids=lambda a: " ".join(a) if isinstance(a, list) else None,
 )

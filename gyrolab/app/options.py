@@ -240,7 +240,9 @@ class ExportOptions:
     force: bool = False
 
     def __post_init__(self) -> None:
-        check_request(self.format, device_id=self.device_id, run=self.run)
+        check_request(
+            self.format, device_id=self.device_id, run=self.run, instance=self.instance
+        )
         need_model_dir(self.model)
         need_file(self.run)
 

@@ -25,9 +25,14 @@ from gyrolab.outputs import atomic_file, check_output
 FORMATS = ("px4", "ardupilot", "c", "json", "kalibr")
 # The options one format requires (the command line's help and docs/cli.md list them)
 REQUIRED_FOR = {"px4": "--device-id", "kalibr": "--run"}
+#: The gyro (IMU) instances a firmware has parameters for: PX4's ``TC_G0..3_*``, ArduPilot's
+#: ``INS_TCAL1..3_*`` (gyrolab.export.params writes them and refuses others too).
+INSTANCES = {"px4": 4, "ardupilot": 3}
 
 
-def check_request(fmt: str, *, device_id: int | None, run: object | None) -> None:
+def check_request(
+    fmt: str, *, device_id: int | None, run: object | None, instance: int = 0
+) -> None:
     """The format is known and the options it requires are given (:data:`REQUIRED_FOR`):
     checked before anything is read, one line and exit 2 otherwise. Light (no numerical
     import), so that the command line answers at once."""
@@ -37,6 +42,9 @@ def check_request(fmt: str, *, device_id: int | None, run: object | None) -> Non
         raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")
     if fmt == "kalibr" and run is None:
         raise InputError("--run", "the kalibr format needs a run to analyse (--run RUN)")
+    n = INSTANCES.get(fmt)
+    if n is not None and not 0 <= instance < n:
+        raise InputError("--instance", f"{fmt} has gyro instances 0..{n - 1}, not {instance}")
 
 
 def _polys(model_dir: str) -> list[Any]:
@@ -126,7 +134,7 @@ def export(
     from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.export.params import ardupilot_parm, px4_params
 
-    check_request(fmt, device_id=device_id, run=run)
+    check_request(fmt, device_id=device_id, run=run, instance=instance)
     model, out = str(model_dir), Path(out)
     outs = [out] + ([out.with_suffix(".h")] if fmt == "c" else [])
     inputs = (model, None if run is None else str(run))
