@@ -279,3 +279,23 @@ def test_a_file_is_checked_once_per_process_until_it_changes(
     with pytest.raises(InputError, match="damaged"):
         read_metadata(f)
     assert len(sums) == 2
+
+
+def test_a_damaged_simulation_record_in_an_older_file_is_one_line(tmp_path: Path) -> None:
+    """An older file's metadata records are under no CRC; the oracle's model (the
+    ``sim_provenance`` record's TOML) that no longer decodes is one line naming the file
+    (benchmarks/fuzz_reads.py --older-format found compensate's TOMLDecodeError traceback)."""
+    from gyrolab.cli import main
+    from gyrolab.compensation.oracle import oracle_rate
+
+    prof = tmp_path / "p.toml"
+    prof.write_text("[[step]]\nsetpoint_c = 25\nduration_s = 20\n")
+    run = tmp_path / "run.mcap"
+    assert main(["simulate", "--profile", str(prof), "--rate", "10", "--out", str(run)]) == 0
+    data = old_style(run.read_bytes())
+    at = data.index(b"[thermal]")
+    old = tmp_path / "old.mcap"
+    old.write_bytes(data[:at] + b"[thermal" + b"\x00" + data[at + 9 :])  # same length
+    with pytest.raises(InputError, match="sim_provenance model does not decode") as e:
+        oracle_rate(read_recording(old))
+    assert e.value.path == str(old)

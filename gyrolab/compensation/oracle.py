@@ -33,17 +33,28 @@ from gyrolab.record.reader import read_recording
 STOCHASTIC = ("arw", "bias_instability", "rate_random_walk", "outliers", "quantization")
 
 
-def deterministic_drift(
-    model_toml: str, rate_hz: float, n: int, steps: list[tuple[float, float]], ambient_c: float
-) -> np.ndarray:
-    """The deterministic part of a simulated gyro's output (°/s) at samples ``0..n−1``:
-    ``steps`` = (start time s, setpoint °C) in time order."""
+def provenance_model(path: str, model_toml: object) -> Any:
+    """The :class:`~gyrolab.sim.model.SimModel` a ``sim_provenance`` record names; an
+    :class:`InputError` naming ``path`` when it does not decode (a damaged record: in the
+    older format, without the data section's CRC, nothing else catches it)."""
     import tomllib
 
     from gyrolab.sim.model import SimModel
+
+    try:
+        return SimModel.from_dict(tomllib.loads(str(model_toml)))
+    except (tomllib.TOMLDecodeError, ValueError, TypeError, KeyError) as e:
+        raise InputError(path, f"its sim_provenance model does not decode ({e})") from None
+
+
+def deterministic_drift(
+    model: Any, rate_hz: float, n: int, steps: list[tuple[float, float]], ambient_c: float
+) -> np.ndarray:
+    """The deterministic part of a simulated gyro's output (°/s) at samples ``0..n−1``:
+    ``model`` a :class:`~gyrolab.sim.model.SimModel`, ``steps`` = (start time s, setpoint
+    °C) in time order."""
     from gyrolab.sim.physics import Physics
 
-    model = SimModel.from_dict(tomllib.loads(model_toml))
     for name in STOCHASTIC:
         model = model.without_effect(name)
     phys = Physics(model, rate_hz=rate_hz, seed=0, ambient_c=ambient_c)
@@ -84,7 +95,8 @@ def oracle_rate(rec: Any) -> np.ndarray | None:
     idx = np.rint(np.asarray(rec.rate.t) * rate_hz).astype(np.int64)
     if idx.size == 0 or idx[0] < 0:
         return None
-    drift = deterministic_drift(str(prov["model_toml"]), rate_hz, int(idx[-1]) + 1, steps, ambient)
+    model = provenance_model(rec.path, prov["model_toml"])
+    drift = deterministic_drift(model, rate_hz, int(idx[-1]) + 1, steps, ambient)
     return raw - drift[idx]
 
 
