@@ -308,32 +308,43 @@ def _client(scheduler: str | None, workers: int, threads: int):  # type: ignore[
         with Client(scheduler) as client:
             yield client
         return
+    from gyrolab.acquisition.interrupts import deferred_stop_signals
+
     env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
     env.update({k: threads for k in THREAD_ENV})
     env["GYROLAB_NO_PROGRESS"] = "1"
     saved = {k: os.environ.get(k) for k in [*env, "PYTHONHASHSEED"]}
+    cluster = None
     try:
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-            cluster = LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=logging.ERROR,
-            )
-    finally:
-        # the nanny sets these in *this* process's environment before spawning (by design);
-        # put them back: a caller's numba, for one, refuses a changed NUMBA_NUM_THREADS
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-    try:
+        try:
+            # A stop signal while the cluster starts is raised once it exists (on leaving
+            # the deferral), so that it is closed below: interrupted inside its start, it
+            # was left to distributed's atexit close, which failed on its half-started
+            # workers (a traceback, or exit -2: tests/test_interrupts.py).
+            with (
+                dask.config.set({"distributed.nanny.pre-spawn-environ": env}),
+                deferred_stop_signals(),
+            ):
+                cluster = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.ERROR,
+                )
+        finally:
+            # the nanny sets these in *this* process's environment before spawning (by
+            # design); put them back: a caller's numba refuses a changed NUMBA_NUM_THREADS
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
         with Client(cluster) as client:
             yield client
     finally:
-        cluster.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def check_scheduler(address: str, timeout_s: float | None = None) -> None:
