@@ -359,21 +359,18 @@ def _read_bench(
     return t0, period, x, idx, np.asarray(sorted(pt), dtype=float), np.asarray(sorted(oven))
 
 
-def load_recording(
-    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+def _bench_data(
+    bench: tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    column: np.ndarray,
+    bin_s: float | None,
+    source: str,
 ) -> BenchData:
-    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
-    t0, period, x, idx, p, o = _read_bench(path, unit)
-    if x.ndim > 1:
-        raise InputError(
-            path,
-            f"a {x.shape[1]}-axis recording: the discrepancy analysis models "
-            "one gyro axis (simulate the axes one by one)",
-        )
+    """:class:`BenchData` of one rate column of what :func:`_read_bench` returned."""
+    t0, period, _x, idx, p, o = bench
     return from_arrays(
         t0,
         period,
-        x,
+        column,
         p[:, 0],
         p[:, 1],
         o[:, 0],
@@ -381,8 +378,23 @@ def load_recording(
         o[:, 2],
         rate_index=idx,
         bin_s=bin_s,
-        source=str(path),
+        source=source,
     )
+
+
+def load_recording(
+    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+) -> BenchData:
+    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
+    bench = _read_bench(path, unit)
+    x = bench[2]
+    if x.ndim > 1:
+        raise InputError(
+            path,
+            f"a {x.shape[1]}-axis recording: the discrepancy analysis models "
+            "one gyro axis (simulate the axes one by one)",
+        )
+    return _bench_data(bench, x, bin_s, str(path))
 
 
 def load_recording_axes(
@@ -391,23 +403,10 @@ def load_recording_axes(
     """One :class:`BenchData` per gyro axis of a recording (one for a single-axis one),
     all with the same temperature channels, for
     :func:`gyrolab.sim.discrepancy.axes.run_discrepancy_axes`."""
-    t0, period, x, idx, p, o = _read_bench(path, unit)
-    cols = x if x.ndim > 1 else x[:, None]
+    bench = _read_bench(path, unit)
+    cols = bench[2] if bench[2].ndim > 1 else bench[2][:, None]
     return [
-        from_arrays(
-            t0,
-            period,
-            cols[:, k],
-            p[:, 0],
-            p[:, 1],
-            o[:, 0],
-            o[:, 1],
-            o[:, 2],
-            rate_index=idx,
-            bin_s=bin_s,
-            source=f"{path} (axis {k})",
-        )
-        for k in range(cols.shape[1])
+        _bench_data(bench, cols[:, k], bin_s, f"{path} (axis {k})") for k in range(cols.shape[1])
     ]
 
 

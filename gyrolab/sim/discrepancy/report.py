@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.sim.discrepancy.workflow import LF_WINDOW_S, Fitted, Result, moving_average
+from gyrolab.sim.discrepancy.fitting import LF_WINDOW_S, Fitted, moving_average
+from gyrolab.sim.discrepancy.workflow import Result
 
 
 def _png(fig: Any) -> str:

@@ -27,10 +27,9 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
-from scipy.signal import lfilter
 
 from gyrolab.sim.discrepancy.data import BenchData
-from gyrolab.sim.thermal import ThermalParams, air_rate, thermal_kernel
+from gyrolab.sim.thermal import ThermalParams, air_rate, lowpass, thermal_kernel
 
 OVEN_DT_S = 0.5
 OVEN_MAX_POINTS = 6000
@@ -369,15 +368,6 @@ class CaseFit:
     @property
     def k(self) -> int:
         return 4 + int(self.with_offset)
-
-
-def lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
-    """``c_{k+1} = c_k + α (u_k − c_k)``, ``c_0 = c0``."""
-    c = np.empty(u.size)
-    c[0] = c0
-    if u.size > 1:
-        c[1:], _ = lfilter([alpha], [1.0, alpha - 1.0], u[:-1], zi=[(1.0 - alpha) * c0])
-    return c
 
 
 MAX_TIME_SHIFT_S = 5.0
