@@ -31,6 +31,7 @@ from typing import ClassVar
 import numba
 import numpy as np
 
+from gyrolab.pt100 import R0_OHM, cvd_resistance
 from gyrolab.sim.candidate import (
     GAP_ALLAN,
     GAP_LATTICE,
@@ -119,6 +120,11 @@ class Effect:
     def post(self, out: np.ndarray, ctx: BlockContext) -> np.ndarray:
         """Transform of the summed output (only ``target == "post"`` effects)."""
         return out
+
+
+def self_heating_c(offset_c: float, temp_c: float | np.ndarray) -> float | np.ndarray:
+    """``rtd_self_heating``'s error at ``temp_c`` (°C): ``offset_c · R(T)/R0``."""
+    return offset_c * cvd_resistance(temp_c) / R0_OHM
 
 
 EFFECTS: dict[str, type[Effect]] = {}
@@ -526,17 +532,36 @@ class Outliers(Effect):
         return np.where(u < p, np.where(u < 0.5 * p, -1.0, 1.0) * self.p["amplitude"], 0.0)
 
 
+def overshoot_omega_zeta(overshoot: float, period_s: float) -> tuple[float, float]:
+    """(ω_n rad/s, ζ) of a second-order step response with fractional ``overshoot``
+    ``exp(−πζ/√(1−ζ²))`` and damped period ``period_s = 2π/(ω_n√(1−ζ²))``."""
+    lo = math.log(overshoot)
+    zeta = -lo / math.sqrt(math.pi**2 + lo * lo)
+    wd = 2.0 * math.pi / period_s
+    return wd / math.sqrt(1.0 - zeta * zeta), zeta
+
+
+def overshoot_period_s(overshoot: float, mean_delay_s: float) -> float:
+    """The damped period of a second-order chamber with ``overshoot`` whose step response
+    has the mean delay ``2ζ/ω_n`` of a first-order one with τ = ``mean_delay_s``:
+    ``π·τ / (ζ·√(1−ζ²))`` s (the chamber as fast as before, only ringing)."""
+    lo = math.log(overshoot)
+    zeta = -lo / math.sqrt(math.pi**2 + lo * lo)
+    return math.pi * mean_delay_s / (zeta * math.sqrt(1.0 - zeta * zeta))
+
+
 @register
 class OvenOvershoot(Effect):
     """Chamber air answers a setpoint step as a second-order system (still rate limited).
 
     ``overshoot`` is the fractional overshoot of a small step, ``exp(−πζ/√(1−ζ²))``;
-    ``period_s`` the damped period ``2π / (ω_n √(1−ζ²))``.
+    ``period_s`` the damped period ``2π / (ω_n √(1−ζ²))``. Its detection limit is stated
+    for a chamber as fast as the first-order fit (:func:`overshoot_period_s`).
     """
 
     name = "oven_overshoot"
     target = "air"
-    candidate = Candidate("temperature", GAP_TEMPERATURE, "overshoot", {"period_s": 1200.0})
+    candidate = Candidate("temperature", GAP_TEMPERATURE, "overshoot")
     PARAMS = {
         "overshoot": Param(0.15, "fraction", "overshoot of a small step", "frac"),
         "period_s": Param(1200.0, "s", "damped oscillation period", "pos"),
@@ -544,17 +569,18 @@ class OvenOvershoot(Effect):
 
     def omega_zeta(self) -> tuple[float, float]:
         """(ω_n in rad/s, ζ)."""
-        lo = math.log(self.p["overshoot"])
-        zeta = -lo / math.sqrt(math.pi**2 + lo * lo)
-        wd = 2.0 * math.pi / self.p["period_s"]
-        return wd / math.sqrt(1.0 - zeta * zeta), zeta
+        return overshoot_omega_zeta(self.p["overshoot"], self.p["period_s"])
 
 
 @register
 class RtdSelfHeating(Effect):
-    """The PT100 reads high by a constant ``offset_c`` (°C): the measuring current's heat."""
+    """The PT100 reads high by its own heat: the multimeter's test current I dissipates
+    ``I²·R(T)`` in it, which a thermal resistance θ to the case turns into
+    ``ΔT = θ·I²·R(T) = offset_c · R(T)/R0`` (°C; R by IEC 60751): the error grows with the
+    sensor's resistance, 0.39 %/°C. ``offset_c`` is its value at 0 °C (``θ·I²·R0``); with
+    the 1 mA of a 34401A, θ = 3 °C/mW gives the default 0.3 °C."""
 
     name = "rtd_self_heating"
     target = "pt100"
     candidate = Candidate("temperature", GAP_TEMPERATURE, "offset_c")
-    PARAMS = {"offset_c": Param(0.3, "degC", "reading minus true case temperature")}
+    PARAMS = {"offset_c": Param(0.3, "degC", "reading minus true case temperature at 0 °C")}

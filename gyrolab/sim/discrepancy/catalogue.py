@@ -83,10 +83,13 @@ def shape_values(name: str, theta: dict[str, float]) -> dict[str, float]:
     return out
 
 
-def limit_entry(name: str, value: float | None, method: str) -> dict[str, Any]:
+def limit_entry(
+    name: str, value: float | None, method: str, at: dict[str, float] | None = None
+) -> dict[str, Any]:
     """A ``detection_limits`` entry of ``discrepancy.json``: the parameter the effect
     declares its limit in, its unit, the value (None: not computable here), how it was
-    computed, and the reference shape it is stated at (``at``), if any."""
+    computed, and the reference shape it is stated at (``at``: the effect's declared one,
+    or the channel's)."""
     cls = EFFECTS[name]
     c = cls.candidate
     if c is None or c.limit is None:
@@ -97,6 +100,6 @@ def limit_entry(name: str, value: float | None, method: str) -> dict[str, Any]:
         "limit": value,
         "method": method,
     }
-    if c.limit_at:
-        e["at"] = dict(c.limit_at)
+    if at or c.limit_at:
+        e["at"] = dict(at or c.limit_at)
     return e

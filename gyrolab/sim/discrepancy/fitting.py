@@ -71,6 +71,8 @@ class Fitted:
     whitener: CovWhitener | None = None
     cov_noise: nf.CovNoise | None = None
     """The bins' noise model the whitener comes from (learned from this residual)."""
+    memo: dict[str, Any] = field(default_factory=dict)
+    """What the channels computed on this fit and use again (scores, then limits)."""
 
     @property
     def resid(self) -> np.ndarray:
@@ -141,10 +143,11 @@ class Fitter:
         self.thermal = thermal or ThermalFits(data, model.thermal)
 
     def context(self, case: CaseFit) -> GyroContext:
-        """The gyro terms' context: the measured case temperature (reading minus the
-        model's PT100 offset) and the case model's rate on the 1 s grid."""
+        """The gyro terms' context: the measured case temperature (a PT100's reading less
+        the model's self-heating, or a die sensor's carried back to the case) and the case
+        model's rate on the 1 s grid."""
         d = self.d
-        meas = np.interp(case.grid_t, d.pt100_t, d.pt100_c) - case.offset_c
+        meas = case.measured_case(d)
         return GyroContext(
             t=d.t,
             y=d.y,
@@ -295,6 +298,8 @@ class Fitter:
             r = th["case_resistance_k_per_w"]
         th["case_resistance_k_per_w"] = r
         th["case_capacity_j_per_k"] = tau / r
+        if f.case.die_tau_s is not None:  # measured through a die sensor
+            th["die_tau_s"] = f.case.die_tau_s
         order = [n for n in m0.effect_names()] + [
             n for n in f.structure.effects if n not in m0.effect_names()
         ]
