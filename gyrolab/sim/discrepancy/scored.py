@@ -20,6 +20,8 @@ class Scored:
     """Gyro terms: the shape value its own scan chose (added with it)."""
     form: dict[str, float] = field(default_factory=dict)
     """Gyro terms: the wider forms' shape values of the candidate's fit."""
+    fit: Any = None
+    """Gyro terms: the candidate's own fit (base + it), for the look-alike tests."""
 
     def to_json(self) -> dict[str, Any]:
         return {

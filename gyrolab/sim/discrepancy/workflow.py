@@ -33,7 +33,7 @@ the best is the one added. After each addition the earlier gyro choices are revi
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from gyrolab.sim.discrepancy import catalogue as cat
@@ -41,9 +41,12 @@ from gyrolab.sim.discrepancy.channels import gyro, noise, sample, temperature
 from gyrolab.sim.discrepancy.data import BenchData
 from gyrolab.sim.discrepancy.fitting import Fitted, Fitter, Structure, ThermalFits
 from gyrolab.sim.discrepancy.gyro_fit import GyroStructure, fit_structure
+from gyrolab.sim.discrepancy.identify import LookAlike
 from gyrolab.sim.discrepancy.limits import detection_limits
 from gyrolab.sim.discrepancy.localize import localize
+from gyrolab.sim.discrepancy.periodic import periodic_content
 from gyrolab.sim.discrepancy.scored import Scored
+from gyrolab.sim.discrepancy.separate import Proposal, propose
 from gyrolab.sim.model import SimModel
 
 AMBIGUITY_MARGIN = 10.0
@@ -86,17 +89,17 @@ class Workflow:
         return st
 
     # ----------------------------------------------------------------- the loop
-    def choose(
-        self, cur: Fitted
-    ) -> tuple[list[Scored], tuple[Scored, list[str], Fitted] | None, list[dict[str, Any]]]:
+    def choose(self, cur: Fitted) -> tuple[list[Scored], Choice | None, list[dict[str, Any]]]:
         """One iteration's choice: every channel's candidates (until a channel has an
-        acceptable one), the accepted candidate with its ambiguous set and the refit
-        model (or None), and the significant ones rejected because their own gap grew."""
+        acceptable one), the accepted candidate with its ambiguous set, its look-alikes
+        (:mod:`.identify`) and the refit model (or None), and the significant ones
+        rejected because their own gap grew."""
         cands: list[Scored] = []
         rejected: list[dict[str, Any]] = []
         for channel in CHANNELS:
             cs = channel.score(self.fitter, cur)
             cands += cs
+            cur.memo["scored"] = cands
             sig = sorted([c for c in cs if c.significant], key=lambda c: -c.score)
             # the best significant candidate whose own gap metric shrinks when added
             # (issue 18: an effect is judged by the gap that belongs to it)
@@ -109,7 +112,8 @@ class Workflow:
                 nxt = self.fitter.fit(new)
                 key = cat.gap_of(best.effect)
                 if nxt.gaps[key] < cur.gaps[key]:
-                    return cands, (best, amb, nxt), rejected
+                    alikes = gyro.look_alikes(self.fitter, cur, best, cs, amb[1:])
+                    return cands, Choice(best, amb, nxt, alikes, cur), rejected
                 rejected.append(
                     {
                         "effect": best.effect,
@@ -126,6 +130,7 @@ class Workflow:
         first = cur
         found: list[str] = []
         ambiguous: list[list[str]] = []
+        looks: list[tuple[list[str], Choice]] = []
         steps: list[dict[str, Any]] = []
         for it in range(MAX_ITER):
             cands, accepted, rejected = self.choose(cur)
@@ -142,17 +147,23 @@ class Workflow:
                 entry["added"] = None
                 steps.append(entry)
                 break
-            best, amb, nxt = accepted
+            best, amb, nxt = accepted.best, accepted.ambiguous, accepted.fit
             key = cat.gap_of(best.effect)
             gone = {r["effect"] for r in rejected}
+            amb = [a for a in amb[1:] if a not in gone]
+            for a in accepted.look_alikes:  # look-alikes the data cannot exclude
+                amb += [m for m in a.other.members if m not in amb and m != best.effect]
             entry["added"] = best.effect
-            entry["ambiguous_with"] = [a for a in amb[1:] if a not in gone]
+            entry["ambiguous_with"] = amb[:2]
+            if accepted.look_alikes:
+                entry["look_alikes"] = [a.to_json() for a in accepted.look_alikes]
             entry["gap_metric"] = key
             entry["gap_metric_before_after"] = [cur.gaps[key], nxt.gaps[key]]
             found.append(best.effect)
             amb = [best.effect] + entry["ambiguous_with"]
             if len(amb) > 1:
                 ambiguous.append(amb)
+                looks.append((amb, accepted))
             if log:
                 log(
                     f"iteration {it}: added {best.effect}"
@@ -170,21 +181,41 @@ class Workflow:
                     else:
                         found[found.index(mv["effect"])] = mv["to"]
                     ambiguous = [s for s in ambiguous if mv["effect"] not in s]
+                    looks = [lk for lk in looks if mv["effect"] not in lk[0]]
                     if log:
                         log(f"iteration {it}: revised {mv}")
             steps.append(entry)
+        model = self.updated_model(cur)
         return Result(
             effects_found=found,
             ambiguous=ambiguous,
             gap_before=first.gaps,
             gap_after=cur.gaps,
             steps=steps,
-            model=self.updated_model(cur),
+            model=model,
             first=first,
             final=cur,
             detection_limits=detection_limits(self.fitter, cur),
             elapsed_s=time.perf_counter() - t_start,
+            ambiguity=[self.ambiguity(s, c, model, i + 1) for i, (s, c) in enumerate(looks)],
+            periodic_content=periodic_content(cur),
+            temperature_source=self.d.temperature_source,
         )
+
+    def ambiguity(self, members: list[str], c: Choice, model: SimModel, k: int) -> Ambiguity:
+        """An ambiguous set with the evidence of each member and, where look-alikes were
+        tested, the profile proposed to separate the winner from the first of them."""
+        evidence = {
+            x.effect: {"delta_bic": x.score, "params": x.evidence.get("params")}
+            for x in c.candidates
+            if x.effect in members
+        }
+        proposal = None
+        if c.look_alikes:
+            noise = gyro.judge(self.fitter, c.before)[3]
+            proposal = propose(self.d, model, noise, c.look_alikes[0], self.fitter.poly_order)
+            proposal.file = f"separating_profile_{k}.toml"
+        return Ambiguity(members, evidence, [a.to_json() for a in c.look_alikes], proposal)
 
     # ------------------------------------------------------------- revisiting
     def _struct_bic(self, cur: Fitted, names: list[str], scan: tuple[str, ...]) -> tuple:
@@ -242,6 +273,40 @@ class Workflow:
         return self.fitter.updated_model(f, params)
 
 
+@dataclass
+class Choice:
+    """An iteration's accepted candidate: its score, ambiguous set (by score), refit model,
+    look-alikes, and the model it was chosen against."""
+
+    best: Scored
+    ambiguous: list[str]
+    fit: Fitted
+    look_alikes: list[LookAlike]
+    before: Fitted
+
+    @property
+    def candidates(self) -> list[Scored]:
+        return self.before.memo.get("scored", [self.best])
+
+
+@dataclass
+class Ambiguity:
+    """An ambiguous set of ``discrepancy.json`` with its evidence and proposed profile."""
+
+    members: list[str]
+    evidence: dict[str, Any]
+    look_alikes: list[dict[str, Any]]
+    proposal: Proposal | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "set": self.members,
+            "evidence": self.evidence,
+            "look_alikes": self.look_alikes,
+            "proposed_profile": self.proposal.to_json() if self.proposal else None,
+        }
+
+
 def select(significant: list[Scored]) -> tuple[Scored, list[str]]:
     """The best of one channel's significant candidates, and the set it cannot be told
     apart from: every candidate within :data:`AMBIGUITY_MARGIN` of the best score (best
@@ -266,11 +331,20 @@ class Result:
     final: Fitted
     detection_limits: dict[str, dict[str, Any]]
     elapsed_s: float
+    ambiguity: list[Ambiguity] = field(default_factory=list)
+    """Each ambiguous set's evidence and proposed separating profile."""
+    periodic_content: list[dict[str, Any]] = field(default_factory=list)
+    """Cycles in the measurement and their spectral significance (:mod:`.periodic`)."""
+    temperature_source: str = "pt100"
+    """What the temperature channel measured: a PT100 on the case, or a die sensor."""
 
     def to_json(self) -> dict[str, Any]:
         return {
             "effects_found": self.effects_found,
             "ambiguous": self.ambiguous,
+            "temperature_source": self.temperature_source,
+            "ambiguity": [a.to_json() for a in self.ambiguity],
+            "periodic_content": self.periodic_content,
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
             "steps": self.steps,

@@ -26,6 +26,7 @@ from gyrolab.sim.discrepancy.gyro_fit import (
     redundant,
     widen_form,
 )
+from gyrolab.sim.discrepancy.identify import LookAlike, combined, look_alike, of_fit
 from gyrolab.sim.discrepancy.scored import Scored
 
 GYRO_SIG = 10.0
@@ -49,7 +50,15 @@ def judging_noises(
 ) -> tuple[dict[str, GyroFit], list[tuple[CovWhitener, int]]]:
     """Each gyro candidate fitted alone (its shape scanned), and the whiteners of the noise
     models learned from the saturated model's residual (see :func:`score`), each with its
-    parameter penalty."""
+    parameter penalty (computed once per fit)."""
+    if "judging" not in cur.memo:
+        cur.memo["judging"] = _judging_noises(fx, cur)
+    return cur.memo["judging"]
+
+
+def _judging_noises(
+    fx: Fitter, cur: Fitted
+) -> tuple[dict[str, GyroFit], list[tuple[CovWhitener, int]]]:
     st = cur.structure
     base_struct = fx.gyro_struct(st)
     assert cur.whitener is not None
@@ -76,6 +85,7 @@ def judging_noises(
     learned = [nf.fit_cov_noise(curve, fx.d.bin_s, rrw=has_k)]
     if not has_k:
         learned.append(nf.fit_cov_noise(curve, fx.d.bin_s, rrw=True))
+    cur.memo["learned"] = learned
     return fits, [(fx.whitener(c), fx.noise_penalty(c)) for c in learned]
 
 
@@ -90,13 +100,10 @@ def score(fx: Fitter, cur: Fitted) -> list[Scored]:
     learned from the same residual competes (the better of the two for each model, its
     parameter counted): slow wander must not pass for a ramp or a step."""
     out = []
-    ln_n = math.log(cur.ctx.y.size)
-    fits, noises = judging_noises(fx, cur)
+    fits, _ = judging_noises(fx, cur)
 
     def best_bic(struct: GyroStructure) -> tuple[float, int]:
-        bics = [fx.cov_fit(struct, cur.ctx, w).bic + extra * ln_n for w, extra in noises]
-        i = int(np.argmin(bics))
-        return bics[i], i
+        return _best_bic(fx, cur, struct)
 
     base_bic, base_noise = best_bic(cur.gyro.struct)
     for name, g in fits.items():
@@ -122,9 +129,76 @@ def score(fx: Fitter, cur: Fitted) -> list[Scored]:
                 form={
                     k: v for k, v in g.struct.theta.items() if k == cat.form_key(cat.theta_owner(k))
                 },
+                fit=g,
             )
         )
     return out
+
+
+def _best_bic(fx: Fitter, cur: Fitted, struct: GyroStructure) -> tuple[float, int]:
+    """BIC of a structure under the better of the judging noise models (its parameters
+    counted), and which."""
+    ln_n = math.log(cur.ctx.y.size)
+    _, noises = judging_noises(fx, cur)
+    bics = [fx.cov_fit(struct, cur.ctx, w).bic + extra * ln_n for w, extra in noises]
+    i = int(np.argmin(bics))
+    return bics[i], i
+
+
+def judge(fx: Fitter, cur: Fitted) -> tuple[GyroFit, CovWhitener, float, nf.CovNoise]:
+    """The current model's fit under the judging noise model it prefers, that noise's
+    whitener, the innovation variance σ² (the scale the limits and the look-alike tests
+    use) and the noise model itself."""
+    if "judge" not in cur.memo:
+        _, noises = judging_noises(fx, cur)
+        ln_n = math.log(cur.ctx.y.size)
+        fits = [(fx.cov_fit(cur.gyro.struct, cur.ctx, w), w, k) for w, k in noises]
+        i = min(range(len(fits)), key=lambda j: fits[j][0].bic + fits[j][2] * ln_n)
+        gfit, w, _ = fits[i]
+        cur.memo["judge"] = (gfit, w, gfit.gls.rss / gfit.gls.n, cur.memo["learned"][i])
+    return cur.memo["judge"]
+
+
+def look_alikes(
+    fx: Fitter, cur: Fitted, best: Scored, cands: list[Scored], near: list[str]
+) -> list[LookAlike]:
+    """The explanations the data cannot exclude beside ``best`` (:mod:`..identify`):
+    every other gyro candidate with a positive score and, when ``best`` won in its wider
+    form, its plain form plus another candidate; those in ``near`` (within the
+    ambiguity margin of ``best``'s score) with their separations whatever they are."""
+    if best.channel != "gyro" or best.fit is None:
+        return []
+    _, w, sigma2, _ = judge(fx, cur)
+    ctx = cur.ctx
+    base_bic, _ = _best_bic(fx, cur, cur.gyro.struct)
+    win = of_fit(best.effect, [best.effect], best.fit, **_evidence(best))
+    rivals = [c for c in cands if c.channel == "gyro" and c.effect != best.effect and c.score > 0]
+    others = [
+        (of_fit(c.effect, [c.effect], c.fit, **_evidence(c)), best.score - c.score) for c in rivals
+    ]
+    if best.evidence.get("form", "single") != "single":
+        base = fx.gyro_struct(cur.structure)
+        for c in rivals:
+            g = combined(base, best.fit, best.effect, c.effect, ctx, w)
+            score = base_bic - _best_bic(fx, cur, g.struct)[0]
+            label = f"{best.effect} (one component) + {c.effect}"
+            members = [best.effect, c.effect]
+            e = of_fit(label, members, g, delta_bic=float(score), params=effect_params(g))
+            others.append((e, best.score - score))
+    found = [
+        look_alike(win, o, m, ctx, w, sigma2, near=o.members == [n] and n in near)
+        for o, m in others
+        for n in o.members[-1:]
+    ]
+    return [a for a in found if a is not None]
+
+
+def _evidence(c: Scored) -> dict[str, Any]:
+    return {
+        "delta_bic": c.score,
+        "params": c.evidence.get("params"),
+        "form": c.evidence.get("form"),
+    }
 
 
 def limits(fx: Fitter, cur: Fitted) -> dict[str, dict[str, Any]]:
@@ -136,16 +210,13 @@ def limits(fx: Fitter, cur: Fitted) -> dict[str, dict[str, Any]]:
     base = cur.gyro.struct
     # the noise model the candidates are judged with (the saturated model's, the better
     # of it and its random-walk alternative for the current model)
-    _, noises = judging_noises(fx, cur)
+    _, w, sigma2, _ = judge(fx, cur)
     n = ctx.y.size
     ln_n = math.log(n)
-    fits = [(fx.cov_fit(base, ctx, w), w, k) for w, k in noises]
-    gfit, w, _ = min(fits, key=lambda f: f[0].bic + f[2] * ln_n)
     X0, _ = design(base, ctx)
     s0 = np.sqrt(np.mean(X0 * X0, axis=0))
     s0[s0 == 0] = 1.0
     Q, _ = np.linalg.qr(w(X0 / s0))
-    sigma2 = gfit.gls.rss / gfit.gls.n
 
     def energy(cols: np.ndarray) -> np.ndarray:
         z = w(cols.reshape(n, -1))
