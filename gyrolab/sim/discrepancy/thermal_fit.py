@@ -396,6 +396,22 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     return fit_pt100_case(d, tau0, with_offset)
 
 
+def _case_grid(d: BenchData) -> tuple[np.ndarray, np.ndarray, Initial, float]:
+    """The case models' 1 s grid (the readings and the bins, with room for the time
+    skew), the recorded air at its interval midpoints, the air at power-on (a window's
+    estimate with its uncertainty, :func:`initial_value`) and the weight of its prior row.
+    The case starts at that air temperature, fitted as a parameter with a Gaussian prior
+    (one row in the least squares, in units of the reading noise) so that no single
+    reading decides an offset."""
+    t0 = float(min(d.pt100_t[0], d.oven_t[0]))
+    t1 = float(max(d.pt100_t[-1], d.t[-1] + d.bin_s)) + MAX_TIME_SHIFT_S
+    grid = np.arange(t0, t1 + 1.0, 1.0)
+    air = np.interp(grid, d.oven_t, d.oven_pv)
+    a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
+    init = initial_value(d.oven_t, d.oven_pv)
+    return grid, a_mid, init, max(pt100_noise_c(d), 1e-4) / init.sigma
+
+
 def fit_pt100_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     """Fit ``τ_case``, ``ΔT_self`` (and the PT100 offset ``δ``) to the PT100 channel.
 
@@ -405,17 +421,8 @@ def fit_pt100_case(d: BenchData, tau0: float, with_offset: bool = False) -> Case
     second of skew is 15 mK, three times the reading noise, and would otherwise pass for
     a constant offset.
     """
-    t0 = float(min(d.pt100_t[0], d.oven_t[0]))
-    t1 = float(max(d.pt100_t[-1], d.t[-1] + d.bin_s)) + MAX_TIME_SHIFT_S
-    grid = np.arange(t0, t1 + 1.0, 1.0)
-    air = np.interp(grid, d.oven_t, d.oven_pv)
-    a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
+    grid, a_mid, init, w_prior = _case_grid(d)
     pt_c = d.pt100_c
-    # The case starts at the air temperature at power-on: estimated from a window with
-    # its uncertainty, and fitted as a parameter with that Gaussian prior (one prior row
-    # in the least squares, in units of the PT100 noise) so no single reading decides δ.
-    init = initial_value(d.oven_t, d.oven_pv)
-    w_prior = max(pt100_noise_c(d), 1e-4) / init.sigma
     # δ's column: the self-heating per unit δ, R(T)/R0, at the reading (0.3 °C of error
     # changes R by 0.1 %: the reading is the sensor's temperature to that order)
     unit_offset = np.asarray(self_heating_c(1.0, pt_c), dtype=float)
@@ -535,14 +542,8 @@ def fit_die_case(d: BenchData, tau0: float, die_tau0: float = DIE_TAU0_S) -> Cas
     together."""
     from scipy.optimize import minimize
 
-    t0 = float(min(d.pt100_t[0], d.oven_t[0]))
-    t1 = float(max(d.pt100_t[-1], d.t[-1] + d.bin_s)) + MAX_TIME_SHIFT_S
-    grid = np.arange(t0, t1 + 1.0, 1.0)
-    air = np.interp(grid, d.oven_t, d.oven_pv)
-    a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
+    grid, a_mid, init, w_prior = _case_grid(d)
     reading = d.pt100_c
-    init = initial_value(d.oven_t, d.oven_pv)
-    w_prior = max(pt100_noise_c(d), 1e-4) / init.sigma
 
     def chain(p: np.ndarray) -> tuple[np.ndarray, ...]:
         ac = 1.0 - math.exp(-1.0 / math.exp(p[0]))
