@@ -165,7 +165,8 @@ def look_alikes(
     """The explanations the data cannot exclude beside ``best`` (:mod:`..identify`):
     every other gyro candidate with a positive score and, when ``best`` won in its wider
     form, its plain form plus another candidate; those in ``near`` (within the
-    ambiguity margin of ``best``'s score) with their separations whatever they are."""
+    ambiguity margin of ``best``'s score) with their separations whatever they are.
+    Ordered by the smaller of their two expected separations, the least separable first."""
     if best.channel != "gyro" or best.fit is None:
         return []
     _, w, sigma2, _ = judge(fx, cur)
@@ -190,7 +191,8 @@ def look_alikes(
         for o, m in others
         for n in o.members[-1:]
     ]
-    return [a for a in found if a is not None]
+    # the hardest to exclude first: the set is capped, and the proposal separates the first
+    return sorted((a for a in found if a is not None), key=lambda a: min(a.sep_winner, a.sep_other))
 
 
 def _evidence(c: Scored) -> dict[str, Any]:
