@@ -231,6 +231,15 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     return records
 
 
+def read_bench_record(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The ``bench`` metadata record alone, normalised (None when the file has none): no
+    other record is decoded — the discrepancy workflow reads the instruments' settings
+    this way and never sees a simulator's ``sim_provenance``."""
+    with opened(path) as src:
+        record = src.metadata_record("bench")
+    return None if record is None else normalise_bench(_parse_meta(record))
+
+
 def list_units(path: str | os.PathLike[str]) -> list[str]:
     """The unit serials of a multi-unit recording, in file order; ``[]`` for single-unit."""
     with opened(path) as src:
