@@ -569,3 +569,11 @@ def test_the_checker_sees_circles_inside_a_package() -> None:
     src = "def f():\n    from gyrolab.compensation.vmd import vmd\n"
     (imp,) = imports("gyrolab.compensation.vmd_triton", ast.parse(src))
     assert imp.lazy and target_module(imp.target) == "gyrolab.compensation.vmd"
+
+
+def test_architecture_md_draws_these_layers() -> None:
+    """docs/architecture.md's layer block names the packages of each layer, top down, as
+    LAYERS does (its first code block; a line's names end at the first run of spaces)."""
+    block = ARCHITECTURE_MD.read_text(encoding="utf-8").split("```", 2)[1]
+    rows = [re.split(r"\s{2,}", line.strip())[0].split() for line in block.strip().splitlines()]
+    assert [set(r) for r in rows] == LAYERS, rows
