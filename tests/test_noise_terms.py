@@ -92,7 +92,7 @@ def test_no_floor_within_the_record() -> None:
     t = noise_terms(r)
     assert np.isnan(t.B) and t.to_dict()["bias_instability_deg_per_h"] is None
     assert t.reasons["B"].startswith("no floor within the record")
-    assert t.upper_bounds["B"] == pytest.approx(r.adev[np.argmin(r.adev)] / FLICKER_FLOOR)
+    assert t.upper_bounds["B"] == pytest.approx(r.dev[np.argmin(r.dev)] / FLICKER_FLOOR)
     # white noise alone falls all the way to T/10: no floor either, and no K, R
     w = noise_terms(allan_deviation(rng.standard_normal(20_000), 1.0))
     assert np.isnan(w.B) and np.isnan(w.K) and np.isnan(w.R)

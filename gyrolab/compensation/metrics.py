@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import AllanResult, allan_deviation
+from gyrolab.numerics.allan import DeviationResult, allan_deviation
 from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means
 from gyrolab.numerics.noise_terms import noise_terms
 
@@ -55,7 +55,7 @@ def signal_metrics(
     fs_hz: float,
     stability_window_s: float = PAPER_BLOCK_S,
     drift_window_s: float = PAPER_BLOCK_S,
-    allan: AllanResult | None = None,
+    allan: DeviationResult | None = None,
 ) -> dict[str, float]:
     """The five metrics (docs/cli.md) of a gyro output in deg/s sampled at ``fs_hz``.
 

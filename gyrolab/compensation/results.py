@@ -126,9 +126,9 @@ def allan_summary(x: np.ndarray, rate_hz: float) -> AllanSummary | None:
     n_rng, b_rng = nt.tau_ranges.get("N"), nt.tau_ranges.get("B")
     return AllanSummary(
         tau=np.asarray(res.taus, dtype=float),
-        adev=np.asarray(res.adev, dtype=float),
-        lo=np.asarray(res.adev_lo, dtype=float),
-        hi=np.asarray(res.adev_hi, dtype=float),
+        adev=np.asarray(res.dev, dtype=float),
+        lo=np.asarray(res.dev_lo, dtype=float),
+        hi=np.asarray(res.dev_hi, dtype=float),
         arw=terms["arw_deg_per_sqrt_h"],
         bi=bi,
         arw_tau=None if n_rng is None else (float(n_rng[0]), float(n_rng[1])),
