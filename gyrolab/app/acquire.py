@@ -170,12 +170,24 @@ def connect_instruments(
 
 
 def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], None], Any]:
+    """The run's progress bar: run seconds done of the profile's, and one ETA — the run
+    time still to go (the plan's, which knows a step held by its stability rule) at the
+    pace the run keeps (run seconds per wall second, as tqdm measures it)."""
     from gyrolab.progress import progress
 
-    bar = progress(total=round(profile.duration_s), desc="acquire", unit="s")
+    bar = progress(
+        total=round(profile.duration_s),
+        desc="acquire",
+        unit="s",
+        # tqdm's own "<remaining" is left out: it would be a second ETA, from the profile's
+        # nominal duration rather than the plan's
+        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} s [{elapsed}, {rate_fmt}{postfix}]",
+    )
     state = {"t": 0}
 
     def show(st: Status) -> None:
+        if bar.disable:  # GYROLAB_NO_PROGRESS: nothing to draw
+            return
         t = int(min(st.t, profile.duration_s))
         if t > state["t"]:
             bar.update(t - state["t"])
@@ -184,10 +196,12 @@ def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], Non
         if st.units:  # a multi-unit run: how many units are fully recorded
             ok = sum(u.state == "recording" for u in st.units)
             units = f" units {ok}/{len(st.units)} ok"
+        pace = bar.format_dict.get("rate") or 0.0  # run s per wall s; 0 before it is known
+        eta = st.remaining_s / pace if pace > 0 else math.nan
         bar.set_postfix_str(
             f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
             f"oven {st.chamber_c:.2f} PT100 {st.pt100_c:.2f} °C "
-            f"ETA(run) {_hms(st.remaining_s)} lost {st.frames_lost} bad {st.frames_bad}"
+            f"ETA {_hms(eta)} lost {st.frames_lost} bad {st.frames_bad}"
             f"{units}{speed_note}",
             refresh=False,
         )
@@ -445,13 +459,15 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 axis_models=axis_models,
             )
         speed_note = "" if sim is None else f" ×{opts.speed or 'max'}"
-        show, bar = _progress(profile, speed_note)
         t0 = time.monotonic()
-        live = None
+        live = bar = None
         try:
             interrupts.check()  # a stop signal while the bench started: end here
             if opts.live_port is not None:
+                # before the progress bar starts: the URL gets a line of its own
                 live = _start_live(opts.live_port, opts.live_host)
+            show, bar = _progress(profile, speed_note)
+            if live is not None:
                 show = live.status_hook(show)
             result = run_acquisition(
                 cfg=cfg,
@@ -465,7 +481,8 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 live=live,
             )
         finally:
-            bar.close()
+            if bar is not None:
+                bar.close()
             if live is not None:
                 live.close()
                 print(
