@@ -13,11 +13,12 @@ is imported. This module therefore imports nothing heavy (standard library only)
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from gyrolab.errors import InputError
+from gyrolab.errors import GyrolabError, InputError
 from gyrolab.export.commands import check_request
 
 PathArg = str | os.PathLike[str]
@@ -99,6 +100,30 @@ class AcquireOptions:
     units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
     # --units only: the units (1-based) read by their internal temperature sensor
     internal_temperature: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        sim = self.bench == "sim"
+        if self.speed is not None and not (self.speed > 0 and math.isfinite(self.speed)):
+            raise GyrolabError(f"--speed must be a positive number, not {self.speed}")
+        only_sim = {  # option: (given, why a bench file does not take it)
+            "--driver": (self.drivers, "a bench file names its drivers"),
+            "--axis-model": (self.axis_models, "a bench file sets [adc] axes"),
+            "--units": (self.units, "a bench file lists [[unit]]s"),
+            "--speed": (self.speed is not None, "real hardware runs in real time"),
+            "--faults": (self.faults is not None, "it drives the simulator"),
+        }
+        for name, (given, why) in only_sim.items():
+            if given and not sim:
+                raise GyrolabError(f"{name} applies to --bench sim only ({why})")
+        if self.internal_temperature and not self.units:
+            raise GyrolabError(
+                "--internal-temperature applies to --bench sim --units N only "
+                '(a bench file says [[unit]] temperature = "internal")'
+            )
+        if len(self.axis_models) > 2:
+            raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
+        for p in (None if sim else self.bench, self.faults, *self.axis_models):
+            need_file(p)
 
 
 @dataclass(frozen=True)
