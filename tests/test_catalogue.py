@@ -445,6 +445,48 @@ def test_acquire_with_unreachable_catalogue_completes(
     assert r["outcome"] == "complete" and r["source"] == "acquire" and r["units"] == ["SIM-0"]
 
 
+def _segment_file(path: Path, segment: int, t0: float, events: list[tuple[float, str]]) -> None:
+    """A small recording: segment ``segment`` of run ``r1`` (the run record's keys of a
+    resumed run, docs/recording-format.md), 10 s of rate and PT100 from ``t0``."""
+    import numpy as np
+
+    from gyrolab.record.writer import RecordingWriter
+
+    run = {"source": "acquire", "profile": {"name": "p"}, "run_id": "r1", "segment": segment,
+           "unit_serial": "SN5", "unit_model": "G7", "bench_name": "bench-1"}  # fmt: skip
+    if segment > 1:  # a continuation names the segment it continues, beside it
+        run["previous_segment"] = {"file": f"seg{segment - 1}.mcap", "segment": segment - 1,
+                                   "run_id": "r1"}  # fmt: skip
+        run["resumed"] = {"after_t": 9.0, "at_t": t0, "step": 0}
+    w = RecordingWriter(path, start_time_ns=1_700_000_000 * 10**9, run=run, bench={"name": "b"})
+    for t, event in events:
+        w.write_event(t, event, 0, None, "")
+    for k in range(0, 1000, 50):
+        counts = np.arange(k, k + 50, dtype=np.int32)
+        w.write_rate_block(t0 + k / 100, 0.01, int(t0 * 100) + k, counts * 1e-3)
+        w.write_pt100(t0 + k / 100, 110.0, 25.0)
+    w.close()
+
+
+def test_a_resumed_run_is_one_run_of_its_segments(catalogue: str, tmp_path: Path) -> None:
+    """Two files of one run (run id, segment 1 then 2): one run, two segments, the run's
+    outcome the last segment's."""
+    _segment_file(tmp_path / "seg1.mcap", 1, 0.0, [(0.0, "run_started"), (9.0, "aborted")])
+    _segment_file(tmp_path / "seg2.mcap", 2, 40.0, [(40.0, "run_resumed"), (49.0, "run_ended")])
+    assert main(["runs", "rebuild", str(tmp_path), "--catalogue", catalogue]) == 0
+    cat = Catalogue.open(catalogue)
+    try:
+        (run,) = cat.runs()
+    finally:
+        cat.close()
+    assert run["run_key"] == "r1" and run["units"] == ["SN5"] and run["station"] == "bench-1"
+    assert [(s["number"], Path(s["path"]).name) for s in run["segments"]] == [
+        (1, "seg1.mcap"),
+        (2, "seg2.mcap"),
+    ]
+    assert run["outcome"] == "complete"
+
+
 def test_rebuild_skips_a_damaged_recording(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
