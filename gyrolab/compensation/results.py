@@ -39,8 +39,8 @@ from gyrolab.errors import InputError
 
 #: Series of the application kept for the report (the baselines are added by name).
 KEPT_SERIES = ("raw", "compensated", "drift_prediction")
-#: Series whose Allan curve is kept.
-ALLAN_SERIES = ("raw", "compensated")
+#: Series whose Allan curve is kept (``causal``: the causal output, where the model has one).
+ALLAN_SERIES = ("raw", "causal", "compensated")
 
 
 @dataclass
@@ -171,7 +171,7 @@ def run_results(role: str, model: Any, app: Any, run: Any, held_out: bool) -> Ru
     if "stream.causal" in app.series:
         series["causal"] = np.asarray(app.series["stream.causal"], float)
     allan = {}
-    for k in ALLAN_SERIES:
+    for k in (k for k in ALLAN_SERIES if k in series):
         a = allan_summary(series[k], 1.0 / bs)
         if a is not None:
             allan[k] = a

@@ -658,7 +658,7 @@ class Workflow:
                 ambiguous.append(amb)
             if log:
                 log(
-                    f"iteration {it}: added {best['effect']}"
+                    f"iteration {it + 1}: added {best['effect']}"
                     + (f" (ambiguous: {amb})" if len(amb) > 1 else "")
                 )
             cur = nxt
@@ -674,7 +674,7 @@ class Workflow:
                         found[found.index(mv["effect"])] = mv["to"]
                     ambiguous = [s for s in ambiguous if mv["effect"] not in s]
                     if log:
-                        log(f"iteration {it}: revised {mv}")
+                        log(f"iteration {it + 1}: revised {mv}")
             steps.append(entry)
         model = self.updated_model(cur)
         from gyrolab.sim.discrepancy.limits import detection_limits
