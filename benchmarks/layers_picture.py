@@ -145,15 +145,16 @@ def draw(out: Path) -> None:
         if u == FLOOR:
             mods = sorted(floor - {"__init__"}) + ["__init__"]
             name = "the floor: " + "  ".join(f"{m}.py" for m in mods)
-        ax.text(cx, y + 0.08, name, ha="center", va="center", fontsize=9.5, weight="bold", zorder=3)
+        fs = 9.5 if u != FLOOR else 8.0  # the floor's many modules on one line in its box
+        ax.text(cx, y + 0.08, name, ha="center", va="center", fontsize=fs, weight="bold", zorder=3)
         ax.text(cx, y - 0.17, f"{lines[u]:,} lines", ha="center", va="center", fontsize=7.5,
                 color="#555", zorder=3)  # fmt: skip
     ax.set_xlim(-0.3, span + 1.3)
     ax.set_ylim(-(len(layers) - 1) * gap_y - 0.6, 0.6)
     ax.set_axis_off()
     ax.set_title(
-        "gyrolab's layers (tests/test_architecture.py): every import points down; red: the "
-        "same-layer pairs of the design; width: module pairs",
+        "gyrolab's layers (tests/test_architecture.py): every import points down;\n"
+        "red: the same-layer pairs of the design; width: module pairs",
         fontsize=10,
     )
     fig.tight_layout()

@@ -51,7 +51,8 @@ LAYERS: list[set[str]] = [
     {"instruments"},
     {"record", "profiles", "catalogue"},
     {"numerics"},
-    {"errors", "outputs", "progress", "tomlfile", "pt100", "framing", "clock", "__init__"},
+    {"errors", "outputs", "progress", "tomlfile", "pt100", "framing", "clock", "sampling",
+     "__init__"},
 ]
 RANK = {unit: len(LAYERS) - i for i, layer in enumerate(LAYERS) for unit in layer}
 

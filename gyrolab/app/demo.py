@@ -46,6 +46,7 @@ from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
 from gyrolab.progress import progress
 from gyrolab.report.spec import Line
+from gyrolab.sampling import DEFAULT_RATE_HZ
 
 # The held-out run is paced: unpaced, the simulated bench runs as fast as the ADC reader
 # drains it (~1 800x) and the multimeter poller gets a PT100 reading only every ~26 s of
@@ -64,7 +65,7 @@ def run_demo(
     profile: str = "paper",
     seed: int = 1,
     force: bool = False,
-    rate_hz: float = 100.0,
+    rate_hz: float = DEFAULT_RATE_HZ,
     catalogue: str | None = None,
 ) -> dict[str, Any]:
     """Run the whole chain into ``out``; returns the report's metrics and stage timings.

@@ -20,6 +20,7 @@ from typing import Any
 
 from gyrolab.errors import GyrolabError, InputError
 from gyrolab.export.commands import check_request
+from gyrolab.sampling import DEFAULT_RATE_HZ
 
 PathArg = str | os.PathLike[str]
 
@@ -67,7 +68,7 @@ class SimulateOptions:
     profile: str = "paper"
     model: str | None = None
     axis_models: tuple[str, ...] = ()
-    rate_hz: float = 100.0
+    rate_hz: float = DEFAULT_RATE_HZ
     seed: int = 0
     units: int = 1
     effects: tuple[str, ...] = ()
