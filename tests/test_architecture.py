@@ -76,13 +76,6 @@ LAZY_BY_DESIGN: dict[tuple[str, str], str] = {}
 # Violations in other helpers' areas, being fixed in parallel: (importer module, imported
 # module or name). The merge that lands the fix removes the entry.
 KNOWN: set[tuple[str, str]] = {
-    # issue 28 point 4 (disc): workflow.py becomes selection only and the circle goes
-    ("gyrolab.sim.discrepancy.limits", "gyrolab.sim.discrepancy.workflow"),
-    ("gyrolab.sim.discrepancy.workflow", "gyrolab.sim.discrepancy.limits"),
-    # issue 28 point 4 (disc): the workflow's private caches and noise terms used outside it
-    ("gyrolab.sim.discrepancy.limits", "gyrolab.sim.discrepancy.workflow.Workflow._noise_terms"),
-    ("gyrolab.sim.discrepancy.axes", "gyrolab.sim.discrepancy.workflow.Workflow._oven_cache"),
-    ("gyrolab.sim.discrepancy.axes", "gyrolab.sim.discrepancy.workflow.Workflow._case_cache"),
     # issue 24 (fc is reshaping logs/__init__.build_recording): the readers take it from the
     # package whose dispatch imports them; it moves below them when that work has landed
     ("gyrolab.logs", "gyrolab.logs.ros2"),
