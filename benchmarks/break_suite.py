@@ -191,7 +191,8 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     gap = 100.0 * (ocut - cut)
     worse = int(np.sum((a["causal"][BS] >= a["raw"][BS]) | (a["causal"][PP] >= a["raw"][PP])))
     L = [
-        f"`python benchmarks/break_suite.py --protocol {proto}` — {meta['date']}, "
+        f"`python benchmarks/break_suite.py --protocol {proto} --families "
+        f"{','.join(meta['families'])}` — {meta['date']}, "
         f"{meta['machine']}, {len(results)} units × {len(held)} held-out trajectories "
         f"({sum(r['real_noise'] for r in results)} units with real ADIS16405 noise), "
         f"families {', '.join(meta['families'])}; wall clock {meta['wall_s']:.0f} s, "
