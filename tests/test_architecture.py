@@ -30,7 +30,17 @@ LAYERS: list[set[str]] = [
     {"instruments"},
     {"record", "profiles"},
     {"numerics"},
-    {"errors", "outputs", "progress", "tomlfile", "pt100", "framing", "clock", "__init__"},
+    {
+        "errors",
+        "outputs",
+        "progress",
+        "tomlfile",
+        "pt100",
+        "framing",
+        "clock",
+        "autopilot",
+        "__init__",
+    },
 ]
 RANK = {unit: len(LAYERS) - i for i, layer in enumerate(LAYERS) for unit in layer}
 

@@ -46,7 +46,7 @@ from gyrolab.compensation.axes import (
 )
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
 from gyrolab.compensation.evaluate import evaluate
-from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
+from gyrolab.compensation.firmware import add_firmware_metrics, fit_poly3
 from gyrolab.compensation.fit import fit
 from gyrolab.compensation.guards import check_not_calibration, range_check, warn_outside
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, load_model, save_model, write_json
@@ -116,13 +116,14 @@ def _summary(m: dict[str, Any]) -> str:
         f"  ARW          {r['arw_deg_per_sqrt_h']:.4g} -> {c['arw_deg_per_sqrt_h']:.4g} deg/rt(h)"
         f" (without noise removal {m['compensated_drift_only']['arw_deg_per_sqrt_h']:.4g})",
     ]
-    fw = m.get("firmware_poly3")
-    if fw:
-        lines.append(
-            f"  firmware cubic (PX4/ArduPilot form) drift p-p {fw['drift_pp_deg_per_s']:.4g} "
-            f"deg/s, {fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the chosen causal "
-            "output's"
-        )
+    for key, name in (("firmware_px4", "PX4"), ("firmware_ardupilot", "ArduPilot")):
+        fw = m.get(key)
+        if fw:
+            lines.append(
+                f"  firmware cubic as {name} runs it: drift p-p "
+                f"{fw['drift_pp_deg_per_s']:.4g} deg/s, "
+                f"{fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the chosen causal output's"
+            )
     for name, b in m["baselines"].items():
         lines.append(
             f"  baseline {name:<4} drift p-p {b['drift_pp_deg_per_s']:.4g} deg/s, "
@@ -235,13 +236,13 @@ def _fit_axis(
         app = compensate_offline(model, run, dec)
         metrics_cal = evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
-        metrics_cal["firmware_poly3"] = poly3_metrics(p3, run, cfg.block_s, metrics_cal)
+        add_firmware_metrics(p3, run, cfg.block_s, metrics_cal)
         results = [run_results("calibration", model, app, run, held_out=False)]
     if val is not None:
         with _named(val.path):
             app_val = compensate_offline(model, val)
             metrics = evaluate(model, app_val, val, held_out=True)
-            metrics["firmware_poly3"] = poly3_metrics(p3, val, cfg.block_s, metrics)
+            add_firmware_metrics(p3, val, cfg.block_s, metrics)
             results.append(run_results("validation", model, app_val, val, held_out=True))
         metrics["calibration"] = metrics_cal
         warn_outside(args.validate, metrics.get("temperature", {}))

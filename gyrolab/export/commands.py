@@ -45,7 +45,7 @@ def kalibr_text(args: argparse.Namespace) -> str:
     from gyrolab.compensation.apply import streaming_compensate
     from gyrolab.compensation.axes import axis_dirs
     from gyrolab.compensation.model_dir import load_model
-    from gyrolab.export.kalibr import axis_noise, imu_yaml
+    from gyrolab.export.kalibr import accel_axis_noise, axis_noise, imu_yaml
     from gyrolab.logs import log_options, read_log
 
     if not args.run:
@@ -56,11 +56,30 @@ def kalibr_text(args: argparse.Namespace) -> str:
         raise InputError(args.run, f"has {rec.axes} axes, the model {len(dirs)}")
     pt_t, pt_c = rec.require_temperature()
     axes = {}
-    for k, (name, d) in enumerate(dirs):
-        s = rec.axis(k).require_rate()
-        y = streaming_compensate(load_model(str(d)), s.t, s.values, pt_t, pt_c)
-        axes[name] = axis_noise(y, s.rate_hz)
-    return imu_yaml(axes, rec.require_rate().rate_hz, args.rostopic, str(args.run))
+    try:
+        for k, (name, d) in enumerate(dirs):
+            s = rec.axis(k).require_rate()
+            y = streaming_compensate(load_model(str(d)), s.t, s.values, pt_t, pt_c)
+            axes[name] = axis_noise(y, s.rate_hz)
+        accel = None
+        if rec.accel is not None:  # a user's log with an accelerometer (gyrolab.logs)
+            acc = rec.accel
+            accel = {"xyz"[j]: accel_axis_noise(acc.values[:, j], acc.rate_hz) for j in range(3)}
+    except InputError as e:
+        raise InputError(args.run, e.problem) from None
+    return imu_yaml(axes, rec.require_rate().rate_hz, args.rostopic, str(args.run), accel)
+
+
+def check_instance(firmware: str, instance: int) -> None:
+    """``--instance`` within the firmware's calibration slots (PX4 TC_G0..3, ArduPilot
+    INS_TCAL1..3 as 0..2); InputError otherwise."""
+    from gyrolab.autopilot import ardupilot, px4
+
+    n = px4.TC_SLOTS if firmware == "px4" else ardupilot.IMUS
+    if not 0 <= instance < n:
+        raise InputError(
+            "--instance", f"{firmware} has gyro calibration instances 0..{n - 1}, not {instance}"
+        )
 
 
 def export(args: argparse.Namespace) -> int:
@@ -73,6 +92,8 @@ def export(args: argparse.Namespace) -> int:
     inputs = (args.model, args.run)
     for o in outs:
         check_output(o, args.force, inputs=inputs, kind="file")
+    if fmt in ("px4", "ardupilot"):
+        check_instance(fmt, args.instance)
     if fmt == "px4":
         if args.device_id is None:
             raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")

@@ -115,6 +115,21 @@ def read_log(
     return read_dataflash(path, instance=instance)
 
 
+def make_series(t_s: np.ndarray, values: np.ndarray, scale: float = 1.0) -> Series:
+    """Samples at times ``t_s`` (sorted, duplicated stamps dropped) as a :class:`Series`
+    indexed by its nominal period (the median spacing), so that lost samples stay gaps."""
+    t = np.asarray(t_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    keep = np.concatenate([[True], np.diff(t) > 0])  # duplicated stamps: keep the first
+    t, v = t[keep], v[keep]
+    period = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+    if not period > 0:
+        raise ValueError("time stamps do not advance")
+    return Series(t, v * scale, np.rint((t - t[0]) / period).astype(np.int64), period)
+
+
 def build_recording(
     path: str | os.PathLike[str],
     t_s: np.ndarray,
@@ -122,22 +137,21 @@ def build_recording(
     temp_t_s: np.ndarray,
     temp_c: np.ndarray,
     run: dict,
+    *,
+    accel_m_s2: np.ndarray | None = None,
 ) -> Recording:
     """The common tail of every reader: sort by time, convert rad/s → °/s, index the samples
     by nominal period (median spacing) so that gaps stay gaps, drop non-finite temperature
-    readings, and check there is something to work with."""
+    readings, and check there is something to work with. ``accel_m_s2``: the accelerometer
+    at the same samples (m/s²), kept as ``rec.accel`` on the same index."""
     t = np.asarray(t_s, dtype=float)
-    g = np.asarray(gyro_rad_s, dtype=float)
     if t.size < 2:
         raise InputError(path, "log has fewer than 2 gyro samples")
-    order = np.argsort(t, kind="stable")
-    t, g = t[order], g[order]
-    keep = np.concatenate([[True], np.diff(t) > 0])  # duplicated stamps: keep the first
-    t, g = t[keep], g[keep]
-    period = float(np.median(np.diff(t)))
-    if not period > 0:
-        raise InputError(path, "gyro time stamps do not advance")
-    index = np.rint((t - t[0]) / period).astype(np.int64)
+    try:
+        rate = make_series(t, gyro_rad_s, RAD2DEG)
+        accel = None if accel_m_s2 is None else make_series(t, accel_m_s2)
+    except ValueError:
+        raise InputError(path, "gyro time stamps do not advance") from None
     tt = np.asarray(temp_t_s, dtype=float)
     tc = np.asarray(temp_c, dtype=float)
     ok = np.isfinite(tt) & np.isfinite(tc)
@@ -147,8 +161,9 @@ def build_recording(
     o = np.argsort(tt, kind="stable")
     rec = Recording(path=str(path))
     rec.run = dict(run)
-    rec.rate = Series(t, g * RAD2DEG, index, period)
+    rec.rate = rate
+    rec.accel = accel
     rec.pt100_t, rec.pt100_c = tt[o], tc[o]
     rec.pt100_ohm = np.full(tt.size, np.nan)
-    rec.topic_counts = {"gyro": int(t.size), "temperature": int(tt.size)}
+    rec.topic_counts = {"gyro": int(rate.t.size), "temperature": int(tt.size)}
     return rec
