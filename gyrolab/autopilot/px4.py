@@ -195,12 +195,15 @@ def publications(
 
 
 def held(sample_t: np.ndarray, pub_t: np.ndarray, pub_offsets: np.ndarray) -> np.ndarray:
-    """The offsets in force at each sample: the last publication at or before it (zeros
-    before the first). ``(n, 3)`` float32."""
+    """The offsets in force at each sample: the last publication at or before it; before
+    the first, the first (the module has been running since the controller booted, and
+    its first poll always publishes). ``(n, 3)`` float32; zeros without a publication."""
     st = np.asarray(sample_t, dtype=float)
     out = np.zeros((st.size, 3), dtype=f32)
-    j = np.searchsorted(pub_t, st, side="right") - 1
-    out[j >= 0] = pub_offsets[j[j >= 0]]
+    if len(pub_t) == 0:
+        return out
+    j = np.maximum(np.searchsorted(pub_t, st, side="right") - 1, 0)
+    out[:] = pub_offsets[j]
     return out
 
 

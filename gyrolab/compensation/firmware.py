@@ -119,7 +119,8 @@ def firmware_offset_fn(p3: Poly3, run: PreparedRun, form: str) -> Callable[[np.n
         tc = px4.TcGyro.from_params(values, 0)
         # after the last reading the temperature no longer moves: no later publication
         t_end = float(run.pt_t[-1]) + px4.MODULE_PERIOD_S if run.pt_t.size else 0.0
-        pub_t, pub = px4.publications(run.pt_t, run.pt_c, tc, t_end)
+        first = float(run.pt_t[0]) if run.pt_t.size else 0.0  # polls from the first reading
+        pub_t, pub = px4.publications(run.pt_t, run.pt_c, tc, t_end, first_poll_s=first)
         return lambda t: px4.held(t, pub_t, pub)[:, 0].astype(float) / DEG2RAD
     if form == "ardupilot":
         values = {k: v for k, (v, _type) in ardupilot_parameter_set([p3], 0).items()}

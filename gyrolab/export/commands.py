@@ -61,13 +61,17 @@ def kalibr_text(args: argparse.Namespace) -> str:
             s = rec.axis(k).require_rate()
             y = streaming_compensate(load_model(str(d)), s.t, s.values, pt_t, pt_c)
             axes[name] = axis_noise(y, s.rate_hz)
-        accel = None
-        if rec.accel is not None:  # a user's log with an accelerometer (gyrolab.logs)
-            acc = rec.accel
-            accel = {"xyz"[j]: accel_axis_noise(acc.values[:, j], acc.rate_hz) for j in range(3)}
     except InputError as e:
         raise InputError(args.run, e.problem) from None
-    return imu_yaml(axes, rec.require_rate().rate_hz, args.rostopic, str(args.run), accel)
+    accel, why = None, "the run has no accelerometer"
+    if rec.accel is not None:  # a user's log with an accelerometer (gyrolab.logs)
+        acc = rec.accel
+        try:
+            accel = {"xyz"[j]: accel_axis_noise(acc.values[:, j], acc.rate_hz) for j in range(3)}
+        except InputError as e:  # e.g. a constant (unlogged, zero-noise) accelerometer
+            why = f"its accelerometer gives no noise terms ({e.problem})"
+    rate_hz = rec.require_rate().rate_hz
+    return imu_yaml(axes, rate_hz, args.rostopic, str(args.run), accel, no_accel_reason=why)
 
 
 def check_instance(firmware: str, instance: int) -> None:

@@ -143,8 +143,10 @@ def imu_yaml(
     rostopic: str,
     source: str,
     accel: dict[str, dict[str, Any]] | None = None,
+    no_accel_reason: str = "the run has no accelerometer",
 ) -> str:
-    """The ``imu.yaml`` text (the largest axis's values; every axis in comments)."""
+    """The ``imu.yaml`` text (the largest axis's values; every axis in comments); without
+    ``accel`` the two accelerometer fields are named in a comment (``no_accel_reason``)."""
     lines = [
         f"# kalibr IMU noise parameters from gyrolab's Allan analysis of {source}",
         "# (gyro: causal compensated output; continuous-time units, kalibr wiki "
@@ -170,7 +172,7 @@ def imu_yaml(
         )
     else:
         lines += [
-            "# the run has no accelerometer: add accelerometer_noise_density (m/s^2/sqrt(Hz))",
+            f"# {no_accel_reason}: add accelerometer_noise_density (m/s^2/sqrt(Hz))",
             "# and accelerometer_random_walk (m/s^3/sqrt(Hz)) of your IMU before running kalibr.",
         ]
     for key, v in values.items():  # finite and > 0: allan_densities refuses otherwise
