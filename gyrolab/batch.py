@@ -23,7 +23,6 @@ every item is done or skipped, 1 when any item failed, 2 for bad arguments (noth
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import ctypes
 import functools
@@ -33,7 +32,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -206,39 +205,50 @@ def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
-def _namespace(task: str, item: Item, opt: BatchOptions) -> argparse.Namespace:
-    common = {"run": str(item.run), "out": str(item.out), "force": opt.force, "unit": item.unit}
-    if task == "compensate":
-        return argparse.Namespace(
-            **common,
-            validate=opt.validate,
-            seed=opt.seed,
-            config=opt.config_file,
-            pipeline_config=opt.config,
-            **opt.extra,
-        )
-    if task == "report":
-        model = None
-        if opt.models:
-            model = Path(opt.models) / item.run.stem
-            model = str(model / item.unit if item.unit else model)
-        return argparse.Namespace(**common, model=model, **opt.extra)
-    return argparse.Namespace(**common, model=opt.sim_model, **opt.extra)
-
-
-def _task_handler(task: str) -> Callable[[argparse.Namespace], int]:
-    """The single-run command a batch task runs (imported in the worker that runs it)."""
+def _run_task(task: str, item: Item, opt: BatchOptions) -> None:
+    """The single-run command's work for one item (imported in the worker that runs it),
+    called as the command calls it."""
+    run, out, common = str(item.run), str(item.out), {"force": opt.force, "unit": item.unit}
     if task == "compensate":
         from gyrolab.compensation.commands import compensate
 
-        return compensate
-    if task == "report":
-        from gyrolab.report.commands import report
+        compensate(
+            run,
+            out,
+            validate=opt.validate,
+            config=opt.config_file,
+            seed=opt.seed,
+            base_config=opt.config,
+            **common,
+        )
+    elif task == "report":
+        from gyrolab.record.reader import select_unit
+        from gyrolab.report.commands import write_report
 
-        return report
-    from gyrolab.sim.discrepancy.commands import discrepancy
+        write_report(run, out, _item_model(item, opt), opt.force, unit=select_unit(run, item.unit))
+    else:
+        from gyrolab.sim.discrepancy.commands import discrepancy
 
-    return discrepancy
+        discrepancy(run, out, model=opt.sim_model, **common)
+
+
+def _item_model(item: Item, opt: BatchOptions) -> str | None:
+    """``report``: the item's model, ``MODELS/<stem>`` (``/<serial>`` for a unit)."""
+    if not opt.models:
+        return None
+    model = Path(opt.models) / item.run.stem
+    return str(model / item.unit if item.unit else model)
+
+
+def item_inputs(task: str, item: Item, opt: BatchOptions) -> list[str]:
+    """The item's inputs, which its output may never replace: the run, and the held-out
+    run (compensate) or the model (report, discrepancy)."""
+    other = {
+        "compensate": opt.validate,
+        "report": _item_model(item, opt),
+        "discrepancy": opt.sim_model,
+    }[task]
+    return [v for v in (str(item.run), other) if v]
 
 
 def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
@@ -262,14 +272,11 @@ def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
         return res
     bound_threads(opt.threads)
     tune_malloc()
-    handler = _task_handler(task)
-    args = _namespace(task, item, opt)
     sink = io.StringIO()
     try:
-        inputs = [v for v in (args.run, args.model if task != "compensate" else args.validate) if v]
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-            with command_inputs(inputs):
-                handler(args)
+            with command_inputs(item_inputs(task, item, opt)):
+                _run_task(task, item, opt)
     except GyrolabError as e:
         res.status, res.error = "failed", str(e)
     except Exception as e:  # a bug or a numerical failure: still one line, the rest go on
@@ -420,40 +427,3 @@ def summary(results: Sequence[ItemResult]) -> str:
     counts = {s: sum(r.status == s for r in results) for s in ("done", "skipped", "failed")}
     lines.append(", ".join(f"{v} {k}" for k, v in counts.items()))
     return "\n".join(lines)
-
-
-def batch(args: argparse.Namespace) -> int:
-    """The ``gyrolab batch`` handler (module docstring)."""
-    if args.scheduler and args.workers:
-        raise GyrolabError(
-            "gyrolab batch: --workers sizes the local cluster; with "
-            "--scheduler the cluster's own workers run the items"
-        )
-    if args.workers is not None and args.workers < 1:
-        raise GyrolabError("gyrolab batch: --workers must be at least 1")
-    if args.threads < 1:
-        raise GyrolabError("gyrolab batch: --threads must be at least 1")
-    opt = BatchOptions(
-        seed=args.seed,
-        config_file=args.config,
-        models=args.models,
-        sim_model=args.sim_model,
-        force=args.force,
-        threads=args.threads,
-    )
-    if opt.config_file and args.task != "compensate":
-        raise GyrolabError("gyrolab batch: --config is for `batch compensate`")
-    if opt.models and args.task != "report":
-        raise GyrolabError("gyrolab batch: --models is for `batch report`")
-    if opt.sim_model and args.task != "discrepancy":
-        raise GyrolabError("gyrolab batch: --sim-model is for `batch discrepancy`")
-    results = run_batch(
-        args.task,
-        args.runs,
-        args.out,
-        options=opt,
-        scheduler=args.scheduler,
-        workers=args.workers,
-    )
-    print(summary(results))
-    return 1 if any(r.status == "failed" for r in results) else 0

@@ -1,10 +1,11 @@
 """The ``gyrolab`` command line (the contract in docs/cli.md).
 
-Thin: it parses arguments and hands them to the layer that does the work. Each
-subcommand's handler is ``module:function(args) -> int``, imported only when that
-subcommand runs, so ``gyrolab --help`` stays fast and a broken layer cannot break the rest.
-``acquire``, ``recover`` and ``demo`` are translated here into the typed library calls of
-:mod:`gyrolab.app`.
+Thin: it parses the arguments into the command's typed options
+(:mod:`gyrolab.app.options`, which check themselves: inputs exist, options that one choice
+requires are given) and hands them to the command's call in :mod:`gyrolab.app`
+(``HANDLERS``: ``module:function(options) -> int``). That module is imported only after the
+options are made, so ``--help`` and a typing mistake are answered before any numerical
+library is imported, and a broken layer cannot break the rest.
 
 Errors: a :class:`~gyrolab.errors.GyrolabError` becomes one line on stderr and exit 2;
 SIGINT exits 130. Anything else is a bug and shows its traceback.
@@ -13,28 +14,29 @@ SIGINT exits 130. Anything else is a bug and shows its traceback.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import os
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 from gyrolab import __version__
+from gyrolab.app import options as o
 from gyrolab.errors import GyrolabError
 
 HANDLERS: dict[str, str] = {
-    "simulate": "gyrolab.sim.commands:simulate",
-    "acquire": "gyrolab.cli:acquire",
+    "simulate": "gyrolab.app.simulate:simulate",
+    "acquire": "gyrolab.app.acquire:acquire_command",
     "compensate": "gyrolab.app.compensate:compensate",
-    "apply": "gyrolab.compensation.commands:apply",
-    "report": "gyrolab.report.commands:report",
-    "discrepancy": "gyrolab.sim.discrepancy.commands:discrepancy",
-    "recover": "gyrolab.cli:recover",
-    "demo": "gyrolab.cli:demo",
-    "convert": "gyrolab.convert:convert",
-    "export": "gyrolab.export.commands:export",
-    "batch": "gyrolab.batch:batch",
-    "fleet": "gyrolab.report.fleet:fleet",
+    "apply": "gyrolab.app.compensate:apply",
+    "report": "gyrolab.app.report:report",
+    "discrepancy": "gyrolab.app.simulate:discrepancy",
+    "recover": "gyrolab.app.acquire:recover_command",
+    "demo": "gyrolab.app.demo:demo",
+    "convert": "gyrolab.app.export:convert",
+    "export": "gyrolab.app.export:export",
+    "batch": "gyrolab.app.batch:batch",
+    "fleet": "gyrolab.app.report:fleet",
 }
 
 
@@ -57,6 +59,9 @@ def _unit_numbers(text: str) -> str:
     if text != "all" and not all(p.strip().isdigit() and int(p) >= 1 for p in parts):
         raise argparse.ArgumentTypeError(f"bad --internal-temperature {text!r} (K[,K...]|all)")
     return text
+
+
+UNIT_HELP = "the unit of a multi-unit run (required when the run holds several)"
 
 
 def _log_options(sp: argparse.ArgumentParser) -> None:
@@ -86,12 +91,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--model", help="SIM_MODEL.toml (default: the nominal model)")
     s.add_argument(
         "--axis-model",
+        dest="axis_models",
         action="append",
         default=[],
         metavar="SIM_MODEL.toml",
         help="model of the next axis (y, then z): makes a 2- or 3-axis unit (repeatable)",
     )
-    s.add_argument("--rate", type=float, default=100.0, help="ADC sample rate, Hz (default 100)")
+    s.add_argument(
+        "--rate",
+        dest="rate_hz",
+        type=float,
+        default=100.0,
+        help="ADC sample rate, Hz (default 100)",
+    )
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument(
         "--units",
@@ -101,6 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument(
         "--effect",
+        dest="effects",
         action="append",
         default=[],
         type=_effect_spec,
@@ -123,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument(
         "--units",
         type=int,
-        default=None,
+        default=0,
         metavar="N",
         help="--bench sim only: N units of a seeded family in the chamber, read by a scanner "
         "(1-10; docs/fleet.md)",
@@ -138,7 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument(
         "--driver",
+        dest="drivers",
         action="append",
+        default=[],
         metavar="NAME",
         help="--bench sim only: use this driver for its role (repeatable; docs/instruments.md)",
     )
@@ -149,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     a.add_argument(
         "--axis-model",
+        dest="axis_models",
         action="append",
         default=[],
         metavar="SIM_MODEL.toml",
@@ -157,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--force", action="store_true", help="overwrite an existing output")
     a.add_argument(
         "--live",
+        dest="live_port",
         type=int,
         nargs="?",
         const=8765,
@@ -196,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--spec", metavar="SPEC.toml", help="spec limits: per-line pass/fail, verdict")
     r.add_argument("--operator", help="operator for the sign-off (default: the recording's)")
     r.add_argument("--unit-serial", help="unit serial (default: the recording's)")
-    r.add_argument("--unit", metavar="SERIAL", help="the unit of a multi-unit run")
+    r.add_argument("--unit", metavar="SERIAL", help=UNIT_HELP)
     r.add_argument("--out", required=True, help="output REPORT_DIR")
     _log_options(r)
     r.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -204,7 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = cmd("discrepancy", "find where the simulator and a recording disagree, and fix the model")
     d.add_argument("run", metavar="RUN.mcap")
     d.add_argument("--model", metavar="SIM_MODEL.toml", help="starting model (default nominal)")
-    d.add_argument("--unit", metavar="SERIAL", help="the unit of a multi-unit run")
+    d.add_argument("--unit", metavar="SERIAL", help=UNIT_HELP)
     d.add_argument("--out", required=True, help="output DIR")
     d.add_argument("--force", action="store_true", help="overwrite an existing output")
 
@@ -217,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("run", metavar="RUN", help="gyrolab MCAP, PX4 ULog, DataFlash .bin, ROS 2 MCAP")
     cv.add_argument("--to", required=True, choices=["csv", "hdf5", "parquet", "netcdf"])
     cv.add_argument("--out", required=True, help="output FILE")
-    cv.add_argument("--unit", metavar="SERIAL", help="the unit of a multi-unit run")
+    cv.add_argument("--unit", metavar="SERIAL", help=UNIT_HELP)
     _log_options(cv)
     cv.add_argument("--force", action="store_true", help="overwrite an existing output")
     ex = cmd("export", "write a fitted model in a firmware's or another tool's format")
@@ -231,8 +248,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="c/json: which fitted drift model (default chosen: causal if fitted, else gabp)",
     )
     ex.add_argument("--instance", type=int, default=0, help="px4/ardupilot gyro instance (0)")
-    ex.add_argument("--device-id", type=int, help="px4: the gyro's device id (TC_Gi_ID)")
-    ex.add_argument("--run", metavar="RUN", help="kalibr: the run to analyse")
+    req = ex.add_argument_group("required by one format")
+    req.add_argument(
+        "--device-id",
+        type=int,
+        metavar="ID",
+        help="required with --format px4: the gyro's device id (TC_Gi_ID)",
+    )
+    req.add_argument(
+        "--run", metavar="RUN", help="required with --format kalibr: the run to analyse"
+    )
     ex.add_argument("--rostopic", default="/imu0", help="kalibr: IMU topic (default /imu0)")
     _log_options(ex)
     ex.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -240,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
     dm.add_argument("--out", required=True, help="output DIR")
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
-    dm.add_argument("--seed", type=int, default=1)
+    dm.add_argument("--seed", type=int, default=1, help="seed of the calibration run (default 1)")
     dm.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     b = cmd("batch", "run compensate, report or discrepancy on many recordings (Dask)")
@@ -264,48 +289,41 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def acquire(args: argparse.Namespace) -> int:
-    """``gyrolab acquire``: :func:`gyrolab.app.acquire.acquire`; the run's exit code."""
-    from gyrolab.app.acquire import AcquireOptions
-    from gyrolab.app.acquire import acquire as run
-
-    opts = AcquireOptions(
-        bench=args.bench,
-        out=Path(args.out),
-        profile=args.profile,
-        speed=args.speed,
-        seed=args.seed,
-        drivers=tuple(args.driver or ()),
-        faults=args.faults,
-        axis_models=tuple(args.axis_model or ()),
-        units=args.units or 0,
-        internal_temperature=(
-            tuple(range(1, (args.units or 0) + 1))
-            if args.internal_temperature == "all"
-            else tuple(int(k) for k in (args.internal_temperature or "").split(",") if k)
-        ),
-        force=args.force,
-        live_port=args.live,
-        live_host=args.live_host,
-    )
-    return run(opts).exit_code
+def _internal_units(args: argparse.Namespace) -> tuple[int, ...]:
+    if args.internal_temperature == "all":
+        return tuple(range(1, args.units + 1))
+    return tuple(int(k) for k in (args.internal_temperature or "").split(",") if k)
 
 
-def recover(args: argparse.Namespace) -> int:
-    """``gyrolab recover BROKEN.mcap --out FIXED.mcap``: salvage and report what was lost."""
-    from gyrolab.app.acquire import recover as run
+OPTIONS: dict[str, type] = {
+    "simulate": o.SimulateOptions,
+    "acquire": o.AcquireOptions,
+    "compensate": o.CompensateOptions,
+    "apply": o.ApplyOptions,
+    "report": o.ReportOptions,
+    "discrepancy": o.DiscrepancyOptions,
+    "recover": o.RecoverOptions,
+    "demo": o.DemoOptions,
+    "convert": o.ConvertOptions,
+    "export": o.ExportOptions,
+    "batch": o.BatchCommandOptions,
+    "fleet": o.FleetOptions,
+}
 
-    print(run(args.broken, args.out, force=args.force))
-    return 0
 
-
-def demo(args: argparse.Namespace) -> int:
-    """``gyrolab demo --out DIR``: :func:`gyrolab.app.demo.run_demo`, then its summary."""
-    from gyrolab.app.demo import run_demo, summary
-
-    res = run_demo(args.out, args.profile, args.seed, args.force)
-    print(summary(Path(args.out), res))
-    return 0
+def options(args: argparse.Namespace) -> object:
+    """The typed options of ``args.command`` (:mod:`gyrolab.app.options`), checked as they
+    are made: each field from the argument of the same name (repeated ones as tuples)."""
+    kw: dict[str, object] = {}
+    for f in dataclasses.fields(OPTIONS[args.command]):
+        if f.name == "log":
+            kw["log"] = o.LogOptions(args.temperature_topic, args.imu_topic, args.log_instance)
+        elif f.name == "internal_temperature":
+            kw[f.name] = _internal_units(args)
+        elif hasattr(args, f.name):
+            v = getattr(args, f.name)
+            kw[f.name] = tuple(v) if isinstance(v, list) else v
+    return OPTIONS[args.command](**kw)
 
 
 def _handler(command: str):  # type: ignore[no-untyped-def]
@@ -330,10 +348,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not args.command:
             parser.print_help()
             return 2
+        opts = options(args)  # checked here, before any numerical import
         from gyrolab.outputs import command_inputs
 
         with command_inputs(_input_paths(args)):
-            return int(_handler(args.command)(args) or 0)
+            return int(_handler(args.command)(opts) or 0)
     except GyrolabError as e:
         print(f"gyrolab: error: {e}", file=sys.stderr)
         return e.exit_code

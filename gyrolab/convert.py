@@ -27,7 +27,6 @@ atomic (temporary sibling, renamed at the end) and never the input file.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import os
@@ -635,18 +634,3 @@ def _convert_log(
         bar.close()
     return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out)}
 
-
-def convert(args: argparse.Namespace) -> int:
-    """CLI handler of ``gyrolab convert``."""
-    from gyrolab.logs import log_options
-
-    res = convert_recording(
-        args.run,
-        args.to,
-        args.out,
-        force=args.force,
-        unit=getattr(args, "unit", None),
-        log_options=log_options(args),
-    )
-    print(f"wrote {res['out']}: {res['rows']} samples ({res['gaps']} gap(s)) as {res['format']}")
-    return 0

@@ -20,7 +20,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ from gyrolab.acquisition.runner import (
     Status,
     UnitDevices,
 )
+from gyrolab.app.options import AcquireOptions, RecoverOptions
 from gyrolab.app.sim_bench import SimHandle, sim_bench_config, sim_drivers, start_sim_bench
 from gyrolab.clock import Clock, WallClock
 from gyrolab.errors import GyrolabError, InputError
@@ -46,31 +47,6 @@ from gyrolab.profiles.plan import check_profile_limits
 from gyrolab.profiles.profile import Profile, load_profile
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
 from gyrolab.record.writer import RecordingWriter
-
-
-@dataclass(frozen=True)
-class AcquireOptions:
-    """What ``gyrolab acquire`` is asked to do (docs/cli.md).
-
-    ``bench``: ``"sim"`` or a BENCH.toml; ``profile``: paper | short | FILE.toml (None: the
-    bench's); ``speed``/``seed``/``drivers``/``faults``/``axis_models``: the simulated bench
-    only; ``live_port``: serve the run to Foxglove (0: any free port)."""
-
-    bench: str
-    out: Path
-    profile: str | None = None
-    speed: float | None = None
-    seed: int = 0
-    drivers: tuple[str, ...] = ()
-    faults: str | None = None
-    axis_models: tuple[str, ...] = ()
-    force: bool = False
-    live_port: int | None = None
-    live_host: str = "127.0.0.1"
-    units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
-    # --units only: the units (1-based) read by their internal temperature sensor
-    internal_temperature: tuple[int, ...] = ()
-
 
 # --------------------------------------------------------------------- instruments
 
@@ -522,3 +498,14 @@ def recover(broken: str | Path, out: str | Path, force: bool = False) -> str:
     from gyrolab.record.recover import recover_recording
 
     return str(recover_recording(broken, out, force=force).summary())
+
+
+def acquire_command(opts: AcquireOptions) -> int:
+    """The ``gyrolab acquire`` command: :func:`acquire`, its exit code (docs/cli.md)."""
+    return acquire(opts).exit_code
+
+
+def recover_command(opts: RecoverOptions) -> int:
+    """The ``gyrolab recover`` command: :func:`recover`, its summary printed."""
+    print(recover(opts.broken, opts.out, force=opts.force))
+    return 0

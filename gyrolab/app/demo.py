@@ -26,7 +26,6 @@ report's software table) are named relative to ``DIR`` (``calibration.mcap``,
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -34,7 +33,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gyrolab.app.acquire import AcquireOptions, acquire
+from gyrolab.app.acquire import acquire
+from gyrolab.app.options import AcquireOptions, CompensateOptions, DemoOptions
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
@@ -56,7 +56,7 @@ def run_demo(
     rate_hz: float = 100.0,
 ) -> dict[str, Any]:
     """Run the whole chain into ``out``; returns the report's metrics and stage timings."""
-    from gyrolab.compensation.commands import compensate
+    from gyrolab.app.compensate import compensate
     from gyrolab.report.commands import write_report
     from gyrolab.sim.commands import simulate_file
 
@@ -104,12 +104,11 @@ def run_demo(
 
             t0 = stage("compensate (GPSO-VMD, MPE, FLP, GA-BP)")
             compensate(
-                argparse.Namespace(
+                CompensateOptions(
                     run=str(cal),
                     out=str(model),
                     validate=str(held),
                     seed=seed,
-                    force=False,
                     run_label=cal_label,
                     validate_label=held_label,
                 )
@@ -175,3 +174,10 @@ def summary(out: Path, res: dict[str, Any]) -> str:
         lines.append("  (no oracle: the true drift of an acquired run is not known)")
     lines.append(f"report: {out / 'report' / 'index.html'} (PDF: report.pdf beside it)")
     return "\n".join(lines)
+
+
+def demo(opts: DemoOptions) -> int:
+    """The ``gyrolab demo`` command: :func:`run_demo`, then its :func:`summary`."""
+    res = run_demo(opts.out, opts.profile, opts.seed, opts.force)
+    print(summary(Path(opts.out), res))
+    return 0

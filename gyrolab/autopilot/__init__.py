@@ -18,3 +18,8 @@ owner:
 
 Sources are cited in each module and in docs/export.md / docs/instruments.md.
 """
+
+# Gyro calibration slots of each firmware (the exporters' --instance range, checked by the
+# command line before anything numerical is imported): PX4 TC_G0..3 (GYRO_COUNT_MAX,
+# TemperatureCompensation.h), ArduPilot INS_TCAL1..3 (AP_InertialSensor.cpp)
+GYRO_CAL_SLOTS = {"px4": 4, "ardupilot": 3}

@@ -32,10 +32,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrolab.autopilot import GYRO_CAL_SLOTS
+
 TEMP_REFERENCE_C = 35.0  # TEMP_REFERENCE
 SCALE_FACTOR = 1.0e6  # SCALE_FACTOR (parameters hold coefficient · 1e6)
 INV_SCALE_FACTOR = 1.0e-6
-IMUS = 3  # INS_TCAL1..3
+IMUS = GYRO_CAL_SLOTS["ardupilot"]  # INS_TCAL1..3
 AXES = "XYZ"
 BOARD_ORIENTATION = "AHRS_ORIENTATION"
 ENABLED = 1  # TCal::Enable::Enabled

@@ -33,7 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-TC_SLOTS = 4  # GYRO_COUNT_MAX (TemperatureCompensation.h)
+from gyrolab.autopilot import GYRO_CAL_SLOTS
+
+TC_SLOTS = GYRO_CAL_SLOTS["px4"]  # GYRO_COUNT_MAX (TemperatureCompensation.h)
 CORRECTED_GYROS = 3  # sensor_correction gyro_offset_0..2 (Gyroscope.cpp)
 MODULE_PERIOD_S = 1.0  # TemperatureCompensationModule::init: ScheduleOnInterval(1_s)
 REPUBLISH_DELTA_C = 1.0  # update_offsets_gyro: fabsf(T - last_temperature) > 1.0f

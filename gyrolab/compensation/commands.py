@@ -1,12 +1,15 @@
-"""``gyrolab compensate`` and ``gyrolab apply`` (the contract in docs/cli.md).
+"""What ``gyrolab compensate`` and ``gyrolab apply`` do (the contract in docs/cli.md), as
+library calls with keyword arguments; :mod:`gyrolab.app.compensate` calls them.
 
-``gyrolab compensate RUN.mcap --out MODEL_DIR [--validate OTHER.mcap]`` fits the hybrid
-model of :mod:`gyrolab.compensation.fit` on RUN and writes MODEL_DIR (layout in
+:func:`compensate` (``gyrolab compensate RUN.mcap --out MODEL_DIR [--validate
+OTHER.mcap]``) fits the hybrid model of :mod:`gyrolab.compensation.fit` on RUN and writes
+MODEL_DIR (layout in
 :mod:`gyrolab.compensation.model_dir`) with ``metrics.json``. With ``--validate`` the
 top-level metrics are those of OTHER (``"held_out": true``) and the calibration run's own
 metrics sit under ``"calibration"``; without it they are RUN's (``"held_out": false``).
 
-``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap`` writes a copy of RUN in which
+:func:`apply` (``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap``) writes a copy
+of RUN in which
 
 * ``/gyro/rate`` is the causal, full-rate compensated rate ``raw − d`` of the causal
   headline model (:mod:`gyrolab.compensation.causal`; ``raw − f(T)`` with the GA-BP drift
@@ -23,10 +26,9 @@ Every input is checked before anything is written; bad input is one line and exi
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
-import sys
+import os
 import time
 from collections.abc import Iterator
 from dataclasses import replace
@@ -73,10 +75,6 @@ def _named(path: str) -> Iterator[None]:
         if e.path is None:
             raise InputError(path, e.problem) from None
         raise
-
-
-def _load_run(path: str, cfg: PipelineConfig, unit: str | None = None) -> PreparedRun:
-    return prepare_file(path, cfg, unit=unit)
 
 
 def _summary(m: dict[str, Any]) -> str:
@@ -132,58 +130,69 @@ def _summary(m: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def compensate(args: argparse.Namespace) -> int:
-    """Fit on ``args.run``, optionally evaluate on ``args.validate``, write ``args.out``.
+def compensate(
+    run_path: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    validate: str | os.PathLike[str] | None = None,
+    config: str | os.PathLike[str] | None = None,
+    seed: int | None = None,
+    unit: str | None = None,
+    log_options: dict[str, Any] | None = None,
+    force: bool = False,
+    run_label: str = "",
+    validate_label: str = "",
+    base_config: PipelineConfig | None = None,
+) -> str:
+    """Fit on ``run_path``, optionally evaluate on ``validate``, write ``out``; returns
+    the summary the command prints (one block per axis, the calibration run's after the
+    held-out one's).
 
-    A run with several axes (or a foreign log, :mod:`gyrolab.logs`) gets one model per axis
-    in one directory (:mod:`gyrolab.compensation.axes`). The outputs name the runs as
-    given, or by ``args.run_label``/``args.validate_label`` when an app sets them
-    (:mod:`gyrolab.app.demo`: paths relative to its output directory)."""
+    ``config`` is a CONFIG.toml over ``base_config`` (default :data:`DEFAULT_CONFIG`; batch
+    passes its own), its seed overridden by ``seed``. ``unit`` picks one unit of a
+    multi-unit recording. A run with several axes (or a foreign log, :mod:`gyrolab.logs`,
+    read with ``log_options``) gets one model per axis in one directory
+    (:mod:`gyrolab.compensation.axes`). The outputs name the runs as given, or by
+    ``run_label``/``validate_label`` (:mod:`gyrolab.app.demo`: paths relative to its
+    output directory)."""
     t_start = time.perf_counter()
-    inputs = (args.run, args.validate, getattr(args, "config", None))
-    check_output(args.out, args.force, inputs=inputs, kind="dir")
-    cfg, seed = resolve_config(
-        getattr(args, "config", None),
-        getattr(args, "pipeline_config", None) or DEFAULT_CONFIG,  # batch passes its own
-        getattr(args, "seed", None),
-    )
-    unit_arg = getattr(args, "unit", None)
-    if unit_arg is None and units_of(args.run):
+    run_s, val_s = str(run_path), None if validate is None else str(validate)
+    inputs = (run_s, val_s, config)
+    check_output(out, force, inputs=inputs, kind="dir")
+    cfg, seed = resolve_config(config, base_config or DEFAULT_CONFIG, seed)
+    if unit is None and units_of(run_s):
         # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
-        # this layer: it runs this handler once per unit through gyrolab.batch)
+        # this layer: it runs this function once per unit through gyrolab.batch)
         raise InputError(
-            args.run, f"holds units {', '.join(units_of(args.run))}: choose one with --unit"
+            run_s, f"holds units {', '.join(units_of(run_s))}: choose one with --unit"
         )
-    from gyrolab.logs import log_options
-
-    opts = log_options(args)
-    unit = select_unit(args.run, unit_arg) if unit_arg is not None or units_of(args.run) else None
+    opts = log_options or {}
+    unit_arg = unit
+    unit = select_unit(run_s, unit_arg) if unit_arg is not None or units_of(run_s) else None
     vunit = None
-    if args.validate and unit is not None:  # the same unit of a multi-unit held-out run
-        vunit = select_unit(args.validate, unit if units_of(args.validate) else None)
+    if val_s and unit is not None:  # the same unit of a multi-unit held-out run
+        vunit = select_unit(val_s, unit if units_of(val_s) else None)
     if unit is not None:  # one unit of a multi-unit recording (single-axis units)
-        runs = [prepare_file(args.run, cfg, unit=unit)]
+        runs = [prepare_file(run_s, cfg, unit=unit)]
     else:
-        runs = load_runs(args.run, cfg, **opts)
+        runs = load_runs(run_s, cfg, **opts)
     if vunit is not None:
-        vals = [prepare_file(args.validate, cfg, unit=vunit)]
+        vals = [prepare_file(val_s, cfg, unit=vunit)]
     else:
-        vals = load_runs(args.validate, cfg, **opts) if args.validate else None
+        vals = load_runs(val_s, cfg, **opts) if val_s else None
     if vals is not None and len(vals) != len(runs):
-        raise InputError(
-            args.validate, f"has {len(vals)} axes but the calibration run has {len(runs)}"
-        )
+        raise InputError(val_s, f"has {len(vals)} axes but the calibration run has {len(runs)}")
     for run, val in zip(runs, vals or [], strict=False):
-        check_not_calibration(args.validate, val.content_hash, run.content_hash)
+        check_not_calibration(val_s, val.content_hash, run.content_hash)
     # how the outputs name the runs: an app's stable labels, else the paths as given
-    for prepared, label in ((runs, "run_label"), (vals or [], "validate_label")):
+    for prepared, label in ((runs, run_label), (vals or [], validate_label)):
         for r in prepared:
-            r.label = getattr(args, label, None) or ""
+            r.label = label
     t_read = time.perf_counter() - t_start
     fitted = []
     for k, run in enumerate(runs):
         t_axis = time.perf_counter()
-        fitted.append(_fit_axis(args, cfg, run, None if vals is None else vals[k], seed))
+        fitted.append(_fit_axis(val_s, cfg, run, None if vals is None else vals[k], seed))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
         model, metrics, metrics_cal, _results = fitted[-1]
         metrics["timing_s"] = total
@@ -197,11 +206,11 @@ def compensate(args: argparse.Namespace) -> int:
     if len(runs) == 1:
         # the floor beside the headline, where the truth is known (gyrolab simulate runs)
         _model, metrics, metrics_cal, results = fitted[0]
-        ob = add_oracle(metrics, args.validate or args.run, cfg.block_s, vunit if vals else unit)
+        ob = add_oracle(metrics, val_s or run_s, cfg.block_s, vunit if vals else unit)
         keep_oracle(results[-1], ob)
         if vals is not None:
-            keep_oracle(results[0], add_oracle(metrics_cal, args.run, cfg.block_s, unit))
-    with atomic_dir(args.out, args.force, command="compensate", inputs=inputs) as tmp:
+            keep_oracle(results[0], add_oracle(metrics_cal, run_s, cfg.block_s, unit))
+    with atomic_dir(out, force, command="compensate", inputs=inputs) as tmp:
         if len(runs) == 1:
             _write_axis(Path(tmp), *fitted[0])
         else:
@@ -210,19 +219,18 @@ def compensate(args: argparse.Namespace) -> int:
                 sub.mkdir()
                 _write_axis(sub, *f)
             write_head(Path(tmp), len(runs), [f[1] for f in fitted])
+    lines = []
     for k, (_model, metrics, metrics_cal, _res) in enumerate(fitted):
         if len(runs) > 1:
-            print(f"axis {'xyz'[k]}:")
-        print(_summary(metrics))
+            lines.append(f"axis {'xyz'[k]}:")
+        lines.append(_summary(metrics))
         if vals is not None:
-            print(_summary(metrics_cal))
-    total = time.perf_counter() - t_start
-    print(f"model written to {args.out} in {total:.1f} s", file=sys.stderr)
-    return 0
+            lines.append(_summary(metrics_cal))
+    return "\n".join(lines)
 
 
 def _fit_axis(
-    args: argparse.Namespace,
+    validate: str | None,
     cfg: PipelineConfig,
     run: PreparedRun,
     val: PreparedRun | None,
@@ -245,7 +253,7 @@ def _fit_axis(
             add_firmware_metrics(p3, val, cfg.block_s, metrics)
             results.append(run_results("validation", model, app_val, val, held_out=True))
         metrics["calibration"] = metrics_cal
-        warn_outside(args.validate, metrics.get("temperature", {}))
+        warn_outside(validate, metrics.get("temperature", {}))
     else:
         metrics = metrics_cal
     model.firmware_poly3 = p3  # type: ignore[attr-defined]
@@ -270,21 +278,29 @@ def units_of(path: str) -> list[str]:
         return []
 
 
-def apply(args: argparse.Namespace) -> int:
-    """Apply ``args.model`` to ``args.run`` and write the compensated MCAP ``args.out``."""
-    inputs = (args.model, args.run)
-    check_output(args.out, args.force, inputs=inputs, kind="file")
-    if len(axis_dirs(args.model)) > 1:
-        return _apply_axes(args)
-    model = load_model(args.model)
-    run = _load_run(args.run, model.config)
-    with _named(args.run):
+def apply(
+    model_dir: str | os.PathLike[str],
+    run_path: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    force: bool = False,
+) -> None:
+    """Apply ``model_dir`` to ``run_path`` and write the compensated MCAP ``out``
+    (module docstring)."""
+    model_dir, run_path = str(model_dir), str(run_path)
+    inputs = (model_dir, run_path)
+    check_output(out, force, inputs=inputs, kind="file")
+    if len(axis_dirs(model_dir)) > 1:
+        _apply_axes(model_dir, run_path, out, force)
+        return
+    model = load_model(model_dir)
+    run = prepare_file(run_path, model.config)
+    with _named(run_path):
         offline = compensate_offline(model, run)
     # /gyro/rate carries the headline: the causal model when the model has one
     which = "causal" if model.causal is not None else "gabp"
     comp = StreamingCompensator(model, run.pt_t, run.pt_c, which)
     in_range = range_check(model.calibration, run)
-    warn_outside(args.run, in_range)
+    warn_outside(run_path, in_range)
     what = (
         f"causal full-rate compensated rate, raw - d (causal {model.causal.family} model on "
         "PT100 readings up to now)"
@@ -292,7 +308,7 @@ def apply(args: argparse.Namespace) -> int:
         else "causal full-rate compensated rate, raw - f(T)"
     )
     info = {
-        "model_dir": str(args.model),
+        "model_dir": str(model_dir),
         "model_format_version": MODEL_FORMAT_VERSION,
         "software_version": __version__,
         "calibration_run": model.calibration.get("path", ""),
@@ -305,9 +321,9 @@ def apply(args: argparse.Namespace) -> int:
             f"{model.config.block_s} s averages",
         },
     }
-    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
+    with atomic_file(out, force, inputs=inputs) as tmp:
         _write_compensated(
-            args.run,
+            run_path,
             tmp,
             comp,
             offline.t,
@@ -315,28 +331,26 @@ def apply(args: argparse.Namespace) -> int:
             model.config.block_s,
             info,
         )
-    print(f"compensated recording written to {args.out}", file=sys.stderr)
-    return 0
 
 
-def _apply_axes(args: argparse.Namespace) -> int:
+def _apply_axes(model_dir: str, run_path: str, out: str | os.PathLike[str], force: bool) -> None:
     """``apply`` for a multi-axis model: every axis of the recording compensated by its own
     model, block by block (the rate blocks keep their (n, axes) layout)."""
     from gyrolab.logs import detect_format
 
-    models = [load_model(str(d)) for _a, d in axis_dirs(args.model)]
-    inputs = (args.model, args.run)
-    check_output(args.out, args.force, inputs=inputs, kind="file")
-    if detect_format(args.run) != "gyrolab":
-        raise InputError(args.run, "apply writes a compensated copy of a gyrolab recording only")
-    runs = load_runs(args.run, models[0].config)
+    models = [load_model(str(d)) for _a, d in axis_dirs(model_dir)]
+    inputs = (model_dir, run_path)
+    check_output(out, force, inputs=inputs, kind="file")
+    if detect_format(run_path) != "gyrolab":
+        raise InputError(run_path, "apply writes a compensated copy of a gyrolab recording only")
+    runs = load_runs(run_path, models[0].config)
     if len(runs) != len(models):
-        raise InputError(args.run, f"has {len(runs)} axes, the model {len(models)}")
+        raise InputError(run_path, f"has {len(runs)} axes, the model {len(models)}")
     comps, y_off, ranges = [], [], []
     for k, (m, r) in enumerate(zip(models, runs, strict=True)):
         ranges.append(range_check(m.calibration, r))
-        warn_outside(f"{args.run} (axis {'xyz'[k]})", ranges[-1])
-        with _named(args.run):
+        warn_outside(f"{run_path} (axis {'xyz'[k]})", ranges[-1])
+        with _named(run_path):
             off = compensate_offline(m, r)
         y_off.append(off.series["compensated"])
         comps.append(StreamingCompensator(m, r.pt_t, r.pt_c))
@@ -346,7 +360,7 @@ def _apply_axes(args: argparse.Namespace) -> int:
 
     block_s = models[0].config.block_s
     info = {
-        "model_dir": str(args.model),
+        "model_dir": str(model_dir),
         "model_format_version": MODEL_FORMAT_VERSION,
         "software_version": __version__,
         "axes": len(models),
@@ -360,10 +374,8 @@ def _apply_axes(args: argparse.Namespace) -> int:
             "averages",
         },
     }
-    with atomic_file(args.out, args.force, inputs=inputs) as tmp:
-        _write_compensated(args.run, tmp, comp, off.t, np.column_stack(y_off), block_s, info)
-    print(f"compensated recording written to {args.out}", file=sys.stderr)
-    return 0
+    with atomic_file(out, force, inputs=inputs) as tmp:
+        _write_compensated(run_path, tmp, comp, off.t, np.column_stack(y_off), block_s, info)
 
 
 def _write_compensated(

@@ -1,4 +1,5 @@
-"""``gyrolab export MODEL_DIR --format px4|ardupilot|c|json|kalibr --out FILE``.
+"""What ``gyrolab export MODEL_DIR --format px4|ardupilot|c|json|kalibr --out FILE`` writes:
+:func:`export` (called by :mod:`gyrolab.app.export`).
 
 * ``px4`` / ``ardupilot``: the firmware cubic of every axis (:mod:`.params`);
   ``--instance`` picks the gyro/IMU instance, ``--device-id`` PX4's ``TC_Gi_ID``.
@@ -13,9 +14,8 @@ Everything is checked before anything is written; outputs appear atomically.
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
+import os
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,30 @@ from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file, check_output
 
 FORMATS = ("px4", "ardupilot", "c", "json", "kalibr")
+# The options one format requires (the command line's help and docs/cli.md list them)
+REQUIRED_FOR = {"px4": "--device-id", "kalibr": "--run"}
+
+
+def check_request(
+    fmt: str, *, device_id: int | None, run: object | None, instance: int = 0
+) -> None:
+    """The format is known and the options it requires are given (:data:`REQUIRED_FOR`),
+    and ``--instance`` is one of the firmware's calibration slots (PX4 ``TC_G0…3``: 0–3,
+    ArduPilot ``INS_TCAL1…3``: 0–2): checked before anything is read, one line and exit 2
+    otherwise. Light (no numerical import), so that the command line answers at once."""
+    from gyrolab.autopilot import GYRO_CAL_SLOTS
+
+    if fmt not in FORMATS:
+        raise InputError("--format", f"unknown format {fmt!r}")
+    if fmt == "px4" and device_id is None:
+        raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")
+    if fmt == "kalibr" and run is None:
+        raise InputError("--run", "the kalibr format needs a run to analyse (--run RUN)")
+    n = GYRO_CAL_SLOTS.get(fmt)
+    if n is not None and not 0 <= instance < n:
+        raise InputError(
+            "--instance", f"{fmt} has gyro calibration instances 0..{n - 1}, not {instance}"
+        )
 
 
 def _polys(model_dir: str) -> list[Any]:
@@ -31,29 +55,29 @@ def _polys(model_dir: str) -> list[Any]:
     return [load_poly3(d) for _name, d in axis_dirs(model_dir)]
 
 
-def _header(args: argparse.Namespace) -> str:
+def _header(model_dir: str) -> str:
     from gyrolab import __version__
 
     return (
-        f"gyrolab {__version__} export of {args.model}: 3rd-order temperature polynomial "
+        f"gyrolab {__version__} export of {model_dir}: 3rd-order temperature polynomial "
         "per axis\n(the firmware form; metrics.json 'firmware_poly3' gives its residual)"
     )
 
 
-def kalibr_text(args: argparse.Namespace) -> str:
-    """``imu.yaml`` for ``args.model`` applied to ``args.run`` (every axis)."""
+def kalibr_text(
+    model_dir: str, run: str, rostopic: str = "/imu0", log_options: dict[str, Any] | None = None
+) -> str:
+    """``imu.yaml`` for ``model_dir`` applied to ``run`` (every axis)."""
     from gyrolab.compensation.apply import streaming_compensate
     from gyrolab.compensation.axes import axis_dirs
     from gyrolab.compensation.model_dir import load_model
     from gyrolab.export.kalibr import accel_axis_noise, axis_noise, imu_yaml
-    from gyrolab.logs import log_options, read_log
+    from gyrolab.logs import read_log
 
-    if not args.run:
-        raise InputError("--run", "the kalibr format needs a run to analyse (--run RUN)")
-    rec = read_log(args.run, **log_options(args))
-    dirs = axis_dirs(args.model)
+    rec = read_log(run, **(log_options or {}))
+    dirs = axis_dirs(model_dir)
     if rec.axes != len(dirs):
-        raise InputError(args.run, f"has {rec.axes} axes, the model {len(dirs)}")
+        raise InputError(run, f"has {rec.axes} axes, the model {len(dirs)}")
     pt_t, pt_c = rec.require_temperature()
     axes = {}
     try:
@@ -62,7 +86,7 @@ def kalibr_text(args: argparse.Namespace) -> str:
             y = streaming_compensate(load_model(str(d)), s.t, s.values, pt_t, pt_c)
             axes[name] = axis_noise(y, s.rate_hz)
     except InputError as e:
-        raise InputError(args.run, e.problem) from None
+        raise InputError(run, e.problem) from None
     accel, why = None, "the run has no accelerometer"
     if rec.accel is not None:  # a user's log with an accelerometer (gyrolab.logs)
         acc = rec.accel
@@ -71,45 +95,42 @@ def kalibr_text(args: argparse.Namespace) -> str:
         except InputError as e:  # e.g. a constant (unlogged, zero-noise) accelerometer
             why = f"its accelerometer gives no noise terms ({e.problem})"
     rate_hz = rec.require_rate().rate_hz
-    return imu_yaml(axes, rate_hz, args.rostopic, str(args.run), accel, no_accel_reason=why)
+    return imu_yaml(axes, rate_hz, rostopic, str(run), accel, no_accel_reason=why)
 
 
-def check_instance(firmware: str, instance: int) -> None:
-    """``--instance`` within the firmware's calibration slots (PX4 TC_G0..3, ArduPilot
-    INS_TCAL1..3 as 0..2); InputError otherwise."""
-    from gyrolab.autopilot import ardupilot, px4
-
-    n = px4.TC_SLOTS if firmware == "px4" else ardupilot.IMUS
-    if not 0 <= instance < n:
-        raise InputError(
-            "--instance", f"{firmware} has gyro calibration instances 0..{n - 1}, not {instance}"
-        )
-
-
-def export(args: argparse.Namespace) -> int:
-    """The ``gyrolab export`` handler (module docstring)."""
+def export(
+    model_dir: str | os.PathLike[str],
+    fmt: str,
+    out: str | os.PathLike[str],
+    *,
+    kind: str = "chosen",
+    instance: int = 0,
+    device_id: int | None = None,
+    run: str | os.PathLike[str] | None = None,
+    rostopic: str = "/imu0",
+    log_options: dict[str, Any] | None = None,
+    force: bool = False,
+) -> list[Path]:
+    """Write ``model_dir`` in format ``fmt`` to ``out`` (module docstring); returns the
+    files written. ``device_id`` is required for ``px4``, ``run`` for ``kalibr``
+    (:func:`check_request`)."""
     from gyrolab.export.params import ardupilot_parm, px4_params
 
-    fmt = args.format
-    out = Path(args.out)
+    check_request(fmt, device_id=device_id, run=run, instance=instance)
+    model, out = str(model_dir), Path(out)
     outs = [out] + ([out.with_suffix(".h")] if fmt == "c" else [])
-    inputs = (args.model, args.run)
+    inputs = (model, None if run is None else str(run))
     for o in outs:
-        check_output(o, args.force, inputs=inputs, kind="file")
-    if fmt in ("px4", "ardupilot"):
-        check_instance(fmt, args.instance)
+        check_output(o, force, inputs=inputs, kind="file")
     if fmt == "px4":
-        if args.device_id is None:
-            raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")
-        texts = [
-            px4_params(_polys(args.model), args.instance, args.device_id, header=_header(args))
-        ]
+        assert device_id is not None  # check_request
+        texts = [px4_params(_polys(model), instance, device_id, header=_header(model))]
     elif fmt == "ardupilot":
-        texts = [ardupilot_parm(_polys(args.model), args.instance, header=_header(args))]
+        texts = [ardupilot_parm(_polys(model), instance, header=_header(model))]
     elif fmt in ("c", "json"):
         from gyrolab.export.spec import export_spec
 
-        spec = export_spec(args.model, args.kind)
+        spec = export_spec(model, kind)
         if fmt == "json":
             texts = [json.dumps(spec, indent=2) + "\n"]
         else:
@@ -120,14 +141,11 @@ def export(args: argparse.Namespace) -> int:
             try:
                 header, source = generate(spec, outs[1].name)
             except ValueError as e:
-                raise InputError(args.model, str(e)) from None
+                raise InputError(model, str(e)) from None
             texts = [source, header]
-    elif fmt == "kalibr":
-        texts = [kalibr_text(args)]
-    else:  # argparse restricts the choices
-        raise InputError("--format", f"unknown format {fmt!r}")
+    else:  # kalibr (check_request knows every format)
+        texts = [kalibr_text(model, str(run), rostopic, log_options)]
     for o, text in zip(outs, texts, strict=True):
-        with atomic_file(o, args.force, inputs=inputs) as tmp:
+        with atomic_file(o, force, inputs=inputs) as tmp:
             tmp.write_text(text, encoding="utf-8")
-    print(f"wrote {', '.join(str(o) for o in outs)}", file=sys.stderr)
-    return 0
+    return outs

@@ -78,16 +78,6 @@ def single_axis_gyrolab(path: str | os.PathLike[str]) -> bool:
     return True  # no rate at all: the single-axis path reports it
 
 
-def log_options(args: object) -> dict:
-    """The :func:`read_log` keywords from a command's ``--temperature-topic``,
-    ``--imu-topic`` and ``--log-instance`` (absent ones take the defaults)."""
-    return {
-        "temperature_topic": getattr(args, "temperature_topic", None),
-        "imu_topic": getattr(args, "imu_topic", None),
-        "instance": int(getattr(args, "log_instance", 0) or 0),
-    }
-
-
 def read_log(
     path: str | os.PathLike[str],
     *,

@@ -1,4 +1,5 @@
-"""``gyrolab report RUN.mcap [--model MODEL_DIR] --out REPORT_DIR`` (docs/cli.md contract).
+"""What ``gyrolab report RUN.mcap [--model MODEL_DIR] --out REPORT_DIR`` writes (docs/cli.md
+contract): :func:`write_report`, which :mod:`gyrolab.app.report` calls.
 
 Writes, atomically (a temporary sibling directory renamed into place):
 
@@ -13,9 +14,7 @@ version) is one line and exit 2, and nothing is written.
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -96,32 +95,3 @@ def write_report(
     finally:
         bar.close()
     return metrics
-
-
-def report(args: argparse.Namespace) -> int:
-    """The ``gyrolab report`` handler."""
-    from gyrolab.logs import log_options
-    from gyrolab.record.reader import select_unit
-
-    check_output(
-        args.out, args.force, inputs=(args.run, args.model, getattr(args, "spec", None)), kind="dir"
-    )
-    unit = select_unit(args.run, getattr(args, "unit", None))
-    metrics = write_report(
-        args.run,
-        args.out,
-        args.model,
-        args.force,
-        spec=getattr(args, "spec", None),
-        operator=getattr(args, "operator", None),
-        serial=getattr(args, "unit_serial", None),
-        log_options=log_options(args),
-        unit=unit,
-    )
-    print(f"run outcome: {metrics['outcome']['line']}", file=sys.stderr)
-    for name, m in metrics.get("axes", {"": metrics}).items():
-        if "verdict" in m:
-            axis = f" (axis {name})" if name else ""
-            print(f"verdict{axis}: {m['verdict']['verdict']}", file=sys.stderr)
-    print(f"report written to {Path(args.out) / 'index.html'}", file=sys.stderr)
-    return 0

@@ -29,11 +29,9 @@ complete, safe state) need the recording and are checked per run by ``gyrolab re
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -514,17 +512,4 @@ def write_fleet(
     return doc
 
 
-def fleet(args: argparse.Namespace) -> int:
-    """The ``gyrolab fleet`` handler."""
-    doc = write_fleet(list(args.models), args.out, args.spec, args.force)
-    y = doc.get("yield")
-    print(
-        f"{doc['n_units']} units, {len(doc['outliers'])} outlier flag(s)"
-        + (f", yield {y['passed']}/{y['total']}" if y else "")
-        + f"; fleet record written to {Path(args.out) / 'index.html'}",
-        file=sys.stderr,
-    )
-    return 0
-
-
-__all__ = ["analyse", "find_model_dirs", "fleet", "robust_z", "wilson", "write_fleet"]
+__all__ = ["analyse", "find_model_dirs", "robust_z", "wilson", "write_fleet"]

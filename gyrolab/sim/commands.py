@@ -1,11 +1,9 @@
-"""``gyrolab simulate``: the handler and the library call it translates to."""
+"""What ``gyrolab simulate`` does: :func:`simulate_file` (called by :mod:`gyrolab.app.simulate`)."""
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
-import sys
 
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file, check_output
@@ -16,23 +14,6 @@ from gyrolab.sim.simulate import axis_physics, simulate_run
 
 MAX_RATE_HZ = 100_000.0
 MAX_UNITS = 256
-
-
-def simulate(args: argparse.Namespace) -> int:
-    """``gyrolab simulate --out RUN.mcap [--profile] [--model] [--rate] [--seed] [--effect]``."""
-    line = simulate_file(
-        args.out,
-        args.profile,
-        model_path=args.model,
-        axis_model_paths=tuple(getattr(args, "axis_model", None) or ()),
-        rate_hz=args.rate,
-        seed=args.seed,
-        units=int(getattr(args, "units", 1) or 1),
-        effects=tuple(args.effect or ()),
-        force=args.force,
-    )
-    print(line, file=sys.stdout)
-    return 0
 
 
 def simulate_file(

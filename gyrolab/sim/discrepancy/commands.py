@@ -1,4 +1,5 @@
-"""``gyrolab discrepancy RUN.mcap [--model SIM_MODEL.toml] --out DIR``.
+"""What ``gyrolab discrepancy RUN.mcap [--model SIM_MODEL.toml] --out DIR`` does:
+:func:`discrepancy` (called by :mod:`gyrolab.app.discrepancy` and by ``gyrolab batch``).
 
 Writes ``DIR/discrepancy.json`` (``effects_found``, ``ambiguous``, ``gap_before``,
 ``gap_after``, ``steps``), ``DIR/model.toml`` (the updated simulator model, accepted by
@@ -14,9 +15,10 @@ under ``axes``), ``model_axis{K}.toml`` and ``index_axis{K}.html`` per axis, and
 
 from __future__ import annotations
 
-import argparse
 import json
+import os
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from html import escape
 from typing import Any
@@ -29,32 +31,43 @@ from gyrolab.sim.discrepancy.workflow import run_discrepancy
 from gyrolab.sim.model import load_model, nominal_model
 
 
-def discrepancy(args: argparse.Namespace) -> int:
-    """CLI handler (see module docstring)."""
-    inputs = (args.run, args.model)
-    check_output(args.out, args.force, inputs=inputs, kind="dir")
-    model = load_model(args.model) if args.model else nominal_model()
+def discrepancy(
+    run: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    model: str | os.PathLike[str] | None = None,
+    unit: str | None = None,
+    force: bool = False,
+    log: Callable[[str], None] | None = None,
+) -> str:
+    """Analyse ``run`` from ``model`` (default nominal), write ``out`` (module docstring);
+    returns the one-line summary the command prints. ``log``: progress lines (default:
+    ``discrepancy: ...`` on stderr)."""
+    inputs = (run, model)
+    check_output(out, force, inputs=inputs, kind="dir")
+    sim_model = load_model(model) if model else nominal_model()
     from gyrolab.record.reader import select_unit
 
-    axes = load_recording_axes(args.run, unit=select_unit(args.run, getattr(args, "unit", None)))
+    axes = load_recording_axes(run, unit=select_unit(run, unit))
 
-    def log(msg: str) -> None:
+    def stderr_log(msg: str) -> None:
         print(f"discrepancy: {msg}", file=sys.stderr)
 
+    log = log or stderr_log
     if len(axes) > 1:
-        return _discrepancy_axes(args, axes, model, inputs, log)
-    data = replace(axes[0], source=str(args.run))
-    res = run_discrepancy(data, model, log=log)
-    with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
+        return _discrepancy_axes(run, out, force, axes, sim_model, inputs, log)
+    data = replace(axes[0], source=str(run))
+    res = run_discrepancy(data, sim_model, log=log)
+    with atomic_dir(out, force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
             json.dumps(res.to_json(), indent=1, default=json_default), encoding="utf-8"
         )
         (tmp / "model.toml").write_text(res.model.to_toml(), encoding="utf-8")
-        (tmp / "index.html").write_text(render(res, str(args.run)), encoding="utf-8")
+        (tmp / "index.html").write_text(render(res, str(run)), encoding="utf-8")
     found = ", ".join(res.effects_found) or "nothing"
     amb = "; ".join("{" + ", ".join(s) + "}" for s in res.ambiguous)
-    print(
-        f"wrote {args.out}: named {found}" + (f" (ambiguous: {amb})" if amb else "") + f"; "
+    return (
+        f"wrote {out}: named {found}" + (f" (ambiguous: {amb})" if amb else "") + f"; "
         f"LF residual {res.gap_before['lf_residual_rms_dps']:.3g} -> "
         f"{res.gap_after['lf_residual_rms_dps']:.3g} deg/s, "
         f"Allan log distance {res.gap_before['allan_log_distance']:.3g} -> "
@@ -62,12 +75,17 @@ def discrepancy(args: argparse.Namespace) -> int:
         f"temperature {res.gap_before['temperature_rms_c']:.3g} -> "
         f"{res.gap_after['temperature_rms_c']:.3g} C ({res.elapsed_s:.0f} s)"
     )
-    return 0
 
 
 def _discrepancy_axes(
-    args: argparse.Namespace, axes: list[Any], model: Any, inputs: tuple[Any, ...], log: Any
-) -> int:
+    run: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    force: bool,
+    axes: list[Any],
+    model: Any,
+    inputs: tuple[Any, ...],
+    log: Any,
+) -> str:
     """The multi-axis layout (module docstring): shared effects once, one model per axis."""
     res = run_discrepancy_axes(axes, model, log=log)
     n = len(res.axes)
@@ -79,26 +97,25 @@ def _discrepancy_axes(
     )
     index = (
         "<!doctype html><meta charset=utf-8><title>discrepancy</title>"
-        f"<h1>Discrepancy: {escape(str(args.run))} ({n} axes)</h1>"
+        f"<h1>Discrepancy: {escape(str(run))} ({n} axes)</h1>"
         f"<p>Shared by every axis: {escape(', '.join(res.shared) or 'none')}</p><ul>{links}</ul>"
     )
-    with atomic_dir(args.out, args.force, command="discrepancy", inputs=inputs) as tmp:
+    with atomic_dir(out, force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
             json.dumps(res.to_json(), indent=1, default=json_default), encoding="utf-8"
         )
         for k, r in enumerate(res.axes):
             (tmp / f"model_axis{k}.toml").write_text(r.model.to_toml(), encoding="utf-8")
             (tmp / f"index_axis{k}.html").write_text(
-                render(r, f"{args.run} (axis {k})"), encoding="utf-8"
+                render(r, f"{run} (axis {k})"), encoding="utf-8"
             )
         (tmp / "index.html").write_text(index, encoding="utf-8")
     own = "; ".join(f"axis {k}: {', '.join(e) or 'nothing'}" for k, e in enumerate(res.by_axis))
-    print(
-        f"wrote {args.out}: {n} axes; shared {', '.join(res.shared) or 'nothing'}; {own}; "
+    return (
+        f"wrote {out}: {n} axes; shared {', '.join(res.shared) or 'nothing'}; {own}; "
         + ", ".join(
             f"axis {k} LF residual {r.gap_before['lf_residual_rms_dps']:.3g} -> "
             f"{r.gap_after['lf_residual_rms_dps']:.3g} deg/s"
             for k, r in enumerate(res.axes)
         )
     )
-    return 0

@@ -1,0 +1,298 @@
+"""The typed options of every ``gyrolab`` command (the contract in docs/cli.md).
+
+``gyrolab.cli`` parses the command line into one of these dataclasses and hands it to the
+command's call in :mod:`gyrolab.app`; nothing below ``cli.py`` sees an argparse namespace.
+A library caller builds the same dataclass.
+
+Each options object checks itself when it is made: the rules that need no more than the
+arguments and the file system (an input that does not exist, an option that one choice
+of another requires, a count out of range) raise :class:`~gyrolab.errors.InputError`
+there — one line, exit 2 — so a typing mistake is answered before any numerical library
+is imported. This module therefore imports nothing heavy (standard library only).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+from gyrolab.errors import InputError
+from gyrolab.export.commands import check_request
+
+PathArg = str | os.PathLike[str]
+
+
+
+def need_file(path: PathArg | None) -> None:
+    """``path`` (when given) names an existing file or directory, else ``file not found``."""
+    if path is not None and not os.path.exists(path):
+        raise InputError(path, "file not found")
+
+
+def need_model_dir(path: PathArg | None) -> None:
+    """``path`` (when given) is an existing directory (a model directory, or one of them)."""
+    if path is None:
+        return
+    if not os.path.exists(path):
+        raise InputError(path, "model directory not found")
+    if not os.path.isdir(path):
+        raise InputError(path, "not a directory (a model directory is expected)")
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How to read a user's log (ROS 2 MCAP, PX4 ULog, ArduPilot DataFlash; docs/export.md):
+    ``--temperature-topic``, ``--imu-topic``, ``--log-instance``."""
+
+    temperature_topic: str | None = None
+    imu_topic: str | None = None
+    instance: int = 0
+
+    def read_log_kwargs(self) -> dict[str, Any]:
+        """The keywords of :func:`gyrolab.logs.read_log`."""
+        return {
+            "temperature_topic": self.temperature_topic,
+            "imu_topic": self.imu_topic,
+            "instance": int(self.instance),
+        }
+
+
+@dataclass(frozen=True)
+class SimulateOptions:
+    """``gyrolab simulate`` (docs/sim-model.md): ``profile`` paper | short | FILE.toml."""
+
+    out: PathArg
+    profile: str = "paper"
+    model: str | None = None
+    axis_models: tuple[str, ...] = ()
+    rate_hz: float = 100.0
+    seed: int = 0
+    units: int = 1
+    effects: tuple[str, ...] = ()
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        for p in (self.model, *self.axis_models):
+            need_file(p)
+
+
+@dataclass(frozen=True)
+class AcquireOptions:
+    """What ``gyrolab acquire`` is asked to do (docs/cli.md).
+
+    ``bench``: ``"sim"`` or a BENCH.toml; ``profile``: paper | short | FILE.toml (None: the
+    bench's); ``speed``/``seed``/``drivers``/``faults``/``axis_models``: the simulated bench
+    only; ``live_port``: serve the run to Foxglove (0: any free port)."""
+
+    bench: str
+    out: PathArg
+    profile: str | None = None
+    speed: float | None = None
+    seed: int = 0
+    drivers: tuple[str, ...] = ()
+    faults: str | None = None
+    axis_models: tuple[str, ...] = ()
+    force: bool = False
+    live_port: int | None = None
+    live_host: str = "127.0.0.1"
+    units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
+    # --units only: the units (1-based) read by their internal temperature sensor
+    internal_temperature: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class RecoverOptions:
+    """``gyrolab recover BROKEN.mcap --out FIXED.mcap`` (docs/reliability.md)."""
+
+    broken: PathArg
+    out: PathArg
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        need_file(self.broken)
+
+
+@dataclass(frozen=True)
+class CompensateOptions:
+    """``gyrolab compensate`` (docs/compensation.md). ``run_label``/``validate_label``: how
+    the outputs name the runs (default: the paths as given; the demo passes paths relative
+    to its output directory); ``workers``: parallel fits of a multi-unit run."""
+
+    run: PathArg
+    out: PathArg
+    validate: PathArg | None = None
+    config: PathArg | None = None
+    seed: int | None = None
+    unit: str | None = None
+    workers: int | None = None
+    log: LogOptions = field(default_factory=LogOptions)
+    force: bool = False
+    run_label: str = ""
+    validate_label: str = ""
+
+    def __post_init__(self) -> None:
+        for p in (self.run, self.validate, self.config):
+            need_file(p)
+
+
+@dataclass(frozen=True)
+class ApplyOptions:
+    """``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap`` (docs/compensation.md)."""
+
+    model: PathArg
+    run: PathArg
+    out: PathArg
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        need_model_dir(self.model)
+        need_file(self.run)
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    """``gyrolab report`` (docs/report.md). ``unit_serial``/``operator`` fill the sign-off
+    block instead of the recording's; ``unit``: the unit of a multi-unit run."""
+
+    run: PathArg
+    out: PathArg
+    model: PathArg | None = None
+    spec: PathArg | None = None
+    operator: str | None = None
+    unit_serial: str | None = None
+    unit: str | None = None
+    log: LogOptions = field(default_factory=LogOptions)
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        need_file(self.run)
+        need_model_dir(self.model)
+        need_file(self.spec)
+
+
+@dataclass(frozen=True)
+class DiscrepancyOptions:
+    """``gyrolab discrepancy RUN.mcap [--model SIM_MODEL.toml] --out DIR`` (docs/discrepancy.md)."""
+
+    run: PathArg
+    out: PathArg
+    model: PathArg | None = None
+    unit: str | None = None
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        need_file(self.run)
+        need_file(self.model)
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """``gyrolab demo --out DIR`` (docs/report.md); ``fc`` (``px4`` | ``ardupilot``): a
+    simulated flight controller through calibration, compensation, export, flash and an
+    on-device verification run instead (docs/instruments.md)."""
+
+    out: PathArg
+    profile: str = "paper"
+    seed: int = 1
+    force: bool = False
+    fc: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.fc not in (None, "px4", "ardupilot"):
+            raise InputError("--fc", f"px4 or ardupilot, not {self.fc!r}")
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """``gyrolab convert RUN --to FORMAT --out FILE`` (docs/convert.md): a recording, or a
+    user's log (``log``: which IMU or topics)."""
+
+    run: PathArg
+    to: str
+    out: PathArg
+    unit: str | None = None
+    log: LogOptions = field(default_factory=LogOptions)  # a user's log (docs/convert.md)
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        need_file(self.run)
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """``gyrolab export MODEL_DIR --format FORMAT --out FILE`` (docs/export.md).
+
+    Conditionally required (:data:`gyrolab.export.commands.REQUIRED_FOR`): ``device_id``
+    for ``px4`` (PX4's ``TC_Gi_ID``), ``run`` for ``kalibr`` (the run whose noise it
+    describes)."""
+
+    model: PathArg
+    format: str
+    out: PathArg
+    kind: str = "chosen"
+    instance: int = 0
+    device_id: int | None = None
+    run: PathArg | None = None
+    rostopic: str = "/imu0"
+    log: LogOptions = field(default_factory=LogOptions)
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        check_request(self.format, device_id=self.device_id, run=self.run, instance=self.instance)
+        need_model_dir(self.model)
+        need_file(self.run)
+
+
+@dataclass(frozen=True)
+class BatchCommandOptions:
+    """``gyrolab batch TASK RUNS... --out DIR`` (docs/fleet.md): ``runs`` are recordings
+    or glob patterns; ``scheduler`` a Dask scheduler's address, else a local cluster of
+    ``workers``; ``seed``/``config`` for compensate, ``models`` for report, ``sim_model``
+    for discrepancy."""
+
+    task: str
+    runs: tuple[str, ...]
+    out: PathArg
+    scheduler: str | None = None
+    workers: int | None = None
+    threads: int = 1
+    seed: int | None = None
+    config: PathArg | None = None
+    models: PathArg | None = None
+    sim_model: PathArg | None = None
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        if self.scheduler and self.workers:
+            raise InputError(
+                "gyrolab batch",
+                "--workers sizes the local cluster; with --scheduler the cluster's own "
+                "workers run the items",
+            )
+        for name, n in (("--workers", self.workers), ("--threads", self.threads)):
+            if n is not None and n < 1:
+                raise InputError("gyrolab batch", f"{name} must be at least 1")
+        for name, value, task in (
+            ("--config", self.config, "compensate"),
+            ("--models", self.models, "report"),
+            ("--sim-model", self.sim_model, "discrepancy"),
+        ):
+            if value and self.task != task:
+                raise InputError("gyrolab batch", f"{name} is for `batch {task}`")
+            need_file(value)
+
+
+@dataclass(frozen=True)
+class FleetOptions:
+    """``gyrolab fleet MODEL_DIR... --out REPORT_DIR [--spec SPEC.toml]`` (docs/fleet.md)."""
+
+    models: tuple[PathArg, ...]
+    out: PathArg
+    spec: PathArg | None = None
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        for m in self.models:
+            need_model_dir(m)
+        need_file(self.spec)

@@ -1,0 +1,77 @@
+"""The command line answers ``--help`` and a typing mistake before any numerical library is
+imported (issue 27: parse and check the arguments and input paths first). Checked on what
+is loaded, not on a clock: one fresh interpreter runs every case and reports, after each,
+which heavy packages ``sys.modules`` holds."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gyrolab.cli import main
+
+HEAVY = ["numpy", "torch", "numba", "matplotlib", "dask", "distributed", "scipy", "mcap"]
+
+PROBE = """
+import contextlib, io, json, sys
+from gyrolab.cli import main
+heavy = set(HEAVY)
+out = []
+for argv in CASES:
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        try:
+            rc = main(argv)
+        except SystemExit as e:  # --help
+            rc = e.code
+    loaded = sorted({m.split(".")[0] for m in sys.modules} & heavy)
+    out.append([argv, rc, loaded, err.getvalue()])
+print(json.dumps(out))
+"""
+
+
+def test_help_and_argument_errors_import_nothing_heavy(tmp_path: Path) -> None:
+    out = tmp_path / "x"
+    model = tmp_path / "M"
+    model.mkdir()
+    (tmp_path / "run.mcap").write_bytes(b"")
+    cases = [
+        ["--help"],
+        ["compensate", "--help"],
+        ["export", "--help"],
+        ["simulate"],  # --out missing
+        ["compensate", str(tmp_path / "missing.mcap"), "--out", str(out)],
+        ["export", "M", "--format", "px4", "--out", str(tmp_path / "x.params")],
+        ["export", str(model), "--format", "kalibr", "--out", str(tmp_path / "imu.yaml")],
+        ["report", str(tmp_path / "run.mcap"), "--model", str(model / "no"), "--out", str(out)],
+        ["apply", str(model), str(tmp_path / "missing.mcap"), "--out", str(out)],
+        ["fleet", str(tmp_path / "nope"), "--out", str(out)],
+        ["batch", "report", str(tmp_path / "run.mcap"), "--out", str(out), "--sim-model", "m"],
+        ["convert", str(tmp_path / "missing.mcap"), "--to", "csv", "--out", str(out)],
+    ]
+    code = PROBE.replace("HEAVY", repr(HEAVY)).replace("CASES", repr(cases))
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
+    )
+    for argv, rc, loaded, err in json.loads(res.stdout):
+        assert loaded == [], f"{argv}: imported {loaded} before answering"
+        if "--help" in argv:
+            assert rc == 0
+            continue
+        assert rc == 2, (argv, err)
+        assert len(err.strip().splitlines()) == 1, (argv, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["M", "run.mcap"]  # nothing written
+
+
+def test_export_help_lists_the_options_one_format_requires(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with pytest.raises(SystemExit):
+        main(["export", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--device-id ID required with --format px4" in text
+    assert "--run RUN required with --format kalibr" in text
