@@ -264,6 +264,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
     dm.add_argument("--out", required=True, help="output DIR")
+    dm.add_argument(
+        "--fc",
+        choices=["px4", "ardupilot"],
+        help="a simulated flight controller through the loop: calibration run, compensate, "
+        "export, flash, verification run (docs/instruments.md)",
+    )
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
     dm.add_argument("--seed", type=int, default=1, help="seed of the calibration run (default 1)")
     dm.add_argument("--force", action="store_true", help="overwrite an existing output")

@@ -177,7 +177,12 @@ def summary(out: Path, res: dict[str, Any]) -> str:
 
 
 def demo(opts: DemoOptions) -> int:
-    """The ``gyrolab demo`` command: :func:`run_demo`, then its :func:`summary`."""
+    """The ``gyrolab demo`` command: :func:`run_demo`, then its :func:`summary`; with
+    ``--fc``, the flight-controller loop (:mod:`gyrolab.app.fc_demo`)."""
+    if opts.fc is not None:
+        from gyrolab.app.fc_demo import fc_demo
+
+        return fc_demo(opts)
     res = run_demo(opts.out, opts.profile, opts.seed, opts.force)
     print(summary(Path(opts.out), res))
     return 0

@@ -114,3 +114,41 @@ def encode_mg(accel_m_s2: np.ndarray) -> list[int]:
     """m/s² → the int16 mG fields (``accel·1000/g``, truncated)."""
     v = np.trunc(np.asarray(accel_m_s2, dtype=np.float32) * np.float32(1000.0 / GRAVITY_MSS))
     return [int(x) for x in np.clip(v, -32768, 32767)]
+
+
+# MAV_PARAM_TYPE (common.xml) and how each firmware puts a parameter in PARAM_VALUE's /
+# PARAM_SET's float ``param_value`` (mavlink.io "Parameter Protocol", parameter encoding):
+# PX4 copies the integer's bytes into the float (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE,
+# src/modules/mavlink/mavlink_parameters.cpp), ArduPilot casts the value (..._C_CAST).
+MAV_PARAM_TYPE_UINT8, MAV_PARAM_TYPE_INT8 = 1, 2
+MAV_PARAM_TYPE_UINT16, MAV_PARAM_TYPE_INT16 = 3, 4
+MAV_PARAM_TYPE_UINT32, MAV_PARAM_TYPE_INT32 = 5, 6
+MAV_PARAM_TYPE_REAL32 = 9
+_INT_FORMATS = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
+
+
+def param_to_wire(value: float, param_type: int, firmware: str) -> float:
+    """The float ``param_value`` carrying ``value`` of ``param_type`` for ``firmware``."""
+    import struct
+
+    fmt = _INT_FORMATS.get(int(param_type))
+    if fmt is None:
+        return float(np.float32(value))
+    if firmware != "px4":
+        return float(np.float32(int(value)))
+    raw = struct.pack(fmt, int(value)).ljust(4, b"\0")
+    return float(struct.unpack("<f", raw)[0])
+
+
+def param_from_wire(wire: float, param_type: int, firmware: str) -> float:
+    """The parameter's value from the float ``param_value`` (inverse of
+    :func:`param_to_wire`)."""
+    import struct
+
+    fmt = _INT_FORMATS.get(int(param_type))
+    if fmt is None:
+        return float(np.float32(wire))
+    if firmware != "px4":
+        return float(int(round(wire)))
+    raw = struct.pack("<f", wire)
+    return float(struct.unpack(fmt, raw[: struct.calcsize(fmt)])[0])

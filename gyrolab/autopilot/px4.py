@@ -196,6 +196,39 @@ def publications(
     return np.asarray(pub_t), tc.offsets(np.asarray(pub_c))
 
 
+def module_publications(
+    params: Mapping[str, float],
+    readings: list[tuple[int, np.ndarray, np.ndarray]],
+    t_end: float,
+    *,
+    first_poll_s: float = 0.0,
+    period_s: float = MODULE_PERIOD_S,
+) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """:class:`TemperatureCompensationModule` run over every gyro of a controller:
+    ``readings`` is ``(device_id, t, temperature_c)`` per gyro (uORB instance order). Polls
+    every ``period_s`` from ``first_poll_s`` to ``t_end``; returns the publication times and
+    per device id its offsets at each publication (``(k, 3)`` float32; a publication that
+    another gyro's 1 °C move triggered carries this gyro's current offsets too)."""
+    mod = TemperatureCompensationModule(params, [dev for dev, _t, _c in readings])
+    n = int(np.floor((t_end - first_poll_s) / period_s)) + 1
+    polls = first_poll_s + period_s * np.arange(max(n, 0))
+    idx = [np.searchsorted(np.asarray(t), polls, side="right") - 1 for _d, t, _c in readings]
+    pub_t: list[float] = []
+    pubs: dict[int, list[np.ndarray]] = {dev: [] for dev, _t, _c in readings}
+    for i, poll in enumerate(polls):
+        temps = [
+            float(c[k[i]]) if k[i] >= 0 else None
+            for (_d, _t, c), k in zip(readings, idx, strict=True)
+        ]
+        out = mod.poll(temps)
+        if out is None:
+            continue
+        pub_t.append(float(poll))
+        for dev in pubs:
+            pubs[dev].append(out.get(dev, np.zeros(3, dtype=f32)))
+    return np.asarray(pub_t), {d: np.asarray(v, dtype=f32).reshape(-1, 3) for d, v in pubs.items()}
+
+
 def held(sample_t: np.ndarray, pub_t: np.ndarray, pub_offsets: np.ndarray) -> np.ndarray:
     """The offsets in force at each sample: the last publication at or before it; before
     the first, the first (the module has been running since the controller booted, and

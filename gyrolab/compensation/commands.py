@@ -172,12 +172,12 @@ def compensate(
     vunit = None
     if val_s and unit is not None:  # the same unit of a multi-unit held-out run
         vunit = select_unit(val_s, unit if units_of(val_s) else None)
-    if unit is not None:  # one unit of a multi-unit recording (single-axis units)
-        runs = [prepare_file(run_s, cfg, unit=unit)]
+    if unit is not None:  # one unit of a multi-unit recording (1–3 axes)
+        runs = load_runs(run_s, cfg, unit=unit)
     else:
         runs = load_runs(run_s, cfg, **opts)
     if vunit is not None:
-        vals = [prepare_file(val_s, cfg, unit=vunit)]
+        vals = load_runs(val_s, cfg, unit=vunit)
     else:
         vals = load_runs(val_s, cfg, **opts) if val_s else None
     if vals is not None and len(vals) != len(runs):

@@ -65,15 +65,16 @@ def _mcap_profile(path: Path) -> str:
         raise InputError(path, f"damaged MCAP ({e})") from None
 
 
-def single_axis_gyrolab(path: str | os.PathLike[str]) -> bool:
-    """True for a gyrolab MCAP whose ``/gyro/rate`` has one axis (streamed as before)."""
+def single_axis_gyrolab(path: str | os.PathLike[str], unit: str | None = None) -> bool:
+    """True for a gyrolab MCAP whose ``/gyro/rate`` (unit ``unit``'s, of a multi-unit
+    recording) has one axis (streamed as before)."""
     from gyrolab.record.blocks import decode_block
     from gyrolab.record.format import TOPIC_RATE
     from gyrolab.record.reader import iter_messages
 
     if detect_format(path) != "gyrolab":
         return False
-    for _topic, _ts, data in iter_messages(path, [TOPIC_RATE]):
+    for _topic, _ts, data in iter_messages(path, [TOPIC_RATE], unit=unit):
         return decode_block(data, "rate")[3].ndim == 1
     return True  # no rate at all: the single-axis path reports it
 
