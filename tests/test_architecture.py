@@ -39,6 +39,7 @@ LAYERS: list[set[str]] = [
         "framing",
         "clock",
         "autopilot",
+        "vectornav",
         "__init__",
     },
 ]

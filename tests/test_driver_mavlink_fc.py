@@ -42,11 +42,11 @@ def test_every_imu_recorded_in_the_sensor_frame_and_the_parameters_put_back(
     h = _handle(fw)
     out = tmp_path / "run.mcap"
     try:
-        before = h.bench.fc.values()
+        before = h.bench.device.values()
         cfg = with_ports(fc_bench_config(fw, rate_hz=RATE), h)
         prof = Profile("t", (Step(25.0, 60.0, label="power-on"), Step(40.0, 240.0)))
         res = run_acquisition(cfg=cfg, profile=prof, out=out, force=False, sim=h, seed=SEED)
-        after = h.bench.fc.values()
+        after = h.bench.device.values()
     finally:
         h.stop()
     assert res.outcome == "completed", res.reason
@@ -71,18 +71,18 @@ def test_every_imu_recorded_in_the_sensor_frame_and_the_parameters_put_back(
         # (the user's offsets are 0.2-0.7 °/s; a rotation would flip y and z's sign)
         temp = np.interp(rec.rate.t, rec.pt100_t, rec.pt100_c)
         for a in range(3):
-            want = _bias_dps(k, a, temp - h.bench.fc.imus[k][0].die_sensor_offset_c)
+            want = _bias_dps(k, a, temp - h.bench.device.imus[k][0].die_sensor_offset_c)
             assert abs(np.mean(rec.rate.values[:, a] - want)) < 0.06, (s, a)
 
 
 def test_a_refused_write_at_set_up_leaves_the_vehicle_as_it_was() -> None:
     h = _handle("px4", fail_param_sets={"CAL_GYRO1_YOFF"})
     try:
-        before = h.bench.fc.values()
+        before = h.bench.device.values()
         cfg = with_ports(fc_bench_config("px4", rate_hz=RATE), h)
         with pytest.raises(InputError, match=r"CAL_GYRO1_YOFF.*previous values put back"):
             connect_instruments(cfg, h.addresses, timeout=h.timeout)
-        assert h.bench.fc.values() == before
+        assert h.bench.device.values() == before
     finally:
         h.stop()
 
@@ -92,11 +92,11 @@ def test_a_fault_mid_run_still_puts_the_parameters_back() -> None:
     instruments; the last IMU to close restores the vehicle."""
     h = _handle("ardupilot")
     try:
-        before = h.bench.fc.values()
+        before = h.bench.device.values()
         cfg = with_ports(fc_bench_config("ardupilot", rate_hz=RATE), h)
         inst = connect_instruments(cfg, h.addresses, timeout=h.timeout)
         try:
-            assert h.bench.fc.values()["AHRS_ORIENTATION"] == 0.0  # set up for the run
+            assert h.bench.device.values()["AHRS_ORIENTATION"] == 0.0  # set up for the run
             _serial, stream = inst.units[1]
             for _ in range(20):
                 stream.read(0.05)
@@ -105,14 +105,15 @@ def test_a_fault_mid_run_still_puts_the_parameters_back() -> None:
             pass
         finally:
             inst.close()
-        assert h.bench.fc.values() == before
+        assert h.bench.device.values() == before
     finally:
         h.stop()
 
 
 def test_px4_with_compensation_on_is_rebooted_for_the_calibration() -> None:
     """PX4 keeps published thermal offsets until a reboot (TC_G_ENABLE is
-    @reboot_required): a vehicle with TC on is rebooted after TC_G_ENABLE = 0."""
+    @reboot_required): a vehicle with TC on is rebooted after TC_G_ENABLE = 0, and again
+    once the user's values are back."""
     h = _handle("px4")
     try:
         link = MavlinkLink(h.addresses["unit/PX4-IMU1"], timeout_s=h.timeout(1.0))
@@ -121,10 +122,11 @@ def test_px4_with_compensation_on_is_rebooted_for_the_calibration() -> None:
         link.close()
         cfg = with_ports(fc_bench_config("px4", rate_hz=RATE), h)
         inst = connect_instruments(cfg, h.addresses, timeout=h.timeout)
-        assert h.bench.fc.stats.reboots == 1
-        assert h.bench.fc.values()["TC_G_ENABLE"] == 0.0
+        assert h.bench.device.stats.reboots == 1
+        assert h.bench.device.values()["TC_G_ENABLE"] == 0.0
         inst.close()
-        assert h.bench.fc.values()["TC_G_ENABLE"] == 1.0
+        assert h.bench.device.values()["TC_G_ENABLE"] == 1.0
+        assert h.bench.device.stats.reboots == 2  # the user's compensation in use again
     finally:
         h.stop()
 
@@ -155,20 +157,20 @@ def test_flash_writes_reads_back_and_an_injected_failure_restores(fw: str) -> No
     bad = "TC_G1_X2_1" if fw == "px4" else "INS_TCAL2_GYR2_Y"
     h = _handle(fw, fail_param_sets={bad})
     try:
-        before = h.bench.fc.values()
+        before = h.bench.device.values()
         link = MavlinkLink(h.addresses[f"unit/{fc_serials(fw)[0]}"], timeout_s=h.timeout(1.0))
         link.connect(10.0)
         res = flash_polys(link, _polys())
         assert not res.ok and res.report.failed[0] == bad
         assert not res.report.restore_failed
-        assert h.bench.fc.values() == before  # the previous calibration, untouched
+        assert h.bench.device.values() == before  # the previous calibration, untouched
         assert "the previous calibration is in place" in res.summary()
         assert res.to_dict()["failed"]["name"] == bad
-        h.bench.fc.fail_param_sets.clear()
+        h.bench.device.fail_param_sets.clear()
         res = flash_polys(link, _polys())
         link.close()
         assert res.ok and len(res.report.written) == len(set(n for n, _v, _t in res.plan))
-        now = h.bench.fc.values()
+        now = h.bench.device.values()
         for name, value in res.report.written.items():
             assert now[name] == pytest.approx(value, rel=1e-6, abs=1e-9), name
     finally:

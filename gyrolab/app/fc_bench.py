@@ -96,7 +96,7 @@ def start_fc_bench(
 
     imus = imu_physics(seed, rate_hz, ambient_c)
     bench = SimBench(
-        fc=FcSpec(firmware, imus, seed=seed, fail_param_sets=set(fail_param_sets or ())),
+        device=FcSpec(firmware, imus, seed=seed, fail_param_sets=set(fail_param_sets or ())),
         samples_per_frame=1,
         ambient_c=ambient_c,
         workdir=workdir,
@@ -105,7 +105,7 @@ def start_fc_bench(
         speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
     )
     bench.start()
-    fc_port = bench.fc_port
+    fc_port = bench.device_port
     assert fc_port is not None
     serials = fc_serials(firmware, len(imus))
     metadata: dict[str, dict[str, Any]] = {

@@ -234,6 +234,8 @@ def start_sim_bench(
     for role, spec in specs.items():
         if not spec.sim_backend:
             raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
+    rate_spec = registry.get(cfg.adc.driver, "rate_stream")
+    device = _sim_device(cfg, rate_spec, profile, seed, axis_models)
     if cfg.units and axis_models:
         raise InputError("--axis-model", "multi-axis units are single-unit only (not --units)")
     try:
@@ -255,10 +257,11 @@ def start_sim_bench(
         model=model,
         axis_physics=extra_axes,
         unit_physics=unit_physics,
+        device=device,
         unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
         seed=seed,
         adc_rate_hz=cfg.adc.sample_rate_hz,
-        samples_per_frame=cfg.adc.samples_per_frame,
+        samples_per_frame=getattr(cfg.adc, "samples_per_frame", 1),
         ambient_c=profile.ambient_c,
         workdir=workdir,
         faults=faults,
@@ -281,7 +284,8 @@ def start_sim_bench(
         )
 
     axes = 1 + len(axis_models)
-    cfg = replace(cfg, adc=replace(calibrated(cfg.adc, bench.physics.adc), axes=axes))
+    if device is None:  # a device (VN-100) reports in its own units
+        cfg = replace(cfg, adc=replace(calibrated(cfg.adc, bench.physics.adc), axes=axes))
     if cfg.units:
         cfg = replace(
             cfg,
@@ -294,7 +298,12 @@ def start_sim_bench(
     where = bench.resources()
     metadata: dict[str, dict[str, Any]] = {
         "sim_provenance": (
-            provenance(bench.physics.model, seed)
+            {
+                "device": rate_spec.sim_backend,
+                "axes": [provenance(p.model, p.seed) for p in device.imus[0]],
+            }
+            if device is not None
+            else provenance(bench.physics.model, seed)
             if not family  # a family: keyed by serial, as simulate --units writes it
             else {
                 u.serial: {**provenance(u.model, u.seed), "family_seed": int(seed)} for u in family
@@ -313,7 +322,7 @@ def start_sim_bench(
         | (
             {f"unit/{u.serial}": p for u, p in zip(cfg.units, bench.unit_adc_ports, strict=True)}
             if cfg.units
-            else {"rate_stream": bench.adc_port}
+            else {"rate_stream": where[rate_spec.sim_address]}
         ),
         clock=SimRunClock(bench.clock),
         silence=SimSilence(),
@@ -324,6 +333,25 @@ def start_sim_bench(
         metadata=metadata,
     )
     return handle, cfg
+
+
+def _sim_device(
+    cfg: BenchConfig, spec: registry.DriverSpec, profile: Profile, seed: int, axis_models: Any
+) -> Any:
+    """The simulated device a rate-stream driver speaks to, when it is not the gyro ADC:
+    ``vectornav`` → a simulated VN-100 (:mod:`gyrolab.sim.bench.vectornav`) whose IMU is
+    :func:`gyrolab.sim.fc_imus.imu_physics`'s first; None for the ADC."""
+    if spec.sim_backend == "ADC":
+        return None
+    if spec.sim_backend != "VN100":
+        raise GyrolabError(f"rate_stream driver {spec.name!r}: no simulated back end here")
+    if cfg.units or axis_models:
+        raise InputError("--driver", f"{spec.name}: one simulated unit (no --units, --axis-model)")
+    from gyrolab.sim.bench.vectornav import VnSpec
+    from gyrolab.sim.fc_imus import imu_physics
+
+    imus = imu_physics(seed, cfg.adc.sample_rate_hz, profile.ambient_c, imus=1)
+    return VnSpec(imus, seed=seed)
 
 
 def _with_die_sensor(adc: Any, physics: Any, internal: bool) -> Any:

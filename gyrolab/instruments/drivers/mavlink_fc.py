@@ -17,8 +17,9 @@ is a gap and a repeated one is dropped.
 **Calibration data are the sensor's own output** (``calibration = true``, the default).
 At connect the driver reads, then sets for the whole run: PX4 ``TC_G_ENABLE`` = 0, every
 IMU's ``CAL_GYROn_{X,Y,Z}OFF`` = 0, ``SENS_BOARD_ROT`` = 0 and ``SENS_BOARD_{X,Y,Z}_OFF`` = 0
-— and, when the thermal compensation was on, reboots the controller, because PX4 keeps the
-last published thermal offsets until then (``TC_G_ENABLE`` is ``@reboot_required``);
+— and, when the thermal compensation was on or the board rotated, reboots the controller,
+because PX4 keeps the last published thermal offsets until then (``TC_G_ENABLE`` and
+``SENS_BOARD_ROT`` are ``@reboot_required``), and again after putting the user's values back;
 ArduPilot ``INS_TCALn_ENABLE`` = 0, ``INS_GYROFFS_*``/``INS_GYR2OFFS_*``/``INS_GYR3OFFS_*``
 = 0, ``AHRS_ORIENTATION`` = 0 (which ArduPilot takes into use within a second: samples are
 kept from 2 s of controller time after the change). Each write is read back; a failed one
@@ -98,6 +99,7 @@ class _Shared:
         self.setup: WriteReport | None = None
         self.valid_from = -math.inf  # controller time from which samples are kept
         self.restore: WriteReport | None = None
+        self.rebooted = False  # calibration mode rebooted a PX4: closing reboots it again
         self.device_ids: dict[int, int] = {}
         self.parameters: dict[str, float] = {}
         self.lock = threading.Lock()
@@ -256,8 +258,13 @@ def _setup_calibration(shared: _Shared) -> None:
         raise InstrumentError(
             NAME, f"calibration settings: {name}: {why}; previous values put back{left}"
         )
-    if link.firmware == "px4" and rep.previous.get("TC_G_ENABLE", 0) == 1:
-        link.reboot()  # PX4 keeps published thermal offsets until a reboot
+    # PX4 keeps published thermal offsets until a reboot; TC_G_ENABLE and SENS_BOARD_ROT
+    # are @reboot_required
+    if link.firmware == "px4" and (
+        rep.previous.get("TC_G_ENABLE", 0) == 1 or rep.previous.get(px4.BOARD_ROTATION, 0) != 0
+    ):
+        link.reboot()
+        shared.rebooted = True
     # keep samples only once every change is in use (ArduPilot: orientation within 1 s)
     link.pump(0.2)
     latest = max((q[-1].t for q in link.imu.values() if q), default=-math.inf)
@@ -293,6 +300,8 @@ def release(shared: _Shared, config: MavlinkFcConfig) -> None:
                     f"the user's parameters could not all be put back ({name}: {why}); "
                     f"still changed: {', '.join(left)}",
                 )
+            if shared.rebooted:
+                link.reboot()  # the user's compensation and rotation in use again
     finally:
         link.close()
 

@@ -110,14 +110,27 @@ def default_parameters(firmware: str, imus: int) -> dict[str, tuple[float, int]]
 
 @dataclass
 class FcSpec:
-    """A flight controller for :class:`gyrolab.sim.bench.SimBench` (``fc=``): the bench makes
-    its pty (``bench.fc_port``, link ``fc`` in its work directory) and drives it."""
+    """A flight controller for :class:`gyrolab.sim.bench.SimBench` (``device=``): the bench
+    makes its pty (``bench.device_port``, link ``fc`` in its work directory, resource
+    ``fc_port``) and drives it."""
 
     firmware: str
     imus: list[list[Any]]  # per IMU its x, y, z Physics
     seed: int = 0
     params: dict[str, tuple[float, int]] = field(default_factory=dict)
     fail_param_sets: set[str] = field(default_factory=set)
+    port_name: str = "fc"
+
+    def build(self, port: PtyPort, write_timeout_s: float) -> SimFlightController:
+        return SimFlightController(
+            self.firmware,
+            self.imus,
+            port,
+            seed=self.seed,
+            params=dict(self.params),
+            fail_param_sets=set(self.fail_param_sets),
+            write_timeout_s=write_timeout_s,
+        )
 
 
 @dataclass

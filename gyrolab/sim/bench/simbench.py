@@ -88,7 +88,7 @@ class SimBench:
         axis_physics: list[Any] | None = None,
         unit_physics: list[Any] | None = None,
         unit_internal_temperature: list[bool] | None = None,
-        fc: Any | None = None,
+        device: Any | None = None,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
@@ -102,12 +102,13 @@ class SimBench:
             if not unit_physics or axis_physics or physics is not None:
                 raise ValueError("unit_physics: one or more units, single-axis, no physics=")
             physics = unit_physics[0]
-        # fc (a FcSpec): a flight controller in the chamber instead of a gyro on the ADC;
-        # its first IMU's air is the chamber's (every IMU axis shares the thermal model)
-        if fc is not None:
+        # device (a FcSpec or VnSpec): a flight controller or an IMU with its own serial
+        # protocol in the chamber instead of a gyro on the ADC; its first IMU's air is the
+        # chamber's (every IMU axis shares the thermal model)
+        if device is not None:
             if unit_physics is not None or axis_physics or physics is not None:
-                raise ValueError("fc: a flight controller bench has no ADC units")
-            physics = fc.imus[0][0]
+                raise ValueError("device: a device bench has no ADC units")
+            physics = device.imus[0][0]
         if physics is None:
             from gyrolab.sim.model import nominal_model
             from gyrolab.sim.physics import Physics
@@ -165,21 +166,13 @@ class SimBench:
             for pty, internal in zip(self.unit_ptys, self.unit_internal, strict=True)
         ]
         self.adc_pty, self.adc = self.unit_ptys[0], self.unit_adcs[0]
-        self.fc: Any = None
-        self.fc_pty: PtyPort | None = None
-        if fc is not None:
-            from gyrolab.sim.bench.flight_controller import SimFlightController
-
-            self.fc_pty = PtyPort(self.workdir / "fc")
-            self.fc = SimFlightController(
-                fc.firmware,
-                fc.imus,
-                self.fc_pty,
-                seed=fc.seed,
-                params=dict(fc.params),
-                fail_param_sets=set(fc.fail_param_sets),
-                write_timeout_s=0.5 if speed is None else 0.05,
-            )
+        self.device: Any = None
+        self.device_pty: PtyPort | None = None
+        self.device_kind = ""
+        if device is not None:
+            self.device_kind = device.port_name
+            self.device_pty = PtyPort(self.workdir / device.port_name)
+            self.device = device.build(self.device_pty, 0.5 if speed is None else 0.05)
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
             control_event=oven_control_event,
@@ -245,8 +238,8 @@ class SimBench:
 
     def _set_setpoint(self, value_c: float) -> None:
         with self.lock:
-            if self.fc is not None:
-                self.fc.set_setpoint(value_c)  # its IMUs' physics, the chamber's among them
+            if self.device is not None:
+                self.device.set_setpoint(value_c)  # its IMUs' physics, the chamber's among them
                 return
             self.physics.set_setpoint(value_c)
             for p in self.axis_physics + self.unit_physics[1:]:
@@ -299,9 +292,9 @@ class SimBench:
         return [p.path for p in self.unit_ptys]
 
     @property
-    def fc_port(self) -> str | None:
-        """Serial device path of the flight controller's MAVLink port (None without one)."""
-        return None if self.fc_pty is None else self.fc_pty.path
+    def device_port(self) -> str | None:
+        """Serial device path of the device's port (None without one)."""
+        return None if self.device_pty is None else self.device_pty.path
 
     @property
     def chamber_tcp_resource(self) -> str | None:
@@ -319,7 +312,8 @@ class SimBench:
             "scanner_tcp_resource": self.scanner_tcp_resource,
             "unit_adc_ports": self.unit_adc_ports,
             "adc_port": self.adc_port,
-            "fc_port": self.fc_port,
+            "fc_port": self.device_port if self.device_kind == "fc" else None,
+            "vn_port": self.device_port if self.device_kind == "vn" else None,
             "adc_rate_hz": self.rate_hz,
             "samples_per_frame": self.samples_per_frame,
         }
@@ -385,18 +379,18 @@ class SimBench:
         # below then reuses it.
         for p in (*self.unit_physics, *self.axis_physics):
             p.prefetch(n)
-        if self.fc is not None:
-            self.fc.prefetch(n)
+        if self.device is not None:
+            self.device.prefetch(n)
         # Compile the physics' JIT kernels on a throwaway copy first (about 1 s, once per
         # process), so the first tick does not hold the physics lock while responders wait.
         copy.deepcopy(self.physics).advance(n)
         for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):
             p.connect()
-        if self.fc is not None:
-            assert self.fc_pty is not None
-            self.fc_pty.connect()
-            self.adc.port.disconnect()  # no gyro ADC on a flight-controller bench
-            self.fc.start()
+        if self.device is not None:
+            assert self.device_pty is not None
+            self.device_pty.connect()
+            self.adc.port.disconnect()  # no gyro ADC on a device bench
+            self.device.start()
         for s in self._servers:
             s.start()
         self.clock.speed = self.clock.speed  # re-anchor pacing: construction time is not run time
@@ -415,8 +409,8 @@ class SimBench:
             while not self._stop.is_set():
                 for p in (*self.unit_physics, *self.axis_physics):
                     p.prefetch(lead)  # no lock: see Physics.prefetch
-                if self.fc is not None:
-                    self.fc.prefetch(lead)
+                if self.device is not None:
+                    self.device.prefetch(lead)
                 self._stop.wait(PREFETCH_POLL_S)
         except BaseException as e:  # surfaced like the tick thread's; ticks still work
             self.error = e
@@ -429,10 +423,10 @@ class SimBench:
                 t_next = (self.physics.index + n) / self.rate_hz
                 if not self.clock.advance_to(t_next):
                     break
-                if self.fc is not None:
+                if self.device is not None:
                     with self.lock:
-                        data = self.fc.advance(n)
-                    self.fc.send(data)
+                        data = self.device.advance(n)
+                    self.device.send(data)
                     self._fire_due()
                     continue
                 with self.lock:
@@ -468,10 +462,10 @@ class SimBench:
                 th.join(timeout=5.0)
         for s in self._servers:
             s.stop()
-        if self.fc is not None:
-            self.fc.stop()
-            assert self.fc_pty is not None
-            self.fc_pty.disconnect()
+        if self.device is not None:
+            self.device.stop()
+            assert self.device_pty is not None
+            self.device_pty.disconnect()
         for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):
             p.disconnect()
         if self._own_dir:
