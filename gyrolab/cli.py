@@ -7,6 +7,9 @@ requires are given) and hands them to the command's call in :mod:`gyrolab.app`
 options are made, so ``--help`` and a typing mistake are answered before any numerical
 library is imported, and a broken layer cannot break the rest.
 
+After the command, what it wrote is registered in the catalogue
+(:func:`gyrolab.app.register.register_command`, which never changes the exit code).
+
 Errors: a :class:`~gyrolab.errors.GyrolabError` becomes one line on stderr and exit 2;
 SIGINT exits 130. Anything else is a bug and shows its traceback.
 """
@@ -37,6 +40,7 @@ HANDLERS: dict[str, str] = {
     "export": "gyrolab.app.export:export",
     "batch": "gyrolab.app.batch:batch",
     "fleet": "gyrolab.app.report:fleet",
+    "runs": "gyrolab.app.runs:runs",
 }
 
 
@@ -272,6 +276,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
     dm.add_argument("--seed", type=int, default=1, help="seed of the calibration run (default 1)")
+    dm.add_argument(
+        "--catalogue",
+        metavar="URL",
+        help="register the demo here (default: $GYROLAB_CATALOGUE if set, else "
+        "DIR/catalogue.sqlite; docs/catalogue.md)",
+    )
     dm.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     b = cmd("batch", "run compensate, report or discrepancy on many recordings (Dask)")
@@ -288,11 +298,50 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--force", action="store_true", help="redo items whose outputs exist")
 
     f = cmd("fleet", "fleet record of many units' models: tables, distributions, outliers, yield")
-    f.add_argument("models", nargs="+", metavar="MODEL_DIR", help="model dirs or dirs of them")
+    f.add_argument("models", nargs="*", metavar="MODEL_DIR", help="model dirs or dirs of them")
     f.add_argument("--out", required=True, help="output REPORT_DIR")
     f.add_argument("--spec", metavar="SPEC.toml", help="spec limits: yield against them")
+    f.add_argument(
+        "--part-number",
+        metavar="PN",
+        help="take the units of this part number from the catalogue (each one's latest model)",
+    )
+    f.add_argument(
+        "--since",
+        metavar="DATE",
+        help="take the units with a run since DATE (ISO 8601, UTC) from the catalogue",
+    )
+    _catalogue_option(f)
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
+
+    ru = cmd("runs", "the catalogue of units, runs, models, exports and verdicts")
+    rsub = ru.add_subparsers(dest="action", metavar="ACTION", parser_class=_Parser, required=True)
+    rl = rsub.add_parser("list", help="the runs, newest first, with their units")
+    rl.add_argument("--unit", metavar="SERIAL", help="only the runs of this unit")
+    rl.add_argument("--part-number", metavar="PN", help="only runs of units of this part number")
+    rl.add_argument("--since", metavar="DATE", help="only runs started since (ISO 8601, UTC)")
+    for name, help_ in (
+        ("show", "everything registered about one unit"),
+        ("trace", "unit -> runs -> model -> exported or flashed parameters -> verdict"),
+    ):
+        rs = rsub.add_parser(name, help=help_)
+        rs.add_argument("serial", metavar="SERIAL")
+    for sp in rsub.choices.values():
+        sp.add_argument("--json", action="store_true", help="print JSON")
+        _catalogue_option(sp)
+    rr = rsub.add_parser("rebuild", help="register every file under the directories again")
+    rr.add_argument("dirs", nargs="+", metavar="DIR")
+    _catalogue_option(rr)
     return p
+
+
+def _catalogue_option(sp: argparse.ArgumentParser) -> None:
+    sp.add_argument(
+        "--catalogue",
+        metavar="URL",
+        help="the catalogue: an SQLite file or a database URL (default: $GYROLAB_CATALOGUE, "
+        "else ~/.local/share/gyrolab/catalogue.sqlite; docs/catalogue.md)",
+    )
 
 
 def _internal_units(args: argparse.Namespace) -> tuple[int, ...]:
@@ -314,6 +363,7 @@ OPTIONS: dict[str, type] = {
     "export": o.ExportOptions,
     "batch": o.BatchCommandOptions,
     "fleet": o.FleetOptions,
+    "runs": o.RunsOptions,
 }
 
 
@@ -358,7 +408,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         from gyrolab.outputs import command_inputs
 
         with command_inputs(_input_paths(args)):
-            return int(_handler(args.command)(opts) or 0)
+            rc = int(_handler(args.command)(opts) or 0)
+        from gyrolab.app.register import register_command
+
+        register_command(opts, rc)  # never fails the command (docs/catalogue.md)
+        return rc
     except GyrolabError as e:
         print(f"gyrolab: error: {e}", file=sys.stderr)
         return e.exit_code

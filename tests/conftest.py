@@ -1,8 +1,11 @@
-"""Shared test settings: no progress bars, headless matplotlib, ../shared located."""
+"""Shared test settings: no progress bars, headless matplotlib, ../shared located, and
+every command's catalogue registration going to the session's own catalogue file."""
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -25,3 +28,32 @@ def shared_dir() -> Path:
             "beside the repository as ../shared (see ../shared/README.md)"
         )
     return SHARED
+
+
+_CATALOGUE_DIR: list[str] = []
+_SAVED: dict[str, str | None] = {}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Every command a test runs (in process, or as a subprocess with an environment copied
+    at import time) registers in this session's own SQLite catalogue, never in the user's
+    (docs/catalogue.md): set before the test modules are imported."""
+    d = tempfile.mkdtemp(prefix="gyrolab-test-catalogue-")
+    _CATALOGUE_DIR.append(d)
+    _SAVED["GYROLAB_CATALOGUE"] = os.environ.get("GYROLAB_CATALOGUE")
+    os.environ["GYROLAB_CATALOGUE"] = str(Path(d) / "catalogue.sqlite")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    for d in _CATALOGUE_DIR:
+        shutil.rmtree(d, ignore_errors=True)
+    if _SAVED.get("GYROLAB_CATALOGUE") is None:
+        os.environ.pop("GYROLAB_CATALOGUE", None)
+    else:
+        os.environ["GYROLAB_CATALOGUE"] = str(_SAVED["GYROLAB_CATALOGUE"])
+
+
+@pytest.fixture(scope="session")
+def session_catalogue() -> Path:
+    """The session's catalogue file (pytest_configure)."""
+    return Path(os.environ["GYROLAB_CATALOGUE"])

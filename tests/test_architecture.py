@@ -28,7 +28,7 @@ LAYERS: list[set[str]] = [
     {"report", "export", "batch", "convert"},
     {"compensation", "acquisition", "sim", "logs"},
     {"instruments"},
-    {"record", "profiles"},
+    {"record", "profiles", "catalogue"},
     {"numerics"},
     {
         "errors",

@@ -6,6 +6,7 @@ transaction, an injected PARAM_SET failure leaving the previous parameters, repo
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,9 @@ import pytest
 
 from gyrolab.app.acquire import connect_instruments, run_acquisition
 from gyrolab.app.fc_bench import fc_bench_config, fc_serials, start_fc_bench, with_ports
-from gyrolab.app.flash import flash_polys, parameter_plan
+from gyrolab.app.flash import flash_polys, flash_records, parameter_plan
+from gyrolab.app.register import register_record
+from gyrolab.catalogue import Catalogue
 from gyrolab.compensation.firmware import Poly3
 from gyrolab.errors import InputError
 from gyrolab.instruments.mavlink_link import MavlinkLink
@@ -153,7 +156,7 @@ def test_flash_order_keeps_a_partial_set_out_of_use() -> None:
 
 
 @pytest.mark.parametrize("fw", ["px4", "ardupilot"])
-def test_flash_writes_reads_back_and_an_injected_failure_restores(fw: str) -> None:
+def test_flash_writes_reads_back_and_an_injected_failure_restores(fw: str, tmp_path) -> None:
     bad = "TC_G1_X2_1" if fw == "px4" else "INS_TCAL2_GYR2_Y"
     h = _handle(fw, fail_param_sets={bad})
     try:
@@ -166,6 +169,7 @@ def test_flash_writes_reads_back_and_an_injected_failure_restores(fw: str) -> No
         assert h.bench.device.values() == before  # the previous calibration, untouched
         assert "the previous calibration is in place" in res.summary()
         assert res.to_dict()["failed"]["name"] == bad
+        failed = flash_records(res, {1: "IMU2"})[1]
         h.bench.device.fail_param_sets.clear()
         res = flash_polys(link, _polys())
         link.close()
@@ -173,5 +177,16 @@ def test_flash_writes_reads_back_and_an_injected_failure_restores(fw: str) -> No
         now = h.bench.device.values()
         for name, value in res.report.written.items():
             assert now[name] == pytest.approx(value, rel=1e-6, abs=1e-9), name
+        # the catalogue's record of each (docs/catalogue.md): reported, registered, traced
+        written = flash_records(res, {1: "IMU2"})[1]
+        assert (failed["result"], written["result"]) == ("restored", "written")
+        assert set(written["detail"]["parameters"]) <= set(res.report.written)
+        url = f"sqlite:///{tmp_path / 'cat.sqlite'}"
+        for k, rec in enumerate((failed, written)):
+            (tmp_path / f"f{k}.json").write_text(json.dumps(rec))
+            assert register_record(tmp_path / f"f{k}.json", url)
+        with Catalogue.open(url) as cat:
+            flashes = cat.unit("IMU2")["flashes"]
+        assert sorted(f["result"] for f in flashes) == ["restored", "written"]
     finally:
         h.stop()

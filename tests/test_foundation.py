@@ -29,6 +29,7 @@ def test_cli_lists_every_design_subcommand() -> None:
         "export",  # issue 15: firmware and tool formats
         "batch",
         "fleet",
+        "runs",  # issue 29: the catalogue
     }
 
 

@@ -13,9 +13,12 @@ The README quick start in one command, using only the real pieces (nothing is fa
 3. report the held-out run with the model, so the report's metrics are held out
    (``"held_out": true``), plus the raw report of the calibration run.
 
-``DIR`` ends up holding ``calibration.mcap``, ``heldout.mcap``, ``model/``, ``report/``
-(the compensated report: ``index.html``, ``metrics.json``, ``report.pdf``),
-``calibration-report/`` (raw) and ``demo.json``. It appears atomically: the work happens
+``DIR`` ends up holding ``calibration.mcap``, ``heldout.mcap``, ``model/``, ``firmware/``
+(the model exported: ``gyro_comp.c``/``.h``, ``ardupilot.parm``), ``report/`` (the
+compensated report: ``index.html``, ``metrics.json``, ``report.pdf``),
+``calibration-report/`` (raw), ``demo.json`` and ``catalogue.sqlite`` (where the demo
+registered its units, runs, model, exports and reports, unless told another catalogue:
+:func:`run_demo`). It appears atomically: the work happens
 in a temporary sibling directory renamed into place at the end, and any failure removes
 it. Each stage is a library call (no command line, no change of directory) on the files
 in the temporary directory; the runs recorded inside the outputs (model.json's
@@ -35,6 +38,7 @@ from typing import Any
 
 from gyrolab.app.acquire import acquire
 from gyrolab.app.options import AcquireOptions, CompensateOptions, DemoOptions
+from gyrolab.app.register import register_tree
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
@@ -46,6 +50,7 @@ from gyrolab.progress import progress
 DEMO_ACQUIRE_SPEED = 600.0
 
 HELDOUT_SOURCE = "acquire --bench sim"
+DEMO_CATALOGUE = "catalogue.sqlite"  # inside DIR unless --catalogue / $GYROLAB_CATALOGUE
 
 
 def run_demo(
@@ -54,8 +59,14 @@ def run_demo(
     seed: int = 1,
     force: bool = False,
     rate_hz: float = 100.0,
+    catalogue: str | None = None,
 ) -> dict[str, Any]:
-    """Run the whole chain into ``out``; returns the report's metrics and stage timings."""
+    """Run the whole chain into ``out``; returns the report's metrics and stage timings.
+
+    Then ``out`` is registered (:func:`gyrolab.app.register.register_tree`, once it is in
+    place: the paths are final) in ``catalogue``, else in ``$GYROLAB_CATALOGUE`` where the
+    user set it, else in ``out/catalogue.sqlite``: a demo's simulated units stay out of a
+    lab's catalogue unless asked, and nothing is written outside ``out`` unless asked."""
     from gyrolab.app.compensate import compensate
     from gyrolab.report.commands import write_report
     from gyrolab.sim.commands import simulate_file
@@ -66,7 +77,7 @@ def run_demo(
     prof_arg = str(Path(profile).resolve()) if Path(profile).is_file() else profile
     load_profile(prof_arg)
     timings: dict[str, float] = {}
-    bar = progress(total=5, desc="demo", unit="stage")
+    bar = progress(total=6, desc="demo", unit="stage")
     t_all = time.perf_counter()
 
     def stage(name: str) -> float:
@@ -115,6 +126,10 @@ def run_demo(
             )
             done("compensate", t0)
 
+            t0 = stage("export (C source, ArduPilot parameters)")
+            export_firmware(model, tmp / "firmware")
+            done("export", t0)
+
             t0 = stage("report (held-out run, with model)")
             metrics = write_report(held, report, model, label=held_label)
             done("report", t0)
@@ -133,7 +148,34 @@ def run_demo(
             (tmp / "demo.json").write_text(json.dumps(info, indent=2) + "\n")
     finally:
         bar.close()
-    return {"metrics": metrics, "timing_s": timings, "heldout_source": HELDOUT_SOURCE}
+    url = demo_catalogue(out_p, catalogue)
+    registered = url is not None and register_tree(out_p, url)
+    return {
+        "metrics": metrics,
+        "timing_s": timings,
+        "heldout_source": HELDOUT_SOURCE,
+        "catalogue": url if registered else None,
+    }
+
+
+def export_firmware(model: Path, out: Path) -> None:
+    """The model as firmware takes it: ``gyro_comp.c``/``.h`` (the chosen causal model,
+    float32 C99) and ``ardupilot.parm`` (the firmware cubic), as ``gyrolab export`` writes
+    them (each names its model by hash: the catalogue's trace goes model → export)."""
+    from gyrolab.export.commands import export
+
+    out.mkdir()
+    export(model, "c", out / "gyro_comp.c")
+    export(model, "ardupilot", out / "ardupilot.parm")
+
+
+def demo_catalogue(out: Path, option: str | None) -> str | None:
+    """Where the demo registers (:func:`run_demo`); None when registration is off."""
+    from gyrolab.catalogue.store import ENV, catalogue_url, sqlite_url
+
+    if option or os.environ.get(ENV, "").strip():
+        return catalogue_url(option)
+    return sqlite_url(out / DEMO_CATALOGUE)
 
 
 def summary(out: Path, res: dict[str, Any]) -> str:
@@ -173,6 +215,11 @@ def summary(out: Path, res: dict[str, Any]) -> str:
     if "oracle" not in m:
         lines.append("  (no oracle: the true drift of an acquired run is not known)")
     lines.append(f"report: {out / 'report' / 'index.html'} (PDF: report.pdf beside it)")
+    if res.get("catalogue"):
+        from gyrolab.catalogue.store import shown
+
+        where = shown(res["catalogue"])
+        lines.append(f"catalogue: {where} (gyrolab runs list --catalogue {where})")
     return "\n".join(lines)
 
 
@@ -183,6 +230,6 @@ def demo(opts: DemoOptions) -> int:
         from gyrolab.app.fc_demo import fc_demo
 
         return fc_demo(opts)
-    res = run_demo(opts.out, opts.profile, opts.seed, opts.force)
+    res = run_demo(opts.out, opts.profile, opts.seed, opts.force, catalogue=opts.catalogue)
     print(summary(Path(opts.out), res))
     return 0

@@ -12,11 +12,17 @@ parameters from one step to the next, as a vehicle on a bench does:
 3. **export** — each IMU's firmware file (``export/imu<k>.params`` for PX4 with the IMU's
    device id, ``export/imu<k>.parm`` for ArduPilot), what a user would load by hand;
 4. **flash** — the same parameters written into the controller over MAVLink as one
-   transaction, each read back (:func:`gyrolab.app.flash.flash_models`): ``flash.json``;
+   transaction, each read back (:func:`gyrolab.app.flash.flash_models`): ``flash.json``,
+   and per IMU the catalogue's flash record ``flash/<serial>.json``;
 5. **verification run** — a held-out profile with the firmware's compensation ON
    (``verification.mcap``), and per IMU and axis the device's drift p-p of 100 s averages
    beside what gyrolab predicted for that run (:mod:`gyrolab.compensation.verification`):
-   ``verification.json``, ``verification.md``.
+   ``verification.json``, ``verification.md``, and per IMU the catalogue's verification
+   record ``verification/<serial>.json`` (PASS: every axis within 10 %).
+
+``DIR`` is then registered in the catalogue as ``gyrolab demo`` registers its directory
+(``DIR/catalogue.sqlite`` unless ``--catalogue`` or ``$GYROLAB_CATALOGUE`` says another):
+units, runs, models, exports, flashes, verifications — ``gyrolab runs trace PX4-IMU1``.
 
 ``DIR`` appears atomically; a failed step fails the demo with one line, exit 2, nothing
 left.
@@ -98,38 +104,82 @@ def _compensate(run: Path, serial: str, out: Path, seed: int, label: str) -> Non
 
 
 def _export(model: Path, firmware: str, imu: int, device_id: int, out: Path) -> None:
-    from gyrolab.compensation.axes import axis_dirs, load_poly3
-    from gyrolab.export.params import ardupilot_parm, px4_params
+    """As ``gyrolab export`` writes it (its provenance line names the model by hash)."""
+    from gyrolab.export.commands import export
 
-    polys = [load_poly3(d) for _n, d in axis_dirs(model)]
-    header = f"gyrolab demo --fc {firmware}: IMU {imu}, model {model.name}"
-    if firmware == "px4":
-        out.write_text(px4_params(polys, imu, device_id, header=header))
-    else:
-        out.write_text(ardupilot_parm(polys, imu, header=header))
+    export(model, firmware, out, instance=imu, device_id=device_id if firmware == "px4" else None)
+
+
+def _write_records(d: Path, records: dict[str, dict[str, Any]]) -> dict[str, Path]:
+    """Catalogue records (serial → record) as ``d/<serial>.json``."""
+    d.mkdir()
+    paths = {}
+    for serial, rec in records.items():
+        paths[serial] = d / f"{serial}.json"
+        paths[serial].write_text(json.dumps(rec, indent=2) + "\n")
+    return paths
+
+
+def verification_records(
+    result: dict[str, Any], flash_paths: dict[str, Path], run: Path
+) -> dict[str, dict[str, Any]]:
+    """One catalogue verification record per IMU (``"format": "gyrolab.verification"``,
+    docs/catalogue.md): PASS when every axis's device drift p-p is within the tolerance of
+    the prediction."""
+    import datetime as dt
+
+    from gyrolab.app.index_files import VERIFICATION_FORMAT
+    from gyrolab.catalogue.digest import file_digest
+
+    when = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+    run_hash = file_digest(run)
+    out = {}
+    for serial, imu in result["imus"].items():
+        ok = all(abs(a["ratio"] - 1.0) <= result["tolerance"] for a in imu["axes"].values())
+        out[serial] = {
+            "format": VERIFICATION_FORMAT,
+            "unit": serial,
+            "time": when,
+            "verdict": "PASS" if ok else "FAIL",
+            "flash_record_sha256": file_digest(flash_paths[serial]),
+            "run_sha256": run_hash,
+            "detail": {"firmware": result["firmware"], "tolerance": result["tolerance"], **imu},
+        }
+    return out
 
 
 @interrupts.deferring_stop_signals
 def run_fc_demo(
-    out: str | Path, firmware: str, seed: int = 1, force: bool = False
+    out: str | Path,
+    firmware: str,
+    seed: int = 1,
+    force: bool = False,
+    catalogue: str | None = None,
 ) -> dict[str, Any]:
-    """The whole loop into ``out`` (module doc); returns verification.json's content.
-    Ctrl-C (SIGTERM, SIGHUP) ends it as it ends ``acquire``: the run in progress stops,
-    the controller's parameters are put back, nothing is left."""
+    """The whole loop into ``out`` (module doc); returns verification.json's content (and
+    ``catalogue``: where ``out`` was registered, as :func:`gyrolab.app.demo.run_demo`
+    registers, or None). Ctrl-C (SIGTERM, SIGHUP) ends it as it ends ``acquire``: the run
+    in progress stops, the controller's parameters are put back, nothing is left."""
+    from gyrolab.app.demo import demo_catalogue
+    from gyrolab.app.register import register_tree
+
     old = sys.getswitchinterval()
     # the simulated instruments share this process (and its GIL) with the drivers: hand
     # the GIL over sooner, as gyrolab acquire --bench sim does
     sys.setswitchinterval(0.0005)
     try:
-        return _run_fc_demo(out, firmware, seed, force)
+        res = _run_fc_demo(out, firmware, seed, force)
     finally:
         sys.setswitchinterval(old)
+    url = demo_catalogue(Path(out), catalogue)
+    res["catalogue"] = url if url is not None and register_tree(Path(out), url) else None
+    return res
 
 
 def _run_fc_demo(out: str | Path, firmware: str, seed: int, force: bool) -> dict[str, Any]:
     from gyrolab.acquisition.simdir import sim_workdir
     from gyrolab.app.fc_bench import fc_bench_config, fc_serials, start_fc_bench
-    from gyrolab.app.flash import compensation_parameters, flash_models
+    from gyrolab.app.flash import compensation_parameters, flash_models, flash_records
     from gyrolab.instruments.mavlink_link import MavlinkLink
     from gyrolab.record.reader import read_metadata
 
@@ -177,6 +227,14 @@ def _run_fc_demo(out: str | Path, firmware: str, seed: int, force: bool) -> dict
                 finally:
                     link.close()
                 (tmp / "flash.json").write_text(json.dumps(flashed.to_dict(), indent=2) + "\n")
+                records = flash_records(
+                    flashed,
+                    dict(enumerate(serials)),
+                    {k: tmp / "export" / f"imu{k}.{ext}" for k in models},
+                )
+                flash_paths = _write_records(
+                    tmp / "flash", {serials[k]: r for k, r in records.items()}
+                )
                 if not flashed.ok:
                     raise GyrolabError(f"demo --fc: {flashed.summary()}")
                 t0 = stage("export and flash", t0)
@@ -198,6 +256,9 @@ def _run_fc_demo(out: str | Path, firmware: str, seed: int, force: bool) -> dict
                 result["timing_s"] = timings
                 (tmp / "verification.json").write_text(json.dumps(result, indent=2) + "\n")
                 (tmp / "verification.md").write_text(verification_table(result))
+                _write_records(
+                    tmp / "verification", verification_records(result, flash_paths, ver)
+                )
             finally:
                 handle.stop()
     finally:
@@ -282,19 +343,28 @@ def fc_summary(out: Path, res: dict[str, Any]) -> str:
     """The demo's closing lines on stdout."""
     t = res.get("timing_s", {}).get("total", float("nan"))
     verdict = "within" if res["within_tolerance"] else "NOT within"
-    return (
+    line = (
         f"demo --fc {res['firmware']} finished in {t:.0f} s: on-device drift p-p (100 s) "
         f"{verdict} {100 * res['tolerance']:.0f} % of the prediction for every IMU and axis "
         f"(largest difference {100 * res['max_relative_difference']:.1f} %); "
         f"{out / 'verification.md'}"
     )
+    if res.get("catalogue"):
+        from gyrolab.catalogue.store import shown
+
+        where = shown(res["catalogue"])
+        first = next(iter(res["imus"]), "")
+        line += f"\ncatalogue: {where} (gyrolab runs trace {first} --catalogue {where})"
+    return line
 
 
 def fc_demo(opts: DemoOptions) -> int:
     """``gyrolab demo --fc px4|ardupilot --out DIR``: :func:`run_fc_demo`, the verification
     table and the closing line."""
     assert opts.fc is not None
-    res = run_fc_demo(opts.out, opts.fc, seed=opts.seed, force=opts.force)
+    res = run_fc_demo(
+        opts.out, opts.fc, seed=opts.seed, force=opts.force, catalogue=opts.catalogue
+    )
     print(verification_table(res), end="")
     print(fc_summary(Path(opts.out), res))
     return 0

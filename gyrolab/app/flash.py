@@ -133,3 +133,72 @@ def compensation_parameters(link: MavlinkLink, imus: list[int]) -> dict[str, flo
     for n in dict.fromkeys(names):
         out[n] = link.param_read(n)[0]
     return out
+
+
+def imu_parameter_names(firmware: str, imu: int) -> set[str]:
+    """The parameters of a flash that belong to IMU ``imu`` (PX4's ``TC_G_ENABLE`` is every
+    IMU's)."""
+    from gyrolab.autopilot import ardupilot as ap
+    from gyrolab.autopilot import px4
+
+    if firmware == "px4":
+        return set(px4.tc_names(imu))
+    return {*ap.tcal_names(imu), *ap.gyro_offset_names(imu), ap.caltemp_name(imu)}
+
+
+def flash_records(
+    result: FlashResult,
+    serials: dict[int, str],
+    params_files: dict[int, str | Path] | None = None,
+    when: str | None = None,
+) -> dict[int, dict[str, Any]]:
+    """One catalogue record per IMU of ``result`` (``"format": "gyrolab.flash"``, the keys of
+    docs/catalogue.md): its unit (``serials``: IMU → serial), the device, what was written
+    (``params_sha256``: the export file of the same parameter set where one was written,
+    ``params_files``; else the hash of the values), the model's hash, and ``result``:
+    ``written``, ``restored`` (a failed flash whose previous values were put back) or
+    ``failed`` (not all put back). Write each to a file and register it
+    (``gyrolab.app.register.register_record``)."""
+    import datetime as dt
+    import hashlib
+    import json
+
+    from gyrolab.app.index_files import FLASH_FORMAT
+    from gyrolab.catalogue.digest import PREFIX, file_digest, model_digest
+
+    rep = result.report
+    outcome = "written" if rep.ok else ("failed" if rep.restore_failed else "restored")
+    when = when or dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+    out = {}
+    for imu, serial in serials.items():
+        names = imu_parameter_names(result.firmware, imu)
+        values = {n: v for n, v, _t in result.plan if n in names}
+        pf = (params_files or {}).get(imu)
+        if pf is not None:
+            params_hash = file_digest(pf)
+        else:
+            blob = json.dumps(values, sort_keys=True).encode()
+            params_hash = PREFIX + hashlib.sha256(blob).hexdigest()
+        model = result.models.get(imu)
+        device = f"{result.firmware} flight controller at {result.port}, IMU {imu}"
+        if result.device_ids.get(imu):
+            device += f" (device id {result.device_ids[imu]})"
+        out[imu] = {
+            "format": FLASH_FORMAT,
+            "unit": serial,
+            "time": when,
+            "device": device,
+            "params_sha256": params_hash,
+            "model_sha256": model_digest(model) if model else None,
+            "result": outcome,
+            "detail": {
+                "firmware": result.firmware,
+                "imu": imu,
+                "parameters": values,
+                "written": {n: v for n, v in rep.written.items() if n in names},
+                "failed": list(rep.failed) if rep.failed else None,
+                "restored": {n: v for n, v in rep.restored.items() if n in names},
+                "summary": result.summary(),
+            },
+        }
+    return out

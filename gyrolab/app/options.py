@@ -196,6 +196,7 @@ class DemoOptions:
     profile: str = "paper"
     seed: int = 1
     force: bool = False
+    catalogue: str | None = None  # where it registers (docs/catalogue.md, "The demo")
     fc: str | None = None
 
     def __post_init__(self) -> None:
@@ -285,14 +286,40 @@ class BatchCommandOptions:
 
 @dataclass(frozen=True)
 class FleetOptions:
-    """``gyrolab fleet MODEL_DIR... --out REPORT_DIR [--spec SPEC.toml]`` (docs/fleet.md)."""
+    """``gyrolab fleet MODEL_DIR... --out REPORT_DIR [--spec SPEC.toml]`` (docs/fleet.md);
+    with ``part_number``/``since`` the units (each one's latest model) come from the
+    ``catalogue`` as well (docs/catalogue.md)."""
 
     models: tuple[PathArg, ...]
     out: PathArg
     spec: PathArg | None = None
     force: bool = False
+    part_number: str | None = None
+    since: str | None = None
+    catalogue: str | None = None
 
     def __post_init__(self) -> None:
+        if not self.models and self.part_number is None and self.since is None:
+            raise InputError(
+                "gyrolab fleet", "give MODEL_DIR... or --part-number/--since (the catalogue)"
+            )
         for m in self.models:
             need_model_dir(m)
         need_file(self.spec)
+
+
+@dataclass(frozen=True)
+class RunsOptions:
+    """``gyrolab runs list|show|trace|rebuild`` (docs/catalogue.md): ``action``; ``serial``
+    for show and trace; ``unit``/``part_number``/``since`` filter list; ``dirs`` for
+    rebuild; ``catalogue``: a URL or SQLite file (default: $GYROLAB_CATALOGUE, else the
+    default file)."""
+
+    action: str
+    serial: str | None = None
+    unit: str | None = None
+    part_number: str | None = None
+    since: str | None = None
+    dirs: tuple[PathArg, ...] = ()
+    json: bool = False
+    catalogue: str | None = None

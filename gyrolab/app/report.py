@@ -40,7 +40,12 @@ def report(opts: ReportOptions) -> int:
 def fleet(opts: FleetOptions) -> int:
     """The ``gyrolab fleet`` command (docs/fleet.md)."""
     spec = None if opts.spec is None else str(opts.spec)
-    doc = write_fleet([str(m) for m in opts.models], opts.out, spec, opts.force)
+    models = [str(m) for m in opts.models]
+    if opts.part_number is not None or opts.since is not None:
+        from gyrolab.app.runs import catalogue_models
+
+        models += catalogue_models(opts.catalogue, opts.part_number, opts.since)
+    doc = write_fleet(models, opts.out, spec, opts.force)
     y = doc.get("yield")
     print(
         f"{doc['n_units']} units, {len(doc['outliers'])} outlier flag(s)"

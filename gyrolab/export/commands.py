@@ -55,12 +55,43 @@ def _polys(model_dir: str) -> list[Any]:
     return [load_poly3(d) for _name, d in axis_dirs(model_dir)]
 
 
-def _header(model_dir: str) -> str:
+def _header(model_dir: str, line: str) -> str:
     from gyrolab import __version__
 
     return (
         f"gyrolab {__version__} export of {model_dir}: 3rd-order temperature polynomial "
-        "per axis\n(the firmware form; metrics.json 'firmware_poly3' gives its residual)"
+        "per axis\n(the firmware form; metrics.json 'firmware_poly3' gives its residual)\n"
+        + line
+    )
+
+
+def target(
+    fmt: str,
+    *,
+    kind: str = "chosen",
+    instance: int = 0,
+    device_id: int | None = None,
+    run: object | None = None,
+    rostopic: str = "/imu0",
+) -> dict[str, Any]:
+    """What an export was made for, as given: the gyro instance, device id, model kind,
+    kalibr's topic and run (the catalogue's ``target``; what was not given is left out)."""
+    t = {
+        "instance": instance,
+        "device_id": device_id,
+        "kind": kind if fmt in ("c", "json") else None,
+        "rostopic": rostopic if fmt == "kalibr" else None,
+        "run": None if fmt != "kalibr" or run is None else str(run),
+    }
+    return {k: v for k, v in t.items() if v is not None}
+
+
+def provenance(model_hash: str, fmt: str, what: dict[str, Any]) -> str:
+    """The line every export carries (a comment in the text formats): which model, by its
+    hash, in which format, for which target — what ``gyrolab runs rebuild`` reads back
+    (docs/export.md, "Provenance")."""
+    return f"gyrolab export of model {model_hash} as {fmt} target " + json.dumps(
+        what, sort_keys=True
     )
 
 
@@ -114,6 +145,8 @@ def export(
     """Write ``model_dir`` in format ``fmt`` to ``out`` (module docstring); returns the
     files written. ``device_id`` is required for ``px4``, ``run`` for ``kalibr``
     (:func:`check_request`)."""
+    from gyrolab.catalogue.digest import model_digest
+    from gyrolab.compensation.axes import axis_dirs
     from gyrolab.export.params import ardupilot_parm, px4_params
 
     check_request(fmt, device_id=device_id, run=run, instance=instance)
@@ -122,16 +155,24 @@ def export(
     inputs = (model, None if run is None else str(run))
     for o in outs:
         check_output(o, force, inputs=inputs, kind="file")
+    what = target(
+        fmt, kind=kind, instance=instance, device_id=device_id, run=run, rostopic=rostopic
+    )
+    axis_dirs(model)  # a model directory (one line, exit 2 otherwise) before it is hashed
+    model_hash = model_digest(model)
+    line = provenance(model_hash, fmt, what)
     if fmt == "px4":
         assert device_id is not None  # check_request
-        texts = [px4_params(_polys(model), instance, device_id, header=_header(model))]
+        texts = [px4_params(_polys(model), instance, device_id, header=_header(model, line))]
     elif fmt == "ardupilot":
-        texts = [ardupilot_parm(_polys(model), instance, header=_header(model))]
+        texts = [ardupilot_parm(_polys(model), instance, header=_header(model, line))]
     elif fmt in ("c", "json"):
         from gyrolab.export.spec import export_spec
 
         spec = export_spec(model, kind)
         if fmt == "json":
+            spec["model_sha256"] = model_hash  # the catalogue's link to the model
+            spec["target"] = what
             texts = [json.dumps(spec, indent=2) + "\n"]
         else:
             from gyrolab.export.c_code import generate
@@ -142,9 +183,9 @@ def export(
                 header, source = generate(spec, outs[1].name)
             except ValueError as e:
                 raise InputError(model, str(e)) from None
-            texts = [source, header]
+            texts = [f"/* {line} */\n" + source, f"/* {line} */\n" + header]
     else:  # kalibr (check_request knows every format)
-        texts = [kalibr_text(model, str(run), rostopic, log_options)]
+        texts = [f"# {line}\n" + kalibr_text(model, str(run), rostopic, log_options)]
     for o, text in zip(outs, texts, strict=True):
         with atomic_file(o, force, inputs=inputs) as tmp:
             tmp.write_text(text, encoding="utf-8")

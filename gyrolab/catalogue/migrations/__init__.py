@@ -1,0 +1,1 @@
+"""Alembic migrations of the catalogue (applied on open: gyrolab.catalogue.store)."""
