@@ -584,19 +584,35 @@ def convert_recording(
         unit=unit,
         temperature_source="internal" if internal else "pt100",
     )
-    bar = progress(total=counts[rate_topic], desc=f"convert → {to}", unit="block")
+    blocks = iter_sample_blocks(src_p, tables)
+    return _write_table(src_p, to, out_p, force, tables, blocks, counts[rate_topic], "block")
+
+
+def _write_table(
+    src: Path,
+    to: str,
+    out: Path,
+    force: bool,
+    tables: RunTables,
+    blocks: Iterator[dict[str, np.ndarray]],
+    total: int,
+    unit: str,
+) -> dict[str, Any]:
+    """Write ``blocks`` as ``to`` into ``out`` (atomically), with a progress bar of
+    ``total`` blocks or samples; the conversion's summary."""
+    bar = progress(total=total, desc=f"convert → {to}", unit=unit)
 
     def counted() -> Iterator[dict[str, np.ndarray]]:
-        for b in iter_sample_blocks(src_p, tables):
-            bar.update(1)
+        for b in blocks:
+            bar.update(1 if unit == "block" else b["t_s"].size)
             yield b
 
     try:
-        with atomic_file(out_p, force, inputs=(src_p,)) as tmp:
-            rows = _WRITERS[to](tmp, counted(), tables, src_p)
+        with atomic_file(out, force, inputs=(src,)) as tmp:
+            rows = _WRITERS[to](tmp, counted(), tables, src)
     finally:
         bar.close()
-    return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out_p)}
+    return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out)}
 
 
 def _convert_log(
@@ -620,17 +636,6 @@ def _convert_log(
         foreign=True,
         has_accel=rec.accel is not None,
     )
-    bar = progress(total=rate.t.size, desc=f"convert → {to}", unit="sample")
-
-    def counted() -> Iterator[dict[str, np.ndarray]]:
-        for b in iter_log_blocks(rec, tables):
-            bar.update(b["t_s"].size)
-            yield b
-
-    try:
-        with atomic_file(out, force, inputs=(src,)) as tmp:
-            rows = _WRITERS[to](tmp, counted(), tables, src)
-    finally:
-        bar.close()
-    return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out)}
+    blocks = iter_log_blocks(rec, tables)
+    return _write_table(src, to, out, force, tables, blocks, rate.t.size, "sample")
 

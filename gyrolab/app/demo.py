@@ -38,7 +38,7 @@ from typing import Any
 
 from gyrolab.app.acquire import acquire
 from gyrolab.app.options import AcquireOptions, CompensateOptions, DemoOptions
-from gyrolab.app.register import register_tree
+from gyrolab.app.register import demo_catalogue, register_tree
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
@@ -50,7 +50,6 @@ from gyrolab.progress import progress
 DEMO_ACQUIRE_SPEED = 600.0
 
 HELDOUT_SOURCE = "acquire --bench sim"
-DEMO_CATALOGUE = "catalogue.sqlite"  # inside DIR unless --catalogue / $GYROLAB_CATALOGUE
 
 
 def run_demo(
@@ -167,15 +166,6 @@ def export_firmware(model: Path, out: Path) -> None:
     out.mkdir()
     export(model, "c", out / "gyro_comp.c")
     export(model, "ardupilot", out / "ardupilot.parm")
-
-
-def demo_catalogue(out: Path, option: str | None) -> str | None:
-    """Where the demo registers (:func:`run_demo`); None when registration is off."""
-    from gyrolab.catalogue.store import ENV, catalogue_url, sqlite_url
-
-    if option or os.environ.get(ENV, "").strip():
-        return catalogue_url(option)
-    return sqlite_url(out / DEMO_CATALOGUE)
 
 
 def summary(out: Path, res: dict[str, Any]) -> str:

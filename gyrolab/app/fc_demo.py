@@ -160,8 +160,7 @@ def run_fc_demo(
     ``catalogue``: where ``out`` was registered, as :func:`gyrolab.app.demo.run_demo`
     registers, or None). Ctrl-C (SIGTERM, SIGHUP) ends it as it ends ``acquire``: the run
     in progress stops, the controller's parameters are put back, nothing is left."""
-    from gyrolab.app.demo import demo_catalogue
-    from gyrolab.app.register import register_tree
+    from gyrolab.app.register import demo_catalogue, register_tree
 
     old = sys.getswitchinterval()
     # the simulated instruments share this process (and its GIL) with the drivers: hand

@@ -18,8 +18,9 @@ temperature) with a flight-controller board instead of a gyro case:
   a few 10⁻³ °/s/°C — the order of a consumer MEMS gyro's data-sheet "ZRO variation over
   temperature" — and a 4th-order term (up to 1 °/s at 40 °C from 25 °C) a firmware's
   cubic cannot hold; every IMU and axis its own, drawn from the seed;
-* **noise** — white (``arw`` 0.8 °/√h: 0.067 °/s, 1.2 steps of the MAVLink message's
-  1 mrad/s, per sample at 25 Hz: an MPU-6000-class IMU with a wide filter) and a small
+* **noise** — white (``arw`` 0.5 °/√h, 0.008 °/s/√Hz: 0.042 °/s, 0.73 steps of the MAVLink
+  message's 1 mrad/s, per sample at 25 Hz — enough to dither the step; the data sheets of
+  autopilot IMUs give 0.0028 (ICM-42688-P) to 0.014 °/s/√Hz (BMI088)) and a small
   flicker floor (``bias_instability`` 2 °/h).
 
 Values are those of a plausible autopilot board, not of a particular part; docs/sim-model.md.
@@ -39,7 +40,7 @@ BOARD_THERMAL = {
     "gyro_power_w": 0.8,
 }
 DIE_TAU_S = 40.0
-ARW_DEG_PER_SQRT_H = 0.8
+ARW_DEG_PER_SQRT_H = 0.5
 BIAS_INSTABILITY_DEG_PER_H = 2.0
 # spread of the bias polynomial per IMU axis (°/s per °C^k), Δ = T − 25 °C
 BIAS_SCALES = (2.0, 3.0e-3, 4.0e-5, 1.0e-6, 4.0e-7)

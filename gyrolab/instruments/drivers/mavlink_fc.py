@@ -46,11 +46,11 @@ from gyrolab.autopilot import px4
 from gyrolab.instruments.mavlink_link import MavlinkLink, WriteReport, write_parameters
 from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 from gyrolab.instruments.roles import (
-    AdcBlock,
     AdcRead,
     InstrumentError,
     InstrumentReport,
 )
+from gyrolab.instruments.stamped import StampedBlocks
 
 NAME = "flight controller"
 ORIENTATION_SETTLE_S = 2.0  # ArduPilot applies AHRS_ORIENTATION at most once a second
@@ -159,11 +159,8 @@ class MavlinkImuStream:
         self.shared = shared
         self.link = shared.link
         self.config = config
-        self.period = 1.0 / config.sample_rate_hz
-        self._t_first: float | None = None
-        self._last_index = -1
+        self.stamped = StampedBlocks(1.0 / config.sample_rate_hz)
         self._closed = False
-        self.counts = {"frames_ok": 0, "frames_bad": 0, "frames_lost": 0, "repeated": 0}
 
     @property
     def firmware(self) -> str:
@@ -176,44 +173,14 @@ class MavlinkImuStream:
         got: list[Any] = []
         while q:
             got.append(q.popleft())
-        out = AdcRead()
         valid = [s for s in got if s.t >= self.shared.valid_from]
-        if not valid:
-            return out
-        if self._t_first is None:
-            self._t_first = valid[0].t
-        t = np.array([s.t for s in valid])
-        idx = np.rint((t - self._t_first) / self.period).astype(np.int64)
-        keep = idx > self._last_index
-        keep[1:] &= idx[1:] > idx[:-1]
-        self.counts["repeated"] += int(np.count_nonzero(~keep))
-        valid = [s for s, k in zip(valid, keep, strict=True) if k]
-        idx = idx[keep]
-        if not valid:
-            return out
-        gyro = np.array([s.gyro for s in valid], dtype=np.int32)
+        t = np.array([s.t for s in valid], dtype=np.float64)
+        gyro = np.array([s.gyro for s in valid], dtype=np.int32).reshape(-1, 3)
         temp = np.array([s.temperature_c for s in valid], dtype=float)
-        cuts = np.flatnonzero(np.diff(idx) != 1) + 1
-        for a, b in zip([0, *cuts], [*cuts, idx.size], strict=True):
-            first = int(idx[a])
-            self.counts["frames_lost"] += max(0, first - self._last_index - 1)
-            out.blocks.append(
-                AdcBlock(
-                    first_seq=first,
-                    first_index=first,
-                    t0=self._t_first + first * self.period,
-                    period=self.period,
-                    counts=gyro[a:b],
-                    temperature_c=temp[a:b],
-                    samples_per_reading=1,
-                )
-            )
-            self._last_index = int(idx[b - 1])
-        self.counts["frames_ok"] += len(valid)
-        return out
+        return AdcRead(blocks=self.stamped.blocks(t, gyro, temp))
 
     def counters(self) -> dict[str, int]:
-        return dict(self.counts)
+        return dict(self.stamped.counts)
 
     def reports(self) -> list[InstrumentReport]:
         return []

@@ -38,12 +38,12 @@ import serial
 from gyrolab import vectornav as vn
 from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 from gyrolab.instruments.roles import (
-    AdcBlock,
     AdcRead,
     InstrumentError,
     InstrumentReport,
     InstrumentTimeout,
 )
+from gyrolab.instruments.stamped import StampedBlocks
 
 NAME = "VN-100"
 COUNTS_PER_RAD_S = 1e7
@@ -127,15 +127,12 @@ class VectorNavStream:
             self.port_name = getattr(port, "port", "?")
             self.ser = port
         self.decoder = vn.Decoder()
-        self.period = 1.0 / config.sample_rate_hz
+        self.stamped = StampedBlocks(1.0 / config.sample_rate_hz)
         self.identity: dict[str, str] = {}
         self.reference_frame = ""
         self.setup = SetupReport()
         self._pending: list[vn.Sample] = []
-        self._t0_ns: int | None = None
-        self._last_index = -1
         self._closed = False
-        self.counts = {"frames_ok": 0, "frames_bad": 0, "frames_lost": 0, "repeated": 0}
 
     # ---------------------------------------------------------------- commands
     def _io(self, timeout_s: float) -> list[list[str]]:
@@ -257,44 +254,15 @@ class VectorNavStream:
         """Packets received so far as gap-free blocks (lost packets: gaps)."""
         self._io(timeout_s)
         got, self._pending = self._pending, []
-        self.counts["frames_bad"] = self.decoder.stats.crc_errors
-        out = AdcRead()
-        if not got:
-            return out
-        if self._t0_ns is None:
-            self._t0_ns = got[0].time_ns
-        t = np.array([s.time_ns - self._t0_ns for s in got], dtype=np.float64) * 1e-9
-        idx = np.rint(t / self.period).astype(np.int64)
-        keep = idx > self._last_index
-        keep[1:] &= idx[1:] > np.maximum.accumulate(idx)[:-1]
-        self.counts["repeated"] += int(np.count_nonzero(~keep))
-        got = [s for s, k in zip(got, keep, strict=True) if k]
-        idx = idx[keep]
-        if not got:
-            return out
-        gyro = np.rint(np.array([s.gyro_rad_s for s in got]) * COUNTS_PER_RAD_S).astype(np.int32)
+        self.stamped.counts["frames_bad"] = self.decoder.stats.crc_errors
+        t = np.array([s.time_ns for s in got], dtype=np.float64) * 1e-9
+        gyro = np.array([s.gyro_rad_s for s in got], dtype=np.float64).reshape(-1, 3)
+        counts = np.rint(gyro * COUNTS_PER_RAD_S).astype(np.int32)
         temp = np.array([s.temperature_c for s in got], dtype=float)
-        cuts = np.flatnonzero(np.diff(idx) != 1) + 1
-        for a, b in zip([0, *cuts], [*cuts, idx.size], strict=True):
-            first = int(idx[a])
-            self.counts["frames_lost"] += max(0, first - self._last_index - 1)
-            out.blocks.append(
-                AdcBlock(
-                    first_seq=first,
-                    first_index=first,
-                    t0=first * self.period,
-                    period=self.period,
-                    counts=gyro[a:b],
-                    temperature_c=temp[a:b],
-                    samples_per_reading=1,
-                )
-            )
-            self._last_index = int(idx[b - 1])
-        self.counts["frames_ok"] += len(got)
-        return out
+        return AdcRead(blocks=self.stamped.blocks(t, counts, temp))
 
     def counters(self) -> dict[str, int]:
-        return dict(self.counts)
+        return dict(self.stamped.counts)
 
     def reports(self) -> list[InstrumentReport]:
         return []

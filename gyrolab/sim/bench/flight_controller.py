@@ -46,7 +46,7 @@ from gyrolab.autopilot import ardupilot as ap
 from gyrolab.autopilot import mavlink as ml
 from gyrolab.autopilot import px4
 from gyrolab.autopilot.rotation import rotate
-from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
+from gyrolab.sim.bench.serial_pty import PtyDevice, PtyPort
 
 DEG2RAD = math.pi / 180.0
 HEARTBEAT_PERIOD_S = 1.0
@@ -144,7 +144,7 @@ class _Imu:
 
 
 @dataclass
-class SimFlightController:
+class SimFlightController(PtyDevice):
     """See the module doc. ``imus``: per IMU its three axis Physics (same rate and chamber as
     the bench's); ``firmware``: ``"px4"`` | ``"ardupilot"``; ``port``: the pty the driver
     opens; ``params``: overrides of :func:`default_parameters`."""
@@ -159,6 +159,7 @@ class SimFlightController:
     fail_param_sets: set[str] = field(default_factory=set)
     system_id: int = 1
     component_id: int = 1
+    thread_name = "sim-fc"
 
     def __post_init__(self) -> None:
         from pymavlink.dialects.v20 import common
@@ -192,7 +193,7 @@ class SimFlightController:
         self._mav = common.MAVLink(None, srcSystem=self.system_id, srcComponent=self.component_id)
         self._parser = common.MAVLink(None)
         self._parser.robust_parsing = True
-        self._write_lock = threading.Lock()
+        self.init_device(self.port, self.write_timeout_s)
         self._state_lock = threading.Lock()  # parameters and the PX4 module
         self._module = px4.TemperatureCompensationModule(self._values(), self.device_ids)
         self._next_poll_s = 0.0  # the module's next run (bench time)
@@ -205,9 +206,6 @@ class SimFlightController:
         self._next_orientation_s = 0.0
         self._accel_rotation = 0
         self.stats = FcStats()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.error: BaseException | None = None
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -357,40 +355,17 @@ class SimFlightController:
     def _send(self, data: bytes) -> None:
         if not data:
             return
-        with self._write_lock:
-            try:
-                done = self.port.write(data, timeout_s=self.write_timeout_s)
-            except PortClosed:
-                return
+        done = self.write(data)
+        if done is None:
+            return
         self.stats.messages_out += 1
         if done < len(data):
             self.stats.write_overruns += 1
 
     # ------------------------------------------------------------------ MAVLink in
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._serve, name="sim-fc", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-
-    def _serve(self) -> None:
-        try:
-            while not self._stop.is_set():
-                try:
-                    data = self.port.read(timeout_s=0.05)
-                except PortClosed:
-                    self._stop.wait(0.05)
-                    continue
-                if not data:
-                    continue
-                for msg in self._parser.parse_buffer(data) or []:
-                    self._handle(msg)
-        except BaseException as e:  # surfaced by the bench; never silent
-            self.error = e
-            raise
+    def on_bytes(self, data: bytes) -> None:
+        for msg in self._parser.parse_buffer(data) or []:
+            self._handle(msg)
 
     def _for_us(self, msg: Any) -> bool:
         return getattr(msg, "target_system", self.system_id) in (0, self.system_id)

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab import vectornav as vn
-from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
+from gyrolab.sim.bench.serial_pty import PtyDevice, PtyPort
 
 DEG2RAD = np.pi / 180.0
 GRAVITY_M_S2 = 9.80665
@@ -88,8 +88,10 @@ class VnStats:
     refused: int = 0
 
 
-class SimVectorNav:
+class SimVectorNav(PtyDevice):
     """See the module doc."""
+
+    thread_name = "sim-vn100"
 
     def __init__(
         self,
@@ -106,21 +108,16 @@ class SimVectorNav:
             raise ValueError("a VN-100 is three axes at one rate")
         self.axes = axes
         self.rate_hz = float(axes[0].rate_hz)
-        self.port = port
+        self.init_device(port, write_timeout_s)
         self.reg = {k: v for k, (v, _w) in REGISTERS.items()}
         self.writable = {k for k, (_v, w) in REGISTERS.items() if w}
         self.reg.update(registers or {})
         self.refuse_writes = dict(refuse_writes or {})
         self.accel_sd = accel_noise_m_s2
         self.rng = np.random.default_rng([int(seed), 3301])
-        self.write_timeout_s = write_timeout_s
         self.stats = VnStats()
         self._lock = threading.Lock()  # registers
-        self._write_lock = threading.Lock()
         self._rx = b""
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.error: BaseException | None = None
         self.last_temperature_c = float("nan")
 
     # ------------------------------------------------------------------ world
@@ -199,42 +196,18 @@ class SimVectorNav:
         return b"".join(out)
 
     def send(self, data: bytes) -> None:
-        if not data:
-            return
-        with self._write_lock:
-            try:
-                self.port.write(data, timeout_s=self.write_timeout_s)
-            except PortClosed:
-                return
+        if data:
+            self.write(data)
 
     # ------------------------------------------------------------------ commands
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._serve, name="sim-vn100", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-
-    def _serve(self) -> None:
-        try:
-            while not self._stop.is_set():
-                try:
-                    data = self.port.read(timeout_s=0.05)
-                except PortClosed:
-                    self._stop.wait(0.05)
-                    continue
-                self._rx += data
-                while b"\n" in self._rx:
-                    raw, _, self._rx = self._rx.partition(b"\n")
-                    reply = self.handle(raw.rstrip(b"\r"))
-                    if reply:
-                        self.send(reply)
-                self._rx = self._rx[-512:]
-        except BaseException as e:  # surfaced by the bench; never silent
-            self.error = e
-            raise
+    def on_bytes(self, data: bytes) -> None:
+        self._rx += data
+        while b"\n" in self._rx:
+            raw, _, self._rx = self._rx.partition(b"\n")
+            reply = self.handle(raw.rstrip(b"\r"))
+            if reply:
+                self.send(reply)
+        self._rx = self._rx[-512:]
 
     def handle(self, raw: bytes) -> bytes:
         """The reply to one command line (b"": none)."""
