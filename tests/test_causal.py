@@ -189,3 +189,40 @@ def test_firmware_loop_equals_offline_model_output() -> None:
         prev = float(t)
         loop[i] = m.model.predict(np.array([f]))[0]
     assert np.array_equal(loop, offline)
+
+
+def test_effective_samples_of_correlated_residuals() -> None:
+    from scipy.signal import lfilter
+
+    from gyrolab.compensation.causal import effective_samples
+
+    rng = np.random.default_rng(4)
+    w = rng.standard_normal(50_000)
+    assert effective_samples(w) == pytest.approx(50_000, rel=0.05)
+    ar = lfilter([1.0], [1.0, -0.9], w)  # AR(1): n (1 − φ)/(1 + φ) = n/19
+    assert effective_samples(ar) == pytest.approx(50_000 / 19, rel=0.3)
+
+
+def test_no_issue_23_term_is_kept_for_a_unit_without_it_and_the_band_round_trips() -> None:
+    from gyrolab.compensation.causal import (
+        EXTRA_TERMS,
+        TERMS,
+        CausalDriftModel,
+        fit_causal,
+    )
+
+    cal = _staircase_run(tau_die=600.0, hyst=1e-3, seed=1)
+    m = fit_causal(cal, families=("poly", "structured"))
+    assert set(m.model.terms) <= set(TERMS) and not set(m.model.terms) & set(EXTRA_TERMS)
+    b = m.band
+    assert b is not None and b.level == 0.9 and b.half_width > 0
+    # a run beyond the calibrated range gets a wider band, never wider than the cap
+    t = cal.pt_t
+    hot = cal.pt_c + 70.0  # every reading above the calibrated range
+    h = b.half_width_at(t, t, hot)
+    assert np.all(h > b.half_width)
+    assert np.all(b.half_width_at(t, t, hot + 500.0) <= max(b.max_half_width, b.half_width))
+    meta = m.describe()
+    back = CausalDriftModel.from_state(meta, {}, "causal.")
+    assert back.band == b
+    np.testing.assert_array_equal(back.reading_drift(t, cal.pt_c), m.reading_drift(t, cal.pt_c))

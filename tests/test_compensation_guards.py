@@ -135,10 +135,25 @@ def test_outside_the_calibrated_range_warns_and_flags(
     warn = [line for line in err.splitlines() if line.startswith("warning:")]
     assert len(warn) == 1 and "hot.mcap" in warn[0]
     assert "outside the calibrated temperature range" in warn[0]
-    t = json.loads((out / "metrics.json").read_text())["temperature"]
+    m = json.loads((out / "metrics.json").read_text())
+    t = m["temperature"]
     assert t["outside_calibration_range"] is True
     assert 0.05 < t["fraction_outside_calibration"] <= 1.0
     assert t["fraction_outside_calibration_beyond_margin"] <= t["fraction_outside_calibration"]
+    # issue 23: the graded expected error, the band, the residual mean bias, and the
+    # baselines said to extrapolate; the warning carries the grade
+    band = m["causal_band"]
+    assert (
+        band["level"] == 0.9
+        and band["max_half_width_deg_per_s"] > band["half_width_inside_deg_per_s"]
+    )
+    assert t["expected_error"] == band["expected_error"]
+    assert t["expected_error"]["grade"] in ("mild", "severe")
+    assert "expected error " + t["expected_error"]["grade"] in warn[0]
+    assert set(m["residual_mean_bias_deg_per_h"]) >= {"raw", "causal", "baselines.poly"}
+    assert m["headline"]["mean_bias_deg_per_h"] == m["residual_mean_bias_deg_per_h"]["causal"]
+    ext = m["baselines_extrapolation"]["poly"]
+    assert ext["extrapolating"] is True and ext["max_beyond_c"] > 5.0
     # apply warns too, still writes, and the compensated file carries the flag
     comp = tmp_path / "hot-comp.mcap"
     assert main(["apply", str(model_dir), str(runs["hot"]), "--out", str(comp)]) == 0
@@ -278,6 +293,11 @@ def test_report_says_when_a_run_is_outside_the_calibrated_range(
     assert metrics["temperature"]["outside_calibration_range"] is True
     texts = [b.text for s in doc.sections for b in s.blocks if hasattr(b, "text")]
     assert any(t.startswith("Outside the calibrated range — hot.mcap:") for t in texts)
+    head = next(
+        b for s in doc.sections for b in s.blocks if getattr(b, "key", "") == "causal-headline"
+    )
+    assert "Prediction band (90 %" in head.note and "Baselines extrapolating" in head.note
+    assert any(r[0] == "residual mean bias (°/h)" for r in head.rows)
     allan = next(b for s in doc.sections for b in s.blocks if getattr(b, "key", "") == "allan")
     assert "raw: ARW" in allan.caption and "τ =" in allan.caption
 

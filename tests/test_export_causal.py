@@ -100,3 +100,34 @@ def test_causal_model_exported_to_c_and_json(
         got = series_metrics(acc.result()[1], SMALL.block_s)
         for k in KEYS:
             assert got[k] == pytest.approx(metrics["axes"][name]["causal"][k], rel=1e-4)
+    # issue 23's terms (heating-only rate, R|R|, hysteresis amplitude across T), added to
+    # the fitted models: the JSON evaluator equals the Python model, and the compiled C
+    # follows it to float32 precision
+    from gyrolab.compensation.causal import CausalDriftModel
+    from gyrolab.export.c_code import generate
+
+    extra = {"kp": 2.0e-1, "k2": -40.0, "hT": 1.5e-3}
+    for a, (_, d) in enumerate(axis_dirs(model)):
+        cm = load_model(str(d)).causal
+        inner = replace(cm.model, **extra)
+        py = CausalDriftModel(cm.family, cm.params, inner).reading_drift(
+            rec.pt100_t, rec.pt100_c
+        )
+        spec["axes"][a]["model"]["model"].update(extra)
+        np.testing.assert_allclose(
+            evaluate_causal(spec["axes"][a]["model"], rec.pt100_t, rec.pt100_c),
+            py,
+            rtol=0,
+            atol=1e-15,
+        )
+    header, source = generate(spec, "g2.h")
+    (tmp_path / "g2.h").write_text(header)
+    (tmp_path / "g2.c").write_text(source)
+    (tmp_path / "c").mkdir()
+    ok, drift_c2 = run_c(tmp_path / "c", tmp_path / "g2.c", rec, 3)
+    assert ok.all()
+    for a in range(3):
+        ref = evaluate_causal(spec["axes"][a]["model"], rec.pt100_t, rec.pt100_c)
+        i = np.clip(np.searchsorted(rec.pt100_t, rec.rate.t, side="right") - 1, 0, None)
+        py = ref[i]
+        assert np.abs(drift_c2[:, a] - py).max() <= 1e-5 * np.abs(py).max()

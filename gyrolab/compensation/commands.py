@@ -97,6 +97,21 @@ def _summary(m: dict[str, Any]) -> str:
             f"{pp.get('causal', float('nan')):.4g} deg/s "
             f"({pct(pp.get('raw', 0.0), pp.get('causal', 0.0))} less)"
         )
+        mb = m.get("headline", {}).get("mean_bias_deg_per_h")
+        band = m.get("causal_band")
+        if mb is not None:
+            lines.append(
+                f"  residual mean bias {mb:+.3g} deg/h (raw "
+                f"{m['residual_mean_bias_deg_per_h']['raw']:+.4g})"
+                + (
+                    f"; 90 % band of 100 s means +/-{band['mean_half_width_deg_per_s']:.3g}"
+                    f" deg/s (in range {band['half_width_inside_deg_per_s']:.3g}; covers "
+                    f"{100 * (band['coverage_100s'] or 0):.0f} % here); expected error "
+                    f"{band['expected_error']['grade']}"
+                    if band
+                    else ""
+                )
+            )
         if "oracle" in m:
             lines.append(
                 f"  oracle (true drift removed): bias stab. "
@@ -122,10 +137,18 @@ def _summary(m: dict[str, Any]) -> str:
                 f"{fw['drift_pp_deg_per_s']:.4g} deg/s, "
                 f"{fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the chosen causal output's"
             )
+    ext = m.get("baselines_extrapolation", {})
     for name, b in m["baselines"].items():
+        e = ext.get(name, {})
         lines.append(
             f"  baseline {name:<4} drift p-p {b['drift_pp_deg_per_s']:.4g} deg/s, "
             f"bias stab. {b['bias_stability_deg_per_h']:.4g} deg/h"
+            + (
+                f" (EXTRAPOLATING: {100 * e['fraction_outside_temperature']:.1f} % of the "
+                f"points up to {e['max_beyond_c']:.1f} degC beyond its calibrated range)"
+                if e.get("extrapolating")
+                else ""
+            )
         )
     return "\n".join(lines)
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.compensation.apply import Application, streaming_block_means_many
+from gyrolab.compensation.band import band_metrics
 from gyrolab.compensation.fit import CompensationModel
 from gyrolab.compensation.guards import range_check
 from gyrolab.compensation.metrics import signal_metrics
@@ -74,6 +75,11 @@ def evaluate(
         m["causal"] = series_metrics(causal_series, bs)
         m["causal_model"] = model.causal.describe()
         m["headline"] = headline_info(model, run)
+        m["headline"]["mean_bias_deg_per_h"] = mean_bias(causal_series)
+        if model.causal.band is not None:
+            m["causal_band"] = band_metrics(
+                model.causal.band, run.t, causal_series, run.pt_t, run.pt_c
+            )
         m["drift_pp_100s_deg_per_s"] = drift_pp_table(
             {
                 "raw": app.series["raw"],
@@ -115,12 +121,60 @@ def evaluate(
             *((("causal", streams["causal"]),) if "causal" in streams else ()),
         )
     }
+    m["residual_mean_bias_deg_per_h"] = {
+        "raw": mean_bias(app.series["raw"]),
+        "compensated_drift_only": mean_bias(app.series["compensated_drift_only"]),
+        "compensated_streaming": mean_bias(streams["gabp"]),
+        **({"causal": mean_bias(streams["causal"])} if "causal" in streams else {}),
+        **{f"baselines.{n}": mean_bias(app.series[f"baselines.{n}"]) for n in model.baselines},
+    }
     rng = range_check(model.calibration, run)
     if rng:
+        if "causal_band" in m:
+            rng["expected_error"] = m["causal_band"]["expected_error"]
         m["temperature"] = rng
+        m["baselines_extrapolation"] = baselines_extrapolation(model, rng)
     m["sample_period_s"] = bs
     m["n_points"] = int(run.t.size)
     return m
+
+
+def mean_bias(x: np.ndarray) -> float:
+    """Residual mean bias (°/h) of a 3.6 s series: 3600 × its mean — what a constant
+    offset, aging or a wrong level of the drift model leaves (bias stability, a standard
+    deviation, is blind to it)."""
+    return float(np.mean(x) * 3600.0)
+
+
+def baselines_extrapolation(model: CompensationModel, rng: dict[str, Any]) -> dict[str, Any]:
+    """metrics.json ``baselines_extrapolation``: whether each baseline (a function of the
+    measured temperature, and of dT/dt with ``use_dtdt``) is used beyond its calibrated
+    input range on this run, by how much, and how it continues there."""
+    how = {
+        "poly": "its polynomial's own curve",
+        "bp": "a linear continuation from the network's edge",
+    }
+    frac_t = float(rng.get("fraction_outside_calibration_beyond_margin", 0.0))
+    frac_r = float(rng.get("fraction_rate_outside_calibration", 0.0))
+    beyond = 0.0
+    if "calibration_min_c" in rng:
+        beyond = max(
+            0.0,
+            rng["calibration_min_c"] - rng["min_c"],
+            rng["max_c"] - rng["calibration_max_c"],
+        )
+    out: dict[str, Any] = {}
+    for name in model.baselines:
+        rate_in = bool(model.config.use_dtdt)
+        ext = frac_t > 0 or (rate_in and frac_r > 0)
+        out[name] = {
+            "extrapolating": bool(ext),
+            "fraction_outside_temperature": frac_t,
+            "max_beyond_c": float(beyond),
+            **({"fraction_outside_rate": frac_r} if rate_in else {}),
+            "continues_with": how.get(name, "its own form"),
+        }
+    return out
 
 
 def drift_pp_table(

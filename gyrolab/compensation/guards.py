@@ -200,7 +200,16 @@ def range_warning(path: str, t: dict[str, Any]) -> str | None:
             f"{t['calibration_rate_max_c_per_min']:.2f} °C/min (this run "
             f"{t['rate_min_c_per_min']:.2f} … {t['rate_max_c_per_min']:.2f} °C/min)"
         )
-    return f"warning: {path}: " + "; ".join(parts) + ": the drift model is extrapolated there"
+    ee = t.get("expected_error")
+    grade = (
+        f"; expected error {ee['grade']} (the causal model's 90 % band at the 90th "
+        f"percentile is {ee['ratio_p90']:.2f}× its in-range width)"
+        if ee
+        else ""
+    )
+    return (
+        f"warning: {path}: " + "; ".join(parts) + ": the drift model is extrapolated there" + grade
+    )
 
 
 def warn_outside(path: str, t: dict[str, Any]) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrolab.numerics.allan import AllanResult
 from gyrolab.numerics.deviations import DeviationResult, deviation, gap_filled
-from gyrolab.numerics.noise_terms import FLICKER_FLOOR, noise_terms
+from gyrolab.numerics.noise_terms import FLICKER_FLOOR, filter_corner_tau, noise_terms
 from gyrolab.record.reader import Recording
 
 __all__ = ["Plateau", "as_allan_result", "plateau_noise", "soaked_segments"]
@@ -103,7 +103,10 @@ def plateau_noise(rec: Recording, tol_c: float = 0.5, min_s: float = 60.0) -> li
             continue
         y = gap_filled(rate.index[sel], rate.values[sel])
         r = as_allan_result(deviation(y, rate.rate_hz, "oadev", taus="octave"))
-        nt = noise_terms(r, method="slope", slope_tol=None)  # ARW always read, as metrics
+        # ARW always read, as metrics, above the sensor's own filter corner
+        nt = noise_terms(
+            r, method="slope", slope_tol=None, tau_min=filter_corner_tau(y, rate.rate_hz)
+        )
         i_b = int(np.argmin(np.abs(r.taus - nt.tau_b)))
         psel = (rec.pt100_t >= t0) & (rec.pt100_t <= t1)
         pc = rec.pt100_c[psel]

@@ -93,6 +93,13 @@ def _inner_fn(name: str, m: dict[str, Any]) -> str:
             out.append(
                 f"    y += {_lit(m['k'])} * x[1] + {_lit(m['h'])} * x[2] + {_lit(m['A'])} * x[3];"
             )
+            if m.get("kp") or m.get("k2") or m.get("hT"):
+                # issue 23 terms: heating-only rate, R|R|, hysteresis amplitude across T
+                out.append(
+                    f"    y += {_lit(m.get('kp', 0.0))} * fmaxf(x[1], 0.0f) + "
+                    f"{_lit(m.get('k2', 0.0))} * x[1] * fabsf(x[1]) + "
+                    f"{_lit(m.get('hT', 0.0))} * x[2] * v;"
+                )
         elif m["rate_coef"] is not None:
             out.append(f"    y += {_lit(m['rate_coef'])} * x[1];")
         out += ["    return y;", "}"]

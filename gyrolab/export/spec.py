@@ -32,9 +32,11 @@ generated from it, so what the JSON says is what the C computes. Schema
   :mod:`gyrolab.compensation.causal`: a state machine run at every temperature reading
   (:func:`causal_readings` states its equations) gives the features F (die temperature),
   R (its rate), S (hysteresis branch), E (warm-up); ``INNER`` maps them to the drift, held
-  until the next reading: ``{"kind": "structured", "coef", "lo", "hi", "k", "h", "A"}``
-  (``Σ c_i L_i(u) + k R + h S + A E``, ``u = (2F − lo − hi)/(hi − lo)``, the Legendre part
-  continued linearly beyond u = ±1) or an ``mlp`` with inputs ``["F", "R", "S", "E"]``.
+  until the next reading: ``{"kind": "structured", "coef", "lo", "hi", "k", "h", "A",
+  "kp", "k2", "hT"}`` (``Σ c_i L_i(u) + k R + h S + A E + kp max(R, 0) + k2 R|R| +
+  hT S v``, ``u = (2F − lo − hi)/(hi − lo)``, ``v`` = u clipped to [−1, 1], the Legendre
+  part continued linearly beyond u = ±1; ``kp``, ``k2``, ``hT`` absent = 0, in models
+  written before issue 23) or an ``mlp`` with inputs ``["F", "R", "S", "E"]``.
 
 dT/dt, when a model uses it, is ``(T(t) − T(t − w)) / w`` with both temperatures taken by
 the same zero-order hold (the first reading when ``t − w`` precedes it).
@@ -110,6 +112,9 @@ def _causal_spec(c: Any, cfg: Any) -> dict[str, Any]:
             "k": float(inner.k),
             "h": float(inner.h),
             "A": float(inner.A),
+            "kp": float(getattr(inner, "kp", 0.0)),
+            "k2": float(getattr(inner, "k2", 0.0)),
+            "hT": float(getattr(inner, "hT", 0.0)),
         }
     p = c.params
     return {
@@ -234,7 +239,14 @@ def evaluate_spec(model: dict[str, Any], X: np.ndarray) -> np.ndarray:
         c = np.asarray(model["coef"], dtype=float)
         y = np.polynomial.legendre.legval(uc, c)
         y = y + np.polynomial.legendre.legval(uc, np.polynomial.legendre.legder(c)) * (u - uc)
-        return y + model["k"] * X[:, 1] + model["h"] * X[:, 2] + model["A"] * X[:, 3]
+        y = y + model["k"] * X[:, 1] + model["h"] * X[:, 2] + model["A"] * X[:, 3]
+        R = X[:, 1]
+        return (
+            y
+            + model.get("kp", 0.0) * np.maximum(R, 0.0)
+            + model.get("k2", 0.0) * R * np.abs(R)
+            + model.get("hT", 0.0) * X[:, 2] * uc
+        )
     raise ValueError(f"unknown model kind {k!r}")
 
 

@@ -26,7 +26,7 @@ from scipy import optimize, stats
 from gyrolab.errors import InputError
 from gyrolab.numerics.allan import AllanResult
 
-__all__ = ["FLICKER_FLOOR", "NoiseTerms", "noise_terms"]
+__all__ = ["FLICKER_FLOOR", "NoiseTerms", "filter_corner_tau", "noise_terms"]
 
 #: sqrt(2 ln 2 / pi): sigma of flicker rate noise B on the flat part of the curve.
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)  # 0.6643
@@ -47,6 +47,9 @@ _FIT_SCALE = {"Q": 3.0, "N": 1.0, "B": FLICKER_FLOOR**2, "K": 1.0 / 3.0, "R": 0.
 #: consistent with the term's slope, and its fitted slope inconsistent with the
 #: neighbouring terms' slopes, at this level.
 SLOPE_TEST_LEVEL = 0.95
+#: Lag-1 autocorrelation of the raw samples above which a record is taken as low-passed
+#: by the sensor's own filter (white noise: 0 ± 1/sqrt(n)); see :func:`filter_corner_tau`.
+FILTERED_R1 = 0.02
 #: How far (in log-log slope) a local slope may sit from a term's own where that term
 #: dominates: the other terms then contribute a few per cent of the variance (a white-noise
 #: curve with a flicker floor 10x below it bends by less than 0.1 over an octave).
@@ -74,6 +77,7 @@ class NoiseTerms:
     reasons: dict = field(default_factory=dict)  #: term -> why it is not identifiable
     tau_ranges: dict = field(default_factory=dict)  #: term -> (tau_lo, tau_hi) in s
     upper_bounds: dict = field(default_factory=dict)  #: term -> upper bound (rate units)
+    tau_min: float = float("nan")  #: shortest tau (s) the terms were read on
 
     def value(self, name: str) -> float | None:
         """The term, or ``None`` when not identifiable."""
@@ -92,6 +96,7 @@ class NoiseTerms:
             "reasons": dict(self.reasons),
             "tau_ranges": {k: list(v) for k, v in self.tau_ranges.items()},
             "upper_bounds": dict(self.upper_bounds),
+            "tau_min": self.tau_min,
         }
 
     def deg_h(self) -> dict[str, float | None]:
@@ -200,6 +205,54 @@ def _nnls_terms(taus: np.ndarray, adev: np.ndarray, edf: np.ndarray, names: str)
     return dict(zip(names, c / col, strict=True))
 
 
+def _lag1(y: np.ndarray) -> float:
+    y = y - y.mean()
+    d = float(np.dot(y, y))
+    return float(np.dot(y[1:], y[:-1]) / d) if d > 0 else 0.0
+
+
+def filter_corner_tau(x: np.ndarray, rate_hz: float, max_octaves: int = 12) -> float:
+    """Shortest averaging time (s) at which a static record is free of the sensor's own
+    low-pass filter (decimation filter, digital averaging), from the lag-1
+    autocorrelation ``r1(m)`` of its non-overlapping m-sample averages (m = 1, 2, 4, …).
+
+    White rate noise gives ``r1 = 0`` at every m (± 1/√n); a filter with correlation time
+    T_f makes adjacent samples alike, ``r1 > 0`` (or < 0 where it rings), decaying as the
+    averages grow past T_f; coloured noise (flicker, random walk) raises ``r1`` again at
+    long m. The Allan variance of m-averages is ``var(ȳ_m)·(1 − r1(m))``, and the filter
+    also lowers ``var(ȳ_m)`` itself, so on ``τ < T_f`` σ(τ) lies below the white-noise
+    line and an ARW read there comes out low (on a real ADIS16405 record at 100 Hz by
+    15 %, issue 23). Rule: a record whose raw ``|r1(1)|`` is within
+    max(:data:`FILTERED_R1`, 3/√n) of 0 is unfiltered (corner = one sample); otherwise the
+    corner is one octave above the first m at which ``|r1(m)|`` comes within its own
+    sampling scatter (3/√n) of its minimum over the octaves with ≥ 1000 averages — where
+    the filter's correlation has decayed and the coloured noise has not yet taken over
+    (a filter that rings makes ``r1`` negative at first: hence ``|r1|``) — so that the
+    ARW is read where σ·√τ has reached its white-noise plateau. Returns seconds. NaN
+    samples (gaps) are dropped."""
+    y = np.asarray(x, dtype=float)
+    y = y[np.isfinite(y)]
+    dt = 1.0 / float(rate_hz)
+    if y.size < 64:
+        return dt
+    if abs(_lag1(y)) <= max(FILTERED_R1, 3.0 / math.sqrt(y.size)):
+        return dt
+    ms, r1 = [], []
+    m = 1
+    for _ in range(max_octaves):
+        n = y.size // m
+        if n < 1000:
+            break
+        ms.append(m)
+        r1.append(abs(_lag1(y[: n * m].reshape(n, m).mean(axis=1))))
+        m *= 2
+    lo = min(r1)
+    for m, r in zip(ms, r1, strict=True):
+        if r <= lo + 3.0 / math.sqrt(y.size // m):
+            return 2.0 * m * dt
+    return 2.0 * ms[-1] * dt  # pragma: no cover - the minimum itself always qualifies
+
+
 def _fmt_tau(t: float) -> str:
     return f"{t:.3g} s"
 
@@ -210,6 +263,7 @@ def noise_terms(
     slope_tol: float | None = 0.25,
     terms: tuple[str, ...] = ("Q", "N", "B", "K", "R"),
     b_max_tau_fraction: float = 0.1,
+    tau_min: float | None = None,
 ) -> NoiseTerms:
     """IEEE 952 noise terms from an Allan deviation curve, only where the curve identifies
     them.
@@ -238,7 +292,13 @@ def noise_terms(
     asked for, on the usable taus, each point weighted by its relative uncertainty
     sqrt(edf / 2) / avar (unit weights where the EDF is unknown); Q, N, B, K, R follow from
     c_p (module docstring). A term whose fitted share of avar is below one half at every
-    usable tau is not identifiable (it is never the term the data show).
+    usable tau is not identifiable (it is never the term the data show). A fitted B above
+    its own identifiability bound sigma_min / 0.664 (the curve cannot show a flicker floor
+    higher than its lowest point) is withheld with that reason.
+
+    ``tau_min`` (s): taus below it are not used by either method — the sensor's own
+    low-pass filter lowers sigma there (:func:`filter_corner_tau` detects it from the raw
+    samples); the shortest tau used is ``NoiseTerms.tau_min``.
     """
     taus = np.asarray(result.taus, dtype=float)
     adev = np.asarray(result.adev, dtype=float)
@@ -251,6 +311,8 @@ def noise_terms(
     record_s = result.duration_s if np.isfinite(result.duration_s) else np.inf
     usable = taus <= b_max_tau_fraction * record_s
     t_max = b_max_tau_fraction * record_s
+    if tau_min is not None and np.isfinite(tau_min):
+        usable &= taus >= float(tau_min) * (1.0 - 1e-9)
     if not usable.any():
         usable[:] = True
     taus, adev, edf, u_all = taus[usable], adev[usable], edf[usable], u_all[usable]
@@ -332,12 +394,20 @@ def noise_terms(
                 # the values of the identified terms from a joint fit of all five on the
                 # usable taus: a single-slope line through a region also carries the
                 # neighbouring terms' share of it (K read next to a white-noise region
-                # comes out ~40 % high); B stays the IEEE sigma_min / 0.664
-                joint = _nnls_terms(taus, adev, edf, "QNBKR")
+                # comes out ~40 % high); B stays the IEEE sigma_min / 0.664. The fit starts
+                # at the first identified region: below it the curve is none of the five
+                # terms (a sensor filter's roll-off lowers sigma there, issue 23)
+                first = min((r[0] for r in ranges.values()), default=float(taus[0]))
+                fit_at = taus >= first * (1.0 - 1e-9)
+                joint = _nnls_terms(taus[fit_at], adev[fit_at], edf[fit_at], "QNBKR")
                 for name in ("Q", "N", "K", "R"):
                     if np.isfinite(out[name]) and joint[name] > 0:
                         out[name] = float(math.sqrt(joint[name] / _FIT_SCALE[name]))
     elif method == "fit":
+        # a flicker floor cannot lie above the curve's lowest point (its upper confidence
+        # bound where the curve has one: the point itself scatters)
+        hi_b = float(np.asarray(result.adev_hi, dtype=float)[ok][usable][imin])
+        b_limit = hi_b if np.isfinite(hi_b) and hi_b > 0 else float(adev[imin])
         names = [t for t in "QNBKR" if t in terms]
         powers = np.array([_FIT_POWERS[t] for t in names], dtype=float)
         fitted = _nnls_terms(taus, adev, edf, "".join(names))
@@ -353,7 +423,16 @@ def noise_terms(
             if not dom.any():
                 reasons[t] = f"never half of the fitted Allan variance at {few}"
                 continue
-            out[t] = float(math.sqrt(cp / _FIT_SCALE[t]))
+            val = float(math.sqrt(cp / _FIT_SCALE[t]))
+            if t == "B" and val > b_limit / FLICKER_FLOOR:
+                bounds["B"] = float(adev[imin] / FLICKER_FLOOR)
+                reasons["B"] = (
+                    f"fitted {val:.4g} is above its identifiability bound sigma_min/0.664 = "
+                    f"{bounds['B']:.4g} (the curve's lowest point, at {_fmt_tau(tau_b)}, "
+                    "up to its confidence interval): withheld"
+                )
+                continue
+            out[t] = val
             ranges[t] = (float(taus[dom][0]), float(taus[dom][-1]))
     else:
         raise InputError(None, f"unknown noise-term method {method!r} (slope or fit)")
@@ -365,4 +444,5 @@ def noise_terms(
         reasons=reasons,
         tau_ranges=ranges,
         upper_bounds=bounds,
+        tau_min=float(taus[0]),
     )

@@ -76,6 +76,7 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
         ["drift p-p of 100 s averages (°/s)"] + [_fmt(pp.get(k)) for _, k in cols],
         ["drift p-p of 3.6 s averages (°/s)"]
         + [_fmt(get(k).get("drift_pp_deg_per_s")) for _, k in cols],
+        ["residual mean bias (°/h)"] + [_fmt(_mean_bias(res, metrics, k)) for _, k in cols],
         ["ARW (°/√h)"] + [_fmt(get(k).get("arw_deg_per_sqrt_h")) for _, k in cols],
         ["bias instability (°/h)"]
         + [_fmt(get(k).get("bias_instability_deg_per_h")) for _, k in cols],
@@ -95,6 +96,7 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
             else " No oracle: the true drift of this run is not known."
         )
     )
+    tab.note += band_sentence(metrics) + extrapolation_sentence(metrics)
     sec = Section("headline", "Headline: causal compensation (real-time, full bandwidth)")
     sec.blocks.append(
         TextBlock(
@@ -120,3 +122,53 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
         )
     )
     return sec
+
+
+def _mean_bias(res: Any, metrics: dict[str, Any], key: str) -> float | None:
+    """Residual mean bias (°/h) of one column: metrics.json's, else from the kept series."""
+    mb = metrics.get("residual_mean_bias_deg_per_h", {})
+    if key in mb:
+        return mb[key]
+    x = res.series.get(key)
+    return None if x is None else float(np.mean(x) * 3600.0)
+
+
+def band_sentence(metrics: dict[str, Any]) -> str:
+    """The causal model's 90 % band and the graded expected error ('' without a band)."""
+    b = metrics.get("causal_band")
+    if not b:
+        return ""
+    cov = b.get("coverage_100s")
+    ee = b["expected_error"]
+    return (
+        f" Prediction band ({100 * b['level']:.0f} %, measured by the calibration's "
+        f"cross-validation): 100 s means within ±{b['half_width_inside_deg_per_s']:.3g} °/s "
+        f"inside the calibrated range, widening by {b['per_c_deg_per_s']:.3g} °/s per °C "
+        f"and {b['per_c_per_min_deg_per_s']:.3g} °/s per °C/min beyond it"
+        + ("" if b.get("law_measured", True) else " (default law: not measurable here)")
+        + (f"; on this run {100 * cov:.0f} % of the 100 s means lie inside it" if cov else "")
+        + f". Expected error on this run: {ee['grade']} (90th percentile of the band "
+        f"{ee['ratio_p90']:.2f}× its in-range width)."
+    )
+
+
+def extrapolation_sentence(metrics: dict[str, Any]) -> str:
+    """Which baselines extrapolate on this run ('' when none does)."""
+    ex = metrics.get("baselines_extrapolation") or {}
+    names = [n for n, e in ex.items() if e.get("extrapolating")]
+    if not names:
+        return ""
+    e = ex[names[0]]
+    return (
+        f" Baselines extrapolating on this run: {', '.join(names)} — "
+        f"{100 * e['fraction_outside_temperature']:.1f} % of the points up to "
+        f"{e['max_beyond_c']:.1f} °C beyond the calibrated temperature range"
+        + (
+            f", {100 * e['fraction_outside_rate']:.1f} % beyond the calibrated dT/dt range"
+            if "fraction_outside_rate" in e
+            else ""
+        )
+        + "; there each continues with "
+        + "; ".join(f"{n}: {ex[n]['continues_with']}" for n in names)
+        + "."
+    )

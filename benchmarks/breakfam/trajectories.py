@@ -1,0 +1,62 @@
+"""Chamber trajectories of the break family: per-second setpoints and the temperature the
+unit rests at before power-on (t = 0). Written here, not taken from gyrolab's profiles."""
+
+from __future__ import annotations
+
+import numpy as np
+
+NAMES = ("staircase", "heating", "random", "fastramp", "coldstart", "slowramp")
+
+
+def _steps(parts: list[tuple[float, float]]) -> np.ndarray:
+    """Per-second setpoints from (setpoint °C, hold s) pairs."""
+    return np.concatenate([np.full(int(d), float(s)) for s, d in parts])
+
+
+def _ramp(a: float, b: float, c_per_min: float) -> np.ndarray:
+    n = int(abs(b - a) / c_per_min * 60.0)
+    return np.linspace(a, b, max(n, 1))
+
+
+def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
+    """``(setpoints at 1 Hz, rest temperature °C)`` of trajectory ``name``:
+
+    * ``staircase`` — 1 h at 25 °C after power-on, 1 h at 60, then 10 °C steps down to
+      −40 held 1 h each (13 h: the paper's cooling staircase, re-made);
+    * ``heating`` — the same steps upward from −40 (13 h);
+    * ``random`` — setpoints uniform in −40…60 held 20–90 min (10 h, per ``seed``);
+    * ``fastramp`` — ±3 °C/min ramps between −40 and 60 (the chamber caps cooling at
+      1.5 °C/min) with 30 min soaks (≈ 7 h);
+    * ``coldstart`` — rests at −35 °C unpowered, powered on cold: 1 h at −35, 1 °C/min to
+      50, 2 h, then steps 20, −10, 40 of 1 h (≈ 7 h);
+    * ``slowramp`` — a 0.3 °C/min triangle 25 → 60 → −40 → 25 (≈ 12 h).
+    """
+    if name == "staircase":
+        sp = [(25.0, 3600.0), (60.0, 3600.0)] + [(60.0 - 10.0 * i, 3600.0) for i in range(1, 11)]
+        return _steps(sp), 25.0
+    if name == "heating":
+        sp = [(25.0, 3600.0), (-40.0, 3600.0)] + [(-40.0 + 10.0 * i, 3600.0) for i in range(1, 11)]
+        return _steps(sp), 25.0
+    if name == "random":
+        rng = np.random.default_rng([41, seed])
+        parts, total = [(25.0, 3600.0)], 3600.0
+        while total < 10 * 3600.0:
+            d = float(rng.uniform(20.0, 90.0)) * 60.0
+            parts.append((float(np.round(rng.uniform(-40.0, 60.0), 1)), d))
+            total += d
+        return _steps(parts), 25.0
+    if name == "fastramp":
+        seg = [np.full(3600, 25.0), _ramp(25.0, 60.0, 3.0), np.full(1800, 60.0)]
+        seg += [_ramp(60.0, -40.0, 3.0), np.full(1800, -40.0), _ramp(-40.0, 60.0, 3.0)]
+        seg += [np.full(1800, 60.0), _ramp(60.0, -40.0, 3.0), np.full(1800, -40.0)]
+        seg += [_ramp(-40.0, 25.0, 3.0), np.full(3600, 25.0)]
+        return np.concatenate(seg), 25.0
+    if name == "coldstart":
+        seg = [np.full(3600, -35.0), _ramp(-35.0, 50.0, 1.0), np.full(7200, 50.0)]
+        seg += [_steps([(20.0, 3600.0), (-10.0, 3600.0), (40.0, 3600.0)])]
+        return np.concatenate(seg), -35.0
+    if name == "slowramp":
+        seg = [np.full(1800, 25.0), _ramp(25.0, 60.0, 0.3), _ramp(60.0, -40.0, 0.3)]
+        seg += [_ramp(-40.0, 25.0, 0.3), np.full(1800, 25.0)]
+        return np.concatenate(seg), 25.0
+    raise ValueError(f"unknown trajectory {name!r}")

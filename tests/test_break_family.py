@@ -1,0 +1,98 @@
+"""The break-the-model validation family (benchmarks/breakfam, issue 23): its physics does
+what its docstring says, its scorer is right on known input, and one small in-process
+round (one unit, calibrate, one held-out run) runs gyrolab's causal model through it.
+The full family is ``benchmarks/break_suite.py`` (docs/results.md)."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+from breakfam import physics as P  # noqa: E402
+from breakfam.family import simulate_run, units  # noqa: E402
+from breakfam.realnoise import real_noise, records  # noqa: E402
+from breakfam.score import means, score, window_means  # noqa: E402
+from breakfam.trajectories import NAMES, trajectory  # noqa: E402
+
+
+def test_family_shares_no_code_with_gyrolab() -> None:
+    root = Path(__file__).resolve().parents[1] / "benchmarks" / "breakfam"
+    for f in root.glob("*.py"):
+        assert "gyrolab" not in f.read_text().replace("gyrolab's", ""), f.name
+
+
+def test_two_node_network_self_heats_the_die() -> None:
+    u = replace(units(1)[0], q0=2.0 / 300.0, tau_dp=300.0, beta=0.0)
+    air = np.full(6 * 3600, 25.0)
+    pkg, die = P.thermal(u, air, 25.0)
+    # steady state: the die q0·τ_dp above the package (less what the package takes back)
+    assert 1.5 < die[-1] - pkg[-1] < 2.05
+    assert die[0] - pkg[0] < 0.05  # at rest at power-on: the warm-up is the transient
+    # a package step reaches the die later
+    air2 = np.r_[np.full(3600, 25.0), np.full(3600, 45.0)]
+    pkg2, die2 = P.thermal(replace(u, q0=0.0), air2, 25.0)
+    assert pkg2[3700] - 25.0 > die2[3700] - 25.0
+
+
+def test_hysteresis_width_follows_temperature() -> None:
+    u = replace(units(1)[0], h=(1e-3, 0.0, 0.0), w0=(2.0, 1.0, 1.0), kappa=0.8)
+    u = replace(u, c=(0.0,) * 5, k_pos=0.0, k_neg=0.0, k2=0.0, g=0.0, age_a=0.0)
+    t = np.arange(4000.0)
+
+    def saturated(centre: float) -> float:
+        """Share of a ±3 °C cycle at ``centre`` on a saturated branch (|S| = 1)."""
+        D = centre + 3.0 * np.sin(2 * np.pi * t / 1000.0)
+        return float(np.mean(np.abs(P.drift(u, D, D, 0.0)[2000:] / 1e-3) > 0.999))
+
+    # the branch flips within the play width: wider at the warm end (κ > 0), so less of
+    # the cycle is saturated there than at the cold end
+    assert saturated(45.0) < saturated(5.0)
+
+
+def test_real_noise_is_scaled_to_the_arw() -> None:
+    a, arw0 = records()
+    assert a.shape[0] == 15 and 1.5 < arw0 < 4.0  # the ADIS16405's ARW, °/√h
+    x = real_noise(200_000, 0.05, np.random.default_rng(1))
+    s1 = means(x, 10)
+    assert 60.0 * np.std(s1) == pytest.approx(0.05, rel=0.1)
+
+
+def test_scorer_on_known_input() -> None:
+    y = np.r_[np.zeros(36 * 28), np.full(36 * 28, 1e-3)]
+    s = score(y)
+    assert s["pp_100s_deg_per_s"] == pytest.approx(1e-3)
+    assert s["mean_bias_deg_per_h"] == pytest.approx(1.8)
+    assert s["bias_stability_deg_per_h"] == pytest.approx(3600 * np.std(means(y, 36), ddof=1))
+    assert window_means(y).size == 2
+
+
+def test_trajectories_are_defined() -> None:
+    for name in NAMES:
+        sp, rest = trajectory(name, 1)
+        assert sp.size > 5 * 3600 and -40.0 <= sp.min() and sp.max() <= 60.0
+
+
+def test_one_round_through_gyrolab_causal_model() -> None:
+    from gyrolab.compensation.causal import CausalCalibration, fit_causal
+    from gyrolab.numerics.averaging import block_average
+
+    u = units(1)[0]
+    cal = simulate_run(u, "staircase", seed=1)
+    held = simulate_run(u, "heating", seed=2)
+    tb, xb, _ = block_average(cal.t, cal.raw, 3.6, 0.1)
+    m = fit_causal(
+        CausalCalibration(t=tb, rate=xb, pt_t=cal.pt_t, pt_c=cal.pt_c),
+        families=("poly", "structured"),
+    )
+    y = held.raw - m.drift_at(held.t, held.pt_t, held.pt_c)
+    raw, out, oracle = score(held.raw), score(y), score(held.raw - held.drift)
+    assert out["bias_stability_deg_per_h"] < 0.2 * raw["bias_stability_deg_per_h"]
+    assert out["bias_stability_deg_per_h"] >= oracle["bias_stability_deg_per_h"] * 0.98
+    lo, hi = m.band_at(held.t, held.pt_t, held.pt_c)
+    assert np.all(hi > 0) and np.all(lo == -hi)
