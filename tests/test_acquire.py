@@ -99,7 +99,7 @@ def test_short_run_metadata(short_run) -> None:
     rec = read_recording(short_run[0])
     run, bench = rec.run, rec.bench
     assert run["source"] == "acquire" and run["operator"] == "simulated"
-    assert run["unit_serial"] == "SIM-0" and run["profile"]["name"] == "short"
+    assert run["unit_serial"] == "SIM-GYRO-0001" and run["profile"]["name"] == "short"
     assert run["speed"] == 200
     assert "34401A" in bench["multimeter"]["idn"]
     assert bench["multimeter"]["resource"].startswith("ASRL")

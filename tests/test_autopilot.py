@@ -11,9 +11,9 @@ from gyrolab.autopilot import ardupilot as ap
 from gyrolab.autopilot import px4
 from gyrolab.autopilot.rotation import rotate, rotation_matrix, rotation_name
 from gyrolab.compensation.config import PipelineConfig
+from gyrolab.compensation.evaluate import add_firmware_metrics
 from gyrolab.compensation.firmware import (
     Poly3,
-    add_firmware_metrics,
     ardupilot_parameter_set,
     firmware_offset_fn,
     px4_parameter_set,
@@ -139,7 +139,7 @@ def test_firmware_scores_run_each_update_rule() -> None:
     p3 = Poly3((0.01, 4e-4, 3e-6, -4e-8), 20.0, -20.0, 60.0)
     metrics = {"compensated_streaming": {"rms_deg_per_s": 1.0, "drift_pp_deg_per_s": 1.0,
                                          "bias_stability_deg_per_h": 1.0}}  # fmt: skip
-    add_firmware_metrics(p3, run, 3.6, metrics)
+    add_firmware_metrics(p3, run, metrics, 3.6)
     form, fw_px4, fw_ap = (metrics[f"firmware_{k}"] for k in ("poly3", "px4", "ardupilot"))
     # ArduPilot corrects every sample: the cubic itself, up to float32
     assert fw_ap["drift_pp_deg_per_s"] == pytest.approx(form["drift_pp_deg_per_s"], rel=1e-3)

@@ -275,8 +275,7 @@ def verify(
 ) -> dict[str, Any]:
     """verification.json's content from ``d/calibration.mcap``, ``d/verification.mcap``,
     the models (IMU → model directory) and the parameters read back from the vehicle."""
-    from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.compensation.verification import mean_noise_dps, noise_lsb, verify_imu
     from gyrolab.record.reader import read_recording
 
@@ -297,7 +296,7 @@ def verify(
     for k, s in serials.items():
         cal = read_recording(d / "calibration.mcap", unit=s)
         sigma = [noise_lsb(cal.adc.values[:, a]) for a in range(3)]
-        fitted = [load_model(str(p)) for _n, p in axis_dirs(models[k])]
+        fitted = [p.load() for _n, p in ModelDir(models[k]).axes()]
         axes = verify_imu(
             fitted, firmware, params, k, recs[k], sigma, device_ids.get(k, 0), seed,
             mean_noise=mean_noise_dps(fitted, cal), controller=controller,

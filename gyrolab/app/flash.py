@@ -89,9 +89,11 @@ def flash_models(
     """Flash each IMU's model (IMU instance → model directory of that unit) into the
     controller on ``link`` (connected: its firmware known). PX4 needs each IMU's device id
     (``TC_Gi_ID``; default: read from ``CAL_GYROi_ID``)."""
-    from gyrolab.compensation.axes import axis_dirs, load_poly3
+    from gyrolab.compensation.model_dir import ModelDir
 
-    polys = {imu: [load_poly3(d) for _n, d in axis_dirs(str(m))] for imu, m in models.items()}
+    polys = {
+        imu: [d.require_firmware() for _n, d in ModelDir(m).axes()] for imu, m in models.items()
+    }
     res = flash_polys(link, polys, device_ids)
     res.models = {k: str(v) for k, v in models.items()}
     return res
@@ -164,7 +166,8 @@ def flash_records(
     import json
 
     from gyrolab.app.index_files import FLASH_FORMAT
-    from gyrolab.catalogue.digest import PREFIX, file_digest, model_digest
+    from gyrolab.catalogue.digest import PREFIX, file_digest
+    from gyrolab.compensation.model_dir import ModelDir
 
     rep = result.report
     outcome = "written" if rep.ok else ("failed" if rep.restore_failed else "restored")
@@ -189,7 +192,7 @@ def flash_records(
             "time": when,
             "device": device,
             "params_sha256": params_hash,
-            "model_sha256": model_digest(model) if model else None,
+            "model_sha256": ModelDir(model).digest() if model else None,
             "result": outcome,
             "detail": {
                 "firmware": result.firmware,

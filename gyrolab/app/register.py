@@ -218,8 +218,13 @@ def register_command(opts: object, rc: int) -> None:
             register_recording(out)
     elif isinstance(opts, o.CompensateOptions):
         # one model directory, or DIR/<serial> per unit of a multi-unit run
-        dirs = [out] if (out / "model.json").is_file() else sorted(out.glob("*/model.json"))
-        dirs = [d if d == out else d.parent for d in dirs]
+        from gyrolab.compensation.model_dir import ModelDir
+
+        dirs = (
+            [out]
+            if ModelDir.is_model_dir(out)
+            else sorted(d for d in out.glob("*") if ModelDir.is_model_dir(d))
+        )
         if dirs:
             register_models(dirs, opts.run, opts.validate)
     elif isinstance(opts, o.ApplyOptions) and out.is_file():

@@ -128,12 +128,16 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
     unit k's PT100 on channel 101 + k (a 34901A holds ten). ``internal``
     (``--internal-temperature``): the units (1-based) read by their internal sensor
     instead (``[[unit]] temperature = "internal"``; no scanner when that is every unit)."""
+    from gyrolab.sim.simulate import SIM_UNIT_MODEL, SIM_UNIT_SERIAL
+
     cfg = BenchConfig(
         name="sim",
         run=RunInfo(
             operator="simulated",
-            unit_serial=f"SIM-{seed}" if not units else "",
-            unit_model="simulated MEMS gyro",
+            # the nominal unit, as `gyrolab simulate` names it (its runs of any seed are
+            # one unit's: a model of one applied to another is not another unit's)
+            unit_serial=SIM_UNIT_SERIAL if not units else "",
+            unit_model=SIM_UNIT_MODEL,
             profile="paper",
             notes="gyrolab acquire --bench sim" + (f" --units {units}" if units else ""),
         ),

@@ -12,11 +12,12 @@ calibration run as the chosen model (the 1000 points/h averages of the raw rate 
 causal PT100 temperature, ordinary least squares in Δ with ``T_ref`` the middle of the
 range, as PX4's ``Tools/process_sensor_caldata.py`` does); :func:`px4_parameter_set` and
 :func:`ardupilot_parameter_set` write it as each firmware's parameters (float32, the
-reference temperature and scale each uses), for ``gyrolab export`` and for flashing. The
-scores (:func:`add_firmware_metrics`) run it on any run the way each firmware does — causal,
-full rate, clamped, in its float32 arithmetic and with its own update rule
+reference temperature and scale each uses), for ``gyrolab export`` and for flashing.
+:func:`firmware_offset_fn` runs it on any run the way each firmware does — causal, full
+rate, clamped, in its float32 arithmetic and with its own update rule
 (:mod:`gyrolab.autopilot`: PX4 republishes the offsets only when the temperature moved more
-than 1 °C, polled once a second; ArduPilot corrects every sample) — beside the chosen
+than 1 °C, polled once a second; ArduPilot corrects every sample);
+:func:`gyrolab.compensation.evaluate.add_firmware_metrics` scores that beside the chosen
 model's causal output, so that metrics.json says what each firmware costs.
 docs/export.md gives the parameter mappings.
 """
@@ -29,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.compensation.evaluate import series_metrics
 from gyrolab.compensation.prepare import PreparedRun, causal_temperature, run_rate_batches
 from gyrolab.numerics.averaging import BlockAverager
 
@@ -50,8 +50,11 @@ class Poly3:
     t_max: float
 
     def predict(self, temp_c: np.ndarray) -> np.ndarray:
-        """Bias in °/s at temperatures ``temp_c`` (clamped to the calibrated range)."""
-        d = np.clip(np.asarray(temp_c, dtype=float), self.t_min, self.t_max) - self.t_ref
+        """Bias in °/s at temperatures ``temp_c`` (clamped to the calibrated range): a 1-D
+        array, or inputs ``(N, k)`` whose column 0 is the temperature."""
+        T = np.asarray(temp_c, dtype=float)
+        T = T[:, 0] if T.ndim == 2 else T
+        d = np.clip(T, self.t_min, self.t_max) - self.t_ref
         c0, c1, c2, c3 = self.coef
         return c0 + d * (c1 + d * (c2 + d * c3))
 
@@ -62,6 +65,17 @@ class Poly3:
         c = np.zeros(4)
         c[: q.coef.size] = q.coef
         return tuple(float(v) for v in c)  # type: ignore[return-value]
+
+    def spec(self, inputs: list[str], window_s: float | None) -> dict[str, Any]:
+        """The exported form (``poly3``, :mod:`gyrolab.compensation.regressors`; its one
+        input is T)."""
+        return {
+            "kind": "poly3",
+            "coef": list(self.coef),
+            "t_ref": self.t_ref,
+            "t_min": self.t_min,
+            "t_max": self.t_max,
+        }
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -160,57 +174,12 @@ def chosen_key(metrics: dict[str, Any]) -> str:
     return "causal" if "causal" in metrics else "compensated_streaming"
 
 
-def form_metrics(
-    p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any], form: str = "poly3"
-) -> dict:
-    """metrics.json ``firmware_<form>``: the cubic's causal residual on ``run`` under
-    ``form``'s update rule (:func:`firmware_offset_fn`) and how much worse it is than the
-    chosen causal output of ``metrics`` (:func:`chosen_key`): ratios > 1 mean the firmware
-    leaves more."""
-    key = chosen_key(metrics)
-    chosen = metrics[key]
-    m = series_metrics(
-        firmware_block_means(firmware_offset_fn(p3, run, form), run, block_s), block_s
-    )
-    ratio = {
-        f"{k}_ratio": (m[k] / chosen[k] if chosen.get(k) else float("nan"))
-        for k in ("rms_deg_per_s", "drift_pp_deg_per_s", "bias_stability_deg_per_h")
-    }
-    out = {**m, "vs_chosen": {"chosen": key, **ratio}, "model": p3.to_dict()}
-    if form != "poly3":
-        out["update_rule"] = UPDATE_RULES[form]
-    return out
-
-
 UPDATE_RULES = {
     "px4": "TC_G* float32; recomputed once a second, republished when T moved > 1 degC "
     "(temperature_compensation update_offsets_gyro)",
     "ardupilot": "INS_TCAL* float32 with INS_GYROFFS at CALTEMP; every sample at the "
     "latest T (AP_InertialSensor_tempcal correct_sensor)",
 }
-
-
-def add_firmware_metrics(
-    p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any]
-) -> None:
-    """``firmware_poly3`` (the form) and ``firmware_px4`` / ``firmware_ardupilot`` (each
-    firmware's own update rule and arithmetic) into ``metrics``."""
-    metrics["firmware_poly3"] = form_metrics(p3, run, block_s, metrics, "poly3")
-    for fw in FIRMWARES:
-        metrics[f"firmware_{fw}"] = form_metrics(p3, run, block_s, metrics, fw)
-
-
-def firmware_metrics_for_dir(model_dir: Any, run: PreparedRun, metrics: dict[str, Any]) -> None:
-    """Add the ``firmware_*`` metrics to a report's ``metrics`` when the model directory has
-    the firmware cubic (models fitted before it existed have none: nothing is added)."""
-    import json
-    from pathlib import Path
-
-    p = Path(model_dir) / "firmware.json"
-    if not p.is_file():
-        return
-    p3 = Poly3.from_dict(json.loads(p.read_text())["poly3"])
-    add_firmware_metrics(p3, run, float(metrics["sample_period_s"]), metrics)
 
 
 def firmware_sentence(metrics: dict[str, Any]) -> str:

@@ -164,7 +164,7 @@ def mean_noise_dps(models: list[Any], calibration: Any) -> np.ndarray:
     pt_t, pt_c = calibration.require_temperature()
     for a, m in enumerate(models):
         s = calibration.axis(a).require_rate()
-        y = streaming_compensate(m, s.t, s.values, pt_t, pt_c, which=_which(m))
+        y = streaming_compensate(m, s.t, s.values, pt_t, pt_c, which="chosen")
         res = allan_deviation(y, s.rate_hz, taus=np.array([WINDOW_S]), confidence=None)
         out.append(float(res.adev[0]) if res.adev.size else float("nan"))
     return np.asarray(out)
@@ -200,7 +200,7 @@ def verify_imu(
     drift = np.column_stack(
         [
             untruncated(
-                -streaming_compensate(m, t, np.zeros(t.size), pt_t, pt_c, which=_which(m))
+                -streaming_compensate(m, t, np.zeros(t.size), pt_t, pt_c, which="chosen")
                 * DEG2RAD / LSB_RAD_S,
                 float(sig[a]),
             ) * LSB_RAD_S
@@ -246,6 +246,3 @@ def verify_imu(
         }
     return out
 
-
-def _which(model: Any) -> str:
-    return "causal" if getattr(model, "causal", None) is not None else "gabp"
