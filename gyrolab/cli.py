@@ -127,8 +127,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     a = cmd("acquire", "run an oven profile on a bench (real or simulated) and record it")
-    a.add_argument("--bench", required=True, help="sim | BENCH.toml")
-    a.add_argument("--out", required=True, help="output RUN.mcap")
+    a.add_argument("--bench", help="sim | BENCH.toml (with --resume: the run's sim by default)")
+    a.add_argument(
+        "--out", help="output RUN.mcap (with --resume: default <run>.seg<N>.mcap beside it)"
+    )
+    a.add_argument(
+        "--resume",
+        metavar="RUN.mcap",
+        help="continue this interrupted run (its last segment, or the file a kill left) from "
+        "its last completed step, in a new segment (docs/reliability.md)",
+    )
     a.add_argument("--profile", default=None, help="paper | short | FILE.toml (default: bench's)")
     a.add_argument(
         "--speed",

@@ -31,7 +31,8 @@ FC_RATE_HZ = 25.0  # IMU message rate of the simulated controller (and its IMU r
 # Free-running, the bench covers a few hundred simulated seconds per wall second while the
 # MAVLink streams keep the process busy: on a loaded machine the chamber's poller may get
 # no reply for several wall seconds without the chamber being lost. The watchdog's wall
-# floor (SimSilence) is therefore longer than the ADC bench's 1 s.
+# floor (SimSilence) is therefore longer than the ADC bench's 1 s, and holds the run
+# (suspenders) only after the same wall silence.
 FC_COMM_MIN_WALL_S = 15.0
 
 
@@ -122,6 +123,7 @@ def start_fc_bench(
         addresses={"chamber": bench.oven_port, **{f"unit/{s}": fc_port for s in serials}},
         clock=SimRunClock(bench.clock),
         silence=SimSilence(min_wall_s=FC_COMM_MIN_WALL_S),
+        hold_silence=SimSilence(min_wall_s=FC_COMM_MIN_WALL_S),  # the same floor, for holds
         timeout=scaled_timeouts(speed),
         speed=speed,
         bench=bench,

@@ -96,9 +96,12 @@ def _finish(
     cfg: PipelineConfig,
     raw: tuple[np.ndarray, np.ndarray] | None,
     unit: str | None = None,
+    cut: list[tuple[float, float]] | tuple[()] = (),
 ) -> PreparedRun:
     """Input checks on the accumulated rate, then the run at 1000 points/h; ``raw``: the
-    full-rate ``(t, rate)`` when they are in memory. ``content_hash`` is left to the caller."""
+    full-rate ``(t, rate)`` when they are in memory; ``cut``: a resumed run's
+    interruptions, over which nothing is filled in (the series jumps over them).
+    ``content_hash`` is left to the caller."""
     if acc.n_bad:
         raise InputError(path, f"/gyro/rate has {acc.n_bad} NaN or infinite samples")
     if acc.t_first is None:
@@ -115,7 +118,7 @@ def _finish(
             f"run is {span_s:.0f} s long; the compensation model needs at least "
             f"{need_s:.0f} s ({cfg.min_blocks} points at {cfg.block_s} s)",
         )
-    tb, xb, filled = acc.result()
+    tb, xb, filled = acc.result(cut)
     if not np.all(np.isfinite(xb)):
         raise InputError(path, "/gyro/rate has too many gaps to average")
     return PreparedRun(
@@ -142,7 +145,7 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     x = np.asarray(rate.values, dtype=float)
     acc = BlockAverager(cfg.block_s)
     acc.add(rate.t, x, rate.period)
-    run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit)
+    run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit, rec.interruptions)
     run.content_hash = content_hash(x, pt_t, pt_c)
     run.temperature_source = rec.temperature_source
     run.serial = str(rec.run.get("unit_serial") or "")
@@ -262,7 +265,7 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
     )
     take(batcher.flush())
     pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
-    run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit)
+    run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit, rec.interruptions)
     run.content_hash = hasher.hexdigest(pt_t, pt_c)
     run.temperature_source = rec.temperature_source
     run.serial = str(rec.run.get("unit_serial") or "")

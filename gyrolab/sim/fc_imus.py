@@ -63,6 +63,11 @@ def imu_axis_model(seed: int, imu: int, axis: int) -> SimModel:
     )
 
 
+def imu_seed(seed: int, imu: int, axis: int) -> int:
+    """The noise seed of one IMU axis (its own streams: seed, IMU and axis)."""
+    return int(seed) * 1000 + 10 * imu + axis
+
+
 def imu_physics(
     seed: int, rate_hz: float, ambient_c: float = 25.0, imus: int = 3
 ) -> list[list[Any]]:
@@ -75,7 +80,7 @@ def imu_physics(
             Physics(
                 imu_axis_model(seed, k, a),
                 rate_hz=rate_hz,
-                seed=int(seed) * 1000 + 10 * k + a,
+                seed=imu_seed(seed, k, a),
                 ambient_c=ambient_c,
             )
             for a in range(3)
