@@ -472,7 +472,7 @@ def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
     nds = []
     for a, (_n, d) in enumerate(ModelDir(unit["model"]).axes()):
         s = rec.axis(a).rate
-        comp = streaming_compensate(d.load(), s.t, s.values, rec.pt100_t, rec.pt100_c)
+        comp = streaming_compensate(d.load(), s.t, s.values, rec.pt100_t, rec.pt100_c, "chosen")
         nds.append(noise_terms(allan_deviation(comp, RATE_HZ, confidence=None)).N)
     # continuous-time density = Allan N (deg/s * sqrt(s)) in rad/s/sqrt(Hz), largest axis
     assert y["gyroscope_noise_density"] == pytest.approx(max(nds) * math.pi / 180, rel=1e-6)

@@ -113,7 +113,7 @@ def kalibr_text(
     try:
         for k, (name, d) in enumerate(dirs):
             s = rec.axis(k).require_rate()
-            y = streaming_compensate(d.load(), s.t, s.values, pt_t, pt_c)
+            y = streaming_compensate(d.load(), s.t, s.values, pt_t, pt_c, "chosen")
             axes[name] = axis_noise(y, s.rate_hz)
     except InputError as e:
         raise InputError(run, e.problem) from None
