@@ -79,6 +79,12 @@ def test_kill_9_then_resume_completes_the_profile_as_one_run_with_one_gap(
     cont = tmp_path / "run.seg2.mcap"
     recovered = tmp_path / "run.recovered.mcap"
     assert segments(cont) == [recovered, cont]  # the cut file is kept, untouched
+    # The catalogue knows the run as one run of its two segments (docs/catalogue.md).
+    assert main(["runs", "list", "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    runs = listed["runs"] if isinstance(listed, dict) else listed
+    (run,) = [r for r in runs if len(r.get("segments", [])) == 2]
+    assert [s["number"] for s in run["segments"]] == [1, 2]
     rec = read_recording(cont)
     # One run: the first segment's identity, its two segments, one interruption.
     ((after, at),) = rec.interruptions

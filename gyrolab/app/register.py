@@ -213,7 +213,14 @@ def register_command(opts: object, rc: int) -> None:
     if rc not in (0, 1, 130):
         return
     out = Path(str(getattr(opts, "out", "")))
-    if isinstance(opts, (o.SimulateOptions, o.AcquireOptions, o.RecoverOptions)):
+    if isinstance(opts, o.AcquireOptions) and opts.out is None and opts.resume is not None:
+        # --resume without --out: the continuation went beside the run it continues
+        from gyrolab.app.resume import last_continuation
+
+        cont = last_continuation(opts.resume)
+        if cont is not None:
+            register_recording(cont)
+    elif isinstance(opts, (o.SimulateOptions, o.AcquireOptions, o.RecoverOptions)):
         if out.is_file():
             register_recording(out)
     elif isinstance(opts, o.CompensateOptions):

@@ -98,14 +98,34 @@ def _recovered(src: Path, force: bool) -> Path:
     return out
 
 
+def _stem(name: str) -> str:
+    """A segment's run stem: its name without ``.mcap``, ``.recovered`` and ``.segK``."""
+    stem = name.removesuffix(".mcap").removesuffix(".recovered")
+    base, _, last = stem.rpartition(".seg")
+    return base if base and last.isdigit() else stem
+
+
 def continuation_path(point: ResumePoint) -> Path:
     """Where a continuation is written when ``--out`` is not given: beside the segment it
     continues, ``<run stem>.seg<N>.mcap`` (the stem without an earlier ``.segK`` or
     ``.recovered``)."""
-    stem = point.previous.name.removesuffix(".mcap")
-    for suffix in (".recovered",):
-        stem = stem.removesuffix(suffix)
-    base, _, last = stem.rpartition(".seg")
-    if base and last.isdigit():
-        stem = base
-    return point.previous.with_name(f"{stem}.seg{point.segment}.mcap")
+    return point.previous.with_name(f"{_stem(point.previous.name)}.seg{point.segment}.mcap")
+
+
+def last_continuation(path: str | Path) -> Path | None:
+    """The continuation ``acquire --resume path`` wrote beside it (no ``--out``): the
+    newest ``<stem>.segN.mcap`` whose run's segments include ``path`` or its salvaged
+    copy; None when there is none (the continuation never started)."""
+    from gyrolab.record.reader import segments
+
+    src = Path(path)
+    previous = {src.name, f"{_stem(src.name)}.recovered.mcap"}
+    found: list[tuple[float, Path]] = []
+    for f in src.parent.glob(f"{_stem(src.name)}.seg*.mcap"):
+        try:
+            earlier = {p.name for p in segments(f)[:-1]}
+        except Exception:  # a file that does not read is not the continuation
+            continue
+        if earlier & previous:
+            found.append((f.stat().st_mtime, f))
+    return max(found)[1] if found else None
