@@ -166,7 +166,7 @@ def mean_noise_dps(models: list[Any], calibration: Any) -> np.ndarray:
         s = calibration.axis(a).require_rate()
         y = streaming_compensate(m, s.t, s.values, pt_t, pt_c, which="chosen")
         res = allan_deviation(y, s.rate_hz, taus=np.array([WINDOW_S]), confidence=None)
-        out.append(float(res.adev[0]) if res.adev.size else float("nan"))
+        out.append(float(res.dev[0]) if res.dev.size else float("nan"))
     return np.asarray(out)
 
 

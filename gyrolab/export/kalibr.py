@@ -56,8 +56,8 @@ _TERMS = (("N", 1.0, "noise_density"), ("K", 3.0, "random_walk"))
 
 def _bound(res: Any, name: str) -> float:
     """The upper bound of term ``name`` over τ ≤ T/10 (module doc); NaN without such τ."""
-    usable = (res.taus <= 0.1 * res.duration_s) & (res.adev > 0)
-    t, a = res.taus[usable], res.adev[usable]
+    usable = (res.taus <= 0.1 * res.duration_s) & (res.dev > 0)
+    t, a = res.taus[usable], res.dev[usable]
     if t.size == 0:
         return float("nan")
     return float(np.min(a * np.sqrt(t) if name == "N" else a * np.sqrt(3.0 / t)))
@@ -109,7 +109,7 @@ def allan_densities(y: np.ndarray, rate_hz: float, scale: float = 1.0) -> dict[s
         out[key] = value * scale
         out[f"{key}_from"] = how
     out["allan_taus_s"] = res.taus.tolist()
-    out["allan_adev"] = res.adev.tolist()
+    out["allan_adev"] = res.dev.tolist()
     return out
 
 
