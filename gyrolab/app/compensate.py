@@ -34,6 +34,11 @@ def compensate(opts: CompensateOptions) -> int:
         # the single-run call's default (tests and benchmarks set it there)
         cfg, seed = resolve_config(opts.config, commands.DEFAULT_CONFIG, opts.seed)
         return compensate_units(opts, cfg, seed)
+    prior = None
+    if opts.prior is not None:
+        from gyrolab.app.prior import load_prior
+
+        prior = load_prior(opts.prior)
     summary = commands.compensate(
         run,
         opts.out,
@@ -45,6 +50,7 @@ def compensate(opts: CompensateOptions) -> int:
         force=opts.force,
         run_label=opts.run_label,
         validate_label=opts.validate_label,
+        prior=prior,
     )
     print(summary)
     total = time.perf_counter() - t_start
