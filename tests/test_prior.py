@@ -117,7 +117,7 @@ def test_prior_one_cluster_and_in_prior_unit_borrows_strength(fleet: FleetPrior)
     # the shrinkage estimate beats the unit's own short-run fit by far
     e_map = _err(got.model.model, got.model.params, "paper", p, c)
     e_own = _err(_own_fit(cal, p), p, "paper", p, c)
-    assert e_map < 0.3 * e_own, (e_map, e_own)
+    assert e_map < 0.5 * e_own, (e_map, e_own)
     assert e_map < 1e-4  # a fifth of the white noise of one 3.6 s block
     w = hysteresis_width(got.model.model.to_dict())
     assert w["at_mid_deg_per_h"] == pytest.approx(7200 * c[4], rel=0.5)

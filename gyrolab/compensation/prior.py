@@ -93,7 +93,7 @@ SILHOUETTE_MIN = 0.5
 P_OUT = 1e-3
 MAX_ORDER = 6
 #: φ grid of the MAP fit: the prior mean plus these multiples of its sd
-PHI_STEPS = (-2.0, -1.0, 0.0, 1.0, 2.0)
+PHI_STEPS = (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
 
 
 @dataclass(frozen=True)
@@ -417,14 +417,19 @@ def _map(A: np.ndarray, y: np.ndarray, s2: float, c: Cluster) -> tuple[np.ndarra
     return theta, float(r @ r / s2 + d @ P @ d)
 
 
-def _noise_scale(A: np.ndarray, y: np.ndarray, c: Cluster) -> float:
-    """s² = σ² n / n_eff of the residual of a first MAP fit at s² = its OLS residual."""
+def _noise_scale(A: np.ndarray, y: np.ndarray, c: Cluster, neff: bool = True) -> float:
+    """s² = σ² n / n_eff of the residual of a first MAP fit at s² = its OLS residual
+    (``neff=False``: σ², the residual taken as independent)."""
+
+    def inflate(r: np.ndarray) -> float:
+        return r.size / max(effective_samples(r), 1.0) if neff else 1.0
+
     theta = np.linalg.lstsq(A, y, rcond=None)[0]
     r = y - A @ theta
-    s2 = float(r @ r) / max(r.size - A.shape[1], 1) * r.size / max(effective_samples(r), 1.0)
+    s2 = float(r @ r) / max(r.size - A.shape[1], 1) * inflate(r)
     theta, _ = _map(A, y, s2, c)
     r = y - A @ theta
-    return float(r @ r) / r.size * r.size / max(effective_samples(r), 1.0)
+    return float(r @ r) / r.size * inflate(r)
 
 
 def membership(A: np.ndarray, y: np.ndarray, s2: float, prior: FleetPrior) -> Membership:
@@ -454,7 +459,7 @@ class PriorFit:
     log: dict[str, Any]
 
 
-def fit_map(cal: CausalCalibration, prior: FleetPrior) -> PriorFit:
+def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> PriorFit:
     """The MAP (shrinkage) fit of a unit's run towards the prior (module docstring);
     the causal model is a ``structured`` one on the reference basis, its CV RMSE and band
     measured by the same blocked CV as the selection's."""
@@ -462,11 +467,11 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior) -> PriorFit:
     b = prior.basis
     p0 = params_of(prior.clusters[0].phi_mean)
     A0 = b.design(_features(cal, p0))
-    s2_0 = _noise_scale(A0, y, prior.clusters[0])
+    s2_0 = _noise_scale(A0, y, prior.clusters[0], neff)
     mem = membership(A0, y, s2_0, prior)
     c = prior.clusters[mem.cluster]
     best: tuple[float, np.ndarray, np.ndarray, float] | None = None
-    for i in range(3):  # φ components one at a time, around the prior mean
+    for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
         phi_c = c.phi_mean.copy() if best is None else best[1].copy()
         for step in PHI_STEPS:
             phi = phi_c.copy()
