@@ -30,6 +30,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -85,6 +86,22 @@ def speed_run(out: Path, profile: str = "paper", speed: float | None = 300.0, se
     }
 
 
+def _cpu_s(pid: int) -> float | None:
+    """User + system CPU seconds of process ``pid`` so far (None: it is gone)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
 def units_run(
     out: Path, units: int = 8, profile: str = "paper", speed: float | None = 300.0, seed: int = 0
 ) -> dict[str, Any]:
@@ -95,11 +112,26 @@ def units_run(
     env = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.monotonic()
-    p = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
+    # The run engine's and the simulated bench's process (its child, when it has one):
+    # each one's CPU seconds, sampled from /proc until they end (the last sample counts).
+    per_process: dict[str, float] = {}
+    err: list[str] = []
+    drain = threading.Thread(target=lambda: err.append(proc.stderr.read()), daemon=True)
+    drain.start()
+    while proc.poll() is None:
+        per_process["run engine"] = _cpu_s(proc.pid) or per_process.get("run engine", 0.0)
+        for child in _children(proc.pid):
+            per_process["simulated bench"] = _cpu_s(child) or per_process.get(
+                "simulated bench", 0.0
+            )
+        time.sleep(0.5)
+    drain.join()
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if p.returncode != 0:
-        raise RuntimeError(f"acquire failed ({p.returncode}): {p.stderr[-2000:]}")
+    stderr = "".join(err)
+    if proc.returncode != 0:
+        raise RuntimeError(f"acquire failed ({proc.returncode}): {stderr[-2000:]}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     serials = list_units(out)
     shared = read_recording(out, topics=[TOPIC_EVENT, TOPIC_LOG, TOPIC_OVEN], unit=serials[0])
@@ -128,6 +160,12 @@ def units_run(
         "run_s": round(run_s, 1),
         "speedup": round(run_s / wall, 1),
         "cpu_s": round(cpu, 1),
+        # each process's CPU against the wall time the asked speed allows: below 1, the
+        # process needs less than a core to keep up
+        "cpu_s_per_process": {k: round(v, 1) for k, v in per_process.items()},
+        "cores_needed_at_asked_speed": {
+            k: round(v / (run_s / speed), 2) for k, v in per_process.items() if speed
+        },
         "cpu_s_per_unit_per_run_hour": round(cpu / len(serials) / (run_s / 3600.0), 2),
         "gaps_total": sum(u["index_gaps"] for u in per_unit),
         "gap_logs": sum(1 for m in shared.logs if m.get("kind") == "gap"),
@@ -136,7 +174,7 @@ def units_run(
         ],
         "file_mb": round(out.stat().st_size / 1e6, 1),
         "per_unit": per_unit,
-        "stderr_tail": p.stderr.strip().splitlines()[-1:],
+        "stderr_tail": stderr.strip().splitlines()[-1:],
     }
 
 

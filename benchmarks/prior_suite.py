@@ -121,7 +121,7 @@ def truth(family: str, u: int) -> dict[str, Any]:
 
 
 def calibration(run: _Run):
-    from gyrolab.compensation.causal import CausalCalibration
+    from gyrolab.compensation.drift_model import CausalCalibration
     from gyrolab.numerics.averaging import block_average
 
     tb, xb, _ = block_average(run.t, run.raw, BLOCK_S, 1.0 / RATE_HZ)
@@ -141,9 +141,9 @@ def _pair(cm) -> dict[str, Any]:  # noqa: ANN001
 
 
 def _entry(name: str, d: dict[str, Any]):  # noqa: ANN202
-    from gyrolab.compensation.causal import StructuredModel
     from gyrolab.compensation.causal_features import CausalParams
     from gyrolab.compensation.prior import UnitEntry
+    from gyrolab.compensation.structured import StructuredModel
 
     return UnitEntry(
         name, CausalParams.from_dict(d["params"]), StructuredModel.from_dict(d["structured"])

@@ -293,7 +293,7 @@ def rotation_check(rate_hz: float, quick: bool) -> dict[str, dict[str, float]]:
     prep = prepare_arrays("cal", cal["t"], cal["raw"], per, cal["pt_t"], cal["pt_c"], cfg)
     cm, _ = fit(prep, cfg, seed=0)
     t, pt_t, pt_c = static["t"], static["pt_t"], static["pt_c"]
-    comp = StreamingCompensator(cm, pt_t, pt_c, "causal")
+    comp = StreamingCompensator(cm.causal, pt_t, pt_c)
 
     def outputs(x: np.ndarray) -> dict[str, np.ndarray]:
         run = prepare_arrays("static", t, x, per, pt_t, pt_c, cfg)

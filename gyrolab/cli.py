@@ -128,8 +128,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     a = cmd("acquire", "run an oven profile on a bench (real or simulated) and record it")
-    a.add_argument("--bench", required=True, help="sim | BENCH.toml")
-    a.add_argument("--out", required=True, help="output RUN.mcap")
+    a.add_argument("--bench", help="sim | BENCH.toml (with --resume: the run's sim by default)")
+    a.add_argument(
+        "--out", help="output RUN.mcap (with --resume: default <run>.seg<N>.mcap beside it)"
+    )
+    a.add_argument(
+        "--resume",
+        metavar="RUN.mcap",
+        help="continue this interrupted run (its last segment, or the file a kill left) from "
+        "its last completed step, in a new segment (docs/reliability.md)",
+    )
     a.add_argument("--profile", default=None, help="paper | short | FILE.toml (default: bench's)")
     a.add_argument(
         "--speed",
@@ -441,6 +449,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gyrolab: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (`gyrolab runs list --json | head`): stop quietly, as a
+        # shell tool does; stdout to /dev/null so the interpreter's flush at exit is silent
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -146,18 +146,24 @@ def _is_adc(name: str) -> bool:
 
 
 def _summary(path: Path) -> dict[str, int]:
-    """Message count per topic, from the summary section."""
+    """Message count per topic, from the summary sections of the run's files (a resumed
+    run's segments, gyrolab.record.reader.segments)."""
     from mcap.reader import make_reader
 
-    with open(path, "rb") as fh:
-        try:
-            s = make_reader(fh).get_summary()
-        except Exception as e:
-            raise InputError(path, f"damaged MCAP ({e}); try `gyrolab recover`") from None
-    if s is None or s.statistics is None:
-        raise InputError(path, "MCAP without a summary section; try `gyrolab recover`")
-    topics = {c.id: c.topic for c in s.channels.values()}
-    counts = {topics[c]: int(n) for c, n in s.statistics.channel_message_counts.items()}
+    from gyrolab.record.reader import segments
+
+    counts: dict[str, int] = {}
+    for p in segments(path):
+        with open(p, "rb") as fh:
+            try:
+                s = make_reader(fh).get_summary()
+            except Exception as e:
+                raise InputError(p, f"damaged MCAP ({e}); try `gyrolab recover`") from None
+        if s is None or s.statistics is None:
+            raise InputError(p, "MCAP without a summary section; try `gyrolab recover`")
+        topics = {c.id: c.topic for c in s.channels.values()}
+        for c, n in s.statistics.channel_message_counts.items():
+            counts[topics[c]] = counts.get(topics[c], 0) + int(n)
     return counts
 
 

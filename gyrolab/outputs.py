@@ -4,7 +4,8 @@ The one owner of output paths (docs/cli.md, "Outputs"). A reader never sees a
 half-written file, an interrupted command leaves nothing behind, and:
 
 * an output is never one of the command's inputs: not the same file (same inode, or the
-  same resolved path through links), and a directory output never contains an input;
+  same resolved path through links), a directory output never contains an input, and an
+  output is never inside an input directory (a model directory's files are its parts);
 * an existing output is replaced only with ``force``; an existing *directory* is replaced
   only if gyrolab wrote it (it holds the marker file :data:`MARKER`, naming the command
   that wrote it) — ``--force`` never deletes a directory of someone else's files;
@@ -58,7 +59,8 @@ def command_inputs(paths: Iterable[PathLike]) -> Iterator[None]:
 
 
 def _is_input(out: Path, inputs: Iterable[PathLike | None]) -> str | None:
-    """The first input that ``out`` is (same inode or resolved path) or contains."""
+    """The first input that ``out`` is (same inode or resolved path), contains, or lies
+    inside (an input directory protects everything in it)."""
     out_r = out.resolve()
     for inp in inputs:
         if inp is None:
@@ -70,6 +72,8 @@ def _is_input(out: Path, inputs: Iterable[PathLike | None]) -> str | None:
         if out.exists() and os.path.samefile(out, ip):
             return str(inp)
         if ip_r == out_r or out_r in ip_r.parents:
+            return str(inp)
+        if ip.is_dir() and ip_r in out_r.parents:
             return str(inp)
     return None
 
@@ -91,7 +95,13 @@ def check_output(
     p = Path(path)
     inp = _is_input(p, [*inputs, *_COMMAND_INPUTS])
     if inp is not None:
-        what = "is" if Path(inp).resolve() == p.resolve() or not p.is_dir() else "contains"
+        ip_r, p_r = Path(inp).resolve(), p.resolve()
+        if ip_r in p_r.parents:
+            what = "is inside"
+        elif ip_r == p_r or not p.is_dir():
+            what = "is"
+        else:
+            what = "contains"
         raise InputError(p, f"{what} one of this command's inputs ({inp}); choose another --out")
     if p.exists() or p.is_symlink():
         if not force:

@@ -54,9 +54,23 @@ def test_short_profile_completes_with_every_transition_recorded(short_run) -> No
     assert names[-2:] == ["run_ended", "safe_state"]
     starts = [e["t"] for e in rec.events if e["event"] == "step_started"]
     # Steps start on the run clock, on the 240 s schedule exactly, however late the busy
-    # engine noticed the boundary (docs/reliability.md, "Timing").
-    assert starts == pytest.approx([240.0 * k for k in range(12)], abs=1e-6)
-    assert [e["t"] for e in rec.events if e["event"] == "run_ended"] == [pytest.approx(2880.0)]
+    # engine noticed the boundary (docs/reliability.md, "Timing") — later only by the
+    # time the run was held before them: a simulated bench starved of the CPU for a wall
+    # second (a loaded machine) holds the run as a stalled stream would
+    # (docs/reliability.md, "Suspenders"); the held step goes on, no re-soak.
+    held = [0.0] * 12
+    for sus, back in zip(
+        [e for e in rec.events if e["event"] == "suspended"],
+        [e for e in rec.events if e["event"] == "resumed"],
+        strict=True,
+    ):
+        assert "goes on" in back["detail"]
+        held[sus["step"]] += back["t"] - sus["t"]
+    schedule = np.cumsum([0.0] + [240.0 + h for h in held])
+    assert starts == pytest.approx(list(schedule[:12]), abs=1e-6)
+    assert [e["t"] for e in rec.events if e["event"] == "run_ended"] == [
+        pytest.approx(schedule[12])
+    ]
     assert "verified" in rec.events[-1]["detail"] and rec.oven_mode[-1] == "safe"
     assert rec.oven_setpoint_c[-1] == 25.0
     # Every setpoint of the profile was written and read back by the oven driver at the
@@ -64,6 +78,8 @@ def test_short_profile_completes_with_every_transition_recorded(short_run) -> No
     # machine) is seconds at 200x, up to 18 s seen with two CPU hogs. Each is verified
     # well inside the first quarter of its step, and typically within a few seconds.
     cmds = [m for m in rec.logs if m.get("kind") == "command"]
+    # (a held step's setpoint is commanded again when the run resumes)
+    cmds = [m for i, m in enumerate(cmds) if i == 0 or m["data"] != cmds[i - 1]["data"]]
     verified = [m["data"]["setpoint_c"] for m in cmds]
     assert verified == [25.0, 60.0, 50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0, -30.0, -40.0]
     lag = np.array([m["t"] for m in cmds]) - np.array(starts)
@@ -99,7 +115,7 @@ def test_short_run_metadata(short_run) -> None:
     rec = read_recording(short_run[0])
     run, bench = rec.run, rec.bench
     assert run["source"] == "acquire" and run["operator"] == "simulated"
-    assert run["unit_serial"] == "SIM-0" and run["profile"]["name"] == "short"
+    assert run["unit_serial"] == "SIM-GYRO-0001" and run["profile"]["name"] == "short"
     assert run["speed"] == 200
     assert "34401A" in bench["multimeter"]["idn"]
     assert bench["multimeter"]["resource"].startswith("ASRL")
@@ -232,7 +248,9 @@ def test_fault_run_completes_logs_every_fault_and_never_alters_a_sample(tmp_path
     # The Modbus bursts: the oven driver's retries absorb some; what got through is
     # logged as a fault and a recovery, and the oven's setpoints were still all verified.
     assert by_kind("oven", "fault") and by_kind("oven", "recovery")
-    assert [m["data"]["setpoint_c"] for m in by_kind("oven", "command")] == [25.0, 35.0, 30.0]
+    # (each step's setpoint once, and again when a hold — the outage — ended)
+    sps = [m["data"]["setpoint_c"] for m in by_kind("oven", "command")]
+    assert [c for i, c in enumerate(sps) if i == 0 or c != sps[i - 1]] == [25.0, 35.0, 30.0]
     # ADC corruption: damaged frames rejected and counted; each loss is an explicit gap.
     assert res.gaps > 0 and by_kind("adc", "corruption")
     gap_logs = by_kind("adc", "gap")
@@ -276,10 +294,13 @@ def test_lost_multimeter_ends_the_run_safely(tmp_path: Path) -> None:
     prof = _profile(tmp_path, [(25, 30), (40, 600)])
     faults = FaultPlan(events=[FaultEvent("outage", t_s=40.0, duration_s=10_000.0)])
     res, rec, bench = _run_in_process(tmp_path, prof, speed=50.0, faults=faults)
-    assert res.outcome == "fault" and "lost communication with multimeter" in res.reason
+    # the run is held while the multimeter says nothing (a suspender) and ends when that
+    # has lasted [suspend] temperature_lost_s (docs/reliability.md, "Suspenders")
+    assert res.outcome == "fault" and "temperature lost for" in res.reason
+    assert "(> temperature_lost_s 60 s)" in res.reason and "34401A" in res.reason
     assert res.safe_state_ok and bench.physics.setpoint_c == 25.0
     assert rec.events[-1]["event"] == "safe_state"
-    assert 95.0 < rec.events[-2]["t"] < 200.0  # 60 s after the last reading, plus timeouts
+    assert 95.0 < rec.events[-2]["t"] < 200.0  # 65 s after the last reading, plus timeouts
 
 
 def test_sigint_ends_cleanly_with_the_oven_safe_and_exit_130(tmp_path: Path) -> None:
@@ -400,7 +421,10 @@ def test_simulate_and_acquire_write_the_same_documented_metadata(short_run, simu
     acq, sim = _raw_metadata(short_run[0]), _raw_metadata(simulated)
     for record in ("run", "bench"):
         keys, layout = recording_metadata_keys(record)
-        assert set(acq[record]) == set(sim[record]) == keys - layout, record
+        assert set(sim[record]) == keys - layout, record
+        # an acquisition also says what only it knows (its run_id and segment, its bench's
+        # suspenders): documented keys absent from other files
+        assert keys - layout <= set(acq[record]) <= keys, record
     assert (acq["run"]["source"], sim["run"]["source"]) == ("acquire", "simulate")
     for meta in (acq, sim):
         run, bench = meta["run"], meta["bench"]

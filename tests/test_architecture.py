@@ -262,3 +262,68 @@ def test_the_checker_sees_function_level_and_attribute_imports() -> None:
         "gyrolab.sim.effects._play",
         "gyrolab.record.reader._x",
     }
+
+
+# ------------------------------------------------- one owner of the model directory
+
+MODEL_DIR_OWNER = "gyrolab.compensation.model_dir"
+#: The files a model directory consists of (gyrolab/compensation/model_dir.py).
+MODEL_DIR_FILES = (
+    "model.json",
+    "arrays.npz",
+    "metrics.json",
+    "firmware.json",
+    "results.json",
+    "results.npz",
+)
+MODEL_DIR_NAMES = ("MODEL_JSON", "ARRAYS_NPZ", "METRICS_JSON", "FIRMWARE_JSON", "RESULTS_JSON")
+#: A report directory has a metrics.json of its own (docs/report.md): written by the report,
+#: read by the catalogue's indexing of reports.
+OWN_FILES_ELSEWHERE = {
+    ("gyrolab.report.commands", "metrics.json"),
+    ("gyrolab.app.index_files", "metrics.json"),
+    ("gyrolab.app.rebuild", "metrics.json"),
+    ("gyrolab.app.register", "metrics.json"),
+}
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    out = set()
+    for n in ast.walk(tree):
+        body = getattr(n, "body", None)
+        if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
+def model_dir_file_uses(module: str, tree: ast.AST) -> Iterator[str]:
+    """Where ``module`` names a model directory's file: a string that is the file's name
+    or a path ending in it (``".pt"``: a state dict's suffix), or the owner's constant
+    for it (``ModelDir.MODEL_JSON``)."""
+    docs = _docstrings(tree)
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs:
+            for f in MODEL_DIR_FILES:
+                named = n.value == f or n.value.endswith("/" + f)
+                if named and (module, f) not in OWN_FILES_ELSEWHERE:
+                    yield f"{module}:{n.lineno} names {f}"
+            if n.value == ".pt":
+                yield f"{module}:{n.lineno} names the .pt state dicts"
+        elif isinstance(n, ast.Attribute) and n.attr in MODEL_DIR_NAMES:
+            yield f"{module}:{n.lineno} uses {n.attr}"
+
+
+def test_only_the_model_directory_owner_opens_its_files() -> None:
+    """Issue 28: one owner of the model directory — every other module goes through
+    ``ModelDir`` (guards, report/fleet, export, apply, compensate)."""
+    bad = [
+        u for m, tree in TREES.items() if m != MODEL_DIR_OWNER for u in model_dir_file_uses(m, tree)
+    ]
+    assert not bad, "model directory files named outside its owner:\n" + "\n".join(bad)
+    src = (
+        'def f(d):\n    """model.json"""\n'
+        '    return d / "model.json", d.ARRAYS_NPZ, "x/metrics.json"\n'
+    )
+    found = list(model_dir_file_uses("gyrolab.report.x", ast.parse(src)))
+    assert len(found) == 3, found  # the docstring is not a use

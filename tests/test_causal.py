@@ -194,7 +194,7 @@ def test_firmware_loop_equals_offline_model_output() -> None:
 def test_effective_samples_of_correlated_residuals() -> None:
     from scipy.signal import lfilter
 
-    from gyrolab.compensation.causal import effective_samples
+    from gyrolab.compensation.structured import effective_samples
 
     rng = np.random.default_rng(4)
     w = rng.standard_normal(50_000)
@@ -204,12 +204,8 @@ def test_effective_samples_of_correlated_residuals() -> None:
 
 
 def test_no_issue_23_term_is_kept_for_a_unit_without_it_and_the_band_round_trips() -> None:
-    from gyrolab.compensation.causal import (
-        EXTRA_TERMS,
-        TERMS,
-        CausalDriftModel,
-        fit_causal,
-    )
+    from gyrolab.compensation.causal import causal_from_state, fit_causal
+    from gyrolab.compensation.structured import EXTRA_TERMS, TERMS
 
     cal = _staircase_run(tau_die=600.0, hyst=1e-3, seed=1)
     m = fit_causal(cal, families=("poly", "structured"))
@@ -223,6 +219,6 @@ def test_no_issue_23_term_is_kept_for_a_unit_without_it_and_the_band_round_trips
     assert np.all(h > b.half_width)
     assert np.all(b.half_width_at(t, t, hot + 500.0) <= max(b.max_half_width, b.half_width))
     meta = m.describe()
-    back = CausalDriftModel.from_state(meta, {}, "causal.")
+    back = causal_from_state(meta, {}, "causal.")
     assert back.band == b
     np.testing.assert_array_equal(back.reading_drift(t, cal.pt_c), m.reading_drift(t, cal.pt_c))

@@ -6,6 +6,7 @@ which heavy packages ``sys.modules`` holds."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -75,3 +76,20 @@ def test_export_help_lists_the_options_one_format_requires(
     text = " ".join(capsys.readouterr().out.split())
     assert "--device-id ID required with --format px4" in text
     assert "--run RUN required with --format kalibr" in text
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(tmp_path: Path) -> None:
+    """``gyrolab ... | head``: the pipe closed before the output was written is exit 141
+    (a shell's SIGPIPE code) with nothing on stderr, not a BrokenPipeError traceback."""
+    p = subprocess.Popen(
+        # unbuffered, so that the listing is written (and meets the pipe) inside main
+        [sys.executable, "-u", "-m", "gyrolab", "runs", "list", "--json"],
+        env={**os.environ, "GYROLAB_CATALOGUE": str(tmp_path / "c.sqlite")},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()  # before the interpreter has started: every write meets a closed pipe
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 141
+    assert err == ""

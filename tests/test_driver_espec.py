@@ -8,9 +8,9 @@ import pytest
 
 from gyrolab.instruments import registry
 from gyrolab.instruments.drivers.espec import EspecChamber, EspecConfig
-from gyrolab.instruments.roles import InstrumentError, InstrumentFault, LimitError, is_transient
+from gyrolab.instruments.roles import InstrumentError, LimitError, is_transient
 from gyrolab.instruments.testing import ExpectedVisa, expected_protocol
-from gyrolab.sim.bench import SimBench
+from gyrolab.sim.bench import FaultEvent, SimBench
 
 CONNECT = [
     ("ROM?", "P300 ROM Ver1.20"),
@@ -82,11 +82,11 @@ def test_refusal_alarm_and_standby() -> None:
     with pytest.raises(InstrumentError, match="refused: CMD ERR"):
         with expected_protocol(_chamber, [("MODE?", "NA:CMD ERR")]) as ch:
             _ = ch.mode
-    with pytest.raises(InstrumentFault, match="1 active alarm"):
-        with expected_protocol(
-            _chamber, [("TEMP?", "23.4,25.0,200.0,-75.0"), ("MON?", "23.4,,CONSTANT,1")]
-        ) as ch:
-            ch.read()
+    # An alarm is reported with the reading; the run engine decides (its suspenders).
+    with expected_protocol(
+        _chamber, [("TEMP?", "23.4,25.0,200.0,-75.0"), ("MON?", "23.4,,CONSTANT,1")]
+    ) as ch:
+        assert ch.read() == (25.0, 23.4, "ESPEC controller reports 1 active alarm(s) (MON?)")
     with expected_protocol(
         _chamber, [("MODE, STANDBY", "OK: MODE, STANDBY"), ("MODE?", "STANDBY")]
     ) as ch:
@@ -103,8 +103,14 @@ def test_end_to_end_over_tcp_against_the_simulated_controller() -> None:
         try:
             assert ch.set_setpoint(42.5) == 42.5
             assert bench.espec.mode == "CONSTANT" and bench.physics.setpoint_c == 42.5
-            sp, pv = ch.read()
-            assert sp == 42.5 and abs(pv - 25.0) < 5.0
+            sp, pv, alarm = ch.read()
+            assert sp == 42.5 and abs(pv - 25.0) < 5.0 and alarm == ""
+            bench.inject(FaultEvent("chamber_alarm", duration_s=1e9))
+            assert ch.read().alarm and bench.espec.mode == "STANDBY"
+            assert bench.physics.setpoint_c == 25.0  # stopped: drifts to ambient
+            bench.espec.set_alarm(False)
+            assert ch.read().alarm == "" and bench.espec.mode == "STANDBY"
+            assert ch.set_setpoint(42.5) == 42.5 and bench.espec.mode == "CONSTANT"
             with pytest.raises(LimitError):
                 ch.set_setpoint(90.0)
             assert not any("S90" in c for c in bench.espec.log)

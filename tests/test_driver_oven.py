@@ -410,6 +410,44 @@ def test_running_profile_refused_at_connect_and_a_fault_mid_run() -> None:
         ch.read()
 
 
+def test_alarm_input_read_as_espec_reads_it() -> None:
+    """``alarm_input = 2``: connect reads digital input 2's active condition (register
+    1063), each reading its state (register 213); the chamber is in alarm while they agree
+    (ChamberConnectLibrary ``watlowf4.py``)."""
+    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber, WatlowF4Config
+
+    connect = [(READ_DP, DP_1), (READ_UNITS, UNITS_C), (READ_SP, SP_M40), (READ_PV, PV_25_3)]
+    reading = [(READ_SP, SP_M40), (READ_PV, PV_25_3), (_rd(200), _val(0))]
+    fake = ExpectedSerial(
+        [*connect, (_rd(200), _val(0)), (_rd(1063), _val(1))]
+        + [*reading, (_rd(213), _val(0))]
+        + [*reading, (_rd(213), _val(1))]
+    )
+    ch = WatlowF4Chamber(fake, config=WatlowF4Config(alarm_input=2))
+    assert ch.connect()["digital_input_2_condition"] == 1
+    assert ch.read().alarm == ""
+    r = ch.read()
+    fake.assert_done()
+    assert (r.setpoint_c, r.process_value_c) == (-40.0, 25.3)
+    assert r.alarm == "limit alarm: digital input 2 active (register 213 = 1)"
+
+
+def test_simulated_f4_alarm_stops_the_chamber_until_it_clears() -> None:
+    from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber, WatlowF4Config
+
+    with SimBench(speed=200.0, oven_alarm_input=1, ambient_c=22.0) as bench:
+        bench.inject(FaultEvent("disconnect", duration_s=1e9))
+        with WatlowF4Chamber(bench.oven_port, config=WatlowF4Config(alarm_input=1)) as oven:
+            oven.connect()
+            assert oven.set_setpoint(50.0) == 50.0 and oven.read().alarm == ""
+            bench.inject(FaultEvent("chamber_alarm", duration_s=1e9))
+            assert "digital input 1 active" in oven.read().alarm
+            assert bench.physics.setpoint_c == 22.0  # heater and refrigerator off
+            assert oven.setpoint_c == 50.0  # the controller keeps its setpoint
+            bench.oven.set_alarm(False)
+            assert oven.read().alarm == "" and bench.physics.setpoint_c == 50.0
+
+
 def test_simulated_f4_control_event_switches_the_chamber() -> None:
     from gyrolab.instruments.drivers.watlowf4 import WatlowF4Chamber, WatlowF4Config
 

@@ -19,18 +19,18 @@ from test_pipeline import SMALL
 
 from gyrolab.cli import main
 from gyrolab.compensation.apply import StreamingCompensator, streaming_compensate
-from gyrolab.compensation.axes import axis_dirs, load_poly3
 from gyrolab.compensation.evaluate import series_metrics
 from gyrolab.compensation.firmware import DEG2RAD
-from gyrolab.compensation.model_dir import load_model
+from gyrolab.compensation.model_dir import ModelDir, load_model
 from gyrolab.compensation.prepare import causal_temperature
+from gyrolab.compensation.regressors import evaluate_inputs
 from gyrolab.export.params import (
     ardupilot_correction,
     px4_correction,
     read_ardupilot_parm,
     read_px4_params,
 )
-from gyrolab.export.spec import evaluate_spec, export_spec
+from gyrolab.export.spec import export_spec
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.reader import read_recording
@@ -110,7 +110,11 @@ def test_three_axis_recording_and_model_dir(unit: dict[str, Path]) -> None:
     assert not np.allclose(rec.rate.values[:, 0], rec.rate.values[:, 1])
     head = json.loads((unit["model"] / "model.json").read_text())
     assert head["axes"] == ["x", "y", "z"]
-    assert [p.name for _a, p in axis_dirs(unit["model"])] == ["axis_x", "axis_y", "axis_z"]
+    assert [p.path.name for _a, p in ModelDir(unit["model"]).axes()] == [
+        "axis_x",
+        "axis_y",
+        "axis_z",
+    ]
     m = json.loads((unit["model"] / "metrics.json").read_text())
     assert m["held_out"] is True and set(m["axes"]) == {"x", "y", "z"}
     for a in "xyz":
@@ -138,11 +142,33 @@ def test_apply_three_axes(unit: dict[str, Path]) -> None:
     rec = read_recording(unit["val"])
     assert got.rate.values.shape == rec.rate.values.shape == (115200, 3)
     assert got.metadata["compensation"]["axes"] == 3
-    for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
+    for a, (_n, d) in enumerate(ModelDir(unit["model"]).axes()):
+        # the headline: the causal model, as on one axis and in the C export (issue 24)
         want = streaming_compensate(
-            load_model(str(d)), rec.rate.t, rec.rate.values[:, a], rec.pt100_t, rec.pt100_c
+            d.load(), rec.rate.t, rec.rate.values[:, a], rec.pt100_t, rec.pt100_c, "chosen"
         )
         np.testing.assert_array_equal(got.rate.values[:, a], want.astype(np.float32))
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+def test_apply_three_axes_runs_the_model_the_c_export_runs(unit: dict[str, Path]) -> None:
+    """Issue 24: on three axes as on one (test_model_dir), /gyro/rate of `apply` is raw −
+    the drift the C export (default kind) computes, within float32."""
+    out = unit["dir"] / "applied_c.mcap"
+    assert main(["apply", str(unit["model"]), str(unit["val"]), "--out", str(out)]) == 0
+    c = unit["dir"] / "chosen.c"
+    assert main(["export", str(unit["model"]), "--format", "c", "--out", str(c)]) == 0
+    rec = read_recording(unit["val"])
+    tmp = unit["dir"] / "cbuild_apply"
+    tmp.mkdir()
+    ok, drift_c = run_c(tmp, c, rec, 3)
+    assert ok.all()
+    raw = rec.rate.values.astype(float)
+    d_apply = raw - read_recording(out).rate.values.astype(float)
+    ulp = 2 * np.spacing(np.float32(np.abs(raw).max()))
+    for a in range(3):
+        err = np.abs(d_apply[:, a] - drift_c[:, a])
+        assert err.max() <= 1e-5 * np.abs(d_apply[:, a]).max() + ulp, a
 
 
 def test_three_axis_report_shows_every_axis(unit: dict[str, Path]) -> None:
@@ -193,7 +219,7 @@ def test_px4_params_golden_and_round_trip(unit: dict[str, Path]) -> None:
     assert all(v[0] == 1 and v[1] == 1 for v in p.values())
     assert p["TC_G1_ID"][2:] == (2490378, 6) and p["TC_G_ENABLE"][2:] == (1, 6)
     assert {p[n][3] for n in names - {"TC_G1_ID", "TC_G_ENABLE"}} == {9}
-    polys = [load_poly3(d) for _a, d in axis_dirs(unit["model"])]
+    polys = [d.require_firmware() for _a, d in ModelDir(unit["model"]).axes()]
     lo, hi = min(q.t_min for q in polys), max(q.t_max for q in polys)
     assert p["TC_G1_TMIN"][2] == np.float32(lo) and p["TC_G1_TMAX"][2] == np.float32(hi)
     assert p["TC_G1_TREF"][2] == np.float32(0.5 * (lo + hi))
@@ -239,7 +265,7 @@ def test_ardupilot_parm_golden_and_round_trip(unit: dict[str, Path]) -> None:
     names |= {f"INS_TCAL1_GYR{k}_{a}" for k in (1, 2, 3) for a in "XYZ"}
     names |= {f"INS_GYROFFS_{a}" for a in "XYZ"}
     assert set(p) == names and p["INS_TCAL1_ENABLE"] == 1
-    polys = [load_poly3(d) for _a, d in axis_dirs(unit["model"])]
+    polys = [d.require_firmware() for _a, d in ModelDir(unit["model"]).axes()]
     lo, hi = min(q.t_min for q in polys), max(q.t_max for q in polys)
     assert p["INS_GYR1_CALTEMP"] == np.float32(min(max(35.0, lo), hi))
     for a, q in zip("XYZ", polys, strict=True):  # x = T - 35, no constant, x 1e6, rad/s
@@ -268,21 +294,23 @@ def test_json_schema_is_the_fitted_model(unit: dict[str, Path]) -> None:
     assert doc["units"] == {"rate": "deg/s", "temperature": "degC", "time": "s"}
     assert [a["axis"] for a in doc["axes"]] == ["x", "y", "z"]
     T = np.linspace(0.0, 60.0, 241)[:, None]  # inside and far outside the calibrated range
-    for ax, (_a, d) in zip(doc["axes"], axis_dirs(unit["model"]), strict=True):
+    for ax, (_a, d) in zip(doc["axes"], ModelDir(unit["model"]).axes(), strict=True):
         mdl = ax["model"]
         assert mdl["kind"] == "mlp" and mdl["inputs"] == ["T"]
         assert np.asarray(mdl["W"]).shape == (1, mdl["hidden"])
-        want = load_model(str(d)).drift.predict(T)
-        np.testing.assert_allclose(evaluate_spec(mdl, T), want, rtol=1e-12, atol=1e-15)
+        want = d.load().drift.predict(T)
+        np.testing.assert_allclose(evaluate_inputs(mdl, T), want, rtol=1e-12, atol=1e-15)
     for kind in ("poly", "poly3"):
         for ax, (_a, d) in zip(
-            export_spec(unit["model"], kind)["axes"], axis_dirs(unit["model"]), strict=True
+            export_spec(unit["model"], kind)["axes"], ModelDir(unit["model"]).axes(), strict=True
         ):
-            m = load_model(str(d))
+            m = d.load()
             want = (
-                m.baselines["poly"].predict(T) if kind == "poly" else load_poly3(d).predict(T[:, 0])
+                m.baselines["poly"].predict(T)
+                if kind == "poly"
+                else d.require_firmware().predict(T[:, 0])
             )
-            np.testing.assert_allclose(evaluate_spec(ax["model"], T), want, rtol=1e-12)
+            np.testing.assert_allclose(evaluate_inputs(ax["model"], T), want, rtol=1e-12)
 
 
 # ---------------------------------------------------------------------------- C
@@ -370,9 +398,9 @@ def test_c_export_matches_python_over_a_whole_profile(unit: dict[str, Path]) -> 
     tmp.mkdir()
     ok, drift_c = run_c(tmp, out, rec, 3)
     assert ok.all() and drift_c.shape[0] >= 100_000
-    for a, (name, d) in enumerate(axis_dirs(unit["model"])):
-        model = load_model(str(d))
-        py = StreamingCompensator(model, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
+    for a, (name, d) in enumerate(ModelDir(unit["model"]).axes()):
+        model = d.load()
+        py = StreamingCompensator(model.drift, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
         err = np.abs(drift_c[:, a] - py)
         scale = np.abs(py).max()
         assert err.max() <= 1e-5 * scale  # relative to the drift's full scale
@@ -408,7 +436,7 @@ def test_c_export_other_kinds(unit: dict[str, Path], kind: str) -> None:
     spec = export_spec(unit["model"], kind)
     T = causal_temperature(rec.rate.t, rec.pt100_t, rec.pt100_c)
     for a, ax in enumerate(spec["axes"]):
-        py = evaluate_spec(ax["model"], T[:, None])
+        py = evaluate_inputs(ax["model"], T[:, None])
         assert np.abs(drift_c[:, a] - py).max() <= 1e-5 * np.abs(py).max()
 
 
@@ -442,9 +470,9 @@ def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
     assert y["update_rate"] == RATE_HZ and y["rostopic"] == "/imu0"
     rec = read_recording(unit["val"])
     nds = []
-    for a, (_n, d) in enumerate(axis_dirs(unit["model"])):
+    for a, (_n, d) in enumerate(ModelDir(unit["model"]).axes()):
         s = rec.axis(a).rate
-        comp = streaming_compensate(load_model(str(d)), s.t, s.values, rec.pt100_t, rec.pt100_c)
+        comp = streaming_compensate(d.load(), s.t, s.values, rec.pt100_t, rec.pt100_c)
         nds.append(noise_terms(allan_deviation(comp, RATE_HZ, confidence=None)).N)
     # continuous-time density = Allan N (deg/s * sqrt(s)) in rad/s/sqrt(Hz), largest axis
     assert y["gyroscope_noise_density"] == pytest.approx(max(nds) * math.pi / 180, rel=1e-6)
@@ -483,8 +511,8 @@ def test_c_export_with_dtdt_state(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     ok, drift_c = run_c(tmp_path / "b", out, rec, 1)
     assert ok.all() and drift_c.shape[0] >= 100_000
     model = load_model(str(tmp_path / "m"))
-    assert model.config.use_dtdt and model.drift.n_in == 2
-    py = StreamingCompensator(model, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
+    assert model.config.use_dtdt and model.drift.regressor.n_in == 2
+    py = StreamingCompensator(model.drift, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
     err = np.abs(drift_c[:, 0] - py)
     scale = np.abs(py).max()
     assert err.max() <= 1e-5 * scale

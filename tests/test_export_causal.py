@@ -18,10 +18,10 @@ from test_pipeline import SMALL
 
 from gyrolab.cli import main
 from gyrolab.compensation.apply import StreamingCompensator
-from gyrolab.compensation.axes import axis_dirs
+from gyrolab.compensation.causal_models import evaluate_causal
 from gyrolab.compensation.evaluate import series_metrics
-from gyrolab.compensation.model_dir import load_model
-from gyrolab.export.spec import evaluate_causal, export_spec
+from gyrolab.compensation.model_dir import ModelDir
+from gyrolab.export.spec import export_spec
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.reader import read_recording
@@ -78,8 +78,8 @@ def test_causal_model_exported_to_c_and_json(
     (tmp_path / "b").mkdir()
     ok, drift_c = run_c(tmp_path / "b", out, rec, 3)
     assert ok.all() and drift_c.shape[0] >= 100_000
-    for a, (name, d) in enumerate(axis_dirs(model)):
-        cm = load_model(str(d))
+    for a, (name, d) in enumerate(ModelDir(model).axes()):
+        cm = d.load()
         assert abs(cm.causal.params.tau_s - 300.0) < 60.0  # the die lag is found
         ref = cm.causal.reading_drift(rec.pt100_t, rec.pt100_c)
         np.testing.assert_allclose(
@@ -88,7 +88,7 @@ def test_causal_model_exported_to_c_and_json(
             rtol=0,
             atol=1e-15,
         )
-        py = StreamingCompensator(cm, rec.pt100_t, rec.pt100_c, "causal").drift(rec.rate.t)
+        py = StreamingCompensator(cm.causal, rec.pt100_t, rec.pt100_c).drift(rec.rate.t)
         err = np.abs(drift_c[:, a] - py)
         scale = np.abs(py).max()
         assert err.max() <= 1e-5 * scale
@@ -103,14 +103,14 @@ def test_causal_model_exported_to_c_and_json(
     # issue 23's terms (heating-only rate, R|R|, hysteresis amplitude across T), added to
     # the fitted models: the JSON evaluator equals the Python model, and the compiled C
     # follows it to float32 precision
-    from gyrolab.compensation.causal import CausalDriftModel
+    from gyrolab.compensation.causal_models import StructuredCausalModel
     from gyrolab.export.c_code import generate
 
     extra = {"kp": 2.0e-1, "k2": -40.0, "hT": 1.5e-3}
-    for a, (_, d) in enumerate(axis_dirs(model)):
-        cm = load_model(str(d)).causal
+    for a, (_, d) in enumerate(ModelDir(model).axes()):
+        cm = d.load().causal
         inner = replace(cm.model, **extra)
-        py = CausalDriftModel(cm.family, cm.params, inner).reading_drift(
+        py = StructuredCausalModel(cm.family, cm.params, inner).reading_drift(
             rec.pt100_t, rec.pt100_c
         )
         spec["axes"][a]["model"]["model"].update(extra)

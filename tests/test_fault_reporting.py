@@ -100,8 +100,9 @@ def test_a_stream_that_stops_is_a_gap_up_to_the_end_of_the_run(tmp_path: Path, c
     last = rec.adc.t[-1] + rec.adc.period  # end of the last sample received
     assert d["t_first_missing"] == pytest.approx(last, abs=1e-6)
     assert d["first_missing_index"] == rec.adc.index[-1] + 1
-    # From the last sample to the end of the run, the watchdog's 60 s and more.
-    assert d["t_end"] - last > 60.0
+    # From the last sample to the end of the run, the watchdog's 60 s and more (the clock
+    # moves in ticks: exactly 60 s can be what "more than 60 s" first reads as).
+    assert d["t_end"] - last >= 60.0 - 1e-6
     assert d["n_missing"] == round((d["t_end"] - last) / rec.adc.period)
     assert f"1 gap(s) ({d['n_missing']} samples missing)" in err
 
@@ -134,7 +135,8 @@ duration_s = 1e6
     argv = ["acquire", "--bench", "sim", "--units", "3", "--profile", str(prof)]
     rc = main([*argv, "--faults", str(f), "--speed", "40", "--out", str(out)])
     err = capsys.readouterr().err
-    assert rc == 1 and "lost communication with scanner" in err, err
+    # held while the scanner says nothing (a suspender), ended after temperature_lost_s
+    assert rc == 1 and "temperature lost for" in err and "34970A" in err, err
     assert "safe state verified" in err and "(3 units; dropped: none)" in err
     serials = ["SIM0-01", "SIM0-02", "SIM0-03"]
     recs = {s: read_recording(out, unit=s) for s in serials}

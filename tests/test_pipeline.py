@@ -72,15 +72,18 @@ def write_run(
     fs: float = 10.0,
     heating: bool = False,
     arw_deg_rt_h: float = 0.05,
+    serial: str = "",
 ) -> Path:
-    """A synthetic recording: bias(T) + white noise at ``fs``, PT100 at 1 Hz."""
+    """A synthetic recording: bias(T) + white noise at ``fs``, PT100 at 1 Hz; ``serial``:
+    the unit's serial in the run record (none when empty)."""
     rng = np.random.default_rng(seed)
     n = int(hours * 3600 * fs)
     t = np.arange(n) / fs
     temp = case_temperature(t, heating)
     sigma = arw_deg_rt_h / 60.0 * np.sqrt(fs)  # °/s per sample from N (°/√h)
     rate = true_bias(temp) + rng.normal(0.0, sigma, n)
-    with RecordingWriter(path, start_time_ns=1_700_000_000 * 10**9, run={"op": "t"}) as w:
+    run = {"op": "t", **({"unit_serial": serial} if serial else {})}
+    with RecordingWriter(path, start_time_ns=1_700_000_000 * 10**9, run=run) as w:
         blk = int(fs)
         for s in range(0, n, blk):
             w.write_rate_block(t[s], 1.0 / fs, s, rate[s : s + blk].astype(np.float32))
@@ -229,7 +232,7 @@ def test_model_dir_round_trip(
     with np.load(d / "arrays.npz", allow_pickle=False) as z:
         assert "calib_modes" in z.files and z["calib_modes"].shape[0] == model.K
     sd = torch.load(d / "drift_gabp.pt", weights_only=True)
-    assert sd["0.weight"].shape == (model.drift.hidden, model.drift.n_in)
+    assert sd["0.weight"].shape == (model.drift.regressor.hidden, model.drift.regressor.n_in)
     back = load_model(str(d))
     assert back.config == model.config and (back.K, back.alpha) == (model.K, model.alpha)
     run = load(runs["val"])

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrolab.compensation.causal import CausalCalibration, fit_structured
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.drift_model import CausalCalibration
 from gyrolab.compensation.prior import (
     FleetPrior,
     UnitEntry,
@@ -19,6 +19,7 @@ from gyrolab.compensation.prior import (
     unit_vector,
 )
 from gyrolab.compensation.profile_design import case_trace
+from gyrolab.compensation.structured import fit_structured
 from gyrolab.profiles.profile import BUILTIN
 from gyrolab.sim.thermal import ThermalParams
 

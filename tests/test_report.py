@@ -157,11 +157,11 @@ def test_not_an_mcap_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 def test_model_of_another_version_exits_2(
     short_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from gyrolab.compensation.model_dir import MODEL_FORMAT, MODEL_JSON
+    from gyrolab.compensation.model_dir import MODEL_FORMAT, ModelDir
 
     model = tmp_path / "model"
     model.mkdir()
-    (model / MODEL_JSON).write_text(
+    (model / ModelDir.MODEL_JSON).write_text(
         json.dumps({"format": MODEL_FORMAT, "format_version": 99, "software_version": "9.9.9"})
     )
     out = tmp_path / "rep"
@@ -169,8 +169,10 @@ def test_model_of_another_version_exits_2(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "format version 99" in err[0] and str(model) in err[0]
     assert not out.exists()
-    # a directory that is no model at all
-    assert main(["report", str(short_run), "--model", str(tmp_path), "--out", str(out)]) == 2
+    # a directory that is no model at all (the output beside it: never inside an input)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["report", str(short_run), "--model", str(empty), "--out", str(out)]) == 2
     assert "model.json" in capsys.readouterr().err
 
 

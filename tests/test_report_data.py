@@ -18,7 +18,9 @@ from contract import METRIC_KEYS
 from test_demo import make_demo
 
 from gyrolab.cli import main
-from gyrolab.compensation.results import RESULTS_JSON, RESULTS_NPZ, load_results
+from gyrolab.compensation.model_dir import ModelDir
+
+RESULTS_JSON, RESULTS_NPZ = ModelDir.RESULTS_JSON, ModelDir.RESULTS_NPZ
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +29,7 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_compensate_keeps_the_results_of_both_runs(demo_run: Path) -> None:
-    res = load_results(demo_run / "model")
+    res = ModelDir(demo_run / "model").results()
     assert set(res) == {"calibration", "validation"}
     val = res["validation"]
     assert val.held_out and not res["calibration"].held_out

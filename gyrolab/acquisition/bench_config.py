@@ -81,6 +81,22 @@ class SafeState:
 
 
 @dataclass(frozen=True)
+class Suspend:
+    """Suspenders: conditions that hold the run instead of ending it, each for at most
+    its limit (run seconds; 0: the condition is not a suspender — a chamber alarm then
+    ends the run at once, the temperature sensor is lost after ``comm_timeout_s``, an
+    operator pause is refused). gyrolab/acquisition/suspend.py, docs/bench-config.md."""
+
+    chamber_alarm_s: float = 300.0  # a chamber alarm or open door (where the driver sees it)
+    temperature_lost_s: float = 60.0  # the watched temperature gives no reading
+    # a rate stream, or the watched temperature, silent this long holds the run (0: a
+    # stream's silence never does; the temperature's at once)
+    hold_after_s: float = 5.0
+    operator_pause_s: float = 1800.0  # SIGUSR1 (pause) ... SIGUSR2 (resume)
+    resoak_band_c: float = 1.0  # the temperature leaving +- this while held: the step re-soaks
+
+
+@dataclass(frozen=True)
 class RecorderConfig:
     """Crash-loss policy of the MCAP recorder (docs/reliability.md)."""
 
@@ -104,6 +120,7 @@ class BenchConfig:
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
+    suspend: Suspend = field(default_factory=Suspend)
     # A multi-unit bench: its units (``[[unit]]``) and the scanning multimeter that reads
     # their PT100s (``[scanner]``); none on a single-unit bench, and no scanner when every
     # unit is read by its internal sensor (``[[unit]] temperature = "internal"``).
@@ -139,6 +156,7 @@ _SECTIONS: dict[str, type] = {
     "limits": Limits,
     "safe_state": SafeState,
     "recorder": RecorderConfig,
+    "suspend": Suspend,
 }
 
 
@@ -388,6 +406,12 @@ def validate(cfg: BenchConfig) -> None:
         if not (a.sample_rate_hz > 0 and a.block_s > 0):
             raise InputError(s, f"{where} sample_rate_hz and block_s must be > 0")
     _check_units(cfg)
+    sus = cfg.suspend
+    for key in ("chamber_alarm_s", "temperature_lost_s", "hold_after_s", "operator_pause_s"):
+        if getattr(sus, key) < 0:
+            raise InputError(s, f"[suspend] {key} must be >= 0 (0: not a suspender)")
+    if not sus.resoak_band_c > 0:
+        raise InputError(s, "[suspend] resoak_band_c must be > 0 °C")
     r = cfg.recorder
     if not (0 < r.flush_every_s <= 1.5):
         # The 2 s crash-loss promise needs flush period + one ADC block below 2 s.

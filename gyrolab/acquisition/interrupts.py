@@ -37,7 +37,15 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
-__all__ = ["STOP_SIGNALS", "check", "deferred_stop_signals", "pending", "take"]
+__all__ = [
+    "STOP_SIGNALS",
+    "check",
+    "deferred_stop_signals",
+    "pause_requests",
+    "pending",
+    "stop_requests",
+    "take",
+]
 
 # SIGHUP does not exist on Windows.
 STOP_SIGNALS: tuple[signal.Signals, ...] = tuple(
@@ -57,6 +65,14 @@ def _note(signum: int, _frame: object) -> None:
         _pending = name
     elif _armed:  # asked twice: stop now, wherever the main thread is
         raise KeyboardInterrupt(name)
+
+
+_paused: bool | None = None  # the operator's last pause (True) or resume before the run
+
+
+def _note_pause(signum: int, _frame: object) -> None:
+    global _paused
+    _paused = signal.Signals(signum).name == "SIGUSR1"
 
 
 def pending() -> str | None:
@@ -88,6 +104,9 @@ def deferred_stop_signals() -> Iterator[None]:
         return
     _pending = None
     old = {sig: signal.signal(sig, _note) for sig in STOP_SIGNALS}
+    # The operator's pause and resume before the run: noted for it (their default action
+    # would kill the process).
+    old |= {sig: signal.signal(sig, _note_pause) for sig in PAUSE_SIGNALS}
     _armed = True
     try:
         yield
@@ -109,3 +128,61 @@ def deferring_stop_signals(fn: F) -> F:
             return fn(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+@contextlib.contextmanager
+def stop_requests(stop: Callable[[str], None]) -> Iterator[None]:
+    """During a run: each stop signal is ``stop("interrupted by SIGx")`` (the runner's
+    clean stop: safe state, never an exception mid-run), and so is one noted just before
+    (by :func:`deferred_stop_signals`). Only in the main thread; the previous handlers
+    are restored on exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_signal(signum: int, _frame: object) -> None:
+        stop(f"interrupted by {signal.Signals(signum).name}")
+
+    old = {sig: signal.signal(sig, on_signal) for sig in STOP_SIGNALS}
+    name = take()
+    if name is not None:
+        stop(f"interrupted by {name}")
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+#: The operator's pause (SIGUSR1) and resume (SIGUSR2) during a run (not on Windows).
+PAUSE_SIGNALS: tuple[signal.Signals, ...] = tuple(
+    getattr(signal, n) for n in ("SIGUSR1", "SIGUSR2") if hasattr(signal, n)
+)
+
+
+@contextlib.contextmanager
+def pause_requests(pause: Callable[[str], None], resume: Callable[[], None]) -> Iterator[None]:
+    """During a run: SIGUSR1 is ``pause("paused by SIGUSR1")``, SIGUSR2 ``resume()`` (the
+    runner's suspenders hold the run meanwhile). Only in the main thread; the previous
+    handlers are restored on exit."""
+    if threading.current_thread() is not threading.main_thread() or len(PAUSE_SIGNALS) < 2:
+        yield
+        return
+    usr1, usr2 = PAUSE_SIGNALS
+
+    def on_signal(signum: int, _frame: object) -> None:
+        if signum == usr1:
+            pause(f"paused by {usr1.name}")
+        else:
+            resume()
+
+    global _paused
+    old = {sig: signal.signal(sig, on_signal) for sig in PAUSE_SIGNALS}
+    if _paused:  # paused before the run started
+        pause(f"paused by {usr1.name}")
+    _paused = None
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)

@@ -45,13 +45,27 @@ LIVE_STATUS_SCHEMA: dict[str, Any] = {
         "step_text": {"type": "string", "description": "e.g. 'step 3/12 at 50 °C'"},
         "setpoint_c": {"type": "number", "description": "°C"},
         "chamber_c": {"type": "number", "description": "oven process value, °C"},
-        "pt100_c": {"type": "number", "description": "°C"},
+        "temperature_c": {
+            "type": "number",
+            "description": "the temperature the profile's stability rule watches, °C",
+        },
+        "temperature_source": {
+            "type": "string",
+            "description": "what temperature_c is: pt100 | internal (the unit's own sensor)",
+        },
+        "pt100_c": {"type": "number", "description": "temperature_c when it is a PT100's, °C"},
         "remaining_s": {"type": "number", "description": "nominal run time left, s"},
         "samples": {"type": "integer", "description": "gyro samples recorded"},
         "frames_lost": {"type": "integer"},
         "frames_bad": {"type": "integer"},
         "live_published": {"type": "integer", "description": "messages sent to the server"},
         "live_dropped": {"type": "integer", "description": "messages the live view dropped"},
+        "suspended": {
+            "type": "array",
+            "items": {"type": "string"},
+            "description": "the conditions holding the run now (chamber alarm, temperature "
+            "lost, stream stall, operator pause); absent while it runs",
+        },
         "units": {
             "type": "array",
             "description": "multi-unit runs only: each unit, in bench order",
@@ -185,6 +199,8 @@ class LiveServer:
             "step_text": text,
             "setpoint_c": sp,
             "chamber_c": num(st.chamber_c),
+            "temperature_c": num(st.temperature_c),
+            "temperature_source": st.temperature_source,
             "pt100_c": num(st.pt100_c),
             "remaining_s": num(st.remaining_s),
             "samples": int(st.samples),
@@ -194,6 +210,8 @@ class LiveServer:
             "live_dropped": self.dropped,
         }
         msg = {k: v for k, v in msg.items() if v is not None}
+        if getattr(st, "suspended", None):
+            msg["suspended"] = list(st.suspended)
         units = [
             {
                 k: v

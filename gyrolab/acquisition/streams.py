@@ -7,7 +7,10 @@ cause), repeated samples (dropped, never written twice), damaged frames, and the
 stream that stopped before the run ended. The run engine
 (:class:`gyrolab.acquisition.runner.Acquisition`) keeps one per unit: the single-unit
 bench's one stream is written to the single-unit topics (``unit=None``), a multi-unit
-bench's to ``/unit/<serial>/…`` (docs/recording-format.md).
+bench's to ``/unit/<serial>/…`` (docs/recording-format.md). A unit read by its internal
+sensor also has its temperature readings recorded here, and handed to the engine's
+temperature intake by :meth:`RateRecorder.take_readings` (the engine asks; the recorder
+never calls back).
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ class RateRecorder:
         *,
         unit: str | None = None,
         on_samples: Callable[[float], None] | None = None,
-        on_temperature: Callable[[float, float], None] | None = None,
+        internal: bool = False,
     ) -> None:
         self.dev = device
         self.adc = adc
@@ -55,11 +58,21 @@ class RateRecorder:
         self.on_samples = on_samples
         # A unit on its internal sensor (a multi-unit recording's unit): the readings its
         # blocks carry go to /unit/<serial>/temperature/internal, averaged per recorded
-        # block, and each average to ``on_temperature(t, c)`` (the engine's watchdog, plan).
-        self.on_temperature = on_temperature
-        self._temps: list[tuple[float, float]] = []  # (run time, °C) not yet written
+        # block, and each average to ``readings`` until the engine takes it.
+        self.internal = internal and unit is not None
+        # (run time, °C, run index of its sample) not yet written
+        self._temps: list[tuple[float, float, float]] = []
+        self._readings: list[tuple[float, float]] = []  # written, not yet taken
         self.dropped = False  # a multi-unit run gave up on this stream
-        # Device index of run sample 0, next expected index, block buffer.
+        # A resumed run's continuation (acquire --resume; the engine sets both): the run
+        # index after the last sample the segments before it hold with its run time, and
+        # the run time the continuation starts. Its first sample's run index is that index
+        # plus the periods between the two times: the samples between are the
+        # interruption's gap.
+        self.resume_index: tuple[int, float] | None = None
+        self.t_start = 0.0
+        self._base = 0  # run index of device sample idx0
+        # Device index of the first sample, next expected index, block buffer.
         self.idx0: int | None = None
         self._adc_offset = 0.0  # ADC clock minus run time
         self._blk_t0 = 0.0
@@ -129,22 +142,29 @@ class RateRecorder:
         if n == 0:
             return
         if self.idx0 is None:
+            # Run time of sample 0: its block's arrival less the block's length; from then
+            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
+            t_first = max(self.t_start, t_arrival - n * self.period)
+            self._adc_offset = float(blk.t0) - t_first
+            if self.resume_index is not None:
+                nxt, t_next = self.resume_index
+                self._base = nxt + max(0, int(round((t_first - t_next) / self.period)))
             self.idx0 = idx
             self._next_idx = idx
-            self._blk_first = 0
+            self._blk_first = self._base
             self.log(
                 "info",
                 self.name,
-                f"ADC stream: run sample 0 is device sample {idx}",
+                f"ADC stream: run sample {self._base} is device sample {idx}",
                 "startup",
-                {"device_index": idx},
+                {"device_index": idx}
+                | ({"run_index": self._base} if self.resume_index is not None else {}),
                 t_arrival,
             )
-            # Run time of sample 0: its block's arrival less the block's length; from then
-            # on sample times follow the ADC's own clock (frame timestamps), not arrival.
-            self._adc_offset = float(blk.t0) - max(0.0, t_arrival - n * self.period)
+            if self.resume_index is not None and self._base > self.resume_index[0]:
+                self._interrupted(t_first, t_arrival)
         assert self._next_idx is not None
-        if self.on_temperature is not None and blk.temperature_c is not None:
+        if self.internal and blk.temperature_c is not None:
             self._take_temperatures(blk)
         if idx < self._next_idx:
             # Some or all of these samples were written already: never write one twice.
@@ -153,9 +173,9 @@ class RateRecorder:
             self.log(
                 "warning",
                 self.name,
-                f"dropped {dup} repeated ADC sample(s) at index {idx - self.idx0}",
+                f"dropped {dup} repeated ADC sample(s) at index {self._run(idx)}",
                 "duplicate",
-                {"index": idx - self.idx0, "samples": dup},
+                {"index": self._run(idx), "samples": dup},
                 t_arrival,
             )
             if dup == n:
@@ -171,7 +191,7 @@ class RateRecorder:
             self.emit_block()
             self.gaps += 1
             self.missing += missing
-            first = self._next_idx - self.idx0
+            first = self._run(self._next_idx)
             self.log(
                 "warning",
                 self.name,
@@ -185,7 +205,7 @@ class RateRecorder:
                 },
                 t_arrival,
             )
-            self._blk_first = idx - self.idx0
+            self._blk_first = self._run(idx)
         if not self._blk_n:
             self._blk_t0 = t0_dev - self._adc_offset
         self._blk.append(counts)
@@ -199,6 +219,35 @@ class RateRecorder:
         if self._blk_n >= self._block_len:
             self.emit_block()
 
+    def _run(self, device_index: int) -> int:
+        """The run index of device sample ``device_index``."""
+        assert self.idx0 is not None
+        return device_index - self.idx0 + self._base
+
+    def _interrupted(self, t_first: float, t: float) -> None:
+        """A continuation's first sample: the run's samples since the last one the
+        segments before it hold are a gap, logged as such (never filled in)."""
+        assert self.resume_index is not None
+        nxt, t_next = self.resume_index
+        missing = self._base - nxt
+        self.gaps += 1
+        self.missing += missing
+        self.log(
+            "warning",
+            self.name,
+            f"ADC gap: {missing} sample(s) missing from index {nxt}: the run was "
+            "interrupted and resumed",
+            "gap",
+            {
+                "first_missing_index": nxt,
+                "n_missing": missing,
+                "t_first_missing": round(t_next, 6),
+                "t_resumed": round(t_first, 6),
+                "cause": "run interrupted",
+            },
+            t,
+        )
+
     def _take_temperatures(self, blk: AdcBlock) -> None:
         """Keep the internal-temperature readings of samples not recorded yet (a repeated
         frame's reading is dropped with its samples), on the run clock."""
@@ -208,18 +257,32 @@ class RateRecorder:
         new = first >= self._next_idx
         t = float(blk.t0) + (first - int(blk.first_index)) * self.period - self._adc_offset
         vals = np.asarray(blk.temperature_c, dtype=float)
-        self._temps += [(float(a), float(b)) for a, b in zip(t[new], vals[new], strict=True)]
+        run = first - self.idx0 + self._base if self.idx0 is not None else first
+        self._temps += [
+            (float(a), float(b), float(r))
+            for a, b, r in zip(t[new], vals[new], run[new], strict=True)
+        ]
 
     def _emit_temperature(self) -> None:
-        """Write the readings kept since the last block as one message (their mean) and
-        hand it to ``on_temperature``."""
-        if not self._temps or self.unit is None or self.on_temperature is None:
+        """Write the readings kept since the last block, one message (their mean) per
+        ``block_s`` of samples they were taken at — however many samples one read brought
+        — and keep each for :meth:`take_readings`."""
+        if not self._temps or not self.internal:
             return
-        t, c = np.mean(np.asarray(self._temps), axis=0)
-        n = len(self._temps)
+        a = np.asarray(self._temps)
         self._temps = []
-        self.w.write_internal_temperature(float(t), float(c), n, unit=self.unit)
-        self.on_temperature(float(t), float(c))
+        span = a[:, 2] // self._block_len
+        for b in np.unique(span):
+            group = a[span == b]
+            t, c = group[:, :2].mean(axis=0)
+            self.w.write_internal_temperature(float(t), float(c), len(group), unit=self.unit)
+            self._readings.append((float(t), float(c)))
+
+    def take_readings(self) -> list[tuple[float, float]]:
+        """The internal-sensor readings recorded since the last call, ``(run time, °C)``
+        each (one per recorded block), for the engine's temperature intake."""
+        out, self._readings = self._readings, []
+        return out
 
     def emit_block(self) -> None:
         """Write the block being filled (``/gyro/adc`` and ``/gyro/rate``), and the unit's
@@ -265,13 +328,13 @@ class RateRecorder:
         A tail within the stream's normal latency (``TAIL_LATENCY_FACTOR`` × its median
         arrival lag, at least ``TAIL_MIN_S``) is samples in flight when the run stopped,
         not a stopped stream, and is not counted."""
-        start = 0.0 if self.idx0 is None else self.received_to
+        start = self.t_start if self.idx0 is None else self.received_to
         lag = float(np.median(self._adc_lags)) if self._adc_lags else 0.0
         tail = t_stop - start
         if not math.isfinite(tail) or tail <= max(TAIL_MIN_S, TAIL_LATENCY_FACTOR * lag):
             return
         missing = int(round(tail / self.period))
-        first = 0 if self.idx0 is None or self._next_idx is None else self._next_idx - self.idx0
+        first = self._base if self._next_idx is None else self._run(self._next_idx)
         self.gaps += 1
         self.missing += missing
         what = "never started" if self.idx0 is None else "stopped"

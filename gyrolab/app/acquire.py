@@ -19,6 +19,7 @@ import math
 import os
 import sys
 import time
+import uuid
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -30,6 +31,7 @@ from gyrolab.acquisition.bench_config import (
     check_bench_for_profile,
     load_bench,
 )
+from gyrolab.acquisition.resume import ResumePoint, bench_differences
 from gyrolab.acquisition.runner import (
     Acquisition,
     RunResult,
@@ -44,8 +46,9 @@ from gyrolab.instruments import registry
 from gyrolab.instruments.roles import Chamber, MultiThermometer, RateStream, Thermometer
 from gyrolab.outputs import check_output
 from gyrolab.profiles.plan import check_profile_limits
-from gyrolab.profiles.profile import Profile, load_profile
+from gyrolab.profiles.profile import Profile, load_profile, profile_from_dict
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
+from gyrolab.record.reader import segments
 from gyrolab.record.writer import RecordingWriter
 
 # --------------------------------------------------------------------- instruments
@@ -184,15 +187,20 @@ def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], Non
         if st.units:  # a multi-unit run: how many units are fully recorded
             ok = sum(u.state == "recording" for u in st.units)
             units = f" units {ok}/{len(st.units)} ok"
+        if st.suspended:
+            units += f" SUSPENDED ({', '.join(st.suspended)})"
         bar.set_postfix_str(
             f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
-            f"oven {st.chamber_c:.2f} PT100 {st.pt100_c:.2f} °C "
+            f"oven {st.chamber_c:.2f} {_SENSOR[st.temperature_source]} {st.temperature_c:.2f} °C "
             f"ETA(run) {_hms(st.remaining_s)} lost {st.frames_lost} bad {st.frames_bad}"
             f"{units}{speed_note}",
             refresh=False,
         )
 
     return show, bar
+
+
+_SENSOR = {"pt100": "PT100", "internal": "internal"}  # the progress line's name for it
 
 
 def _hms(s: float) -> str:
@@ -243,12 +251,15 @@ def run_acquisition(
     on_status: Callable[[Status], None] | None = None,
     on_samples: Callable[[float], None] | None = None,
     live: Any = None,
+    resume: ResumePoint | None = None,
 ) -> RunResult:
     """Connect, record one run to ``out`` and end cleanly; returns how it ended.
 
     ``sim``: the simulated bench to run against (its addresses, clock and policies), or
     None for the instruments BENCH.toml names, in real time. ``live``: a
-    :class:`~gyrolab.acquisition.live.LiveServer` fed every recorded message."""
+    :class:`~gyrolab.acquisition.live.LiveServer` fed every recorded message. ``resume``:
+    the run continues an interrupted one (a continuation: its next segment, on the same
+    bench — checked once connected, before anything is written)."""
     check_profile_limits(profile, cfg.limits, str(cfg.run.profile))
     check_output(out, force)
     clock: Clock
@@ -271,6 +282,10 @@ def run_acquisition(
             seed=seed if sim is not None else None,
             speed=(sim.speed if sim.speed is not None else "max") if sim is not None else None,
             axes=cfg.adc.axes,
+            run_id=uuid.uuid4().hex if resume is None else resume.run_id,
+            segment=1 if resume is None else resume.segment,
+            previous_segment=None if resume is None else resume.previous_segment,
+            resumed=None if resume is None else resume.resumed,
         )
         tables = cfg.to_dict()
         ident = dict(inst.identity)  # each instrument's describe(), by role name
@@ -284,13 +299,20 @@ def run_acquisition(
             safe_state=tables["safe_state"],
             recorder=tables["recorder"],
             units=ident.pop("units", None),  # multi-unit: each unit's ADC
-            extra=ident,  # e.g. a multi-unit bench's scanner
+            extra={**ident, "suspend": tables["suspend"]},  # e.g. a multi-unit bench's scanner
         )
+        if resume is not None:
+            differ = bench_differences(resume.bench, bench_meta.to_dict())
+            if differ:
+                raise InputError(
+                    resume.previous, "not the bench the run was on: " + "; ".join(differ)
+                )
         r = cfg.recorder
         with _open_output(out, force) as fh:
             writer = RecordingWriter(
                 fh,
-                start_time_ns=time.time_ns(),
+                # a continuation's log times count from the run's origin: one run clock
+                start_time_ns=time.time_ns() if resume is None else resume.start_time_ns,
                 run=run_meta,
                 bench=bench_meta,
                 chunk_size=r.chunk_size,
@@ -338,10 +360,18 @@ def run_acquisition(
                     on_status=on_status,
                     on_samples=on_samples,
                     silence=None if sim is None else sim.silence,
+                    hold_silence=None if sim is None else sim.hold_silence,
+                    suspend=cfg.suspend,
+                    resume=resume,
                 )
                 if sim is not None:
                     sim.go()  # connected: now run at the asked speed
                 interrupts.check()  # a stop signal while connecting: end before the run
+                print(
+                    f"gyrolab acquire: pid {os.getpid()} (kill -USR1 pauses the run, -USR2 "
+                    "resumes it)",
+                    file=sys.stderr,
+                )
                 result = acq.run()
             finally:
                 # Also on an interrupt before the run started: a finished, readable file.
@@ -370,7 +400,13 @@ def _start_live(port: int, host: str) -> Any:
 def acquire(opts: AcquireOptions) -> RunResult:
     """Check every input, run the bench (starting the simulated one for ``bench="sim"``),
     record to ``opts.out`` and print the one-line summary on stderr; returns how the run
-    ended (``RunResult.exit_code``). Bad input raises GyrolabError before anything starts."""
+    ended (``RunResult.exit_code``). Bad input raises GyrolabError before anything starts.
+    ``opts.resume``: continue that interrupted run instead (:func:`_resumed`)."""
+    resume: ResumePoint | None = None
+    if opts.resume is not None:
+        opts, resume = _resumed(opts)
+    if opts.out is None:
+        raise GyrolabError("--out RUN.mcap is required")
     out = Path(opts.out)
     sim_only = opts.bench == "sim"
     if opts.speed is not None and not (opts.speed > 0 and math.isfinite(opts.speed)):
@@ -411,14 +447,24 @@ def acquire(opts: AcquireOptions) -> RunResult:
         from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults
 
         faults = load_faults(opts.faults)
-        check_plan_for_bench(faults, opts.units, str(opts.faults), opts.internal_temperature)
+        # the F4 reports its alarm through [chamber] alarm_input, the ESPEC always
+        alarm = cfg.oven.driver != "watlowf4" or bool(getattr(cfg.oven, "alarm_input", 0))
+        check_plan_for_bench(
+            faults, opts.units, str(opts.faults), opts.internal_temperature, chamber_alarm=alarm
+        )
     profile_spec = opts.profile or cfg.profile_path()
-    profile = load_profile(profile_spec)
+    if resume is not None:
+        profile_spec = str(resume.previous)
+        profile = profile_from_dict(resume.run["profile"], profile_spec)
+    else:
+        profile = load_profile(profile_spec)
     if opts.profile:
         cfg = replace(cfg, run=replace(cfg.run, profile=str(opts.profile)))
     check_profile_limits(profile, cfg.limits, str(opts.profile or cfg.run.profile))
     check_bench_for_profile(cfg, profile, str(profile_spec))
     inputs = (None if sim_only else opts.bench, profile_spec, opts.faults, *opts.axis_models)
+    if resume is not None:  # every segment of the run is an input: none is written over
+        inputs += tuple(str(p) for p in segments(resume.previous))
     check_output(out, opts.force, inputs=inputs, kind="file")
 
     sim: SimHandle | None = None
@@ -428,9 +474,9 @@ def acquire(opts: AcquireOptions) -> RunResult:
 
     old_switch = sys.getswitchinterval()
     if sim_only:
-        # The simulated instruments share this process (and its GIL) with the drivers:
-        # hand the GIL over sooner so that a waiting driver thread is not held 5 ms per
-        # switch by the busy ones (a Modbus transaction needs several switches).
+        # The drivers' threads (a reader per unit, the pollers) share this process's GIL:
+        # hand it over sooner so that a waiting driver thread is not held 5 ms per switch
+        # by the busy ones (a Modbus transaction needs several switches).
         sys.setswitchinterval(0.0005)
 
     with sim_workdir() as work:
@@ -443,6 +489,10 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 workdir=Path(work),
                 faults=faults,
                 axis_models=axis_models,
+                # Several units: the instruments on a core of their own (one process
+                # reached 233x of 300x with 8 units). One unit: in this process, where a
+                # reply crosses no process boundary (docs/performance.md).
+                own_process=bool(cfg.units),
             )
         speed_note = "" if sim is None else f" ×{opts.speed or 'max'}"
         show, bar = _progress(profile, speed_note)
@@ -463,6 +513,7 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 on_status=show,
                 on_samples=_trace_writer(),
                 live=live,
+                resume=resume,
             )
         finally:
             bar.close()
@@ -479,14 +530,57 @@ def acquire(opts: AcquireOptions) -> RunResult:
     msg = (
         f"gyrolab acquire: {result.outcome} ({result.reason}); {result.t_end:.0f} s recorded in "
         f"{wall:.1f} s wall, {result.samples} samples, {result.gaps} gap(s) "
-        f"({result.samples_missing} samples missing), {result.faults} fault(s); "
+        f"({result.samples_missing} samples missing), {result.faults} fault(s), "
+        f"{result.suspensions} suspension(s); "
         f"oven safe state {'verified' if result.safe_state_ok else 'NOT verified'}; {out}"
     )
     if cfg.units:
         dropped = ", ".join(result.units_dropped) or "none"
         msg += f" ({len(cfg.units)} units; dropped: {dropped})"
+    if resume is not None:
+        msg += (
+            f"; segment {resume.segment} of run {resume.run_id}, resumed at step "
+            f"{resume.step + 1} after {resume.previous.name} (read the run from {out.name})"
+        )
     print(msg, file=sys.stderr)
     return result
+
+
+def _resumed(opts: AcquireOptions) -> tuple[AcquireOptions, ResumePoint]:
+    """``--resume``: the options of the continuation, from the run (gyrolab/app/resume.py).
+    What the run fixed — its profile, and on the simulated bench its seed, units and
+    drivers — cannot be given again; a lab bench needs its BENCH.toml."""
+    from gyrolab.app.resume import continuation_path, resume_settings
+
+    fixed = {
+        "--profile": opts.profile,
+        "--units": opts.units,
+        "--internal-temperature": opts.internal_temperature,
+        "--driver": opts.drivers,
+        "--axis-model": opts.axis_models,
+        "--seed": opts.seed,
+    }
+    given = [k for k, v in fixed.items() if v]
+    if given:
+        raise GyrolabError(f"--resume continues the run as it was: {', '.join(given)} not allowed")
+    rs = resume_settings(opts.resume, opts.force)  # type: ignore[arg-type]
+    bench = opts.bench or ("sim" if rs.simulated else "")
+    if not bench:
+        raise GyrolabError("--resume of a run on a lab bench: give its --bench BENCH.toml")
+    if bench == "sim" and not rs.simulated:
+        raise GyrolabError("--resume: the run was on a lab bench, not --bench sim")
+    out = opts.out if opts.out is not None else continuation_path(rs.point)
+    sim_kw: dict[str, Any] = {}
+    if bench == "sim":
+        speed = opts.speed if opts.speed is not None else rs.speed
+        sim_kw = dict(
+            seed=rs.seed,
+            units=rs.units,
+            internal_temperature=rs.internal,
+            drivers=rs.drivers,
+            speed=speed,
+        )
+    return replace(opts, bench=bench, out=Path(out), resume=None, **sim_kw), rs.point
 
 
 # --------------------------------------------------------------------------- recover

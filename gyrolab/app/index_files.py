@@ -17,7 +17,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from gyrolab.catalogue.digest import file_digest, model_digest
+from gyrolab.catalogue.digest import file_digest
 from gyrolab.catalogue.entries import (
     ApplicationEntry,
     ExportEntry,
@@ -173,22 +173,23 @@ def model_entry(
     """A model directory: its hash, unit, the runs it was fitted and validated on (their
     data hashes from ``model.json``/``results.json``; their file hashes where the caller
     knows the files), its headline metrics."""
+    from gyrolab.compensation.model_dir import ModelDir
+
     d = Path(model_dir)
-    head = _json(d / "model.json")
-    axis_dirs = head.get("axis_dirs")
-    axis = d / str(axis_dirs[0]) if isinstance(axis_dirs, list) and axis_dirs else d
-    meta = head if axis == d else _json(axis / "model.json")
-    metrics = _json(d / "metrics.json")
-    results = _json(axis / "results.json") if (axis / "results.json").is_file() else {}
+    md = ModelDir(d)
+    axes = md.axes()
+    axis = axes[0][1]  # the first axis's directory (the model itself when single-axis)
+    meta = axis.head()
+    metrics = md.require_metrics()
     cal = meta.get("calibration") if isinstance(meta.get("calibration"), dict) else {}
-    runs = results.get("runs") if isinstance(results.get("runs"), dict) else {}
+    runs = axis.run_records()
     val = runs.get("validation") if isinstance(runs.get("validation"), dict) else {}
     unit = named(cal.get("unit") or metrics.get("unit"), unit)
     family = (metrics.get("causal_model") or {}).get("family") or (
         metrics.get("headline") or {}
     ).get("family")
     return ModelEntry(
-        model_hash=model_digest(d),
+        model_hash=md.digest(),
         path=absolute(d),
         unit=unit,
         calibration_file=calibration_file,
@@ -199,7 +200,7 @@ def model_entry(
         validation_path=val.get("path"),
         held_out=bool(metrics.get("held_out")),
         family=family,
-        axes=len(axis_dirs) if isinstance(axis_dirs, list) else 1,
+        axes=len(axes),
         metrics=_kept(metrics),
         created_at=_created(d),
     )

@@ -94,8 +94,8 @@ class AcquireOptions:
     bench's); ``speed``/``seed``/``drivers``/``faults``/``axis_models``: the simulated bench
     only; ``live_port``: serve the run to Foxglove (0: any free port)."""
 
-    bench: str
-    out: PathArg
+    bench: str | None = None
+    out: PathArg | None = None
     profile: str | None = None
     speed: float | None = None
     seed: int = 0
@@ -108,6 +108,15 @@ class AcquireOptions:
     units: int = 0  # the simulated bench only: N units of a seeded family (docs/fleet.md)
     # --units only: the units (1-based) read by their internal temperature sensor
     internal_temperature: tuple[int, ...] = ()
+    # --resume RUN.mcap: continue that interrupted run (gyrolab/app/resume.py, docs/
+    # reliability.md "Resume"); ``bench`` then defaults to the simulated bench that ran it,
+    # ``out`` to ``<run>.seg<N>.mcap`` beside it
+    resume: PathArg | None = None
+
+    def __post_init__(self) -> None:
+        if self.resume is None and (not self.bench or self.out is None):
+            raise InputError(None, "acquire needs --bench and --out (or --resume RUN.mcap)")
+        need_file(self.resume)
 
 
 @dataclass(frozen=True)

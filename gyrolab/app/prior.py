@@ -15,9 +15,9 @@ def prior_dirs(spec: str) -> list[str]:
         from gyrolab.app.runs import catalogue_models
 
         return catalogue_models(None, spec[len(PRIOR_QUERY) :], None)
-    from gyrolab.report.fleet import find_model_dirs
+    from gyrolab.compensation.model_dir import ModelDir
 
-    return [str(d) for d in find_model_dirs([spec])]
+    return [str(d) for d in ModelDir.find([spec])]
 
 
 def load_prior(spec: str):  # -> FleetPrior

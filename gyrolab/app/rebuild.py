@@ -40,7 +40,6 @@ from gyrolab.app.index_files import (
     report_entry,
     run_entry,
 )
-from gyrolab.catalogue.digest import model_digest
 from gyrolab.catalogue.entries import RunEntry, UnitRef
 from gyrolab.errors import GyrolabError, InputError
 
@@ -74,11 +73,13 @@ class Rebuilt:
 
 def walk(root: Path) -> Found:
     """The files under ``root`` the catalogue indexes (module docstring)."""
+    from gyrolab.compensation.model_dir import ModelDir
+
     found = Found()
     for dirpath, dirnames, filenames in os.walk(root):
         here = Path(dirpath)
         dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
-        if "model.json" in filenames:
+        if ModelDir.is_model_dir(here):
             found.models.append(here)
             dirnames[:] = []  # an axis directory is part of its model
             continue
@@ -147,6 +148,8 @@ def _target(head: str) -> dict[str, Any]:
 
 def rebuild_entries(root: str | os.PathLike[str]) -> Rebuilt:
     """Every entry the files under ``root`` give (module docstring); nothing written."""
+    from gyrolab.compensation.model_dir import ModelDir
+
     base = Path(root)
     if not base.is_dir():
         raise InputError(base, "not a directory")
@@ -220,8 +223,8 @@ def rebuild_entries(root: str | os.PathLike[str]) -> Rebuilt:
     for p, meta in applications:
         try:
             model_dir = Path(str(meta.get("compensation", {}).get("model_dir", "")))
-            if (model_dir / "model.json").is_file():
-                model_hash: str | None = model_digest(model_dir)
+            if ModelDir.is_model_dir(model_dir):
+                model_hash: str | None = ModelDir(model_dir).digest()
             else:  # moved since: the model of that name found here
                 named = [m for path, m in models.items() if path.name == model_dir.name]
                 model_hash = named[0].model_hash if len(named) == 1 else None

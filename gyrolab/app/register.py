@@ -213,13 +213,25 @@ def register_command(opts: object, rc: int) -> None:
     if rc not in (0, 1, 130):
         return
     out = Path(str(getattr(opts, "out", "")))
-    if isinstance(opts, (o.SimulateOptions, o.AcquireOptions, o.RecoverOptions)):
+    if isinstance(opts, o.AcquireOptions) and opts.out is None and opts.resume is not None:
+        # --resume without --out: the continuation went beside the run it continues
+        from gyrolab.app.resume import last_continuation
+
+        cont = last_continuation(opts.resume)
+        if cont is not None:
+            register_recording(cont)
+    elif isinstance(opts, (o.SimulateOptions, o.AcquireOptions, o.RecoverOptions)):
         if out.is_file():
             register_recording(out)
     elif isinstance(opts, o.CompensateOptions):
         # one model directory, or DIR/<serial> per unit of a multi-unit run
-        dirs = [out] if (out / "model.json").is_file() else sorted(out.glob("*/model.json"))
-        dirs = [d if d == out else d.parent for d in dirs]
+        from gyrolab.compensation.model_dir import ModelDir
+
+        dirs = (
+            [out]
+            if ModelDir.is_model_dir(out)
+            else sorted(d for d in out.glob("*") if ModelDir.is_model_dir(d))
+        )
         if dirs:
             register_models(dirs, opts.run, opts.validate)
     elif isinstance(opts, o.ApplyOptions) and out.is_file():

@@ -205,8 +205,10 @@ def catalogue_models(url: str | None, part_number: str | None, since: str | None
             if x
         )
         raise InputError(where, f"no unit with a registered model ({what})")
+    from gyrolab.compensation.model_dir import ModelDir
+
     for m in models:
-        if not (Path(m["path"]) / "model.json").is_file():
+        if not ModelDir.is_model_dir(m["path"]):
             raise InputError(
                 m["path"],
                 f"unit {m['serial']}'s model is registered here but no longer there "

@@ -39,6 +39,15 @@ CONNECT_SPEED = 10.0
 # silence (see SimSilence); a real bench runs in real time and needs none.
 SIM_COMM_MIN_WALL_S = 1.0
 
+# A simulated bench in its own process: how long a unit's ADC waits for its reader to
+# drain the port before frames are lost (wall s; see start_sim_bench).
+SIM_ADC_BACKPRESSURE_S = 1.0
+
+# A hold (a suspender: a stream or the temperature silent) on a simulated bench also needs
+# this much wall time of silence: a process starved of the CPU for a second on a loaded
+# machine must not hold the run as a stalled instrument would (SimSilence).
+SIM_HOLD_MIN_WALL_S = 3.0
+
 # Timeouts of a free-running simulated bench are scaled as if it ran this much faster
 # than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
 SIM_FAST_SCALE = 200.0
@@ -60,8 +69,9 @@ class SimRunClock:
 
 
 class SimSilence:
-    """The watchdog's rule on a simulated bench (runner.SilencePolicy): silent longer than
-    ``comm_timeout_s`` simulated seconds AND ``min_wall_s`` wall seconds.
+    """The watchdog's rule on a simulated bench (a ``SilencePolicy``,
+    gyrolab/acquisition/watchdog.py): silent longer than ``comm_timeout_s`` simulated
+    seconds AND ``min_wall_s`` wall seconds.
 
     The bench shares this process with the drivers: a hiccup of a few hundred ms wall (a
     GC, an import, a long physics step) is many simulated seconds at 200x, and must not pass
@@ -100,7 +110,8 @@ class SimHandle:
 
     ``addresses``: the address of each role's instrument (``registry`` role names);
     ``clock``/``silence``/``timeout``: the run clock, the watchdog's silence rule and the
-    drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict)."""
+    drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict);
+    ``hold_silence``: when a silence holds the run (a suspender), ``SIM_HOLD_MIN_WALL_S``."""
 
     addresses: dict[str, str]
     clock: SimRunClock
@@ -110,6 +121,7 @@ class SimHandle:
     bench: Any
     stop: Callable[[], None]
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+    hold_silence: SimSilence = field(default_factory=lambda: SimSilence(SIM_HOLD_MIN_WALL_S))
 
     @property
     def provenance(self) -> dict[str, Any]:
@@ -128,12 +140,19 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
     unit k's PT100 on channel 101 + k (a 34901A holds ten). ``internal``
     (``--internal-temperature``): the units (1-based) read by their internal sensor
     instead (``[[unit]] temperature = "internal"``; no scanner when that is every unit)."""
+    from gyrolab.sim.simulate import SIM_UNIT_MODEL, SIM_UNIT_SERIAL
+
     cfg = BenchConfig(
         name="sim",
+        # The simulated F4's limit controller is wired to its digital input 1 (as ESPEC
+        # wires an F4 chamber's), so the chamber_alarm fault reaches the driver.
+        oven=replace(registry.default_config("chamber"), alarm_input=1),
         run=RunInfo(
             operator="simulated",
-            unit_serial=f"SIM-{seed}" if not units else "",
-            unit_model="simulated MEMS gyro",
+            # the nominal unit, as `gyrolab simulate` names it (its runs of any seed are
+            # one unit's: a model of one applied to another is not another unit's)
+            unit_serial=SIM_UNIT_SERIAL if not units else "",
+            unit_model=SIM_UNIT_MODEL,
             profile="paper",
             notes="gyrolab acquire --bench sim" + (f" --units {units}" if units else ""),
         ),
@@ -204,6 +223,7 @@ def start_sim_bench(
     keep_truth: bool = False,
     model: Any = None,
     axis_models: Any = (),
+    own_process: bool = False,
 ) -> tuple[SimHandle, BenchConfig]:
     """Start the wire-level simulated bench; returns it and the bench config to use.
 
@@ -214,10 +234,13 @@ def start_sim_bench(
     ``faults`` (a FaultPlan) is injected and recorded in the provenance. A multi-unit config
     (``cfg.units``, :func:`sim_bench_config` ``units``) gets one physics per unit of the
     seeded family drawn around ``model`` (as ``gyrolab simulate --units``), each unit's ADC
-    on its own pty with its own calibration, and the simulated scanner.
+    on its own pty with its own calibration, and the simulated scanner. ``own_process``:
+    the bench runs in a child process (gyrolab/sim/bench/process.py: what ``acquire``
+    does, so that the instruments and the run engine each have a core; ``workdir``
+    needed); else in this one (``SimHandle.bench`` is then the ``SimBench``, for tests).
     """
-    from gyrolab.sim.bench import SimBench
     from gyrolab.sim.bench.fault_file import plan_to_dict
+    from gyrolab.sim.bench.process import BenchProcess, BenchRecipe, describe
     from gyrolab.sim.model import nominal_model
     from gyrolab.sim.simulate import axis_physics, provenance
 
@@ -236,65 +259,75 @@ def start_sim_bench(
             raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
     if cfg.units and axis_models:
         raise InputError("--axis-model", "multi-axis units are single-unit only (not --units)")
-    try:
-        extra_axes = axis_physics(
-            model or nominal_model(),
-            list(axis_models),
-            cfg.adc.sample_rate_hz,
-            seed,
-            profile.ambient_c,
-        )
-    except ValueError as e:
-        raise InputError("--axis-model", str(e)) from None
-    family, unit_physics = _sim_units(cfg, profile, seed, model)
+    model = model or nominal_model()
+    if axis_models:
+        try:  # checked here: the bench may be built in another process
+            axis_physics(model, list(axis_models), cfg.adc.sample_rate_hz, seed, profile.ambient_c)
+        except ValueError as e:
+            raise InputError("--axis-model", str(e)) from None
+    family = _sim_family(cfg, seed, model)
     dmm_spec = specs.get("thermometer")
-    bench = SimBench(
-        dmm_model=dmm_spec.sim_backend if dmm_spec is not None else "34401A",
-        chamber_model=specs["chamber"].sim_backend,
-        oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
-        model=model,
-        axis_physics=extra_axes,
-        unit_physics=unit_physics,
-        unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
+    recipe = BenchRecipe(
+        settings=dict(
+            dmm_model=dmm_spec.sim_backend if dmm_spec is not None else "34401A",
+            chamber_model=specs["chamber"].sim_backend,
+            oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
+            oven_alarm_input=getattr(cfg.oven, "alarm_input", 0) or None,
+            unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
+            samples_per_frame=cfg.adc.samples_per_frame,
+            workdir=workdir,
+            faults=faults,
+            keep_truth=keep_truth,
+            tcp=dmm_spec is not None and dmm_spec.sim_address == "dmm_tcp_resource",
+            tick_s=sim_tick_s(speed),
+            # In a process of its own the bench keeps producing while the run engine's
+            # process waits for a core: a unit's ADC waits up to a wall second for its
+            # reader to drain the port (the clock slips) before it overruns, as one
+            # process, starved whole, never did (docs/performance.md).
+            adc_write_timeout_s=SIM_ADC_BACKPRESSURE_S if own_process else None,
+            # Slow while the drivers connect (imports, port set-up: wall seconds that would
+            # be hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall
+            # so that the change to ``speed`` (SimHandle.go) takes effect at once.
+            speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
+        ),
+        rate_hz=cfg.adc.sample_rate_hz,
         seed=seed,
-        adc_rate_hz=cfg.adc.sample_rate_hz,
-        samples_per_frame=cfg.adc.samples_per_frame,
         ambient_c=profile.ambient_c,
-        workdir=workdir,
-        faults=faults,
-        keep_truth=keep_truth,
-        tcp=dmm_spec is not None and dmm_spec.sim_address == "dmm_tcp_resource",
-        tick_s=sim_tick_s(speed),
-        # Slow while the drivers connect (imports, port set-up: wall seconds that would be
-        # hundreds of simulated seconds at full speed), yet one tick per 0.1 s wall so
-        # that the change to ``speed`` (SimHandle.go) takes effect at once.
-        speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
+        model=model,
+        axis_models=list(axis_models),
+        units=[(u.model, u.seed) for u in family] if family else None,
     )
+    bench: Any
+    if own_process:
+        if workdir is None:
+            raise ValueError("own_process needs the bench's workdir")
+        bench = BenchProcess(recipe, Path(workdir))
+        info = bench.info
+    else:
+        try:
+            bench = recipe.build()
+        except ValueError as e:
+            raise InputError("--axis-model", str(e)) from None
+        bench.start()
+        info = describe(bench)
 
-    def calibrated(a: Any, adc: Any) -> Any:  # the ADC config with the unit's calibration
-        return replace(
-            a,
-            bits=int(adc.bits),
-            vref_v=float(adc.vref_v),
-            gain_v_per_dps=float(adc.gain_v_per_dps),
-            offset_v=float(adc.offset_v),
-        )
+    def calibrated(a: Any, adc: dict[str, Any]) -> Any:  # the unit's calibration sheet
+        return replace(a, **adc)
 
     axes = 1 + len(axis_models)
-    cfg = replace(cfg, adc=replace(calibrated(cfg.adc, bench.physics.adc), axes=axes))
+    cfg = replace(cfg, adc=replace(calibrated(cfg.adc, info["adc"]), axes=axes))
     if cfg.units:
         cfg = replace(
             cfg,
             units=tuple(
-                replace(u, adc=_with_die_sensor(calibrated(u.adc, p.adc), p, u.internal))
-                for u, p in zip(cfg.units, bench.unit_physics, strict=True)
+                replace(u, adc=_with_die_sensor(calibrated(u.adc, d["adc"]), d, u.internal))
+                for u, d in zip(cfg.units, info["units"], strict=True)
             ),
         )
-    bench.start()
-    where = bench.resources()
+    where = info["resources"]
     metadata: dict[str, dict[str, Any]] = {
         "sim_provenance": (
-            provenance(bench.physics.model, seed)
+            provenance(model, seed)
             if not family  # a family: keyed by serial, as simulate --units writes it
             else {
                 u.serial: {**provenance(u.model, u.seed), "family_seed": int(seed)} for u in family
@@ -311,9 +344,9 @@ def start_sim_bench(
     handle = SimHandle(
         addresses={role: where[spec.sim_address] for role, spec in specs.items()}
         | (
-            {f"unit/{u.serial}": p for u, p in zip(cfg.units, bench.unit_adc_ports, strict=True)}
+            {f"unit/{u.serial}": p for u, p in zip(cfg.units, where["unit_adc_ports"], strict=True)}
             if cfg.units
-            else {"rate_stream": bench.adc_port}
+            else {"rate_stream": where["adc_port"]}
         ),
         clock=SimRunClock(bench.clock),
         silence=SimSilence(),
@@ -326,31 +359,22 @@ def start_sim_bench(
     return handle, cfg
 
 
-def _with_die_sensor(adc: Any, physics: Any, internal: bool) -> Any:
+def _with_die_sensor(adc: Any, unit: dict[str, Any], internal: bool) -> Any:
     """A unit's stream config with its simulated internal sensor's register scale (the
     part's data sheet, as a lab takes it), for a unit read by that sensor."""
     if not internal:
         return adc
-    s = physics.die_sensor
-    return replace(adc, temperature_c_per_lsb=s.c_per_lsb, temperature_zero_c=s.zero_c)
+    return replace(adc, temperature_c_per_lsb=unit["c_per_lsb"], temperature_zero_c=unit["zero_c"])
 
 
-def _sim_units(
-    cfg: BenchConfig, profile: Profile, seed: int, model: Any
-) -> tuple[list[Any], list[Any] | None]:
-    """A multi-unit config's family (as ``gyrolab simulate --units``) and one Physics per
-    unit; ``([], None)`` for a single unit."""
+def _sim_family(cfg: BenchConfig, seed: int, model: Any) -> list[Any]:
+    """A multi-unit config's family (as ``gyrolab simulate --units``); ``[]`` for a single
+    unit."""
     if not cfg.units:
-        return [], None
+        return []
     from gyrolab.sim.family import unit_family
-    from gyrolab.sim.model import nominal_model
-    from gyrolab.sim.physics import Physics
 
-    family = unit_family(model or nominal_model(), len(cfg.units), seed)
+    family = unit_family(model, len(cfg.units), seed)
     if [u.serial for u in family] != [u.serial for u in cfg.units]:
         raise GyrolabError("the simulated units' serials are SIM<seed>-01 …")
-    physics = [
-        Physics(u.model, rate_hz=cfg.adc.sample_rate_hz, seed=u.seed, ambient_c=profile.ambient_c)
-        for u in family
-    ]
-    return family, physics
+    return family

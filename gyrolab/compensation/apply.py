@@ -33,9 +33,10 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
+from gyrolab.compensation.drift_model import DriftModel
 from gyrolab.compensation.fit import CompensationModel, Decomposition, decompose, fit_flp
 from gyrolab.compensation.flp import ForwardLinearPredictor
-from gyrolab.compensation.prepare import PreparedRun, features, run_rate_batches
+from gyrolab.compensation.prepare import PreparedRun, run_rate_batches
 from gyrolab.numerics.averaging import BlockAverager
 
 
@@ -114,34 +115,24 @@ def compensate_offline(
 
 
 class StreamingCompensator:
-    """Causal full-rate compensation ``raw(t) − f(T(t⁻))`` (module docstring), block by
-    block: ``comp(t, rate)`` for any run of samples in time order.
+    """Causal full-rate compensation ``raw(t) − d(t)`` by one drift model (module
+    docstring), block by block: ``comp(t, rate)`` for any run of samples in time order.
 
-    Without dT/dt the drift model is evaluated once per PT100 reading (the zero-order hold
-    only changes there) and looked up per sample with one ``searchsorted``; with dT/dt the
-    inputs also change through the ``t − w`` lookup, so they are evaluated per sample."""
+    A model whose drift changes only at readings (``DriftModel.reading_drift``: the
+    causal families, f(T) without dT/dt) is evaluated once per PT100 reading and looked up
+    per sample with one ``searchsorted``; otherwise (dT/dt changes through the ``t − w``
+    lookup) it is evaluated per sample (``DriftModel.drift_at``)."""
 
-    def __init__(
-        self, model: CompensationModel, pt_t: np.ndarray, pt_c: np.ndarray, which: str = "gabp"
-    ) -> None:
-        self.cfg = model.config
+    def __init__(self, model: DriftModel, pt_t: np.ndarray, pt_c: np.ndarray) -> None:
+        self.model = model
         self.pt_t, self.pt_c = pt_t, pt_c
-        if which == "causal":
-            # the causal model's state machine runs over the readings once; its drift is
-            # held between readings (causal_features.py)
-            if model.causal is None:
-                raise ValueError("model has no causal drift model")
-            self.model = model.causal
-            self._at_reading = model.causal.reading_drift(pt_t, pt_c)
-            return
-        self.model = model.drift if which == "gabp" else model.baselines[which]
-        self._at_reading = None if self.cfg.use_dtdt else self.model.predict(pt_c[:, None])
+        self._at_reading = model.reading_drift(pt_t, pt_c)
 
     def drift(self, t: np.ndarray) -> np.ndarray:
         if self._at_reading is not None:
             i = np.searchsorted(self.pt_t, t, side="right") - 1
             return self._at_reading[np.clip(i, 0, None)]
-        return self.model.predict(features(t, self.pt_t, self.pt_c, self.cfg))
+        return self.model.drift_at(t, self.pt_t, self.pt_c)
 
     def __call__(self, t: np.ndarray, rate: np.ndarray) -> np.ndarray:
         out = np.empty(rate.size)
@@ -159,8 +150,10 @@ def streaming_compensate(
     pt_c: np.ndarray,
     which: str = "gabp",
 ) -> np.ndarray:
-    """:class:`StreamingCompensator` applied to whole arrays."""
-    return StreamingCompensator(model, pt_t, pt_c, which)(t, np.asarray(rate, dtype=float))
+    """:class:`StreamingCompensator` of ``model.drift_model(which)`` applied to whole
+    arrays."""
+    comp = StreamingCompensator(model.drift_model(which), pt_t, pt_c)
+    return comp(t, np.asarray(rate, dtype=float))
 
 
 def streaming_block_means(
@@ -177,7 +170,7 @@ def streaming_block_means_many(
 ) -> dict[str, np.ndarray]:
     """:func:`streaming_block_means` of several causal outputs in one pass over the run
     (one read of the file when the run was prepared from it)."""
-    comps = {w: StreamingCompensator(model, run.pt_t, run.pt_c, w) for w in whiches}
+    comps = {w: StreamingCompensator(model.drift_model(w), run.pt_t, run.pt_c) for w in whiches}
     accs = {w: BlockAverager(model.config.block_s) for w in whiches}
     if run.raw_rate is not None and run.raw_t is not None:
         batches: Iterable[tuple[np.ndarray, np.ndarray, float]] = [

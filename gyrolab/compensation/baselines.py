@@ -56,6 +56,18 @@ class PolyDriftModel:
             y = y + self.rate_coef * X[:, 1]
         return y
 
+    def spec(self, inputs: list[str], window_s: float | None) -> dict[str, Any]:
+        """The exported form (``legendre``, :mod:`gyrolab.compensation.regressors`);
+        ``window_s``: the dT/dt window of the rate term (``inputs``: T, dT/dt)."""
+        return {
+            "kind": "legendre",
+            "coef": np.asarray(self.coef, dtype=float).tolist(),
+            "t_lo": float(self.t_lo),
+            "t_hi": float(self.t_hi),
+            "rate_coef": self.rate_coef,
+            "dtdt_window_s": window_s if self.rate_coef is not None else None,
+        }
+
     def to_state(self, prefix: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         meta = {
             "kind": "poly",

@@ -39,22 +39,16 @@ import numpy as np
 
 from gyrolab import __version__
 from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
-from gyrolab.compensation.axes import (
-    FIRMWARE_JSON,
-    axis_dir_name,
-    axis_dirs,
-    load_runs,
-    write_head,
-)
+from gyrolab.compensation.axes import load_runs
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
-from gyrolab.compensation.evaluate import evaluate
-from gyrolab.compensation.firmware import fit_poly3, poly3_metrics
+from gyrolab.compensation.evaluate import evaluate, poly3_metrics
+from gyrolab.compensation.firmware import fit_poly3
 from gyrolab.compensation.fit import fit
 from gyrolab.compensation.guards import check_not_calibration, range_check, warn_outside
-from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, load_model, save_model, write_json
+from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, ModelDir
 from gyrolab.compensation.oracle import add_oracle
 from gyrolab.compensation.prepare import PreparedRun, prepare_file
-from gyrolab.compensation.results import keep_oracle, run_results, save_results
+from gyrolab.compensation.results import keep_oracle, run_results
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
 from gyrolab.record.blocks import decode_block, encode_block
@@ -260,14 +254,13 @@ def compensate(
         if vals is not None:
             keep_oracle(results[0], add_oracle(metrics_cal, run_s, cfg.block_s, unit))
     with atomic_dir(out, force, command="compensate", inputs=inputs) as tmp:
+        md = ModelDir(tmp)
         if len(runs) == 1:
-            _write_axis(Path(tmp), *fitted[0])
+            _write_axis(md, *fitted[0])
         else:
             for k, f in enumerate(fitted):
-                sub = Path(tmp) / axis_dir_name(k)
-                sub.mkdir()
-                _write_axis(sub, *f)
-            write_head(Path(tmp), len(runs), [f[1] for f in fitted])
+                _write_axis(md.new_axis(k), *f)
+            md.write_head(len(runs), [f[1] for f in fitted])
     lines = []
     for k, (_model, metrics, metrics_cal, _res) in enumerate(fitted):
         if len(runs) > 1:
@@ -311,12 +304,12 @@ def _fit_axis(
 
 
 def _write_axis(
-    directory: Path, model: Any, metrics: dict[str, Any], _cal: Any, results: list[Any]
+    out: ModelDir, model: Any, metrics: dict[str, Any], _cal: Any, results: list[Any]
 ) -> None:
-    save_model(model, str(directory))
-    write_json(directory / "metrics.json", metrics)
-    write_json(directory / FIRMWARE_JSON, {"poly3": model.firmware_poly3.to_dict()})
-    save_results(directory, results)
+    out.write_model(model)
+    out.write_metrics(metrics)
+    out.write_firmware(model.firmware_poly3)
+    out.write_results(results)
 
 
 def units_of(path: str) -> list[str]:
@@ -328,6 +321,27 @@ def units_of(path: str) -> list[str]:
         return []
 
 
+def _headline_text(models: list[Any]) -> str:
+    """What ``/gyro/rate`` of the compensated copy holds (the apply metadata)."""
+    per_axis = " per axis" if len(models) > 1 else ""
+    if all(m.causal is not None for m in models):
+        fams = "/".join(sorted({m.causal.family for m in models}))
+        return (
+            f"causal full-rate compensated rate, raw - d (causal {fams} model on PT100 "
+            f"readings up to now){per_axis}"
+        )
+    return f"causal full-rate compensated rate, raw - f(T){per_axis}"
+
+
+def rate_axes(path: str) -> int:
+    """The axis count of a gyrolab recording's ``/gyro/rate`` (1 without rate data: the
+    single-axis path reports that)."""
+    for _topic, _ts, data in iter_messages(path, [TOPIC_RATE]):
+        arr = decode_block(data, "rate")[3]
+        return 1 if arr.ndim == 1 else int(arr.shape[1])
+    return 1
+
+
 def apply(
     model_dir: str | os.PathLike[str],
     run_path: str | os.PathLike[str],
@@ -335,28 +349,34 @@ def apply(
     force: bool = False,
 ) -> None:
     """Apply ``model_dir`` to ``run_path`` and write the compensated MCAP ``out``
-    (module docstring)."""
+    (module docstring): ``/gyro/rate`` of every axis compensated by its model's headline
+    drift model (:meth:`~gyrolab.compensation.fit.CompensationModel.headline`: the causal
+    model, the one ``gyrolab export`` exports by default), whatever the axis count; a run
+    of another axis count than the model's is refused."""
+    from gyrolab.logs import detect_format
+
     model_dir, run_path = str(model_dir), str(run_path)
     inputs = (model_dir, run_path)
     check_output(out, force, inputs=inputs, kind="file")
-    if len(axis_dirs(model_dir)) > 1:
-        _apply_axes(model_dir, run_path, out, force)
+    models = [d.load() for _a, d in ModelDir(model_dir).axes()]
+    if detect_format(run_path) != "gyrolab":
+        raise InputError(run_path, "apply writes a compensated copy of a gyrolab recording only")
+    have = rate_axes(run_path)
+    if have != len(models):
+        raise InputError(
+            run_path,
+            f"has {have} axes, the model {model_dir} {len(models)}: apply a {have}-axis model",
+        )
+    if len(models) > 1:
+        _apply_axes(model_dir, run_path, out, force, models)
         return
-    model = load_model(model_dir)
+    model = models[0]
     run = prepare_file(run_path, model.config)
     with _named(run_path):
         offline = compensate_offline(model, run)
-    # /gyro/rate carries the headline: the causal model when the model has one
-    which = "causal" if model.causal is not None else "gabp"
-    comp = StreamingCompensator(model, run.pt_t, run.pt_c, which)
+    comp = StreamingCompensator(model.headline(), run.pt_t, run.pt_c)
     in_range = range_check(model.calibration, run)
     warn_outside(run_path, in_range)
-    what = (
-        f"causal full-rate compensated rate, raw - d (causal {model.causal.family} model on "
-        "PT100 readings up to now)"
-        if model.causal is not None
-        else "causal full-rate compensated rate, raw - f(T)"
-    )
     info = {
         "model_dir": str(model_dir),
         "model_format_version": MODEL_FORMAT_VERSION,
@@ -365,7 +385,7 @@ def apply(
         "vmd": {"K": model.K, "alpha": model.alpha},
         "calibrated_range": in_range,
         "topics": {
-            TOPIC_RATE: what,
+            TOPIC_RATE: _headline_text(models),
             TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
             TOPIC_RATE_OFFLINE: "offline GPSO-VMD/MPE/FLP/GA-BP output, "
             f"{model.config.block_s} s averages",
@@ -383,19 +403,13 @@ def apply(
         )
 
 
-def _apply_axes(model_dir: str, run_path: str, out: str | os.PathLike[str], force: bool) -> None:
+def _apply_axes(
+    model_dir: str, run_path: str, out: str | os.PathLike[str], force: bool, models: list[Any]
+) -> None:
     """``apply`` for a multi-axis model: every axis of the recording compensated by its own
-    model, block by block (the rate blocks keep their (n, axes) layout)."""
-    from gyrolab.logs import detect_format
-
-    models = [load_model(str(d)) for _a, d in axis_dirs(model_dir)]
+    model's headline, block by block (the rate blocks keep their (n, axes) layout)."""
     inputs = (model_dir, run_path)
-    check_output(out, force, inputs=inputs, kind="file")
-    if detect_format(run_path) != "gyrolab":
-        raise InputError(run_path, "apply writes a compensated copy of a gyrolab recording only")
     runs = load_runs(run_path, models[0].config)
-    if len(runs) != len(models):
-        raise InputError(run_path, f"has {len(runs)} axes, the model {len(models)}")
     comps, y_off, ranges = [], [], []
     for k, (m, r) in enumerate(zip(models, runs, strict=True)):
         ranges.append(range_check(m.calibration, r))
@@ -403,7 +417,7 @@ def _apply_axes(model_dir: str, run_path: str, out: str | os.PathLike[str], forc
         with _named(run_path):
             off = compensate_offline(m, r)
         y_off.append(off.series["compensated"])
-        comps.append(StreamingCompensator(m, r.pt_t, r.pt_c))
+        comps.append(StreamingCompensator(m.headline(), r.pt_t, r.pt_c))
 
     def comp(t: np.ndarray, arr: np.ndarray) -> np.ndarray:
         return np.column_stack([c(t, arr[:, k]) for k, c in enumerate(comps)])
@@ -418,7 +432,7 @@ def _apply_axes(model_dir: str, run_path: str, out: str | os.PathLike[str], forc
         "calibration_run": models[0].calibration.get("path", ""),
         "vmd": [{"K": m.K, "alpha": m.alpha} for m in models],
         "topics": {
-            TOPIC_RATE: "causal full-rate compensated rate per axis, raw - f_axis(T)",
+            TOPIC_RATE: _headline_text(models),
             TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
             TOPIC_RATE_OFFLINE: f"offline GPSO-VMD/MPE/FLP/GA-BP output per axis, {block_s} s "
             "averages",

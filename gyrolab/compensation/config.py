@@ -21,17 +21,20 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from gyrolab.compensation import families
 from gyrolab.compensation.fitness import CRITERIA
 from gyrolab.compensation.gabp import OPTIMIZERS, BPConfig, GAConfig
+from gyrolab.compensation.temperature_model import FITS
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import PAPER_BLOCK_S
 from gyrolab.tomlfile import read_toml
 
-DRIFT_MODELS = ("gabp", "bp", "poly")  # the drift model f(T) of PipelineConfig.drift_model
+DRIFT_MODELS = tuple(FITS)  # the drift model f(T) of PipelineConfig.drift_model
 
 
 @dataclass(frozen=True)
@@ -100,13 +103,16 @@ DEFAULT_CONFIG = PipelineConfig()  # what `gyrolab compensate` uses
 EXTRA_KEYS = ("seed",)
 
 
-#: Allowed values of the keys that choose a method (each element for tuples).
-CHOICES: dict[str, tuple[str, ...]] = {
-    "drift_model": DRIFT_MODELS,
-    "bp_optimizer": OPTIMIZERS,
-    "vmd_fitness": tuple(CRITERIA),
-    "flp_criterion": ("aic", "mdl"),
-    "baselines": ("poly", "bp"),  # each element
+#: Allowed values of the keys that choose a method (each element for tuples);
+#: ``causal_families``: the registered drift-model families
+#: (:mod:`gyrolab.compensation.families`, which a test or an extension may add to).
+CHOICES: dict[str, Callable[[], tuple[str, ...]]] = {
+    "drift_model": lambda: DRIFT_MODELS,
+    "bp_optimizer": lambda: OPTIMIZERS,
+    "vmd_fitness": lambda: tuple(CRITERIA),
+    "flp_criterion": lambda: ("aic", "mdl"),
+    "baselines": lambda: ("poly", "bp"),  # each element
+    "causal_families": families.names,  # each element
 }
 
 
@@ -179,7 +185,7 @@ def _coerce(path: str, key: str, value: Any, tp: Any) -> Any:
 
 
 def _check_value(path: str, key: str, value: Any) -> None:
-    choices = CHOICES.get(key)
+    choices = CHOICES[key]() if key in CHOICES else None
     items = value if isinstance(value, tuple) else (value,)
     if choices is not None:
         for v in items:
@@ -220,6 +226,20 @@ def config_from_dict(
     if (cfg.vmd_K is None) != (cfg.vmd_alpha is None):
         raise InputError(path, "vmd_K and vmd_alpha fix (K, alpha) together: give both or none")
     return cfg, seed
+
+
+def check_config_dict(data: dict[str, Any], path: str = "config") -> None:
+    """Check a stored configuration (model.json's ``config``) the way a file's keys are
+    checked (type, allowed names, positivity); null where the field is optional is
+    allowed, a missing key is its default, and an unknown one (written by another
+    gyrolab) is ignored, as :meth:`PipelineConfig.from_dict` does."""
+    hints = typing.get_type_hints(PipelineConfig)
+    for key, value in data.items():
+        if key not in hints:
+            continue
+        if value is None and type(None) in typing.get_args(hints[key]):
+            continue
+        _check_value(path, key, _coerce(path, key, value, hints[key]))
 
 
 def load_config(

@@ -1,4 +1,5 @@
-"""metrics.json of one application of a model (:func:`evaluate`, docs/cli.md keys).
+"""metrics.json of one application of a model (:func:`evaluate`, docs/cli.md keys; the
+firmware cubic's cost beside it, :func:`poly3_metrics`).
 
 Every series is compared at the paper's 1000 points/h (:func:`series_metrics`: the five
 metrics of :func:`gyrolab.compensation.metrics.signal_metrics` on the 3.6 s averages, the
@@ -17,6 +18,7 @@ import numpy as np
 
 from gyrolab.compensation.apply import Application, streaming_block_means_many
 from gyrolab.compensation.band import band_metrics
+from gyrolab.compensation.firmware import Poly3, chosen_key, poly3_block_means
 from gyrolab.compensation.fit import CompensationModel
 from gyrolab.compensation.guards import range_check
 from gyrolab.compensation.metrics import signal_metrics
@@ -203,3 +205,30 @@ def headline_info(model: CompensationModel, run: PreparedRun) -> dict[str, Any]:
         "metrics_window_s": model.config.block_s,
         "drift_pp_window_s": DRIFT_PP_WINDOW_S,
     }
+
+
+def poly3_metrics(p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any]) -> dict:
+    """metrics.json ``firmware_poly3``: the cubic's causal residual on ``run`` and how much
+    worse it is than the chosen causal output of ``metrics`` (:func:`chosen_key`): ratios
+    > 1 mean the firmware form leaves more."""
+    key = chosen_key(metrics)
+    chosen = metrics[key]
+    m = series_metrics(poly3_block_means(p3, run, block_s), block_s)
+    ratio = {
+        f"{k}_ratio": (m[k] / chosen[k] if chosen.get(k) else float("nan"))
+        for k in ("rms_deg_per_s", "drift_pp_deg_per_s", "bias_stability_deg_per_h")
+    }
+    return {
+        **m,
+        "vs_chosen": {"chosen": key, **ratio},
+        "model": p3.to_dict(),
+    }
+
+
+def add_firmware_metrics(p3: Poly3 | None, run: PreparedRun, metrics: dict[str, Any]) -> None:
+    """Add ``firmware_poly3`` to a report's ``metrics`` for the model's firmware cubic
+    (``None``: a model fitted before it existed; nothing is added)."""
+    if p3 is not None:
+        metrics["firmware_poly3"] = poly3_metrics(
+            p3, run, float(metrics["sample_period_s"]), metrics
+        )

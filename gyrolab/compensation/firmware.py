@@ -9,10 +9,11 @@ temperature, clamped to the calibrated range::
 so neither can load gyrolab's network. :func:`fit_poly3` fits this cubic on the same
 calibration run as the chosen model (the 1000 points/h averages of the raw rate against the
 causal PT100 temperature, ordinary least squares in Δ with ``T_ref`` the middle of the
-range, as PX4's ``Tools/process_sensor_caldata.py`` does), and :func:`poly3_metrics` scores
-it the way the firmware would run it — causal, full rate, clamped — on any run, beside the
-chosen model's causal output (``compensated_streaming``), so that metrics.json says what the
-firmware's form costs. docs/export.md gives the parameter mappings.
+range, as PX4's ``Tools/process_sensor_caldata.py`` does), and :func:`poly3_block_means`
+applies it the way the firmware would run it — causal, full rate, clamped — on any run;
+:func:`gyrolab.compensation.evaluate.poly3_metrics` scores that beside the chosen model's
+causal output, so that metrics.json says what the firmware's form costs. docs/export.md
+gives the parameter mappings.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.compensation.evaluate import series_metrics
 from gyrolab.compensation.prepare import PreparedRun, causal_temperature, run_rate_batches
 from gyrolab.numerics.averaging import BlockAverager
 
@@ -39,8 +39,11 @@ class Poly3:
     t_max: float
 
     def predict(self, temp_c: np.ndarray) -> np.ndarray:
-        """Bias in °/s at temperatures ``temp_c`` (clamped to the calibrated range)."""
-        d = np.clip(np.asarray(temp_c, dtype=float), self.t_min, self.t_max) - self.t_ref
+        """Bias in °/s at temperatures ``temp_c`` (clamped to the calibrated range): a 1-D
+        array, or inputs ``(N, k)`` whose column 0 is the temperature."""
+        T = np.asarray(temp_c, dtype=float)
+        T = T[:, 0] if T.ndim == 2 else T
+        d = np.clip(T, self.t_min, self.t_max) - self.t_ref
         c0, c1, c2, c3 = self.coef
         return c0 + d * (c1 + d * (c2 + d * c3))
 
@@ -51,6 +54,17 @@ class Poly3:
         c = np.zeros(4)
         c[: q.coef.size] = q.coef
         return tuple(float(v) for v in c)  # type: ignore[return-value]
+
+    def spec(self, inputs: list[str], window_s: float | None) -> dict[str, Any]:
+        """The exported form (``poly3``, :mod:`gyrolab.compensation.regressors`; its one
+        input is T)."""
+        return {
+            "kind": "poly3",
+            "coef": list(self.coef),
+            "t_ref": self.t_ref,
+            "t_min": self.t_min,
+            "t_max": self.t_max,
+        }
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -101,37 +115,6 @@ def chosen_key(metrics: dict[str, Any]) -> str:
     """The metrics key of the chosen causal output: ``causal`` (the causal headline model)
     when the model has one, else ``compensated_streaming`` (GA-BP on T, causal)."""
     return "causal" if "causal" in metrics else "compensated_streaming"
-
-
-def poly3_metrics(p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any]) -> dict:
-    """metrics.json ``firmware_poly3``: the cubic's causal residual on ``run`` and how much
-    worse it is than the chosen causal output of ``metrics`` (:func:`chosen_key`): ratios
-    > 1 mean the firmware form leaves more."""
-    key = chosen_key(metrics)
-    chosen = metrics[key]
-    m = series_metrics(poly3_block_means(p3, run, block_s), block_s)
-    ratio = {
-        f"{k}_ratio": (m[k] / chosen[k] if chosen.get(k) else float("nan"))
-        for k in ("rms_deg_per_s", "drift_pp_deg_per_s", "bias_stability_deg_per_h")
-    }
-    return {
-        **m,
-        "vs_chosen": {"chosen": key, **ratio},
-        "model": p3.to_dict(),
-    }
-
-
-def firmware_metrics_for_dir(model_dir: Any, run: PreparedRun, metrics: dict[str, Any]) -> None:
-    """Add ``firmware_poly3`` to a report's ``metrics`` when the model directory has the
-    firmware cubic (models fitted before it existed have none: nothing is added)."""
-    import json
-    from pathlib import Path
-
-    p = Path(model_dir) / "firmware.json"
-    if not p.is_file():
-        return
-    p3 = Poly3.from_dict(json.loads(p.read_text())["poly3"])
-    metrics["firmware_poly3"] = poly3_metrics(p3, run, float(metrics["sample_period_s"]), metrics)
 
 
 def firmware_sentence(metrics: dict[str, Any]) -> str:

@@ -31,15 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.compensation.baselines import PolyDriftModel, fit_plain_bp, fit_poly
-from gyrolab.compensation.causal import CausalCalibration, CausalDriftModel, fit_causal
-from gyrolab.compensation.config import DEFAULT_CONFIG, DRIFT_MODELS, PipelineConfig
+from gyrolab.compensation.causal import fit_causal
+from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig
+from gyrolab.compensation.drift_model import CausalCalibration, DriftModel
 from gyrolab.compensation.fitness import search_vmd_parameters
 from gyrolab.compensation.flp import ForwardLinearPredictor
-from gyrolab.compensation.gabp import MLPDriftModel, fit_gabp
 from gyrolab.compensation.guards import calibration_ranges
 from gyrolab.compensation.mpe import classify_modes, mean_mpe
 from gyrolab.compensation.prepare import PreparedRun
+from gyrolab.compensation.temperature_model import TemperatureModel, fit_temperature_model
 from gyrolab.compensation.vmd import vmd
 from gyrolab.errors import InputError
 
@@ -129,16 +129,16 @@ def decompose(
 # ------------------------------------------------------------------------ the model
 
 
-DriftModel = MLPDriftModel | PolyDriftModel
-
-
 @dataclass
 class CompensationModel:
-    """What ``gyrolab compensate`` fits and ``gyrolab apply`` uses."""
+    """What ``gyrolab compensate`` fits and ``gyrolab apply`` uses: the paper's drift
+    model ``drift`` (f(T) in the hybrid reconstruction), the baselines, the decomposition
+    settings, and the causal headline model ``causal`` — each drift model a
+    :class:`~gyrolab.compensation.drift_model.DriftModel`."""
 
     config: PipelineConfig
-    drift: DriftModel
-    baselines: dict[str, DriftModel]
+    drift: TemperatureModel
+    baselines: dict[str, TemperatureModel]
     K: int
     alpha: float
     calibration: dict[str, Any]
@@ -147,18 +147,40 @@ class CompensationModel:
     diagnostics: dict[str, np.ndarray] = field(default_factory=dict)
     decomposition_info: dict[str, Any] = field(default_factory=dict)
     timing_s: dict[str, float] = field(default_factory=dict)
-    causal: CausalDriftModel | None = None  # the causal headline model (causal.py)
+    causal: DriftModel | None = None  # the causal headline model (causal.py)
     seed: int | None = None  # None: a model written before the seed was recorded
 
+    def drift_model(self, which: str) -> DriftModel:
+        """The drift model of one causal output: ``causal`` (the headline), ``gabp`` (the
+        paper's drift model, whatever ``drift_model`` fitted it), a baseline's name, or
+        ``chosen`` (:meth:`headline`)."""
+        if which == "chosen":
+            return self.headline()
+        if which == "causal":
+            if self.causal is None:
+                raise ValueError("model has no causal drift model (an older fit)")
+            return self.causal
+        if which == "gabp":
+            return self.drift
+        try:
+            return self.baselines[which]
+        except KeyError:
+            raise ValueError(f"model has no {which!r} drift model") from None
 
-def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> CausalDriftModel:
+    def headline(self) -> DriftModel:
+        """What ``apply`` writes and ``export`` exports by default: the causal model, or
+        the paper's drift model for a model fitted before there was one."""
+        return self.causal if self.causal is not None else self.drift
+
+
+def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> DriftModel:
     """The causal drift model (:func:`gyrolab.compensation.causal.fit_causal`): every family
-    of ``cfg.causal_families`` on the causal features, the winner by CV inside ``run``."""
+    of ``cfg.causal_families``, the winner by CV inside ``run``."""
     cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
-    return fit_causal(cal, families=cfg.causal_families, bp=cfg.bp(), ga=cfg.ga(), seed=seed)
+    return fit_causal(cal, config=cfg, seed=seed)
 
 
-def fit_prior_model(run: PreparedRun, prior: Any) -> CausalDriftModel:
+def fit_prior_model(run: PreparedRun, prior: Any) -> DriftModel:
     """The causal model as the MAP fit towards a fleet prior (:mod:`.prior`); a unit
     outside the prior is an :class:`InputError` asking for the full profile."""
     from gyrolab.compensation.prior import fit_map
@@ -170,16 +192,13 @@ def fit_prior_model(run: PreparedRun, prior: Any) -> CausalDriftModel:
     return got.model
 
 
-def fit_drift_model(X: np.ndarray, drift: np.ndarray, cfg: PipelineConfig, seed: int) -> Any:
+def fit_drift_model(
+    X: np.ndarray, drift: np.ndarray, cfg: PipelineConfig, seed: int
+) -> TemperatureModel:
     """The drift model ``f`` of ``cfg.drift_model`` fitted to ``drift ≈ f(X)``: the paper's
-    GA-BP, plain BP (random initial weights) or the polynomial of :mod:`.baselines`."""
-    if cfg.drift_model == "gabp":
-        return fit_gabp(X, drift, ga=cfg.ga(), bp=cfg.bp(), seed=seed)
-    if cfg.drift_model == "bp":
-        return fit_plain_bp(X, drift, bp=cfg.bp(), seed=seed)
-    if cfg.drift_model == "poly":
-        return fit_poly(X, drift)
-    raise ValueError(f"drift_model must be one of {DRIFT_MODELS}, not {cfg.drift_model!r}")
+    GA-BP, plain BP (random initial weights) or the polynomial of :mod:`.baselines`
+    (:data:`gyrolab.compensation.temperature_model.FITS`)."""
+    return fit_temperature_model(cfg.drift_model, X, drift, cfg, seed)
 
 
 def fit(
@@ -210,11 +229,11 @@ def fit(
     gabp = fit_drift_model(run.X, drift, cfg, seed)
     timing["gabp"] = time.perf_counter() - t1
     t2 = time.perf_counter()
-    baselines: dict[str, DriftModel] = {}
-    if "poly" in cfg.baselines:
-        baselines["poly"] = fit_poly(run.X, run.rate)
-    if "bp" in cfg.baselines:
-        baselines["bp"] = fit_plain_bp(run.X, run.rate, bp=cfg.bp(), seed=seed)
+    # the classical approach: fitted on the raw rate, no decomposition
+    baselines = {
+        name: fit_temperature_model(name, run.X, run.rate, cfg, seed)
+        for name in dict.fromkeys(cfg.baselines)
+    }
     timing["baselines"] = time.perf_counter() - t2
     t3 = time.perf_counter()
     causal = fit_causal_model(run, cfg, seed) if prior is None else fit_prior_model(run, prior)
@@ -251,6 +270,8 @@ def fit(
             "content_hash": run.content_hash,
             # the model's input: the PT100 or the unit's internal sensor (guards.source_check)
             "temperature_source": run.temperature_source,
+            # the unit it was fitted on, as its recording names it (guards.unit_check)
+            **({"unit_serial": run.serial} if run.serial else {}),
         },
         flp_mixed=flp_mixed,
         flp_stream=flp_stream,

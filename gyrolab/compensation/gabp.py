@@ -112,10 +112,19 @@ def forward(theta: np.ndarray, Xs: np.ndarray, n_in: int, hidden: int) -> np.nda
 
 
 def _input_gradient(theta: np.ndarray, Xs: np.ndarray, n_in: int, hidden: int) -> np.ndarray:
-    """∂Z/∂X (standardised units) of eqs 15–17: ``Σ_h W_ih w_h Y_h (1 − Y_h)``, ``(N, n)``."""
+    """∂Z/∂X (standardised units) of eqs 15–17: ``Σ_h W_ih w_h Y_h (1 − Y_h)``, ``(N, n)``.
+
+    Row by row the same operations in the same order whatever N (the sums run over the
+    hidden units one at a time): a reading evaluated alone gives the bits it gets inside
+    a whole run (a BLAS product sums differently for different N)."""
     W, a, w, _ = unpack(theta, n_in, hidden)
-    Y = 0.5 * (1.0 + np.tanh(0.5 * (Xs @ W + a)))
-    return (Y * (1.0 - Y) * w) @ W.T
+    z = np.einsum("ni,ih->nh", Xs, W) + a
+    Y = 0.5 * (1.0 + np.tanh(0.5 * z))
+    d = Y * (1.0 - Y) * w
+    g = np.zeros((Xs.shape[0], n_in))
+    for h in range(hidden):
+        g += d[:, h : h + 1] * W[:, h]
+    return g
 
 
 def _nonuniform(
@@ -355,6 +364,30 @@ class MLPDriftModel:
                     y[out_of] += np.sum(g * dx[out_of], axis=1)
             out[s : s + chunk] = y
         return out * self.y_std + self.y_mean
+
+    def spec(self, inputs: list[str], window_s: float | None) -> dict[str, Any]:
+        """The exported form (``mlp``, :mod:`gyrolab.compensation.regressors`) on inputs
+        named ``inputs``; ``window_s``: the dT/dt window when an input is dT/dt."""
+        W, a, w, b = unpack(np.asarray(self.theta, dtype=float), self.n_in, self.hidden)
+        if self.x_min is None or self.x_max is None:
+            raise ValueError("network without a calibrated input range: refit the model")
+        return {
+            "kind": "mlp",
+            "init": self.init,
+            "inputs": list(inputs),
+            "dtdt_window_s": window_s,
+            "hidden": int(self.hidden),
+            "x_mean": np.asarray(self.x_mean, dtype=float).tolist(),
+            "x_std": np.asarray(self.x_std, dtype=float).tolist(),
+            "x_min": np.asarray(self.x_min, dtype=float).tolist(),
+            "x_max": np.asarray(self.x_max, dtype=float).tolist(),
+            "W": W.tolist(),
+            "a": a.tolist(),
+            "w": w.tolist(),
+            "b": float(b),
+            "y_mean": float(self.y_mean),
+            "y_std": float(self.y_std),
+        }
 
     def torch_state_dict(self) -> dict[str, Any]:
         """The weights as a ``torch.nn.Sequential(Linear(n, l), Sigmoid(), Linear(l, 1))``

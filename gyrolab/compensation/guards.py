@@ -15,15 +15,16 @@
   fitted on (``calibration.temperature_source``: the unit's PT100, or its internal die
   sensor) against the run's. A mismatch is not refused (the die–case offset and lag may be
   acceptable) but flagged the same way: a stderr line and ``temperature_source_mismatch``.
-* :func:`check_finite` — a model whose parameters are not all finite is refused when
-  loaded (one line naming the file, exit 2) instead of producing an all-NaN output.
+* :func:`unit_check` / :func:`unit_warning` — the unit the model was fitted on
+  (``calibration.unit_serial``, the serial its calibration recording names) against the
+  run's: a model applied to another unit's run is flagged (stderr line, ``unit_mismatch``),
+  not refused (a fleet prior is applied to other units on purpose).
 """
 
 from __future__ import annotations
 
 import hashlib
 import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -122,6 +123,30 @@ def source_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     }
 
 
+def unit_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
+    """The serial of the unit the model was fitted on (``calibration.unit_serial``, else
+    the multi-unit ``calibration.unit``) against the run's (``PreparedRun.serial``), and
+    whether they differ — only where both are known (a model or a recording without a
+    serial is not flagged)."""
+    fitted = str(calibration.get("unit_serial") or calibration.get("unit") or "")
+    used = str(getattr(run, "serial", "") or "")
+    return {
+        "unit_serial": used or None,
+        "calibration_unit_serial": fitted or None,
+        "unit_mismatch": bool(fitted and used and fitted != used),
+    }
+
+
+def unit_warning(path: str, t: dict[str, Any]) -> str | None:
+    """One stderr line for a run of another unit than the model's (``None`` otherwise)."""
+    if not t.get("unit_mismatch"):
+        return None
+    return (
+        f"warning: {path}: the model was fitted on unit {t['calibration_unit_serial']}, "
+        f"this run is unit {t['unit_serial']}: its drift is not this unit's"
+    )
+
+
 SOURCE_NAMES = {"pt100": "PT100 (case)", "internal": "internal (die) sensor"}
 
 
@@ -147,7 +172,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     keys only."""
     lo, hi = calibration.get("temp_min_c"), calibration.get("temp_max_c")
     if lo is None or hi is None:
-        return source_check(calibration, run)
+        return {**source_check(calibration, run), **unit_check(calibration, run)}
     strict = (run.temp < lo) | (run.temp > hi)
     frac_t, margin_t = _outside(run.temp, lo, hi, TEMP_MARGIN_C)
     out: dict[str, Any] = {
@@ -179,6 +204,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
         flag = flag or frac_r > 0
     out["outside_calibration_range"] = bool(flag)
     out.update(source_check(calibration, run))
+    out.update(unit_check(calibration, run))
     return out
 
 
@@ -213,37 +239,8 @@ def range_warning(path: str, t: dict[str, Any]) -> str | None:
 
 
 def warn_outside(path: str, t: dict[str, Any]) -> None:
-    """The stderr lines of a ``temperature`` block: outside the range, another source."""
-    for msg in (range_warning(path, t), source_warning(path, t)):
+    """The stderr lines of a ``temperature`` block: outside the range, another source,
+    another unit."""
+    for msg in (range_warning(path, t), source_warning(path, t), unit_warning(path, t)):
         if msg:
             print(msg, file=sys.stderr)
-
-
-def check_finite(directory: str | Path, meta: dict[str, Any], arrays: dict[str, Any]) -> None:
-    """Refuse a model whose parameters are not all finite: the network weights, scalers,
-    ranges and polynomial coefficients (``drift.*``, ``baseline.*``, ``causal.*`` in arrays.npz, the
-    scalers in model.json) and the FLP coefficients. One line naming the file."""
-    npz = Path(directory) / "arrays.npz"
-    for k, v in arrays.items():
-        if not k.startswith(("drift.", "baseline.", "causal.")) or k.endswith("_history"):
-            continue
-        a = np.asarray(v)
-        if a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
-            bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
-            raise InputError(
-                npz, f"model parameter {k} has {bad} non-finite value(s) of {a.size}: refused"
-            )
-    mj = Path(directory) / "model.json"
-    scal = [("drift_model", meta.get("drift_model") or {})]
-    scal += [(f"baselines.{n}", b) for n, b in (meta.get("baselines") or {}).items()]
-    for where, d in scal:
-        for key in ("y_mean", "y_std", "t_lo", "t_hi"):
-            if key in d and not (d[key] is not None and np.isfinite(float(d[key]))):
-                raise InputError(mj, f"model parameter {where}.{key} is not finite: refused")
-    for name, f in (meta.get("flp") or {}).items():
-        if not isinstance(f, dict):
-            continue
-        vals = list(f.get("coef") or []) + [f.get("mean", 0.0)]
-        # JSON has no NaN: a non-finite value was written as null
-        if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in vals):
-            raise InputError(mj, f"FLP parameters flp.{name} are not finite: refused")

@@ -22,6 +22,7 @@ import numpy as np
 from gyrolab.compensation.causal_features import hold
 from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.guards import RunHasher, content_hash
+from gyrolab.compensation.temperature_model import temperature_inputs
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE
@@ -52,6 +53,7 @@ class PreparedRun:
     unit: str | None = None  # the unit of a multi-unit recording (docs/fleet.md)
     # what pt_c is: the PT100, or the unit's internal sensor (Recording.temperature_source)
     temperature_source: str = "pt100"
+    serial: str = ""  # the unit's serial as the recording names it ("": not recorded)
     label: str = ""  # the caller's stable name for the run ("": the path as given)
     # prepare_file's full-rate batches, kept for the later passes (run_rate_batches) when the
     # run has at most RATE_KEEP_MAX_SAMPLES samples; None: those passes stream the file
@@ -76,12 +78,7 @@ def features(t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, cfg: PipelineCon
     """Drift-model inputs at times ``t``: T (°C) and, with ``use_dtdt``, the backward
     difference ``(T(t) − T(t − w)) / w`` (°C/s, w = ``dtdt_window_s``). Causal, and the same
     function for fitting, offline and streaming application."""
-    T = causal_temperature(t, pt_t, pt_c)
-    if not cfg.use_dtdt:
-        return T[:, None]
-    w = cfg.dtdt_window_s
-    Tp = causal_temperature(t - w, pt_t, pt_c)
-    return np.column_stack([T, (T - Tp) / w])
+    return temperature_inputs(t, pt_t, pt_c, cfg.dtdt_window_s if cfg.use_dtdt else None)
 
 
 def _check_temperature(path: str, pt_t: np.ndarray, pt_c: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -99,9 +96,12 @@ def _finish(
     cfg: PipelineConfig,
     raw: tuple[np.ndarray, np.ndarray] | None,
     unit: str | None = None,
+    cut: list[tuple[float, float]] | tuple[()] = (),
 ) -> PreparedRun:
     """Input checks on the accumulated rate, then the run at 1000 points/h; ``raw``: the
-    full-rate ``(t, rate)`` when they are in memory. ``content_hash`` is left to the caller."""
+    full-rate ``(t, rate)`` when they are in memory; ``cut``: a resumed run's
+    interruptions, over which nothing is filled in (the series jumps over them).
+    ``content_hash`` is left to the caller."""
     if acc.n_bad:
         raise InputError(path, f"/gyro/rate has {acc.n_bad} NaN or infinite samples")
     if acc.t_first is None:
@@ -118,7 +118,7 @@ def _finish(
             f"run is {span_s:.0f} s long; the compensation model needs at least "
             f"{need_s:.0f} s ({cfg.min_blocks} points at {cfg.block_s} s)",
         )
-    tb, xb, filled = acc.result()
+    tb, xb, filled = acc.result(cut)
     if not np.all(np.isfinite(xb)):
         raise InputError(path, "/gyro/rate has too many gaps to average")
     return PreparedRun(
@@ -145,9 +145,10 @@ def prepare_run(rec: Recording, cfg: PipelineConfig) -> PreparedRun:
     x = np.asarray(rate.values, dtype=float)
     acc = BlockAverager(cfg.block_s)
     acc.add(rate.t, x, rate.period)
-    run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit)
+    run = _finish(rec.path, acc, pt_t, pt_c, cfg, (rate.t, x), rec.unit, rec.interruptions)
     run.content_hash = content_hash(x, pt_t, pt_c)
     run.temperature_source = rec.temperature_source
+    run.serial = str(rec.run.get("unit_serial") or "")
     return run
 
 
@@ -264,8 +265,9 @@ def prepare_file(path: str, cfg: PipelineConfig, unit: str | None = None) -> Pre
     )
     take(batcher.flush())
     pt_t, pt_c = _check_temperature(str(path), *rec.require_temperature())
-    run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit)
+    run = _finish(str(path), acc, pt_t, pt_c, cfg, None, unit, rec.interruptions)
     run.content_hash = hasher.hexdigest(pt_t, pt_c)
     run.temperature_source = rec.temperature_source
+    run.serial = str(rec.run.get("unit_serial") or "")
     run.rate_batches = kept
     return run

@@ -67,15 +67,11 @@ from scipy import stats
 
 from gyrolab.compensation.band import fit_band
 from gyrolab.compensation.baselines import blocked_folds
-from gyrolab.compensation.causal import (
-    CV_FOLDS,
-    CV_SEGMENTS,
-    CausalCalibration,
-    CausalDriftModel,
-    StructuredModel,
-    effective_samples,
-)
+from gyrolab.compensation.causal import CV_FOLDS, CV_SEGMENTS
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.causal_models import StructuredCausalModel
+from gyrolab.compensation.drift_model import CausalCalibration
+from gyrolab.compensation.structured import StructuredModel, effective_samples
 
 #: the six terms after the Legendre columns, in θ order
 TERMS = ("rate", "hyst", "warmup", "rate_pos", "rate_sq", "hyst_T")
@@ -459,7 +455,7 @@ def membership(A: np.ndarray, y: np.ndarray, s2: float, prior: FleetPrior) -> Me
 class PriorFit:
     """A unit fitted with the prior: the causal model, whether it belongs, the fit log."""
 
-    model: CausalDriftModel
+    model: StructuredCausalModel
     membership: Membership
     log: dict[str, Any]
 
@@ -521,7 +517,7 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
         "rms_residual_deg_per_s": float(np.sqrt(np.mean(r * r))),
         "hysteresis_width": hysteresis_width(b.model(theta).to_dict()),
     }
-    model = CausalDriftModel(
+    model = StructuredCausalModel(
         family="structured",
         params=params,
         model=b.model(theta),
@@ -561,11 +557,11 @@ __all__ = [
 def prior_from_dirs(dirs: list[str]) -> FleetPrior:
     """The prior of the units whose model directories are ``dirs`` (a model whose causal
     model is a network, or that has none, is skipped and named in ``skipped``)."""
-    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.compensation.model_dir import ModelDir
 
     units, skipped = [], {}
     for d in dirs:
-        got = structured_of(load_model(d).causal)
+        got = structured_of(ModelDir(d).load().causal)
         if got is None:
             skipped[str(d)] = "its causal model is not a structured one"
             continue

@@ -2,8 +2,8 @@
 
 ``gyrolab report RUN --model MODEL_DIR`` reads these instead of applying the model again
 (VMD, MPE, FLP, the causal outputs, the Allan curves), so the report's figures and numbers
-are the ones ``compensate`` computed. Two files in the model directory
-(:mod:`gyrolab.compensation.model_dir`), format ``RESULTS_FORMAT_VERSION`` 1:
+are the ones ``compensate`` computed. Two files in the model directory, written and read
+by :class:`~gyrolab.compensation.model_dir.ModelDir` (format version 1):
 
 ``results.json``
     ``format``, ``format_version``, ``software_version`` and ``runs``: one entry per
@@ -24,29 +24,19 @@ are the ones ``compensate`` computed. Two files in the model directory
 The metrics of each run are those of ``metrics.json`` (the top level for the run
 ``compensate`` reports on, ``calibration`` for the calibration run of a ``--validate``
 fit). A model directory written before these files existed has none:
-:func:`load_results` returns ``{}`` and the report computes what it needs, saying so.
+:meth:`ModelDir.results` returns ``{}`` and the report computes what it needs, saying so.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import zipfile
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from gyrolab import __version__
 from gyrolab.errors import InputError
 
-RESULTS_FORMAT = "gyrolab.compensation-results"
-RESULTS_FORMAT_VERSION = 1
-RESULTS_JSON = "results.json"
-RESULTS_NPZ = "results.npz"
-METRICS_JSON = "metrics.json"
 #: Series of the application kept for the report (the baselines are added by name).
 KEPT_SERIES = ("raw", "compensated", "drift_prediction")
 #: Series whose Allan curve is kept.
@@ -202,11 +192,9 @@ def run_results(role: str, model: Any, app: Any, run: Any, held_out: bool) -> Ru
     )
 
 
-def save_results(directory: str | os.PathLike[str], runs: list[RunResults]) -> None:
-    """Write results.json and results.npz into an existing (temporary) model directory."""
-    from gyrolab.compensation.model_dir import write_json
-
-    d = Path(directory)
+def results_to_parts(runs: list[RunResults]) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """``(runs metadata, arrays)``: results.json's ``runs`` and results.npz's arrays
+    (:class:`~gyrolab.compensation.model_dir.ModelDir` writes them)."""
     meta: dict[str, Any] = {}
     arrays: dict[str, np.ndarray] = {}
     for r in runs:
@@ -227,91 +215,40 @@ def save_results(directory: str | os.PathLike[str], runs: list[RunResults]) -> N
             "oracle_checked": r.oracle_checked,
             "allan": {k: a.scalars() for k, a in r.allan.items()},
         }
-    write_json(
-        d / RESULTS_JSON,
-        {
-            "format": RESULTS_FORMAT,
-            "format_version": RESULTS_FORMAT_VERSION,
-            "software_version": __version__,
-            "runs": meta,
-        },
-    )
-    np.savez_compressed(d / RESULTS_NPZ, **arrays)
+    return meta, arrays
 
 
-def load_results(directory: str | os.PathLike[str]) -> dict[str, RunResults]:
-    """The results of a model directory by role; ``{}`` when it has none (written before
-    they were kept). A damaged file or one of another format version is an
-    :class:`InputError` naming it."""
-    d = Path(directory)
-    rj, rn = d / RESULTS_JSON, d / RESULTS_NPZ
-    if not rj.is_file():
-        return {}
-    try:
-        meta = json.loads(rj.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(rj, f"damaged results file ({e.__class__.__name__})") from None
-    if not isinstance(meta, dict) or meta.get("format") != RESULTS_FORMAT:
-        raise InputError(rj, "not a gyrolab results file")
-    if meta.get("format_version") != RESULTS_FORMAT_VERSION:
-        raise InputError(
-            rj,
-            f"results format version {meta.get('format_version')} (written by gyrolab "
-            f"{meta.get('software_version')}); this gyrolab reads version "
-            f"{RESULTS_FORMAT_VERSION} — refit with `gyrolab compensate`",
-        )
-    try:
-        with np.load(rn, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        why = e.__class__.__name__
-        raise InputError(rn, f"missing or damaged results arrays ({why})") from None
+def results_from_parts(
+    runs: dict[str, Any], arrays: dict[str, np.ndarray]
+) -> dict[str, RunResults]:
+    """The results by role from results.json's ``runs`` and results.npz's arrays
+    (``KeyError``/``TypeError``/``ValueError`` when they are incomplete)."""
     out: dict[str, RunResults] = {}
-    try:
-        for role, m in meta["runs"].items():
-            p = f"{role}."
-            series = {
-                k[len(p) + 7 :]: v for k, v in arrays.items() if k.startswith(p + "series.")
-            }
-            allan = {
-                k: AllanSummary.from_parts(
-                    s, {q: arrays[f"{p}allan.{k}.{q}"] for q in ("tau", "adev", "lo", "hi")}
-                )
-                for k, s in m.get("allan", {}).items()
-            }
-            out[role] = RunResults(
-                role=role,
-                path=str(m["path"]),
-                content_hash=str(m["content_hash"]),
-                held_out=bool(m["held_out"]),
-                block_s=float(m["block_s"]),
-                t=arrays[p + "t"],
-                temp=arrays[p + "temp"],
-                modes=arrays[p + "modes"],
-                mpe=[float(v) for v in m["mpe"]],
-                classes={k: [int(i) for i in v] for k, v in m["classes"].items()},
-                series=series,
-                allan=allan,
-                oracle_checked=bool(m.get("oracle_checked", False)),
+    for role, m in runs.items():
+        p = f"{role}."
+        series = {k[len(p) + 7 :]: v for k, v in arrays.items() if k.startswith(p + "series.")}
+        allan = {
+            k: AllanSummary.from_parts(
+                s, {q: arrays[f"{p}allan.{k}.{q}"] for q in ("tau", "adev", "lo", "hi")}
             )
-    except (KeyError, TypeError, ValueError) as e:
-        raise InputError(rj, f"incomplete or damaged results ({e!r})") from None
+            for k, s in m.get("allan", {}).items()
+        }
+        out[role] = RunResults(
+            role=role,
+            path=str(m["path"]),
+            content_hash=str(m["content_hash"]),
+            held_out=bool(m["held_out"]),
+            block_s=float(m["block_s"]),
+            t=arrays[p + "t"],
+            temp=arrays[p + "temp"],
+            modes=arrays[p + "modes"],
+            mpe=[float(v) for v in m["mpe"]],
+            classes={k: [int(i) for i in v] for k, v in m["classes"].items()},
+            series=series,
+            allan=allan,
+            oracle_checked=bool(m.get("oracle_checked", False)),
+        )
     return out
-
-
-def run_metrics(directory: str | os.PathLike[str], role: str) -> dict[str, Any] | None:
-    """``compensate``'s metrics of the run of ``role`` from ``metrics.json`` (module
-    docstring); ``None`` when the file or the entry is missing."""
-    p = Path(directory) / METRICS_JSON
-    if not p.is_file():
-        return None
-    try:
-        m = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(p, f"damaged metrics file ({e.__class__.__name__})") from None
-    if role == "calibration" and isinstance(m.get("calibration"), dict):
-        m = m["calibration"]
-    return m if isinstance(m, dict) and "raw" in m else None
 
 
 def keep_oracle(r: RunResults, oracle: np.ndarray | None) -> None:

@@ -40,9 +40,9 @@ def check_request(fmt: str, *, device_id: int | None, run: object | None) -> Non
 
 
 def _polys(model_dir: str) -> list[Any]:
-    from gyrolab.compensation.axes import axis_dirs, load_poly3
+    from gyrolab.compensation.model_dir import ModelDir
 
-    return [load_poly3(d) for _name, d in axis_dirs(model_dir)]
+    return [d.require_firmware() for _name, d in ModelDir(model_dir).axes()]
 
 
 def _header(model_dir: str, line: str) -> str:
@@ -90,20 +90,19 @@ def kalibr_text(
 ) -> str:
     """``imu.yaml`` for ``model_dir`` applied to ``run`` (every axis)."""
     from gyrolab.compensation.apply import streaming_compensate
-    from gyrolab.compensation.axes import axis_dirs
-    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.export.kalibr import axis_noise, imu_yaml
     from gyrolab.logs import read_log
 
     rec = read_log(run, **(log_options or {}))
-    dirs = axis_dirs(model_dir)
+    dirs = ModelDir(model_dir).axes()
     if rec.axes != len(dirs):
         raise InputError(run, f"has {rec.axes} axes, the model {len(dirs)}")
     pt_t, pt_c = rec.require_temperature()
     axes = {}
     for k, (name, d) in enumerate(dirs):
         s = rec.axis(k).require_rate()
-        y = streaming_compensate(load_model(str(d)), s.t, s.values, pt_t, pt_c)
+        y = streaming_compensate(d.load(), s.t, s.values, pt_t, pt_c)
         axes[name] = axis_noise(y, s.rate_hz)
     return imu_yaml(axes, rec.require_rate().rate_hz, rostopic, str(run))
 
@@ -124,8 +123,7 @@ def export(
     """Write ``model_dir`` in format ``fmt`` to ``out`` (module docstring); returns the
     files written. ``device_id`` is required for ``px4``, ``run`` for ``kalibr``
     (:func:`check_request`)."""
-    from gyrolab.catalogue.digest import model_digest
-    from gyrolab.compensation.axes import axis_dirs
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.export.params import ardupilot_parm, px4_params
 
     check_request(fmt, device_id=device_id, run=run)
@@ -137,8 +135,9 @@ def export(
     what = target(
         fmt, kind=kind, instance=instance, device_id=device_id, run=run, rostopic=rostopic
     )
-    axis_dirs(model)  # a model directory (one line, exit 2 otherwise) before it is hashed
-    model_hash = model_digest(model)
+    md = ModelDir(model)
+    md.axes()  # a model directory (one line, exit 2 otherwise) before it is hashed
+    model_hash = md.digest()
     line = provenance(model_hash, fmt, what)
     if fmt == "px4":
         assert device_id is not None  # check_request
@@ -160,7 +159,7 @@ def export(
                 raise InputError(out, "the C output must be NAME.c (NAME.h is written beside it)")
             try:
                 header, source = generate(spec, outs[1].name)
-            except ValueError as e:
+            except ValueError as e:  # e.g. a non-finite constant, axes' windows that differ
                 raise InputError(model, str(e)) from None
             texts = [f"/* {line} */\n" + source, f"/* {line} */\n" + header]
     else:  # kalibr (check_request knows every format)

@@ -117,10 +117,14 @@ class ThermometerReading(NamedTuple):
 
 
 class ChamberReading(NamedTuple):
-    """The controller's ``setpoint_c`` and its ``process_value_c`` (chamber air, °C)."""
+    """The controller's ``setpoint_c`` and its ``process_value_c`` (chamber air, °C), and
+    ``alarm``: what the chamber reports of an alarm (or an open door) that stops it, where
+    the driver can tell ("" when none). The run engine decides what an alarm does: it holds
+    the run (a suspender) or ends it (gyrolab/acquisition/suspend.py)."""
 
     setpoint_c: float
     process_value_c: float
+    alarm: str = ""
 
 
 # The rate stream's reading: one ``read`` returns an AdcRead of gap-free AdcBlocks.
@@ -206,8 +210,9 @@ class Chamber(Instrument, Protocol):
         ...
 
     def read(self) -> ChamberReading:
-        """Setpoint and process value; raises on failure (:class:`InstrumentFault` when
-        the controller reports it cannot control the chamber)."""
+        """Setpoint, process value and any alarm; raises on failure
+        (:class:`InstrumentFault` when the controller reports it cannot control the
+        chamber for a reason no suspension can wait out)."""
         ...
 
     # Drivers that can switch the chamber off also have ``switch_off()`` (heater and

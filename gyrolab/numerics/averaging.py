@@ -10,7 +10,10 @@ that series. Two forms of the same operation:
   the block length, s); its centre is ``t₀ + (k + ½)·b``. A block with fewer than half its
   expected ``b / period`` samples (a recording gap) is filled by linear interpolation of
   its neighbours and counted, so the series stays uniformly sampled (VMD needs that); a
-  trailing partial block is dropped.
+  trailing partial block is dropped. Across an interruption of a resumed run (``cut``:
+  the recording's interruptions, docs/recording-format.md "Segments") nothing is filled:
+  the blocks without enough samples that overlap one are left out, and the series jumps
+  over the interruption.
 * **by sample count** — :func:`block_means` for a series already uniformly sampled (e.g. the
   3.6 s series itself averaged again to 100 s): windows of ``round(window_s · fs)`` ≥ 1
   samples, a trailing partial window dropped.
@@ -84,9 +87,12 @@ class BlockAverager:
         """Median nominal sample period of the batches (s); NaN before the first."""
         return float(np.median(self.periods)) if self.periods else float("nan")
 
-    def result(self) -> tuple[np.ndarray, np.ndarray, int]:
+    def result(
+        self, cut: list[tuple[float, float]] | tuple[()] = ()
+    ) -> tuple[np.ndarray, np.ndarray, int]:
         """Block centres (s), block means and the number of gap-filled blocks (module
-        docstring)."""
+        docstring); the blocks short of samples that overlap an interval of ``cut`` (s)
+        are left out instead of filled."""
         if self.t_first is None or not self.period > 0:
             return np.empty(0), np.empty(0), 0
         n = self.n_bins
@@ -96,7 +102,12 @@ class BlockAverager:
         s, c = self.sums[:n], self.counts[:n]
         tb = self.t_first + (np.arange(n) + 0.5) * self.block_s
         good = c >= 0.5 * expected
-        xb = np.full(n, np.nan)
+        keep = np.ones(n, dtype=bool)
+        for a, b in cut:  # an interruption: its short blocks go, never filled in
+            lo = tb - 0.5 * self.block_s
+            keep &= good | (lo + self.block_s <= a) | (lo >= b)
+        tb, s, c, good = tb[keep], s[keep], c[keep], good[keep]
+        xb = np.full(tb.size, np.nan)
         xb[good] = s[good] / c[good]
         filled = int((~good).sum())
         if filled and good.sum() >= 2:

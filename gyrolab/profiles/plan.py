@@ -103,6 +103,7 @@ class ProfilePlan:
         self.step_started_at = math.nan
         self.ended_at = math.nan  # run time the profile was complete
         self.soaked = False
+        self.held_at: float | None = None  # run time the profile was held (a suspension)
         self._hist: deque[tuple[float, float]] = deque()
         self._t_last = -math.inf  # run time of the latest update
 
@@ -112,21 +113,30 @@ class ProfilePlan:
             return self.profile.steps[self.step_index]
         return None
 
-    def start(self, t: float) -> list[Action]:
+    def start(self, t: float, first_step: int = 0, resumed: str = "") -> list[Action]:
+        """Start at run time ``t`` with step ``first_step``. ``resumed`` (a continuation of
+        an interrupted run, gyrolab acquire --resume: what it continues): the run resumes
+        there instead of starting (``run_resumed``) and that step, which was running when
+        the run was interrupted, is soaked again from its beginning."""
         if self.state != "idle":
             raise RuntimeError("plan already started")
-        acts: list[Action] = [Event("run_started", detail=f"profile {self.profile.name}", t=t)]
-        acts += self._begin(0, t)
+        if not 0 <= first_step < len(self.profile.steps):
+            raise ValueError(f"no step {first_step} in profile {self.profile.name}")
+        if resumed:
+            acts: list[Action] = [Event("run_resumed", first_step, detail=resumed, t=t)]
+            return acts + self._begin(first_step, t, " (re-soak)")
+        acts = [Event("run_started", detail=f"profile {self.profile.name}", t=t)]
+        acts += self._begin(first_step, t)
         return acts
 
-    def _begin(self, i: int, t: float) -> list[Action]:
+    def _begin(self, i: int, t: float, again: str = "") -> list[Action]:
         self.state = "step"
         self.step_index = i
         self.step_started_at = t
         self.soaked = False
         self._hist.clear()
         s = self.profile.steps[i]
-        label = s.label or ("power-on" if i == 0 else f"{s.setpoint_c:g} C")
+        label = (s.label or ("power-on" if i == 0 else f"{s.setpoint_c:g} C")) + again
         return [
             SetSetpoint(s.setpoint_c),
             Event("step_started", i, s.setpoint_c, label, t=t),
@@ -138,6 +148,38 @@ class ProfilePlan:
             ),
         ]
 
+    def hold(self, t: float, why: str) -> list[Action]:
+        """Hold the profile at run time ``t`` (a suspension, ``why``): the step's clock
+        stops and its setpoint stays; :meth:`update` does nothing until :meth:`resume`."""
+        s = self.step
+        if self.state != "step" or self.held_at is not None or s is None:
+            return []
+        self.held_at = t
+        return [Event("suspended", self.step_index, s.setpoint_c, why, t=t)]
+
+    def resume(self, t: float, resoak: bool) -> list[Action]:
+        """Go on at run time ``t`` after a hold. The held step either goes on for what it
+        had left (its start moves by the time held; its stability window starts afresh)
+        or, ``resoak`` (the temperature left its band while held), starts again: its
+        whole duration and stability rule from ``t``. Either way its setpoint is
+        commanded again (a chamber that stopped on an alarm needs it)."""
+        s = self.step
+        if self.held_at is None or s is None:
+            return []
+        held = t - self.held_at
+        self.held_at = None
+        if self.state != "step":
+            return []
+        how = "the step re-soaks" if resoak else "the step goes on"
+        acts: list[Action] = [
+            Event("resumed", self.step_index, s.setpoint_c, f"held {held:.0f} s; {how}", t=t)
+        ]
+        if resoak:
+            return acts + self._begin(self.step_index, t, " (re-soak)")
+        self.step_started_at += held
+        self._hist.clear()
+        return acts + [SetSetpoint(s.setpoint_c)]
+
     def _due(self, s: Step) -> float:
         # the one expression of the minimum duration's end (wake_at and update agree on it)
         return self.step_started_at + s.duration_s
@@ -147,7 +189,7 @@ class ProfilePlan:
         the end of its minimum duration, then (stability rule) the end of ``max_extra_s``.
         ``update(wake_at())`` at that time ends the step or moves this on; inf when done."""
         s = self.step
-        if self.state != "step" or s is None:
+        if self.state != "step" or s is None or self.held_at is not None:
             return math.inf
         due = self._due(s)
         if s.stable_slope_c_per_min is None or self._t_last < due:
@@ -160,7 +202,7 @@ class ProfilePlan:
         A step that ends is ended at the run time its rule was met (module docstring), which
         may be earlier than ``t`` when ``update`` is called late; its events carry that time
         and the next step starts then."""
-        if self.state != "step":
+        if self.state != "step" or self.held_at is not None:
             return []
         self._t_last = max(self._t_last, t)
         s = self.profile.steps[self.step_index]
@@ -234,5 +276,6 @@ class ProfilePlan:
         if self.state != "step":
             return 0.0
         steps = self.profile.steps
+        t = t if self.held_at is None else self.held_at  # held: its clock stopped
         cur = max(0.0, steps[self.step_index].duration_s - (t - self.step_started_at))
         return cur + sum(s.duration_s for s in steps[self.step_index + 1 :])

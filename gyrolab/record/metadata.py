@@ -91,6 +91,13 @@ class RunMetadata:
     software_version: str = __version__
     axes: int = 1  # written only for a multi-axis unit
     units: list[str] | None = None  # the multi-unit layout's serials (the writer sets it)
+    # An acquired run (docs/recording-format.md, "Segments"): its id, this file's segment
+    # number (1, 2, …), and for a continuation the segment it continues
+    # (``{"file", "segment", "run_id"}``) and where (``{"after_t", "at_t", "step"}``).
+    run_id: str | None = None
+    segment: int | None = None
+    previous_segment: dict[str, Any] | None = None
+    resumed: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
@@ -114,6 +121,9 @@ class RunMetadata:
             d["axes"] = self.axes
         if self.units is not None:
             d["units"] = list(self.units)
+        for key in ("run_id", "segment", "previous_segment", "resumed"):
+            if getattr(self, key) is not None:  # absent before segments existed, as then
+                d[key] = getattr(self, key)
         d.update(self.extra)
         return d
 

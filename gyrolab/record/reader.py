@@ -5,6 +5,13 @@ blocks to a callback while it reads the other topics), one unit of a multi-unit 
 
 The ``run`` and ``bench`` records come back normalised (:mod:`gyrolab.record.metadata`):
 files written with older spellings read in the documented shape.
+
+A run resumed after an interruption (``gyrolab acquire --resume``) is several files, its
+segments, each continuing the one before (docs/recording-format.md, "Segments"). Every
+function here reads the run a file belongs to, from its first segment to that file
+(:func:`segments`): the messages of each segment in turn, on the one run clock, with the
+interruption a gap in the data (the sample index jumps, nothing is filled in) that
+``Recording.interruptions`` and the ``run`` record's ``segments`` name.
 """
 
 from __future__ import annotations
@@ -101,6 +108,12 @@ class Recording:
     # took its internal sensor as its temperature, that sensor ("internal": pt100_ohm is NaN)
     temperature_source: str = "pt100"
 
+    @property
+    def interruptions(self) -> list[tuple[float, float]]:
+        """A resumed run's gaps between segments: ``(last time before, time it resumed)``
+        (run seconds) each; empty for a run in one piece."""
+        return interruptions(self.run)
+
     def require_rate(self) -> Series:
         if self.rate is None or self.rate.t.size == 0:
             raise InputError(self.path, f"recording has no {TOPIC_RATE} data")
@@ -174,11 +187,92 @@ def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[A
         yield reader
 
 
+def file_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
+    """One file's metadata records as written (not normalised, not merged with the other
+    segments of its run: :func:`read_metadata`), values JSON-decoded where possible."""
+    with opened(path) as reader:
+        return {m.name: _parse_meta(m.metadata) for m in reader.iter_metadata()}
+
+
+#: Longest chain of segments followed (a loop of file names cannot hang a reader).
+MAX_SEGMENTS = 1000
+
+
+def _run_record(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The ``run`` record of one file, and no other: read through the summary's metadata
+    index, so that following a run's segments opens no other record (a workflow that
+    must not see ``sim_provenance`` may read runs; tests/test_discrepancy_workflow.py)."""
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
+
+    with opened_file(path) as (reader, fh):
+        summary = reader.get_summary()
+        if summary is None:  # no index: the records in file order
+            return file_metadata(path).get("run", {})
+        for idx in summary.metadata_indexes:
+            if idx.name == "run":
+                fh.seek(idx.offset)
+                record = next(StreamReader(fh, skip_magic=True).records)
+                if isinstance(record, Metadata):
+                    return _parse_meta(record.metadata)
+    return {}
+
+
+def segments(path: str | os.PathLike[str]) -> list[Path]:
+    """The files of the run ``path`` belongs to, first to ``path``: a continuation (its
+    ``run`` record's ``segment`` > 1) names the file it continues (``previous_segment``,
+    beside it), which must hold the same ``run_id`` and the segment before. A missing or
+    foreign previous segment is an :class:`InputError` naming it: the run is not whole."""
+    chain = [Path(path)]
+    run = _run_record(path)
+    while isinstance(run.get("segment"), int) and run["segment"] > 1:
+        prev = run.get("previous_segment") or {}
+        p = chain[0].parent / str(prev.get("file", ""))
+        want = f"segment {run['segment'] - 1} of run {run.get('run_id')}"
+        if not prev.get("file") or not p.is_file():
+            raise InputError(chain[0], f"continues {p.name} ({want}), which is not beside it")
+        before = _run_record(p)
+        if before.get("run_id") != run.get("run_id") or before.get("segment", 1) != (
+            run["segment"] - 1
+        ):
+            raise InputError(chain[0], f"continues {p.name}, which is not {want}")
+        chain.insert(0, p)
+        if len(chain) > MAX_SEGMENTS:
+            raise InputError(path, f"more than {MAX_SEGMENTS} segments: a loop of file names")
+        run = before
+    return chain
+
+
+def interruptions(run: Mapping[str, Any]) -> list[tuple[float, float]]:
+    """The gaps of a resumed run from its ``run`` record (:func:`read_metadata`'s
+    ``segments``): ``(after_t, at_t)`` per continuation, run seconds."""
+    segs = run.get("segments") or []
+    return [(float(s["after_t"]), float(s["at_t"])) for s in segs[1:] if "after_t" in s]
+
+
 def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """All metadata records of a recording, values JSON-decoded where possible; ``run``
-    and ``bench`` normalised (:func:`~gyrolab.record.metadata.normalise_run`)."""
-    with opened(path) as reader:
-        records = {m.name: _parse_meta(m.metadata) for m in reader.iter_metadata()}
+    and ``bench`` normalised (:func:`~gyrolab.record.metadata.normalise_run`).
+
+    A resumed run's are its first segment's (what was run, on which bench), with ``run``
+    ``segments``: each segment's ``segment`` and ``file``, a continuation's ``after_t``,
+    ``at_t``, ``step`` (where it resumed), and a segment's ``recovery`` record if it went
+    through ``gyrolab recover``."""
+    paths = segments(path)
+    records = file_metadata(paths[0])
+    if len(paths) > 1:
+        first: dict[str, Any] = {"segment": 1, "file": paths[0].name}
+        if "recovery" in records:
+            first["recovery"] = records.pop("recovery")
+        segs = [first]
+        for p in paths[1:]:
+            later = file_metadata(p)
+            run = later.get("run", {})
+            seg = {"segment": run.get("segment"), "file": p.name, **(run.get("resumed") or {})}
+            if "recovery" in later:
+                seg["recovery"] = later["recovery"]
+            segs.append(seg)
+        records["run"] = {**records.get("run", {}), "segments": segs}
     for name, normalise in (("run", normalise_run), ("bench", normalise_bench)):
         if name in records:
             records[name] = normalise(records[name])
@@ -250,9 +344,7 @@ def chunks_in_file_order(summary: Any, topics: list[str] | None) -> list[Any] | 
     by log time, give that same order for the topic."""
     if summary is None or not summary.chunk_indexes:
         return None
-    wanted = {
-        cid for cid, ch in summary.channels.items() if topics is None or ch.topic in topics
-    }
+    wanted = {cid for cid, ch in summary.channels.items() if topics is None or ch.topic in topics}
     chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
     last_end: dict[int, int] = {}
     out = []
@@ -341,6 +433,16 @@ def iter_messages(
         topics = [unit_topic(t, unit) for t in names]
         prefix = f"{UNIT_PREFIX}{unit}"
     per_topic = order == "topic" or (topics is not None and len(set(topics)) == 1)
+    # A resumed run's segments in turn: each ends before the next begins (the run clock
+    # goes on across the interruption), so either order holds over the whole run.
+    for p in segments(path):
+        yield from _iter_file(p, topics, prefix, per_topic)
+
+
+def _iter_file(
+    path: Path, topics: list[str] | None, prefix: str, per_topic: bool
+) -> Iterator[tuple[str, int, bytes]]:
+    """:func:`iter_messages` of one file (topics already a unit's, ``prefix`` stripped)."""
     with opened_file(path) as (reader, fh):
         summary = reader.get_summary() if per_topic else None
         chunks = chunks_in_file_order(summary, topics)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gyrolab.record.format import PROFILE
-from gyrolab.record.reader import opened
-from gyrolab.record.writer import McapFile
+from gyrolab.record.reader import opened, read_metadata, segments
+from gyrolab.record.writer import McapFile, json_strings
 
 
 @dataclass(frozen=True)
@@ -46,45 +46,62 @@ def rewrite_recording(
     takes; registered right after that topic's channel. ``tail``: messages written after
     the copy (on any topic registered by then). ``metadata``: records (MCAP string maps)
     written after the source's, replacing any of the same name. A damaged ``src`` is an
-    :class:`InputError`."""
+    :class:`InputError`.
+
+    A resumed run (its segments, docs/recording-format.md) is copied whole into one file:
+    every segment's messages in turn, each topic on one channel, and the run's metadata as
+    :func:`~gyrolab.record.reader.read_metadata` gives it (``run`` with its ``segments``)."""
     derived = dict(derived or {})
     metadata = dict(metadata or {})
+    paths = segments(src)
+    merged = read_metadata(src) if len(paths) > 1 else None
+    w: McapFile | None = None
+    sids: dict[tuple[str, str, bytes], int] = {}
+    by_topic: dict[str, int] = {}
+    records: list[tuple[str, Mapping[str, str]]] = []
+
+    def put(m: Message) -> None:
+        if m.topic not in by_topic:
+            raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
+        assert w is not None
+        w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
+
     # dst is opened first: an error writing it is not the source's damage
-    with open(Path(dst), "wb") as out, opened(src, hint="") as reader:
-        header = reader.get_header()
-        w = McapFile(out, profile=header.profile or PROFILE)
-        sids: dict[int, int] = {}
-        cids: dict[int, int] = {}
-        by_topic: dict[str, int] = {}
-
-        def put(m: Message) -> None:
-            if m.topic not in by_topic:
-                raise ValueError(f"no channel {m.topic!r} in the rewritten recording")
-            w.add_message(by_topic[m.topic], m.log_time, m.data, m.publish_time, m.sequence)
-
-        for schema, channel, msg in reader.iter_messages(log_time_order=True):
-            if channel.id not in cids:
-                sid = 0
-                if schema is not None:
-                    if schema.id not in sids:
-                        sids[schema.id] = w.register_schema(
-                            schema.name, schema.encoding, schema.data
+    with open(Path(dst), "wb") as out:
+        for path in paths:
+            with opened(path, hint="") as reader:
+                if w is None:
+                    w = McapFile(out, profile=reader.get_header().profile or PROFILE)
+                for schema, channel, msg in reader.iter_messages(log_time_order=True):
+                    if channel.topic not in by_topic:
+                        sid = 0
+                        if schema is not None:
+                            key = (schema.name, schema.encoding, bytes(schema.data))
+                            if key not in sids:
+                                sids[key] = w.register_schema(*key)
+                            sid = sids[key]
+                        enc, meta = channel.message_encoding, dict(channel.metadata)
+                        by_topic[channel.topic] = w.register_channel(
+                            channel.topic, enc, sid, meta
                         )
-                    sid = sids[schema.id]
-                enc, meta = channel.message_encoding, dict(channel.metadata)
-                cids[channel.id] = w.register_channel(channel.topic, enc, sid, meta)
-                by_topic[channel.topic] = cids[channel.id]
-                for topic, like in derived.items():
-                    if like == channel.topic:
-                        by_topic[topic] = w.register_channel(topic, enc, sid, meta)
-            m = Message(channel.topic, msg.log_time, msg.publish_time, msg.sequence, msg.data)
-            for out_msg in [m] if transform is None else transform(m):
-                put(out_msg)
+                        for topic, like in derived.items():
+                            if like == channel.topic:
+                                by_topic[topic] = w.register_channel(topic, enc, sid, meta)
+                    m = Message(
+                        channel.topic, msg.log_time, msg.publish_time, msg.sequence, msg.data
+                    )
+                    for out_msg in [m] if transform is None else transform(m):
+                        put(out_msg)
+                if merged is None:  # one file: its records as they are
+                    records = [(r.name, r.metadata) for r in reader.iter_metadata()]
+        assert w is not None
         for m in tail:
             put(m)
-        for rec in reader.iter_metadata():
-            if rec.name not in metadata:
-                w.add_metadata(rec.name, rec.metadata)
+        if merged is not None:
+            records = [(name, json_strings(record)) for name, record in merged.items()]
+        for name, values in records:
+            if name not in metadata:
+                w.add_metadata(name, values)
         for name, values in metadata.items():
             w.add_metadata(name, values)
         w.finish()

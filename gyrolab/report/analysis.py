@@ -94,10 +94,10 @@ def plateau_rows(rec: Recording) -> list[Any]:
 
 
 def range_note(metrics: dict[str, Any]) -> str:
-    """The sentences for a run outside the model's calibrated range and for one whose
-    temperature source is not the model's ('' when neither)."""
+    """The sentences for a run outside the model's calibrated range, for one whose
+    temperature source is not the model's and for another unit's run ('' when none)."""
     rng = metrics.get("temperature") or {}
-    from gyrolab.compensation.guards import range_warning, source_warning
+    from gyrolab.compensation.guards import range_warning, source_warning, unit_warning
 
     name = Path(str(metrics.get("run", "this run"))).name
     notes = []
@@ -107,16 +107,20 @@ def range_note(metrics: dict[str, Any]) -> str:
     line = source_warning(name, rng)
     if line:
         notes.append(line.replace("warning: ", "Another temperature source — ", 1) + ".")
+    line = unit_warning(name, rng)
+    if line:
+        notes.append(line.replace("warning: ", "Another unit — ", 1) + ".")
     return " ".join(notes)
 
 
 def warn_source(metrics: dict[str, Any]) -> None:
-    """The stderr line of a run whose temperature source is not the model's."""
-    from gyrolab.compensation.guards import source_warning
+    """The stderr lines of a run whose temperature source or unit is not the model's."""
+    from gyrolab.compensation.guards import source_warning, unit_warning
 
-    line = source_warning(str(metrics.get("run", "this run")), metrics.get("temperature") or {})
-    if line:
-        print(line, file=sys.stderr)
+    name, rng = str(metrics.get("run", "this run")), metrics.get("temperature") or {}
+    for line in (source_warning(name, rng), unit_warning(name, rng)):
+        if line:
+            print(line, file=sys.stderr)
 
 
 def firmware_note(metrics: dict[str, Any]) -> str:
@@ -134,17 +138,18 @@ def model_run(
     """The model on ``rec``: read from ``model_dir`` when ``compensate`` evaluated this
     run (same content hash of the rate and PT100 data), else applied here. ``label``: how
     the metrics name the run (default: its path as given)."""
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.compensation.prepare import prepare_run
-    from gyrolab.compensation.results import load_results, run_metrics
 
     run = prepare_run(rec, model.config)  # checks the run and hashes its data
     run.label = label or ""
-    stored = load_results(model_dir)
+    md = ModelDir(model_dir)
+    stored = md.results()
     match = next(
         (r for r in stored.values() if r.content_hash and r.content_hash == run.content_hash),
         None,
     )
-    metrics = None if match is None else run_metrics(model_dir, match.role)
+    metrics = None if match is None else md.run_metrics(match.role)
     if match is not None and metrics is not None:
         m = {k: v for k, v in metrics.items() if k not in COMPENSATE_ONLY}
         m["run"] = run.name
@@ -167,15 +172,15 @@ def model_run(
 def _apply(model_dir: str | Path, model: Any, run: Any, rec: Recording, why: str) -> ModelRun:
     """Apply the model to the run as ``compensate`` does (fixed K and α, no search)."""
     from gyrolab.compensation.apply import compensate_offline
-    from gyrolab.compensation.evaluate import evaluate
-    from gyrolab.compensation.firmware import firmware_metrics_for_dir
+    from gyrolab.compensation.evaluate import add_firmware_metrics, evaluate
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.compensation.results import run_results
 
     held_out = not is_calibration_run(model, run)
     app = compensate_offline(model, run)
     metrics = evaluate(model, app, run, held_out=held_out)
     metrics["calibration_run"] = model.calibration.get("path")
-    firmware_metrics_for_dir(model_dir, run, metrics)
+    add_firmware_metrics(ModelDir(model_dir).firmware(), run, metrics)
     metrics["model_timing_s"] = model.timing_s
     metrics["model_results"] = "computed"
     res = run_results("report", model, app, run, held_out)

@@ -24,9 +24,9 @@ def n_axes(
     """Axes of the report: those of the model directory, else those of the run (then the
     recording, read to count them, is returned too, so that it is read once)."""
     if model is not None:
-        from gyrolab.compensation.axes import axis_dirs
+        from gyrolab.compensation.model_dir import ModelDir
 
-        return len(axis_dirs(model)), None
+        return len(ModelDir(model).axes()), None
     from gyrolab.report.data import read_run
 
     rec = read_run(run, log_options)
@@ -45,7 +45,7 @@ def build_axes_report(
     """One document with every axis's report (module docstring); ``rec``: the recording
     already read; ``kw`` go to every :func:`~gyrolab.report.build.build_report` (spec,
     operator, serial)."""
-    from gyrolab.compensation.axes import axis_dirs
+    from gyrolab.compensation.model_dir import ModelDir
     from gyrolab.report.build import build_report
     from gyrolab.report.data import read_run
 
@@ -55,7 +55,7 @@ def build_axes_report(
     have = rec.axes
     if have != n:
         raise_mismatch(run, have, n)
-    dirs = [d for _a, d in axis_dirs(model)] if model is not None else [None] * n
+    dirs = [d.path for _a, d in ModelDir(model).axes()] if model is not None else [None] * n
     doc: Document | None = None
     metrics: dict[str, Any] = {"axes": {}}
     for k in range(n):

@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, check_output, json_safe
 
 MIN_UNITS_FOR_OUTLIERS = 5
@@ -83,30 +82,13 @@ class UnitRow:
 def find_model_dirs(paths: list[str]) -> list[Path]:
     """Each path: a model directory, or a directory holding model directories (searched
     three levels deep, hidden and temporary directories skipped). Sorted, unique."""
-    out: list[Path] = []
-    for p in map(Path, paths):
-        if not p.is_dir():
-            raise InputError(p, "not a directory (expected a MODEL_DIR or a directory of them)")
-        if (p / "model.json").is_file():
-            found = [p]
-        else:
-            found = sorted(
-                m.parent
-                for pattern in ("*/model.json", "*/*/model.json", "*/*/*/model.json")
-                for m in p.glob(pattern)
-                if not any(part.startswith(".") for part in m.relative_to(p).parts)
-            )
-        if not found:
-            raise InputError(p, "holds no model directory (no model.json)")
-        out.extend(f for f in found if f.resolve() not in {o.resolve() for o in out})
-    return out
+    from gyrolab.compensation.model_dir import ModelDir
+
+    return [m.path for m in ModelDir.find(paths, depth=3)]
 
 
-def _coefficients(model_dir: Path, meta: dict[str, Any]) -> dict[str, float]:
+def _coefficients(model: Any) -> dict[str, float]:
     """The unit's model in numbers comparable across units (module docstring)."""
-    from gyrolab.compensation.model_dir import load_model
-
-    model = load_model(str(model_dir))
     cal = model.calibration
     lo, hi = float(cal.get("temp_min_c", math.nan)), float(cal.get("temp_max_c", math.nan))
 
@@ -125,32 +107,26 @@ def _coefficients(model_dir: Path, meta: dict[str, Any]) -> dict[str, float]:
         v["bias_at_25c_dps"] = v["tempco_at_25c_dps_per_c"] = math.nan
     grid = f(np.linspace(lo, hi, 201)) if math.isfinite(lo) and hi > lo else np.array([np.nan])
     v["drift_span_dps"] = float(np.ptp(grid))
-    classes = meta.get("decomposition", {}).get("classes", {})
+    classes = model.decomposition_info.get("classes", {})
     v["vmd_K"] = float(model.K)
     v["vmd_alpha"] = float(model.alpha)
     for c in ("drift", "mixed", "noise"):
         v[f"n_{c}_modes"] = float(len(classes.get(c, [])))
-    flp = meta.get("flp", {}).get("mixed") or {}
-    v["flp_mixed_order"] = float(len(flp.get("coef", []))) if flp else 0.0
+    v["flp_mixed_order"] = 0.0 if model.flp_mixed is None else float(model.flp_mixed.order)
     v["temp_min_c"], v["temp_max_c"] = lo, hi
     return v
 
 
 def read_unit(model_dir: Path) -> UnitRow:
-    """One unit's row from its model directory (``model.json`` + ``metrics.json``)."""
-    mj, xj = model_dir / "model.json", model_dir / "metrics.json"
-    try:
-        meta = json.loads(mj.read_text(encoding="utf-8"))
-        metrics = json.loads(xj.read_text(encoding="utf-8"))
-    except FileNotFoundError as e:
-        no = Path(e.filename).name
-        raise InputError(model_dir, f"not a gyrolab model directory (no {no})") from None
-    except (ValueError, UnicodeDecodeError) as e:
-        raise InputError(model_dir, f"damaged model or metrics file ({type(e).__name__})") from None
-    cal = meta.get("calibration", {})
-    unit = str(cal.get("unit") or metrics.get("unit") or model_dir.name)
+    """One unit's row from its model directory (the model and its metrics)."""
+    from gyrolab.compensation.model_dir import ModelDir
+
+    md = ModelDir(model_dir)
+    model = md.load()
+    metrics = md.require_metrics()
+    unit = str(model.calibration.get("unit") or metrics.get("unit") or model_dir.name)
     row = UnitRow(unit, str(model_dir), str(metrics.get("run", "")), bool(metrics.get("held_out")))
-    row.values.update(_coefficients(model_dir, meta))
+    row.values.update(_coefficients(model))
     for series in ("raw", "compensated"):
         block = metrics.get(series) or {}
         for k in METRICS:

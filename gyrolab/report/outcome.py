@@ -2,7 +2,9 @@
 
 The outcome comes from ``/profile/event`` (``run_ended``, ``aborted`` with its reason,
 ``safe_state`` verified or ``FAILED``) and, for a file that went through ``gyrolab
-recover``, from its ``recovery`` metadata record (docs/recording-format.md). Coverage is
+recover``, from its ``recovery`` metadata record (docs/recording-format.md); a run resumed
+after an interruption (its segments: the ``run`` record's ``segments``) says when it was
+interrupted and resumed. Coverage is
 the temperature range the chamber air (oven process value, safe-state readings excluded)
 and the gyro case (PT100) reached, against the range of the profile's setpoints, and the
 gyro samples and gaps. Nothing here is computed that the recording does not say.
@@ -17,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.record.reader import Recording
+from gyrolab.report.text import hms
 
 #: Outcome statuses, most to least orderly.
 STATUSES = ("complete", "aborted", "interrupted", "recovered", "incomplete")
@@ -32,6 +35,8 @@ class Outcome:
     safe_state_detail: str = ""
     end_t: float | None = None
     recovery: dict[str, Any] | None = None
+    # a resumed run's continuations: each {"segment", "file", "after_t", "at_t", "step"}
+    resumptions: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def line(self) -> str:
@@ -46,7 +51,18 @@ class Outcome:
         if self.status == "recovered":
             assert self.recovery is not None
             return f"{self.recovery.get('account', 'recovered')} — {self.reason}"
-        return f"{self.status} — {self.reason}; {safe}"
+        return f"{self.status} — {self.reason}; {safe}{self.resumed_text}"
+
+    @property
+    def resumed_text(self) -> str:
+        """``; interrupted at … and resumed at …`` for each continuation ("" if none)."""
+        parts = [
+            f"interrupted after {hms(r['after_t'])}, resumed at {hms(r['at_t'])} in "
+            f"{r.get('file', 'segment ' + str(r.get('segment')))} (step "
+            f"{int(r.get('step', -1)) + 1} re-soaked; the gap is not filled in)"
+            for r in self.resumptions
+        ]
+        return "".join(f"; {p}" for p in parts)
 
     @property
     def clean(self) -> bool:
@@ -98,6 +114,7 @@ def run_outcome(rec: Recording) -> Outcome:
         safe_state_detail=detail,
         end_t=None if end is None else float(end.get("t", math.nan)),
         recovery=recovery if isinstance(recovery, dict) else None,
+        resumptions=[s for s in (rec.run.get("segments") or [])[1:] if "at_t" in s],
     )
 
 

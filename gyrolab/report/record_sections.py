@@ -16,7 +16,16 @@ from gyrolab.report.document import FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.text import flatten, fmt, hms
 
 #: Notable log entries for the run log (everything at warning level or above is kept too).
-LOG_KINDS = {"fault", "recovery", "gap", "retry", "timeout", "abort", "safe_state"}
+LOG_KINDS = {
+    "fault",
+    "recovery",
+    "gap",
+    "retry",
+    "timeout",
+    "abort",
+    "safe_state",
+    "suspend_cleared",
+}
 MAX_LOG_ROWS = 400
 
 
@@ -109,9 +118,43 @@ def event_rows(rec: Recording) -> list[list[str]]:
     return out
 
 
+def suspension_rows(rec: Recording) -> list[list[str]]:
+    """Each time the run was held (``suspended`` … ``resumed`` on /profile/event,
+    gyrolab/acquisition/suspend.py): when, how long, the step, why, and how it went on —
+    the step went on, re-soaked, or the run ended held."""
+    rows: list[list[str]] = []
+    start: dict[str, Any] | None = None
+    for e in rec.events:
+        ev = e.get("event")
+        if ev == "suspended":
+            start = e
+        elif start is not None and ev in ("resumed", "aborted"):
+            t0, t1 = float(start.get("t", 0.0)), float(e.get("t", 0.0))
+            how = str(e.get("detail", "")).split("; ")[-1] if ev == "resumed" else "run ended"
+            rows.append(
+                [hms(t0), fmt(t1 - t0, 4), str(int(start.get("step", -1)) + 1)]
+                + [str(start.get("detail", "")), how]
+            )
+            start = None
+    if start is not None:
+        rows.append([hms(float(start.get("t", 0.0))), "—", str(int(start.get("step", -1)) + 1)])
+        rows[-1] += [str(start.get("detail", "")), "held when the recording ends"]
+    return rows
+
+
 def log_section(rec: Recording) -> Section:
     sec = Section("log", "Run log: faults, recoveries, gaps")
     rows, counts = run_log_rows(rec)
+    held = suspension_rows(rec)
+    if held:
+        sec.blocks.append(
+            TableBlock(
+                "suspensions",
+                "Suspensions: the run held (setpoint kept, profile not advancing)",
+                ["from", "held (s)", "step", "conditions", "then"],
+                held,
+            )
+        )
     sec.blocks.append(
         TextBlock(
             "Counts: "

@@ -21,8 +21,9 @@ library defaults to port 10001). Commands used (ESPEC North America ChamberConne
 Safety: a setpoint outside the bench limits *or* the controller's own range (``TEMP?``
 fields 3-4, read at connect) raises :class:`LimitError` before anything is sent; every
 setpoint is read back with ``TEMP?``; ``MODE, STANDBY`` is verified with ``MODE?``. An
-active alarm (``MON?``) is an :class:`InstrumentFault`: an ESPEC chamber stops itself on
-an alarm, so the run must end.
+active alarm (``MON?``) is reported in ``ChamberReading.alarm``: an ESPEC chamber stops
+itself on an alarm, and the run engine holds the run or ends it (its suspenders); the next
+setpoint after the alarm cleared restarts it (``MODE, CONSTANT``).
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ from gyrolab.instruments.registry import DriverSpec, OpenContext, connected, reg
 from gyrolab.instruments.roles import (
     ChamberReading,
     InstrumentError,
-    InstrumentFault,
     InstrumentReport,
     InstrumentTimeout,
     LimitError,
@@ -162,9 +162,8 @@ class EspecChamber:
     def read(self) -> ChamberReading:
         pv, sp, _, _ = self.temp()
         n = self.alarms()
-        if n:
-            raise InstrumentFault(f"ESPEC controller reports {n} active alarm(s) (MON?)")
-        return ChamberReading(sp, pv)
+        alarm = f"ESPEC controller reports {n} active alarm(s) (MON?)" if n else ""
+        return ChamberReading(sp, pv, alarm)
 
     # ------------------------------------------------------------------ settings
     def check_setpoint(self, value_c: float) -> None:

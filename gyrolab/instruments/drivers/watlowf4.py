@@ -19,6 +19,13 @@ ChamberConnectLibrary ``watlowf4.py``, the code ESPEC drives its F4 chambers wit
     901        temperature units (0 = °F, 1 = °C)         read
     1209/1210/1217  profile resume / pause / terminate    write 1
     2000 + 10(N-1)  event output N (1..8): 0 off, 1 on    read/write
+    201 + 12(N-1)   digital input N (1..4): its state      read
+    1061 + 2(N-1)   digital input N: its active condition  read
+
+A chamber's limit controller (its over/under-temperature cut-out, a door switch) is wired
+to one of the F4's digital inputs (``[chamber] alarm_input``): the chamber is in alarm
+while that input's state equals its active condition — the test ESPEC's library makes
+(``get_alarm_status``), reported in ``ChamberReading.alarm``.
 
 Safety: a setpoint outside ``setpoint_limits_c`` (or not finite, or beyond int16 after
 scaling) raises :class:`LimitError` before a single byte is written. Every setpoint write
@@ -73,6 +80,9 @@ REG_SETPOINT = 300
 REG_PROFILE_RESUME, REG_PROFILE_PAUSE, REG_PROFILE_TERMINATE = 1209, 1210, 1217
 PROFILE_RUNNING, PROFILE_PAUSED = 2, 3
 REG_DECIMALS = 606
+# Digital input N (1..4): its state, and the condition (level) at which it is active.
+REG_DIGITAL_INPUT, REG_DIGITAL_INPUT_STEP = 201, 12
+REG_DIGITAL_CONDITION, REG_DIGITAL_CONDITION_STEP = 1061, 2
 REG_UNITS = 901
 UNITS_F, UNITS_C = 0, 1
 
@@ -113,6 +123,17 @@ def modbus_report(e: Exception, context: str) -> InstrumentReport:
     name = MODBUS_EXCEPTIONS.get(code, (str(e), ""))[0] if code is not None else str(e)
     return InstrumentReport(
         "Modbus", -1 if code is None else code, name, "exception response", False, context
+    )
+
+
+def digital_input_registers(n: int) -> tuple[int, int]:
+    """Holding registers of digital input ``n`` (1..4): its state, 201 + 12(n − 1), and
+    its active condition, 1061 + 2(n − 1) (ChamberConnectLibrary ``watlowf4.py``)."""
+    if not 1 <= n <= 4:
+        raise ValueError(f"digital input {n} is not one of 1..4")
+    return (
+        REG_DIGITAL_INPUT + REG_DIGITAL_INPUT_STEP * (n - 1),
+        REG_DIGITAL_CONDITION + REG_DIGITAL_CONDITION_STEP * (n - 1),
     )
 
 
@@ -474,12 +495,17 @@ class WatlowF4Config:
     # The F4 event output (1..8) that switches the chamber on (ESPEC wires one so); 0: none.
     # Needed for [safe_state] mode = "off".
     control_event: int = 0
+    # The F4 digital input (1..4) the chamber's limit controller (alarm) is wired to; 0:
+    # none (then the driver reports no chamber alarm).
+    alarm_input: int = 0
 
     def check(self, safe_state_mode: str) -> None:
         """ValueError unless the settings make sense for a bench whose safe state is
         ``safe_state_mode`` ("setpoint" | "off")."""
         if not 0 <= self.control_event <= 8:
             raise ValueError("control_event must be an event output 1..8 (0: none)")
+        if not 0 <= self.alarm_input <= 4:
+            raise ValueError("alarm_input must be a digital input 1..4 (0: none)")
         if safe_state_mode == "off" and self.control_event == 0:
             raise ValueError(
                 "[safe_state] mode = 'off' needs [chamber] control_event (the F4 event output "
@@ -496,6 +522,7 @@ class WatlowF4Chamber(WatlowF4):
         super().__init__(port, **kw)
         self.config = config
         self.registers: dict[str, Any] = {}
+        self._alarm_level: int | None = None  # the alarm input's active condition
 
     def connect(self) -> dict[str, Any]:
         self.registers = super().connect()
@@ -510,6 +537,10 @@ class WatlowF4Chamber(WatlowF4):
         ev = self.config.control_event
         if ev:
             self.registers[f"event_{ev}"] = int(self.event(ev))
+        n = self.config.alarm_input
+        if n:
+            self._alarm_level = self.read_register(digital_input_registers(n)[1])
+            self.registers[f"digital_input_{n}_condition"] = self._alarm_level
         return self.registers
 
     def read(self) -> ChamberReading:
@@ -521,7 +552,20 @@ class WatlowF4Chamber(WatlowF4):
                 f"a profile was started on the controller (register 200 = {mode}): "
                 "register 300 no longer controls the chamber"
             )
-        return ChamberReading(float(sp), float(pv))
+        return ChamberReading(float(sp), float(pv), self.alarm())
+
+    def alarm(self) -> str:
+        """The chamber's alarm ("" when none): its ``alarm_input`` active."""
+        n = self.config.alarm_input
+        if not n:
+            return ""
+        state_reg, condition_reg = digital_input_registers(n)
+        if self._alarm_level is None:
+            self._alarm_level = self.read_register(condition_reg)
+        state = self.read_register(state_reg)
+        if state != self._alarm_level:
+            return ""
+        return f"limit alarm: digital input {n} active (register {state_reg} = {state})"
 
     def set_setpoint(self, value_c: float) -> float:
         """Setpoint (limits first, read back), then the chamber on through its control

@@ -18,7 +18,10 @@ docs/instruments.md):
 =================  ==============================================================
 
 Physics: in ``CONSTANT`` the chamber follows the setpoint; in ``STANDBY``/``OFF`` its
-heater and refrigerator stop, modelled as the chamber settling to ``ambient_c``.
+heater and refrigerator stop, modelled as the chamber settling to ``ambient_c``. An alarm
+(:meth:`EspecP300.set_alarm`, the ``chamber_alarm`` fault) stops the chamber (``MODE?``
+reads ``STANDBY``, ``MON?`` counts it) and keeps heater and refrigerator off while it is
+active; once it has cleared the chamber stays stopped until ``MODE, CONSTANT``.
 """
 
 from __future__ import annotations
@@ -53,8 +56,16 @@ class EspecP300:
         self._lock = threading.Lock()
 
     def _apply(self) -> None:
-        on = self.mode in ("CONSTANT", "RUN")
+        on = self.mode in ("CONSTANT", "RUN") and not self.alarms
         self.hooks.set_setpoint(self.setpoint_c if on else self.hooks.ambient_c)
+
+    def set_alarm(self, on: bool) -> None:
+        """An alarm trips (``on``: the chamber stops) or clears."""
+        with self._lock:
+            self.alarms = 1 if on else 0
+            if on:
+                self.mode = "STANDBY"
+            self._apply()
 
     def handle(self, line: str) -> str:
         with self._lock:

@@ -18,16 +18,18 @@ Layout (every key optional; unknown keys are errors naming the file and the key)
 
     [[event]]             # scheduled faults (FaultEvent), any number
     kind = "scpi_error"   # disconnect | stall | outage | scpi_error | open_channel |
-                          # modbus_exception | modbus_crc | modbus_no_reply
+                          # modbus_exception | modbus_crc | modbus_no_reply | chamber_alarm
     t_s = 30.0            # simulated bench seconds (the run starts a few s later)
-    duration_s = 0.0      # disconnect / stall / outage / open_channel
+    duration_s = 0.0      # disconnect / stall / outage / open_channel / chamber_alarm
     count = 1             # modbus_* : the next `count` replies
     detail = '-310,"System error"'   # scpi_error: the error-queue entry
     unit = 0              # disconnect / stall / open_channel on a multi-unit bench: which
                           # unit (0-based)
 
 ``outage`` and ``scpi_error`` hit the bench's thermometer: the multimeter, or on a
-multi-unit bench the scanner; ``open_channel`` is for multi-unit benches only.
+multi-unit bench the scanner; ``open_channel`` is for multi-unit benches only;
+``chamber_alarm`` needs a chamber whose driver reports its alarm (the F4 with ``[chamber]
+alarm_input``, as ``--bench sim`` has it, or the ESPEC).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from typing import Any
 from gyrolab.errors import InputError
 from gyrolab.sim.bench.faults import (
     ADC_KINDS,
+    CHAMBER_KINDS,
     DMM_KINDS,
     OVEN_KINDS,
     SCANNER_KINDS,
@@ -116,7 +119,7 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
     if not isinstance(raw_events, list):
         raise InputError(source, "event must be an array of tables ([[event]])")
     events = []
-    kinds = ADC_KINDS + DMM_KINDS + OVEN_KINDS + SCANNER_KINDS
+    kinds = ADC_KINDS + DMM_KINDS + OVEN_KINDS + SCANNER_KINDS + CHAMBER_KINDS
     for i, raw in enumerate(raw_events, start=1):
         where = f"[[event]] {i}"
         e = _table(raw, _EVENT_KEYS, where, source)
@@ -133,7 +136,7 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
             raise InputError(
                 source, f"{where}: t_s, duration_s, unit must be >= 0 and count >= 1"
             )
-        timed = ("disconnect", "stall", "outage", "open_channel")
+        timed = ("disconnect", "stall", "outage", "open_channel", "chamber_alarm")
         if e["kind"] in timed and not e.get("duration_s", 0.0) > 0:
             raise InputError(source, f"{where}: {e['kind']} needs duration_s > 0")
         if e["kind"] == "scpi_error" and "detail" in e and not _SCPI_ERROR.match(e["detail"]):
@@ -148,15 +151,26 @@ def faults_from_dict(d: dict[str, Any], source: str = "<dict>") -> FaultPlan:
 
 
 def check_plan_for_bench(
-    plan: FaultPlan, units: int, source: str = "<faults>", internal: tuple[int, ...] = ()
+    plan: FaultPlan,
+    units: int,
+    source: str = "<faults>",
+    internal: tuple[int, ...] = (),
+    chamber_alarm: bool = True,
 ) -> None:
     """InputError unless every event fits a bench of ``units`` units (0: single-unit) of
     which ``internal`` (1-based) read their internal sensor: ``unit`` within the bench,
     ``open_channel`` only on a unit whose PT100 the scanner reads, ``outage`` /
-    ``scpi_error`` only where a thermometer is read (not when every unit is internal)."""
+    ``scpi_error`` only where a thermometer is read (not when every unit is internal),
+    ``chamber_alarm`` only where the chamber's driver reports one (``chamber_alarm``)."""
     n = max(1, units)
     for i, e in enumerate(plan.events, start=1):
         where = f"[[event]] {i}"
+        if e.kind == "chamber_alarm" and not chamber_alarm:
+            raise InputError(
+                source,
+                f"{where}: chamber_alarm: the chamber's driver reports no alarm here "
+                "(the F4 needs [chamber] alarm_input)",
+            )
         if e.unit >= n:
             raise InputError(
                 source, f"{where}: unit = {e.unit}: the bench has {n} unit(s) (0-based)"

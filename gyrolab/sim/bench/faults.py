@@ -10,8 +10,9 @@ Two kinds of fault:
   ``SimBench.inject``): ADC port disconnect (for ``duration_s``), ADC stall (no bytes for
   ``duration_s``, then the backlog in a burst), thermometer outage (no replies for
   ``duration_s``), SCPI errors pushed into the thermometer's error queue, bursts of
-  ``count`` Modbus exception / CRC-error / no-reply responses, and on a multi-unit bench a
-  unit's PT100 channel open (the scanner reads overload on it for ``duration_s``).
+  ``count`` Modbus exception / CRC-error / no-reply responses, a chamber alarm (the
+  chamber stops and reports it for ``duration_s``), and on a multi-unit bench a unit's
+  PT100 channel open (the scanner reads overload on it for ``duration_s``).
 
 The thermometer is the multimeter on a single-unit bench and the scanner on a multi-unit
 bench (the instrument that reads the PT100s there).
@@ -27,6 +28,7 @@ ADC_KINDS = ("disconnect", "stall")
 DMM_KINDS = ("outage", "scpi_error")  # the bench's thermometer: multimeter or scanner
 SCANNER_KINDS = ("open_channel",)  # multi-unit benches only
 OVEN_KINDS = ("modbus_exception", "modbus_crc", "modbus_no_reply")
+CHAMBER_KINDS = ("chamber_alarm",)  # the chamber's own alarm (F4: its limit controller)
 
 
 @dataclass
@@ -116,7 +118,8 @@ class FaultEvent:
     thermometer — multimeter, or a multi-unit bench's scanner — silent for ``duration_s``),
     ``scpi_error`` (``detail`` pushed to the thermometer's error queue, e.g.
     ``-222,"Data out of range"``), ``modbus_exception`` / ``modbus_crc`` /
-    ``modbus_no_reply`` (the next ``count`` oven replies), ``open_channel`` (a multi-unit
+    ``modbus_no_reply`` (the next ``count`` oven replies), ``chamber_alarm`` (the chamber's
+    alarm for ``duration_s``: it stops and says so), ``open_channel`` (a multi-unit
     bench's scanner reads overload on the unit's PT100 channel for ``duration_s``: a lead
     broken). ``unit``: on a multi-unit bench, the unit whose ADC a ``disconnect`` or
     ``stall`` hits, or whose PT100 an ``open_channel`` opens (0-based).
@@ -130,7 +133,7 @@ class FaultEvent:
     unit: int = 0  # disconnect / stall / open_channel: which unit (0-based)
 
     def __post_init__(self) -> None:
-        if self.kind not in ADC_KINDS + DMM_KINDS + OVEN_KINDS + SCANNER_KINDS:
+        if self.kind not in ADC_KINDS + DMM_KINDS + OVEN_KINDS + SCANNER_KINDS + CHAMBER_KINDS:
             raise ValueError(f"unknown fault kind {self.kind!r}")
         if self.unit < 0:
             raise ValueError(f"unit must be >= 0, got {self.unit}")

@@ -3,9 +3,14 @@
 Functions 03 (read holding registers) and 06 (write single register) on the map of
 docs/instruments.md (100 process value, 103/107 heat/cool power in 0.01 %, 200 profile
 mode (0/1 constant, 2 running, 3 paused), 300 setpoint, 606 decimal places, 901 units,
-1209/1210/1217 profile resume/pause/terminate, event outputs 1-8 at 2000 + 10(N-1)).
+1209/1210/1217 profile resume/pause/terminate, event outputs 1-8 at 2000 + 10(N-1),
+digital inputs 1-4: state at 201 + 12(N-1), active condition at 1061 + 2(N-1)).
 With ``control_event`` = N the chamber is switched by event output N (as ESPEC wires
 its F4 chambers): off, the heater and refrigerator stop and the air settles to ambient.
+With ``alarm_input`` = N the chamber's limit controller is wired to digital input N:
+:meth:`WatlowF4Slave.set_alarm` (the ``chamber_alarm`` fault) makes that input active and
+cuts the heater and refrigerator (the air settles to ambient) until it clears; the
+controller's setpoint is then in force again.
 A request with a bad CRC or for another address is ignored, as on a real
 line; a bad register or value gets an exception response (02 illegal data address,
 03 illegal data value). Faults from :class:`~gyrolab.sim.bench.faults.ModbusFaults`:
@@ -27,6 +32,9 @@ REG_PV, REG_PROFILE_MODE, REG_SP, REG_DP, REG_UNITS = 100, 200, 300, 606, 901
 REG_HEAT_POWER, REG_COOL_POWER = 103, 107  # output 1A / 1B, signed, 0.01 %
 REG_RESUME, REG_PAUSE, REG_TERMINATE = 1209, 1210, 1217  # write 1
 EVENTS = {2000 + 10 * (n - 1): n for n in range(1, 9)}  # event output N: 0 off, 1 on
+DIGITAL_INPUTS = {201 + 12 * (n - 1): n for n in range(1, 5)}  # digital input N: its state
+DIGITAL_CONDITIONS = {1061 + 2 * (n - 1): n for n in range(1, 5)}  # its active condition
+ACTIVE = 1  # the simulated inputs' active condition (their state when active)
 EX_ILLEGAL_FUNCTION, EX_ILLEGAL_ADDRESS, EX_ILLEGAL_VALUE = 0x01, 0x02, 0x03
 
 
@@ -68,11 +76,16 @@ class WatlowF4Slave:
         alarm_c: tuple[float, float] = (-60.0, 80.0),
         faults: ModbusFaults | None = None,
         control_event: int | None = None,
+        alarm_input: int | None = None,
     ) -> None:
         self.hooks = hooks
         if control_event is not None and not 1 <= control_event <= 8:
             raise ValueError("control_event is an event output 1..8")
+        if alarm_input is not None and not 1 <= alarm_input <= 4:
+            raise ValueError("alarm_input is a digital input 1..4")
         self.control_event = control_event
+        self.alarm_input = alarm_input
+        self.inputs = [1 - ACTIVE] * 4  # digital inputs 1..4, all inactive
         self.events = [0] * 8
         self.profile_mode = 0  # no profile is ever started on the simulated controller
         self.setpoint_raw: int | None = None  # register 300 as written (None: physics')
@@ -119,15 +132,35 @@ class WatlowF4Slave:
             return 0
         if reg in EVENTS:
             return self.events[EVENTS[reg] - 1]
+        if reg in DIGITAL_INPUTS:
+            return self.inputs[DIGITAL_INPUTS[reg] - 1]
+        if reg in DIGITAL_CONDITIONS:
+            return ACTIVE
         return None
 
+    def set_alarm(self, on: bool) -> None:
+        """The limit controller trips (``on``) or resets: its digital input follows, and
+        the heater and refrigerator stop while it is tripped."""
+        if self.alarm_input is None:
+            raise ValueError("no alarm_input: the chamber's alarm is not wired")
+        self.inputs[self.alarm_input - 1] = ACTIVE if on else 1 - ACTIVE
+        self._apply()
+
+    def alarm(self) -> bool:
+        """Whether the limit controller has tripped."""
+        return self.alarm_input is not None and self.inputs[self.alarm_input - 1] == ACTIVE
+
     def chamber_on(self) -> bool:
-        """Whether heater and refrigerator may run (the control event, if wired, is on)."""
-        return self.control_event is None or bool(self.events[self.control_event - 1])
+        """Whether heater and refrigerator may run: the control event, if wired, is on and
+        the limit controller, if wired, has not tripped."""
+        on = self.control_event is None or bool(self.events[self.control_event - 1])
+        return on and not self.alarm()
 
     def _apply(self) -> None:
         """Drive the physics: the setpoint when on, the air settling to ambient when off."""
         if self.setpoint_raw is None:
+            if not self.chamber_on():  # tripped before any setpoint was written
+                self.hooks.set_setpoint(self.hooks.ambient_c)
             return
         on = self.chamber_on()
         self.hooks.set_setpoint(self._from_raw(self.setpoint_raw) if on else self.hooks.ambient_c)

@@ -85,6 +85,8 @@ class SimBench:
         dmm_model: str = "34401A",
         chamber_model: str = "F4",
         oven_control_event: int | None = None,
+        oven_alarm_input: int | None = None,
+        adc_write_timeout_s: float | None = None,
         axis_physics: list[Any] | None = None,
         unit_physics: list[Any] | None = None,
         unit_internal_temperature: list[bool] | None = None,
@@ -153,7 +155,13 @@ class SimBench:
                 keep_truth=keep_truth,
                 # Back-pressure only when running as fast as possible; paced, a slow reader
                 # overruns like a real UART receiver would.
-                write_timeout_s=0.5 if speed is None else 0.05,
+                write_timeout_s=(
+                    adc_write_timeout_s
+                    if adc_write_timeout_s is not None
+                    else 0.5
+                    if speed is None
+                    else 0.05
+                ),
             )
             for pty, internal in zip(self.unit_ptys, self.unit_internal, strict=True)
         ]
@@ -161,6 +169,7 @@ class SimBench:
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
             control_event=oven_control_event,
+            alarm_input=oven_alarm_input,
             decimals=oven_decimals,
             units_c=oven_units_c,
             faults=self.faults.oven,
@@ -343,6 +352,15 @@ class SimBench:
         elif ev.kind == "open_channel":
             assert self.scanner is not None
             self.scanner.open_channel(101 + ev.unit, end)
+        elif ev.kind == "chamber_alarm":
+            # The chamber in use: the ESPEC when there is one, else the F4 (its limit
+            # controller on its alarm input).
+            # Not under self.lock: the ESPEC's own lock is taken before it in its replies.
+            chamber = self.espec if self.espec is not None else self.oven
+            chamber.set_alarm(phase == "start")
+            if phase == "start":
+                with self.lock:
+                    heapq.heappush(self._events, (end, next(self._tie), "end", ev))
         else:  # modbus_exception | modbus_crc | modbus_no_reply
             self.faults.oven.burst(ev.kind, ev.count)
 

@@ -1,0 +1,342 @@
+"""The built-in causal drift-model families on the causal features: poly, structured, BP,
+GA-BP.
+
+Each is a function of the features of :mod:`gyrolab.compensation.causal_features` (die
+temperature ``F`` from a fitted time constant τ, its rate ``R``, the heating/cooling
+branch ``S``, the warm-up ``E``), computed reading by reading with a state of four
+numbers, so its output at time t uses PT100 readings at or before t only; the drift is
+held between readings:
+
+* ``poly`` — the classical baseline: a Legendre series in the measured temperature
+  (τ = 0, no other term); order by blocked cross-validation;
+* ``structured`` — ``Σ c_i L_i(u(F)) + k R + h S + A E`` (:mod:`.structured`);
+* ``gabp`` — the paper's GA-BP network (eqs 15–17, GA initial weights) on the inputs
+  ``(F, R, S, E)`` with the structured model's (τ, w, τ_w);
+* ``bp`` — the same network from random initial weights (plain BP).
+
+Outside the calibration range of F the polynomial continues linearly from its edge, and
+the networks do the same (:class:`~gyrolab.compensation.gabp.MLPDriftModel`).
+
+Exported as ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s",
+"width_c", "warmup_tau_s"}, "model": INNER}`` with ``INNER`` a ``structured`` or ``mlp``
+form of :mod:`gyrolab.compensation.regressors` (inputs ``["F", "R", "S", "E"]``);
+:func:`causal_readings` states the state machine's equations as the JSON's reference.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gyrolab.compensation.causal_features import (
+    FEATURES,
+    CausalParams,
+    State,
+    hold,
+    initial_state,
+    reading_features,
+    step,
+)
+from gyrolab.compensation.drift_model import (
+    Candidate,
+    CModel,
+    DriftModel,
+    Family,
+    FitContext,
+    SpecKind,
+    c_float,
+)
+from gyrolab.compensation.gabp import BPConfig, GAConfig, MLPDriftModel, fit_mlp
+from gyrolab.compensation.regressors import RANGE_RULES, c_function, evaluate_inputs
+from gyrolab.compensation.structured import (
+    ORDERS,
+    StructuredModel,
+    block_features,
+    cv_linear,
+    fit_structured,
+    select_structured,
+)
+
+
+@dataclass
+class CausalState:
+    """The feature state, the time of the last reading and the drift held since."""
+
+    features: State | None = None
+    t_last: float = 0.0
+    held: float = 0.0
+
+
+@dataclass
+class CausalDriftModel(DriftModel):
+    """A drift model on the causal features: the feature parameters and the output map
+    ``model`` (``predict`` on feature rows ``(F, R, S, E)``)."""
+
+    family: str
+    params: CausalParams
+    model: Any  # StructuredModel | MLPDriftModel
+
+    # -- causal, reading by reading
+    def start(self) -> CausalState:
+        return CausalState()
+
+    def reading(self, state: CausalState, t_s: float, temp_c: float) -> None:
+        if state.features is None:  # at rest at the first reading, t_s after power-on
+            state.features, dt = initial_state(temp_c, t_s), 0.0
+        else:
+            dt = t_s - state.t_last
+        x = step(state.features, temp_c, dt, self.params)
+        state.t_last = t_s
+        state.held = float(self.model.predict(np.array([x]))[0])
+
+    def sample(self, state: CausalState, t_s: float) -> float:
+        return state.held
+
+    # -- vectorised
+    def reading_drift(self, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
+        """Drift estimate (°/s) at every PT100 reading, causally."""
+        return self.model.predict(reading_features(pt_t, pt_c, self.params))
+
+    # -- persistence
+    def describe(self) -> dict[str, Any]:
+        return {
+            "family": self.family,
+            "features": self.params.to_dict(),
+            "cv_rmse_deg_per_s": self.cv_rmse,
+            "selection": self.selection,
+            **self.parameters(),
+            **self.band_entry(),
+        }
+
+    # -- firmware
+    def spec(self) -> dict[str, Any]:
+        inner = self.model.spec(list(FEATURES), None)
+        p = self.params
+        return {
+            "kind": "causal",
+            "family": str(self.family),
+            "features": {
+                "tau_s": float(p.tau_s),
+                "rate_tau_min_s": float(p.rate_tau_min_s),
+                "width_c": float(p.width_c),
+                "warmup_tau_s": float(p.warmup_tau_s),
+            },
+            "model": inner,
+        }
+
+
+@dataclass
+class StructuredCausalModel(CausalDriftModel):
+    """The ``poly`` and ``structured`` families: :class:`.structured.StructuredModel`,
+    whose coefficients fit in model.json and metrics.json (``structured``)."""
+
+    def parameters(self) -> dict[str, Any]:
+        return {"structured": self.model.to_dict()}
+
+
+@dataclass
+class NetworkCausalModel(CausalDriftModel):
+    """The ``bp`` and ``gabp`` families: the eq. 15–17 network, its weights in
+    arrays.npz (model.json ``mlp``: its shape and scalers)."""
+
+    def save(self, prefix: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        meta, arrays = self.model.to_state(prefix)
+        return {"mlp": meta}, arrays
+
+    def torch_state(self) -> dict[str, Any] | None:
+        return self.model.torch_state_dict()
+
+
+def _load_structured(meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str) -> Any:
+    return StructuredCausalModel(
+        str(meta["family"]),
+        CausalParams.from_dict(meta["features"]),
+        StructuredModel.from_dict(meta["structured"]),
+    )
+
+
+def _load_network(meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str) -> Any:
+    return NetworkCausalModel(
+        str(meta["family"]),
+        CausalParams.from_dict(meta["features"]),
+        MLPDriftModel.from_state(meta["mlp"], arrays, prefix),
+    )
+
+
+# --------------------------------------------------------------------------- fitting
+
+
+def _fit_poly(ctx: FitContext) -> Candidate:
+    """Measured temperature only (τ = 0, no rate/hysteresis/warm-up term), the order by
+    blocked CV."""
+    p0 = CausalParams(tau_s=0.0)
+    X0 = block_features(ctx.cal, p0)
+    y = ctx.cal.rate
+    cv = {o: cv_linear(X0, y, o, (), ctx.folds) for o in ORDERS}
+    o0 = min(cv, key=lambda o: cv[o])
+    pred = np.empty_like(y)
+    err = cv_linear(X0, y, o0, (), ctx.folds, pred)
+    model = StructuredCausalModel("poly", p0, fit_structured(X0, y, o0, ()))
+    return Candidate(model, err, {"order": o0}, pred)
+
+
+def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
+    """The structured model's grid choice ``(params, order, terms, cv_rmse, log)`` and the
+    block features at its params, once per selection (the networks reuse them)."""
+
+    def make() -> tuple[Any, ...]:
+        ps, order, terms, err, log = select_structured(ctx.cal, ctx.folds)
+        return ps, order, terms, err, log, block_features(ctx.cal, ps)
+
+    return ctx.shared("structured", make)
+
+
+def _fit_structured(ctx: FitContext) -> Candidate:
+    ps, order, terms, _err, log, Xs = structured_choice(ctx)
+    y = ctx.cal.rate
+    # the CV RMSE of the terms kept (the term search's running error may be that of a
+    # set within the tie margin), with every block's held-out prediction
+    pred = np.empty_like(y)
+    err = cv_linear(Xs, y, order, terms, ctx.folds, pred)
+    model = StructuredCausalModel("structured", ps, fit_structured(Xs, y, order, terms))
+    return Candidate(model, err, {**log, "features": ps.to_dict()}, pred)
+
+
+def _fit_network(ctx: FitContext, name: str, init: str) -> Candidate:
+    """The network on the structured model's features, blocked CV by refitting it on
+    every fold's training blocks."""
+    ps, *_, Xs = structured_choice(ctx)
+    cfg = ctx.config
+    bp = cfg.bp() if cfg is not None else BPConfig()
+    ga = cfg.ga() if cfg is not None else GAConfig()
+    y = ctx.cal.rate
+
+    def fit(X: np.ndarray, yy: np.ndarray) -> MLPDriftModel:
+        return fit_mlp(X, yy, init=init, bp=bp, ga=ga, seed=ctx.seed)
+
+    sq, n = 0.0, 0
+    pred = np.empty_like(y)
+    for held in ctx.folds:
+        pred[held] = fit(Xs[~held], y[~held]).predict(Xs[held])
+        r = pred[held] - y[held]
+        sq += float(r @ r)
+        n += int(held.sum())
+    model = NetworkCausalModel(name, ps, fit(Xs, y))
+    return Candidate(model, float(np.sqrt(sq / n)), None, pred)
+
+
+FAMILIES = (
+    Family("poly", _fit_poly, _load_structured, 1.0, "Legendre series in the measured T"),
+    Family(
+        "structured",
+        _fit_structured,
+        _load_structured,
+        2.0,
+        "Legendre series in the lagged T plus rate, hysteresis and warm-up terms",
+    ),
+    Family(
+        "bp",
+        lambda ctx: _fit_network(ctx, "bp", "random"),
+        _load_network,
+        3.0,
+        "eq. 15-17 network on (F, R, S, E), random initial weights",
+    ),
+    Family(
+        "gabp",
+        lambda ctx: _fit_network(ctx, "gabp", "ga"),
+        _load_network,
+        4.0,
+        "eq. 15-17 network on (F, R, S, E), GA initial weights",
+    ),
+)
+
+
+# ----------------------------------------------------------------- exported form
+
+
+def causal_readings(
+    features: dict[str, float], pt_t: np.ndarray, pt_c: np.ndarray, t_power_on: float = 0.0
+) -> np.ndarray:
+    """The causal features ``(F, R, S, E)`` at every reading (float64, one reading at a
+    time as firmware runs it), from the JSON's ``features`` alone. At rest at the first
+    reading (``F = G = p = T_0``, ``t = t_0 − t_power_on``); then, with ``Δt`` the time
+    since the previous reading, ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width::
+
+        F += a (T − F),  a = −expm1(−Δt/τ)  (1 when τ = 0)      die temperature
+        G += b (T − G),  b = −expm1(−Δt/τ_r);  R = (T − G)/τ_r   rate
+        p = min(max(p, F − w/2), F + w/2);     S = (F − p)/(w/2) hysteresis branch
+        t += Δt;                               E = exp(−t/τ_w)    warm-up
+    """
+    tau, tmin = features["tau_s"], features["rate_tau_min_s"]
+    tau_r, half, tau_w = max(tau, tmin), 0.5 * features["width_c"], features["warmup_tau_s"]
+    out = np.empty((len(pt_c), 4))
+    F = G = p = float(pt_c[0])
+    t = float(pt_t[0]) - t_power_on
+    prev = float(pt_t[0])
+    for n, (tn, T) in enumerate(zip(pt_t, pt_c, strict=True)):
+        dt = float(tn) - prev
+        prev = float(tn)
+        a = -math.expm1(-dt / tau) if tau > 0 else 1.0
+        F += a * (T - F)
+        G += -math.expm1(-dt / tau_r) * (T - G)
+        p = min(max(p, F - half), F + half)
+        t += dt
+        out[n] = (F, (T - G) / tau_r, (F - p) / half, math.exp(-t / tau_w))
+    return out
+
+
+def evaluate_causal(m: dict[str, Any], pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
+    """Drift (°/s) at every reading of an exported ``causal`` model (held until the next)."""
+    return evaluate_inputs(m["model"], causal_readings(m["features"], pt_t, pt_c))
+
+
+def _evaluate(m: dict[str, Any], t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> np.ndarray:
+    return hold(np.asarray(t, dtype=float), pt_t, evaluate_causal(m, pt_t, pt_c))
+
+
+def _c_model(m: dict[str, Any], prefix: str) -> CModel:
+    """The state machine in float32 at every reading, the output map on its features, the
+    drift held until the next reading."""
+    f = m["features"]
+    tau, tau_r = f["tau_s"], max(f["tau_s"], f["rate_tau_min_s"])
+    half = 0.5 * f["width_c"]
+    a = f"-expm1f(-dt / {c_float(tau)})" if tau > 0 else "1.0f"
+    reading = "\n".join(
+        [
+            "    if (first) st->F = st->G = st->p = T;",
+            f"    const float a = {a};",
+            "    st->F += a * (T - st->F);",
+            f"    st->G += -expm1f(-dt / {c_float(tau_r)}) * (T - st->G);",
+            f"    st->p = clampf(st->p, st->F - {c_float(half)}, st->F + {c_float(half)});",
+            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
+            f"                        (st->F - st->p) / {c_float(half)},",
+            f"                        expf(-(float)(t / {f['warmup_tau_s']!r}))}};",
+            f"    st->held = {prefix}f(x);",
+        ]
+    )
+    return CModel(
+        code=c_function(f"{prefix}f", m["model"]),
+        state=("float F", "float G", "float p", "float held"),
+        reading=reading,
+        sample="    return st->held;",
+        note=f"causal {m['family']}: " + RANGE_RULES[m["model"]["kind"]],
+    )
+
+
+KINDS = (SpecKind("causal", _evaluate, _c_model),)
+
+
+__all__ = [
+    "FAMILIES",
+    "KINDS",
+    "CausalDriftModel",
+    "CausalState",
+    "NetworkCausalModel",
+    "StructuredCausalModel",
+    "causal_readings",
+    "evaluate_causal",
+    "structured_choice",
+]
