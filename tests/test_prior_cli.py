@@ -83,3 +83,12 @@ def test_prior_needs_model_directories(tmp_path: Path, capsys) -> None:
     run = write_run(tmp_path / "r.mcap", 1, hours=0.2)
     rc = main(["compensate", str(run), "--prior", str(tmp_path / "none"), "--out", "m"])
     assert rc == 2 and "model directory not found" in capsys.readouterr().err
+
+
+def test_profile_design_with_a_prior(fleet: Path, capsys) -> None:
+    out = fleet / "designed.toml"
+    argv = ["profile", "design", "--hours", "1", "--prior", str(fleet / "models")]
+    assert main([*argv, "--out", str(out)]) == 0
+    p = load_profile(out)
+    assert p.duration_s == pytest.approx(3600.0) and len(p.steps) == 4
+    assert "expected drift sd" in capsys.readouterr().out
