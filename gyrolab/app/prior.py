@@ -21,10 +21,24 @@ def prior_dirs(spec: str) -> list[str]:
 
 
 def load_prior(spec: str):  # -> FleetPrior
-    """The fleet prior of ``spec``; too few usable units is one line naming it."""
-    from gyrolab.compensation.prior import prior_from_dirs
+    """The fleet prior of the units ``spec`` names (a model whose causal model is a
+    network, or that has none, is skipped and named in the prior's ``skipped``); fewer
+    than two usable units is one line naming ``spec``."""
+    from gyrolab.compensation.model_dir import ModelDir
+    from gyrolab.compensation.prior import UnitEntry, learn_prior, structured_of
 
-    try:
-        return prior_from_dirs(prior_dirs(spec))
-    except ValueError as e:
-        raise InputError(spec, str(e)) from None
+    dirs = prior_dirs(spec)
+    units, skipped = [], {}
+    for d in dirs:
+        got = structured_of(ModelDir(d).load().causal)
+        if got is None:
+            skipped[d] = "its causal model is not a structured one"
+        else:
+            units.append(UnitEntry(d, *got))
+    if len(units) < 2:
+        raise InputError(
+            spec,
+            f"a fleet prior needs at least 2 units with a structured causal model; "
+            f"{len(units)} of {len(dirs)} model directories have one",
+        )
+    return learn_prior(units, skipped)

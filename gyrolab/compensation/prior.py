@@ -548,27 +548,6 @@ __all__ = [
     "hysteresis_width",
     "learn_prior",
     "membership",
-    "prior_from_dirs",
     "structured_of",
     "unit_vector",
 ]
-
-
-def prior_from_dirs(dirs: list[str]) -> FleetPrior:
-    """The prior of the units whose model directories are ``dirs`` (a model whose causal
-    model is a network, or that has none, is skipped and named in ``skipped``)."""
-    from gyrolab.compensation.model_dir import ModelDir
-
-    units, skipped = [], {}
-    for d in dirs:
-        got = structured_of(ModelDir(d).load().causal)
-        if got is None:
-            skipped[str(d)] = "its causal model is not a structured one"
-            continue
-        units.append(UnitEntry(str(d), *got))
-    if len(units) < 2:
-        raise ValueError(
-            f"a fleet prior needs at least 2 units with a structured causal model; "
-            f"{len(units)} of {len(dirs)} model directories have one"
-        )
-    return learn_prior(units, skipped)
