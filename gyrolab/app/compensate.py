@@ -30,6 +30,8 @@ def compensate(opts: CompensateOptions) -> int:
     t_start = time.perf_counter()
     run = str(opts.run)
     if opts.unit is None and units_of(run):
+        if opts.prior is not None:  # each unit is tested against the prior on its own
+            raise InputError(run, "--prior fits one unit of a multi-unit run: name it with --unit")
         check_output(opts.out, opts.force, inputs=_inputs(opts), kind="dir")
         # the single-run call's default (tests and benchmarks set it there)
         cfg, seed = resolve_config(opts.config, commands.DEFAULT_CONFIG, opts.seed)
