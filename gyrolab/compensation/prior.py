@@ -28,23 +28,23 @@ temperatures, each term at its largest regressor value), kept only when every cl
 ≥ :data:`MIN_CLUSTER` units and the mean silhouette is ≥ :data:`SILHOUETTE_MIN` (the
 units form clear groups, as 250 MPU-9250s did in CEUR Vol-2278); else one cluster.
 
-**MAP fit** (:func:`fit_map`): φ from the unit's own run — on a grid around the cluster's
-prior (τ, w, τ_w at the prior mean and ±½ … ±2 sd, one component at a time), the least
-``|y − A θ̂|² / s² + |(φ − μ_φ) / σ_φ|²`` with θ̂ the least-squares fit on the components
-the fleet uses — then θ at that φ minimises
+**MAP fit** (:func:`fit_map`): at feature parameters φ, the features of the unit's run give
+the design A on the reference basis and θ minimises
 
     J(θ) = |y − A θ|² / s² + (θ − μ)ᵀ Σ⁻¹ (θ − μ)
 
 (closed form), where ``s² = σ² n / n_eff`` — the residual variance of the 3.6 s
 means inflated by the effective sample size of the residual
-(:func:`~gyrolab.compensation.causal.effective_samples`), the same inflation the
+(:func:`~gyrolab.compensation.structured.effective_samples`), the same inflation the
 structured model's term test uses: flicker-dominated residuals are far from independent.
-φ is not chosen by the whole J: with the prior on θ in the criterion, φ bends the features
-until θ looks typical (on validation unit 10 the lag came out 2080 s for a true 1176 s,
-and its held-out bias stability 2.5× its 13 h fit's). A unit with much data (the 13 h
-run) is dominated by its own likelihood and reproduces its own fit; a short run borrows
-the prior where it says little (the cold end the chamber cannot reach in 3 h, the
-warm-up, the hysteresis).
+φ is chosen on a grid around the cluster's prior (τ, w, τ_w at the prior mean and ±½ … ±2
+sd, one component at a time, τ twice) by the blocked CV RMSE of that MAP fit (the causal
+selection's folds). Not by a joint J over θ and φ: with the prior on θ in the criterion,
+φ bends the features until θ looks typical (validation unit 10's lag came out 2080 s for
+a true 1176 s, its held-out bias stability 2.5× its 13 h fit's). A unit with much data
+(the 13 h run) is dominated by its own likelihood and reproduces its own fit; a short run
+borrows the prior where it says little (the cold end the chamber cannot reach in 3 h,
+the warm-up, the hysteresis).
 
 **Does the unit belong?** (:class:`Membership`): the unit's own least-squares estimate
 θ̂ (same φ, covariance ``C = s² (AᵀA)⁻¹``) against the prior: the Mahalanobis distance
