@@ -47,9 +47,10 @@ os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gyrolab.profiles.profile import load_profile  # noqa: E402
+from gyrolab.sim.discrepancy.catalogue import gap_of  # noqa: E402
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output  # noqa: E402
 from gyrolab.sim.discrepancy.synth import simulate_bench  # noqa: E402
-from gyrolab.sim.discrepancy.workflow import PRIMARY_GAP, run_discrepancy  # noqa: E402
+from gyrolab.sim.discrepancy.workflow import run_discrepancy  # noqa: E402
 from gyrolab.sim.model import nominal_model  # noqa: E402
 
 Sampler = Callable[[np.random.Generator], dict[str, float]]
@@ -180,7 +181,7 @@ def one_run(job: dict[str, Any]) -> dict[str, Any]:
     false = sorted(set(false) - set(hidden))
     shrink = {}
     for h in hidden:
-        key = PRIMARY_GAP[h]
+        key = gap_of(h)
         b, a = res.gap_before[key], res.gap_after[key]
         shrink[h] = {"metric": key, "before": b, "after": a, "shrink": 1.0 - a / b if b else 0.0}
     return {

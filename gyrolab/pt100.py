@@ -80,3 +80,24 @@ def cvd_temperature(r_ohm: float | np.ndarray, r0_ohm: float = R0_OHM) -> float 
                 t = tn
         t = np.where(r > 0.0, t, np.nan)
     return float(t) if t.ndim == 0 else t
+
+
+# 4-wire resistance test current of the multimeters the project drives, by range (Ω → A).
+# The full-scale voltage across the resistor on each ohms range, from the service guides'
+# "Theory of Operation" tables, over the range: 100 mV on 100 Ω, 1 V on 1 kΩ…100 kΩ, 5 V on
+# 1 MΩ (docs/instruments.md, "PT100 excitation current").
+_OHMS_FULL_SCALE_V = {100.0: 0.1, 1e3: 1.0, 1e4: 1.0, 1e5: 1.0, 1e6: 5.0}
+FRES_FAMILIES = ("34401A", "34465A", "34970A", "34972A", "DAQ970A")
+"""Meters with that ohms architecture (the 34465A by assumption: docs/instruments.md)."""
+
+
+def fres_test_current_a(model: str, range_ohm: float | None) -> float | None:
+    """The test current (A) a 4-wire resistance reading drives through the PT100 on
+    ``range_ohm`` (None: the drivers' 1 kΩ range), for a meter of ``FRES_FAMILIES``; None
+    when the meter or the range is not known. The self-heating it causes is
+    ``θ·I²·R(T)`` (``rtd_self_heating``, docs/sim-model.md)."""
+    if not any(f in str(model) for f in FRES_FAMILIES):
+        return None
+    r = 1e3 if range_ohm is None else float(range_ohm)
+    v = _OHMS_FULL_SCALE_V.get(r)
+    return None if v is None else v / r

@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 
 from gyrolab.profiles.profile import Profile, Step
+from gyrolab.sim.discrepancy.channels import temperature
+from gyrolab.sim.discrepancy.fitting import Fitter, Structure
 from gyrolab.sim.discrepancy.synth import simulate_bench
-from gyrolab.sim.discrepancy.thermal_fit import air_model, fit_oven, lowpass
-from gyrolab.sim.discrepancy.workflow import Structure, Workflow
+from gyrolab.sim.discrepancy.thermal_fit import air_model, fit_oven
 from gyrolab.sim.model import nominal_model
+from gyrolab.sim.thermal import lowpass
 
 STEPS = [(25.0, 1800.0), (60.0, 2400.0), (20.0, 2400.0), (-20.0, 2400.0), (-40.0, 2400.0)]
 PROFILE = Profile("stairs", tuple(Step(sp, d) for sp, d in STEPS))
@@ -63,10 +65,10 @@ def test_smooth_rate_limit_chosen_on_a_smooth_chamber_and_knee_kept_on_nominal(n
 def test_thermal_chain_effects_found_on_a_smooth_chamber(nominal):
     rtd = simulate_bench(nominal_model().with_effect("rtd_self_heating"), PROFILE, 2.0, 41)
     ds = smooth_chamber(rtd, overshoot=(0.15, 1200.0))
-    wf = Workflow(ds, nominal_model())
-    cur = wf.fit(Structure([]))
-    sig = {c["effect"] for c in wf.score_temperature(cur) if c["significant"]}
+    fx = Fitter(ds, nominal_model())
+    cur = fx.fit(Structure([]))
+    sig = {c.effect for c in temperature.score(fx, cur) if c.significant}
     assert sig == {"oven_overshoot", "rtd_self_heating"}
-    clean = Workflow(smooth_chamber(nominal), nominal_model())
+    clean = Fitter(smooth_chamber(nominal), nominal_model())
     cur = clean.fit(Structure([]))
-    assert not [c for c in clean.score_temperature(cur) if c["significant"]]
+    assert not [c for c in temperature.score(clean, cur) if c.significant]

@@ -119,13 +119,14 @@ def test_spike_detection_and_lattice():
 
 
 def test_select_reports_indistinguishable_candidates_together():
+    from gyrolab.sim.discrepancy.scored import Scored
     from gyrolab.sim.discrepancy.workflow import AMBIGUITY_MARGIN, select
 
-    def c(name: str, score: float) -> dict:
-        return {"effect": name, "score": score, "significant": True}
+    def c(name: str, score: float) -> Scored:
+        return Scored(name, "gyro", score, True, {})
 
     best, amb = select([c("warmup", 150.0), c("aging_ramp", 157.0), c("hysteresis", 60.0)])
-    assert best["effect"] == "aging_ramp"
+    assert best.effect == "aging_ramp"
     assert amb == ["aging_ramp", "warmup"]
     close = [c(n, 100.0 - i) for i, n in enumerate(["a", "b", "c", "d"])]
     assert select(close)[1] == ["a", "b", "c"]  # at most three

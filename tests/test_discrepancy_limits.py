@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from gyrolab.profiles.profile import Profile, Step
+from gyrolab.sim.discrepancy.fitting import Structure
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output
 from gyrolab.sim.discrepancy.synth import simulate_bench
-from gyrolab.sim.discrepancy.workflow import Structure, Workflow, run_discrepancy
+from gyrolab.sim.discrepancy.workflow import Workflow, run_discrepancy
 from gyrolab.sim.model import nominal_model
 
 STEPS = [(25.0, 1800.0), (60.0, 2400.0), (20.0, 2400.0), (-20.0, 2400.0), (-40.0, 2400.0)]
@@ -112,7 +113,7 @@ def test_revisit_drops_an_earlier_choice_the_later_one_explains():
     d = simulate_bench(_model(thermal_rate={"k": 5e-3}), PROFILE, RATE, 44)
     wf = Workflow(d, nominal_model())
     names = [e.name for e in nominal_model().effects]
-    cur = wf.fit(Structure(names + ["aging_ramp", "thermal_rate"]))
+    cur = wf.fitter.fit(Structure(names + ["aging_ramp", "thermal_rate"]))
     out = wf.revisit(cur, ["aging_ramp", "thermal_rate"], "thermal_rate")
     assert out is not None
     fitted, moves = out

@@ -100,22 +100,39 @@ def test_cli_reads_only_bench_channels_and_writes_contract(tmp_path, monkeypatch
     )
     assert rc == 0
 
-    # The workflow must never look at metadata records (simulator provenance lives there).
+    # The workflow reads the bench record (the multimeter, for its PT100 test current) and
+    # must never decode another metadata record (the simulator's provenance lives there).
     import mcap.reader
 
     import gyrolab.record.reader
 
     def forbidden(*a, **k):
-        raise AssertionError("discrepancy read the recording's metadata")
+        raise AssertionError("discrepancy read all of the recording's metadata")
+
+    class Sealed:
+        def __init__(self, m):
+            self.name, self._m = m.name, m
+
+        @property
+        def metadata(self):
+            if self.name != "bench":
+                raise AssertionError(f"discrepancy decoded the {self.name!r} metadata record")
+            return self._m.metadata
 
     monkeypatch.setattr(gyrolab.record.reader, "read_metadata", forbidden)
     for cls in (mcap.reader.SeekingReader, mcap.reader.NonSeekingReader):
-        monkeypatch.setattr(cls, "iter_metadata", forbidden)
+        orig = cls.iter_metadata
+        monkeypatch.setattr(
+            cls, "iter_metadata", lambda self, orig=orig: (Sealed(m) for m in orig(self))
+        )
 
     out = tmp_path / "dsc"
     assert main(["discrepancy", str(run), "--out", str(out)]) == 0
     doc = json.loads((out / "discrepancy.json").read_text())
     assert set(doc) >= {"effects_found", "ambiguous", "gap_before", "gap_after", "steps"}
+    # the simulated 34401A's test current came from the bench record (1 mA, 1 kΩ range)
+    rtd = next(c for c in doc["steps"][0]["candidates"] if c["effect"] == "rtd_self_heating")
+    assert rtd["evidence"]["excitation_current_a"] == pytest.approx(1e-3)
     assert "warmup" in doc["effects_found"] or any("warmup" in s for s in doc["ambiguous"])
     for key in ("lf_residual_rms_dps", "allan_log_distance", "temperature_rms_c"):
         assert key in doc["gap_before"] and key in doc["gap_after"]

@@ -268,16 +268,19 @@ def test_the_report_flags_a_model_on_another_temperature_source(
     assert "Another temperature source" in (out / "index.html").read_text()
 
 
-def test_discrepancy_refuses_a_die_temperature_in_one_line(
-    mixed_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+def test_discrepancy_analyses_a_unit_on_its_die_temperature(
+    mixed_run: Path, tmp_path: Path
 ) -> None:
+    """The die model (its lag behind the case and its offset, docs/discrepancy.md): the
+    unit on its internal sensor is analysed, with no PT100 candidate."""
     from gyrolab.cli import main
 
     out = tmp_path / "d"
-    assert main(["discrepancy", str(mixed_run), "--unit", "SIM0-01", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "records its internal (die) temperature, not a PT100" in err[0]
-    assert not out.exists()
+    assert main(["discrepancy", str(mixed_run), "--unit", "SIM0-01", "--out", str(out)]) == 0
+    doc = json.loads((out / "discrepancy.json").read_text())
+    assert doc["temperature_source"] == "die"
+    assert "rtd_self_heating" not in doc["detection_limits"]
+    assert "die_tau_s" in (out / "model.toml").read_text()
 
 
 def test_convert_names_the_internal_temperature_column(mixed_run: Path, tmp_path: Path) -> None:

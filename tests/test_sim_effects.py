@@ -240,17 +240,21 @@ def test_oven_overshoot_overshoots_then_settles() -> None:
 
 
 def test_rtd_self_heating_reads_high_by_the_offset() -> None:
-    from gyrolab.sim.sensors import cvd_temperature
+    """I²·R(T)·θ: the reading is high by ``offset_c·R(T)/R0`` (0.4 °C at 0 °C)."""
+    from gyrolab.pt100 import R0_OHM
+    from gyrolab.sim.sensors import cvd_resistance, cvd_temperature
 
     off = 0.4
     p = Physics(model(("rtd_self_heating", {"offset_c": off})), rate_hz=1.0, seed=2)
     q = Physics(model(), rate_hz=1.0, seed=2)
     p.set_setpoint(-20.0)
     q.set_setpoint(-20.0)
-    diffs = []
+    diffs, expected = [], []
     for _ in range(50):
         p.advance(60)
         q.advance(60)
         diffs.append(cvd_temperature(p.pt100_ohm()) - p.case_c())
+        expected.append(off * float(cvd_resistance(p.case_c())) / R0_OHM)
         assert cvd_temperature(q.pt100_true_ohm()) == pytest.approx(q.case_c(), abs=1e-9)
-    assert np.mean(diffs) == pytest.approx(off, abs=0.01)
+    assert np.mean(diffs) == pytest.approx(np.mean(expected), abs=0.01)
+    assert abs(np.mean(diffs) - off) > 0.02  # away from 0 °C it is not the constant

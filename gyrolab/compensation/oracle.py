@@ -7,8 +7,9 @@ measured against (issue 11). The truth is known only for a recording written by
 its ``bench.adc`` the sample rate, and its ``/profile/event`` messages the exact time (to the
 sample) each setpoint step started. Replaying those setpoints through
 :class:`~gyrolab.sim.physics.Physics` with the model's *deterministic* effects only
-(every effect except ``arw``, ``bias_instability``, ``rate_random_walk``, ``outliers``,
-``quantization``) gives the same thermal history and the drift without noise:
+(every effect but those that are part of the noise floor, ``Effect.is_noise()``: the
+stochastic ones and the output's quantization) gives the same thermal history and the
+drift without noise:
 
     oracle(t) = raw(t) − drift_det(t)
 
@@ -30,8 +31,6 @@ from gyrolab.record.format import TOPIC_EVENT, TOPIC_RATE
 from gyrolab.record.metadata import BenchMetadata
 from gyrolab.record.reader import read_recording
 
-STOCHASTIC = ("arw", "bias_instability", "rate_random_walk", "outliers", "quantization")
-
 
 def deterministic_drift(
     model_toml: str, rate_hz: float, n: int, steps: list[tuple[float, float]], ambient_c: float
@@ -40,12 +39,14 @@ def deterministic_drift(
     ``steps`` = (start time s, setpoint °C) in time order."""
     import tomllib
 
+    from gyrolab.sim.effects import EFFECTS
     from gyrolab.sim.model import SimModel
     from gyrolab.sim.physics import Physics
 
     model = SimModel.from_dict(tomllib.loads(model_toml))
-    for name in STOCHASTIC:
-        model = model.without_effect(name)
+    for name in model.effect_names():
+        if EFFECTS[name].is_noise():
+            model = model.without_effect(name)
     phys = Physics(model, rate_hz=rate_hz, seed=0, ambient_c=ambient_c)
     out = np.empty(n)
     pos = 0

@@ -279,6 +279,17 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     return records
 
 
+def read_bench_record(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The ``bench`` metadata record alone, normalised (None when the file has none): no
+    other record is decoded — the discrepancy workflow reads the instruments' settings
+    this way and never sees a simulator's ``sim_provenance``."""
+    with opened(path) as reader:
+        for m in reader.iter_metadata():
+            if m.name == "bench":
+                return normalise_bench(_parse_meta(m.metadata))
+    return None
+
+
 def list_units(path: str | os.PathLike[str]) -> list[str]:
     """The unit serials of a multi-unit recording, in file order; ``[]`` for single-unit."""
     with opened(path) as reader:

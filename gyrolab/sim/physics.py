@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyrolab.sim.effects import EFFECTS, BlockContext, Effect
+from gyrolab.sim.effects import EFFECTS, BlockContext, Effect, self_heating_c
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.noise import FlickerStream, effect_rng
 from gyrolab.sim.sensors import AdcModel, DieThermometer, cvd_resistance
@@ -197,8 +197,10 @@ class Physics:
         return float(self._state[3])
 
     def pt100_true_ohm(self) -> float:
-        """Noise-free PT100 resistance now: CVD(case + rtd_self_heating offset), Ω."""
-        return float(cvd_resistance(self.case_c() + self._rtd_offset_c))
+        """Noise-free PT100 resistance now: CVD(case + its self-heating at the case
+        temperature, ``rtd_self_heating``), Ω."""
+        case = self.case_c()
+        return float(cvd_resistance(case + self_heating_c(self._rtd_offset_c, case)))
 
     def pt100_ohm(self) -> float:
         """What a 4-wire DMM reads now: CVD(T_case + rtd offset) + DMM noise, Ω."""

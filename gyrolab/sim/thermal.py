@@ -171,3 +171,15 @@ def kernel_params(
         ],
         dtype=np.float64,
     )
+
+
+def lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
+    """A first-order lag sampled on a uniform grid: ``c_{k+1} = c_k + α (u_k − c_k)``,
+    ``c_0 = c0`` (a node following ``u`` with ``α = 1 − e^{−Δt/τ}``)."""
+    from scipy.signal import lfilter  # not on the simulator's import path
+
+    c = np.empty(u.size)
+    c[0] = c0
+    if u.size > 1:
+        c[1:], _ = lfilter([alpha], [1.0, alpha - 1.0], u[:-1], zi=[(1.0 - alpha) * c0])
+    return c

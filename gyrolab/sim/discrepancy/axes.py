@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.sim.discrepancy.data import BenchData, from_arrays
+from gyrolab.sim.discrepancy.fitting import ThermalFits
 from gyrolab.sim.discrepancy.workflow import Result, Workflow
 from gyrolab.sim.model import SimModel
 
@@ -72,16 +73,12 @@ def run_discrepancy_axes(
     m = model or nominal_model()
     ref = data[0]
     results: list[Result] = []
-    first: Workflow | None = None
+    thermal: ThermalFits | None = None
     for k, d in enumerate(data):
         if not (np.array_equal(d.pt100_c, ref.pt100_c) and np.array_equal(d.oven_pv, ref.oven_pv)):
             raise ValueError(f"axis {k}: temperature channels differ from axis 0's")
-        wf = Workflow(replace(d), m)
-        if first is not None:  # one chamber, one case: the thermal fits are shared
-            wf._oven_cache = first._oven_cache
-            wf._case_cache = first._case_cache
-        else:
-            first = wf
+        wf = Workflow(replace(d), m, thermal)
+        thermal = wf.fitter.thermal  # one chamber, one case: the thermal fits are shared
         results.append(wf.run((lambda s, k=k: log(f"axis {k}: {s}")) if log else None))
     named = [set(r.effects_found) | {e for s in r.ambiguous for e in s} for r in results]
     common = set.intersection(*named)

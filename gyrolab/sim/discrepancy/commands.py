@@ -27,7 +27,7 @@ from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.sim.discrepancy.axes import run_discrepancy_axes
 from gyrolab.sim.discrepancy.data import load_recording_axes
 from gyrolab.sim.discrepancy.report import json_default, render
-from gyrolab.sim.discrepancy.workflow import run_discrepancy
+from gyrolab.sim.discrepancy.workflow import Result, run_discrepancy
 from gyrolab.sim.model import load_model, nominal_model
 
 
@@ -64,10 +64,21 @@ def discrepancy(
         )
         (tmp / "model.toml").write_text(res.model.to_toml(), encoding="utf-8")
         (tmp / "index.html").write_text(render(res, str(run)), encoding="utf-8")
+        _write_proposals(tmp, res)
     found = ", ".join(res.effects_found) or "nothing"
     amb = "; ".join("{" + ", ".join(s) + "}" for s in res.ambiguous)
+    nxt = [a.proposal.file for a in res.ambiguity if a.proposal is not None]
+    cyc = "; ".join(
+        f"a {c['period_s']:.0f} s cycle at {c['peak_to_local_median']:.0f}x the local median "
+        "(present in the measurement: check the bench)"
+        for c in res.periodic_content
+    )
     return (
-        f"wrote {out}: named {found}" + (f" (ambiguous: {amb})" if amb else "") + f"; "
+        f"wrote {out}: named {found}"
+        + (f" (ambiguous: {amb})" if amb else "")
+        + (f"; next experiment to separate them: {', '.join(nxt)}" if nxt else "")
+        + (f"; {cyc}" if cyc else "")
+        + "; "
         f"LF residual {res.gap_before['lf_residual_rms_dps']:.3g} -> "
         f"{res.gap_after['lf_residual_rms_dps']:.3g} deg/s, "
         f"Allan log distance {res.gap_before['allan_log_distance']:.3g} -> "
@@ -75,6 +86,13 @@ def discrepancy(
         f"temperature {res.gap_before['temperature_rms_c']:.3g} -> "
         f"{res.gap_after['temperature_rms_c']:.3g} C ({res.elapsed_s:.0f} s)"
     )
+
+
+def _write_proposals(tmp: Any, res: Result) -> None:
+    """Each proposed separating profile as a PROFILE.toml beside discrepancy.json."""
+    for a in res.ambiguity:
+        if a.proposal is not None:
+            (tmp / a.proposal.file).write_text(a.proposal.toml(), encoding="utf-8")
 
 
 def _discrepancy_axes(
@@ -100,11 +118,16 @@ def _discrepancy_axes(
         f"<h1>Discrepancy: {escape(str(run))} ({n} axes)</h1>"
         f"<p>Shared by every axis: {escape(', '.join(res.shared) or 'none')}</p><ul>{links}</ul>"
     )
+    for k, r in enumerate(res.axes):  # each axis's proposals under its own name
+        for a in r.ambiguity:
+            if a.proposal is not None:
+                a.proposal.file = f"axis{k}_{a.proposal.file}"
     with atomic_dir(out, force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
             json.dumps(res.to_json(), indent=1, default=json_default), encoding="utf-8"
         )
         for k, r in enumerate(res.axes):
+            _write_proposals(tmp, r)
             (tmp / f"model_axis{k}.toml").write_text(r.model.to_toml(), encoding="utf-8")
             (tmp / f"index_axis{k}.html").write_text(
                 render(r, f"{run} (axis {k})"), encoding="utf-8"

@@ -1,10 +1,11 @@
 """What the discrepancy workflow sees of a run: the bench channels, decimated early.
 
-Only what a real bench records is read: ``/gyro/rate``, ``/temperature/pt100``,
-``/oven/state`` and ``/profile/event``. Metadata records (where a simulator may store its
-provenance) are never opened. A unit whose temperature is its internal (die) sensor
-(``/unit/<serial>/temperature/internal``, no PT100) is refused: the thermal model fits a
-PT100 on the case, and the die's lag and offset would be named as case effects.
+Only what a real bench records is read: ``/gyro/rate``, ``/temperature/pt100`` (or a
+unit's ``/unit/<serial>/temperature/internal``, its die sensor, when it has no PT100),
+``/oven/state`` and, of the metadata, the ``bench`` record (the multimeter's model and
+range, for its PT100 test current); no other metadata record (where a simulator stores
+its provenance) is decoded. A die sensor's readings are marked as such
+(``temperature_source``): the thermal fit models the die behind the case.
 
 The 100 Hz rate stream is reduced in one pass to
 
@@ -25,11 +26,13 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from gyrolab.errors import InputError
 from gyrolab.numerics.allan import allan_deviation
+from gyrolab.pt100 import fres_test_current_a
 from gyrolab.record.blocks import decode_block
 from gyrolab.record.format import (
     TOPIC_EVENT,
@@ -38,7 +41,7 @@ from gyrolab.record.format import (
     TOPIC_RATE,
     TOPIC_TEMPERATURE_INTERNAL,
 )
-from gyrolab.record.reader import iter_messages
+from gyrolab.record.reader import iter_messages, read_bench_record
 
 SPIKE_K = 8.0
 """Spike threshold in robust standard deviations of the centred second difference."""
@@ -100,6 +103,11 @@ class BenchData:
     hr: HighRate
     steps: list[Step] = field(default_factory=list)
     source: str = "<arrays>"
+    pt100_current_a: float | None = None
+    """The multimeter's PT100 test current (A) from the bench record, when known."""
+    temperature_source: str = "pt100"
+    """``pt100`` (a PT100 on the case: ``pt100_*`` are its readings) or ``die`` (a unit's
+    internal sensor: ``pt100_*`` hold the die readings; docs/discrepancy.md)."""
 
     @property
     def duration_s(self) -> float:
@@ -305,21 +313,24 @@ def from_arrays(
     )
 
 
-def _read_bench(
-    path: str | os.PathLike[str], unit: str | None
-) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+Bench = tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None, str]
+
+
+def _read_bench(path: str | os.PathLike[str], unit: str | None) -> Bench:
     """The bench channels of a recording: rate start and period, rate samples (n, or
-    n × axes), their indices, PT100 rows (t, °C) and oven rows (t, SP, PV)."""
+    n × axes), their indices, temperature rows (t, °C), oven rows (t, SP, PV), the PT100
+    test current (A, or None) and the temperature's source (``pt100`` or ``die``)."""
     blocks = []
     pt: list[tuple[float, float]] = []
     oven: list[tuple[float, float, float]] = []
     topics = [TOPIC_RATE, TOPIC_PT100, TOPIC_OVEN]
     if unit is not None:  # a unit on its internal sensor records that instead of a PT100
         topics.append(TOPIC_TEMPERATURE_INTERNAL)
-    internal = 0
+    internal: list[tuple[float, float]] = []
     for topic, _ts, data in iter_messages(path, topics, unit=unit):
         if topic == TOPIC_TEMPERATURE_INTERNAL:
-            internal += 1
+            m = json.loads(data)
+            internal.append((m["t"], m["temperature_c"]))
         elif topic == TOPIC_RATE:
             blocks.append(decode_block(data, "rate"))
         elif topic == TOPIC_PT100:
@@ -330,16 +341,10 @@ def _read_bench(
             oven.append((m["t"], m["setpoint_c"], m["process_value_c"]))
     if not blocks:
         raise InputError(path, f"recording has no {TOPIC_RATE} data")
+    source = "pt100"
     if not pt and internal:
-        # The thermal fit models a PT100 on the case (τ_case, ΔT_self, δ = rtd_self_heating);
-        # a die sensor lags the case by τ_die and carries its own offset, which that fit
-        # would report as a longer τ_case and a PT100 self-heating that is not there.
-        raise InputError(
-            path,
-            f"unit {unit} records its internal (die) temperature, not a PT100 on its case: "
-            "the discrepancy thermal model fits the case and would misread the die's lag "
-            "and offset as case effects (docs/discrepancy.md)",
-        )
+        # a die sensor: the thermal fit models its lag behind the case and its offset
+        pt, source = internal, "die"
     if not pt:
         raise InputError(path, f"recording has no {TOPIC_PT100} data")
     if not oven:
@@ -356,24 +361,40 @@ def _read_bench(
         idx[pos : pos + k] = first + np.arange(k)
         pos += k
     t0 = blocks[0][0] - blocks[0][2] * period
-    return t0, period, x, idx, np.asarray(sorted(pt), dtype=float), np.asarray(sorted(oven))
+    current = pt100_current_a(read_bench_record(path)) if source == "pt100" else None
+    pts = np.asarray(sorted(pt), dtype=float)
+    return t0, period, x, idx, pts, np.asarray(sorted(oven)), current, source
 
 
-def load_recording(
-    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+def pt100_current_a(bench: dict[str, Any] | None) -> float | None:
+    """The PT100 test current (A) of the meter a ``bench`` record names (its
+    ``multimeter``, or a multi-unit bench's ``scanner``): an ``excitation_current_a`` it
+    records, else the meter's documented current on its range (:mod:`gyrolab.pt100`)."""
+    for key in ("multimeter", "scanner"):
+        m = (bench or {}).get(key)
+        if isinstance(m, dict):
+            i = m.get("excitation_current_a")
+            if isinstance(i, (int, float)) and i > 0:
+                return float(i)
+            r = m.get("range_ohm")
+            return fres_test_current_a(
+                str(m.get("model", "")), float(r) if isinstance(r, (int, float)) else None
+            )
+    return None
+
+
+def _bench_data(
+    bench: Bench,
+    column: np.ndarray,
+    bin_s: float | None,
+    source: str,
 ) -> BenchData:
-    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
-    t0, period, x, idx, p, o = _read_bench(path, unit)
-    if x.ndim > 1:
-        raise InputError(
-            path,
-            f"a {x.shape[1]}-axis recording: the discrepancy analysis models "
-            "one gyro axis (simulate the axes one by one)",
-        )
-    return from_arrays(
+    """:class:`BenchData` of one rate column of what :func:`_read_bench` returned."""
+    t0, period, _x, idx, p, o, current, source = bench
+    d = from_arrays(
         t0,
         period,
-        x,
+        column,
         p[:, 0],
         p[:, 1],
         o[:, 0],
@@ -381,8 +402,26 @@ def load_recording(
         o[:, 2],
         rate_index=idx,
         bin_s=bin_s,
-        source=str(path),
+        source=source,
     )
+    d.pt100_current_a = current
+    d.temperature_source = source
+    return d
+
+
+def load_recording(
+    path: str | os.PathLike[str], bin_s: float | None = None, unit: str | None = None
+) -> BenchData:
+    """Read the bench channels of a recording (never its metadata) into :class:`BenchData`."""
+    bench = _read_bench(path, unit)
+    x = bench[2]
+    if x.ndim > 1:
+        raise InputError(
+            path,
+            f"a {x.shape[1]}-axis recording: the discrepancy analysis models "
+            "one gyro axis (simulate the axes one by one)",
+        )
+    return _bench_data(bench, x, bin_s, str(path))
 
 
 def load_recording_axes(
@@ -391,23 +430,10 @@ def load_recording_axes(
     """One :class:`BenchData` per gyro axis of a recording (one for a single-axis one),
     all with the same temperature channels, for
     :func:`gyrolab.sim.discrepancy.axes.run_discrepancy_axes`."""
-    t0, period, x, idx, p, o = _read_bench(path, unit)
-    cols = x if x.ndim > 1 else x[:, None]
+    bench = _read_bench(path, unit)
+    cols = bench[2] if bench[2].ndim > 1 else bench[2][:, None]
     return [
-        from_arrays(
-            t0,
-            period,
-            cols[:, k],
-            p[:, 0],
-            p[:, 1],
-            o[:, 0],
-            o[:, 1],
-            o[:, 2],
-            rate_index=idx,
-            bin_s=bin_s,
-            source=f"{path} (axis {k})",
-        )
-        for k in range(cols.shape[1])
+        _bench_data(bench, cols[:, k], bin_s, f"{path} (axis {k})") for k in range(cols.shape[1])
     ]
 
 

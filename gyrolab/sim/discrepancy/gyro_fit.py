@@ -3,7 +3,10 @@ AR-noise least squares on the low-frequency output (see :mod:`.gls`).
 
 Every vocabulary effect that is a function of the temperature history and time becomes
 columns of a design matrix evaluated at the bin centres (``x = T − 25 °C``; ``T`` the
-bias-setting temperature: the case, or with ``thermal_lag`` the die)::
+bias-setting temperature: the case, or with ``thermal_lag`` the die). Each effect declares
+its own columns, shape parameter and scan grid beside its physics (``terms`` in
+``sim/effects.py``, :mod:`gyrolab.sim.candidate`); this module is generic over them. The
+built-in ones::
 
     bias_poly     1, x, x²  (+ x³, x⁴ when the starting model uses them)   → c0, c1, c2 …
     cubic_temp    x³                                                       → c3
@@ -30,40 +33,20 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from gyrolab.sim.candidate import Bins
+from gyrolab.sim.discrepancy import catalogue as cat
 from gyrolab.sim.discrepancy.gls import GlsResult, ar_whiten, gls_ar, gls_cov
-from gyrolab.sim.effects import hysteresis_width, play, play_var
+from gyrolab.sim.effects import EFFECTS
 
 AR_ORDER = 8
-GYRO_EFFECTS = (
-    "bias_poly",
-    "cubic_temp",
-    "thermal_rate",
-    "thermal_lag",
-    "hysteresis",
-    "warmup",
-    "aging_ramp",
-    "periodic",
-)
-WARMUP2 = "warmup.tau2"
-"""theta key of a second warm-up exponential's time constant (the two-exponential form)."""
-HYST_TC = "hysteresis.width_tc"
-"""theta key of a temperature-dependent hysteresis width's slope (°C/°C)."""
-FORM_KEYS = (WARMUP2, HYST_TC)
 
 
 def n_nonlinear(struct: GyroStructure) -> int:
     """Nonlinear parameters of a structure (the wider forms' extra shape parameters too)."""
-    return sum(1 for n in struct.names if n in NONLINEAR) + sum(
-        1 for k in FORM_KEYS if k in struct.theta and k.split(".")[0] in struct.names
+    keys = {cat.form_key(n) for n in struct.names}
+    return sum(1 for n in struct.names if cat.shape_of(n)) + sum(
+        1 for k in struct.theta if k in keys
     )
-
-
-NONLINEAR = {
-    "thermal_lag": "tau_s",
-    "hysteresis": "width_c",
-    "warmup": "tau_s",
-    "periodic": "period_s",
-}
 
 
 @dataclass
@@ -81,22 +64,11 @@ class GyroContext:
 
 
 def nonlinear_grid(name: str, ctx: GyroContext) -> np.ndarray:
-    """Scan grid of an effect's nonlinear parameter."""
-    if name == "thermal_lag":
-        return np.geomspace(20.0, max(200.0, ctx.duration_s / 3), 36)
-    if name == "hysteresis":
-        return np.geomspace(0.05, 20.0, 30)
-    if name == "warmup":
-        # a warm-up settles within the run; slower drifts are aging_ramp's business
-        return np.geomspace(max(30.0, 3 * ctx.bin_s), max(300.0, ctx.duration_s / 6), 40)
-    if name == "periodic":
-        # uniform in frequency, 2× oversampled against the run's resolution 1/T
-        # compressor-like cycles: minutes to two hours, and at least six per run
-        f_lo = max(1.0 / 7200.0, 6.0 / ctx.duration_s)
-        f_hi = 1.0 / max(120.0, 4.0 * ctx.bin_s)
-        nf = int(min(2000, max(20, 2 * (f_hi - f_lo) * ctx.duration_s)))
-        return 1.0 / np.linspace(f_lo, f_hi, nf)
-    raise KeyError(name)
+    """Scan grid of an effect's nonlinear parameter (its declared ``terms.grid``)."""
+    grid = cat.terms(name).grid
+    if grid is None:
+        raise KeyError(name)
+    return grid(ctx.duration_s, ctx.bin_s)
 
 
 def _bounds(name: str, ctx: GyroContext) -> tuple[float, float]:
@@ -118,65 +90,50 @@ class GyroStructure:
         return GyroStructure(self.names + [name], th)
 
 
-def _temps(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, np.ndarray]:
-    """Bias-setting temperature and its rate on the grid."""
-    if "thermal_lag" in struct.names:
-        tau = struct.theta["thermal_lag"]
-        alpha = 1.0 - math.exp(-1.0 / tau)
-        from gyrolab.sim.discrepancy.thermal_fit import lowpass
-
-        die = lowpass(ctx.case_c, alpha, float(ctx.case_c[0]))
-        return die, (ctx.case_c - die) / tau
-    return ctx.case_c, ctx.dcase
+def bins_of(struct: GyroStructure, ctx: GyroContext) -> Bins:
+    """What the structure's terms are evaluated on: the bias-setting temperature (the case,
+    or what a temperature-changing term such as ``thermal_lag`` makes of it) and its rate,
+    on the grid and at the bin centres."""
+    temp_g, dtemp_g = ctx.case_c, ctx.dcase
+    for name in struct.names:
+        change = cat.terms(name).temperature
+        if change is not None:
+            temp_g, dtemp_g = change(ctx.case_c, cat.shape_values(name, struct.theta))
+    return Bins(
+        t=ctx.t,
+        temp_c=np.interp(ctx.t, ctx.grid_t, temp_g),
+        dtemp_c_per_s=np.interp(ctx.t, ctx.grid_t, dtemp_g),
+        grid_t=ctx.grid_t,
+        grid_temp_c=temp_g,
+        grid_dtemp_c_per_s=dtemp_g,
+        poly_order=ctx.poly_order,
+    )
 
 
 def design(struct: GyroStructure, ctx: GyroContext) -> tuple[np.ndarray, list[str]]:
-    """Design matrix at the bin centres and the names of its columns."""
-    temp_g, dtemp_g = _temps(struct, ctx)
-    T = np.interp(ctx.t, ctx.grid_t, temp_g)
-    x = T - 25.0
+    """Design matrix at the bin centres and the names of its columns (``effect.coef``)."""
+    b = bins_of(struct, ctx)
     cols: list[np.ndarray] = []
     names: list[str] = []
     for name in struct.names:
-        if name == "bias_poly":
-            for i in range(ctx.poly_order + 1):
-                cols.append(x**i)
-                names.append(f"bias_poly.c{i}")
-        elif name == "cubic_temp":
-            cols.append(x**3)
-            names.append("cubic_temp.c3")
-        elif name == "thermal_rate":
-            cols.append(60.0 * np.interp(ctx.t, ctx.grid_t, dtemp_g))
-            names.append("thermal_rate.k")
-        elif name == "hysteresis":
-            s = np.empty(temp_g.size)
-            tc = struct.theta.get(HYST_TC, 0.0)
-            if tc == 0.0:
-                play(temp_g, float(temp_g[0]), 0.5 * struct.theta["hysteresis"], s)
-            else:
-                half = 0.5 * hysteresis_width(temp_g, struct.theta["hysteresis"], tc)
-                tg = np.ascontiguousarray(temp_g, dtype=np.float64)
-                play_var(tg, float(temp_g[0]), half, s)
-            cols.append(0.5 * np.interp(ctx.t, ctx.grid_t, s))
-            names.append("hysteresis.h")
-        elif name == "warmup":
-            cols.append(np.exp(-ctx.t / struct.theta["warmup"]))
-            names.append("warmup.A")
-            if WARMUP2 in struct.theta:
-                cols.append(np.exp(-ctx.t / struct.theta[WARMUP2]))
-                names.append("warmup.A2")
-        elif name == "aging_ramp":
-            cols.append(ctx.t / 3600.0)
-            names.append("aging_ramp.r")
-        elif name == "periodic":
-            w = 2.0 * np.pi / struct.theta["periodic"]
-            cols += [np.sin(w * ctx.t), np.cos(w * ctx.t)]
-            names += ["periodic.a_sin", "periodic.a_cos"]
-        elif name == "thermal_lag":
-            pass  # changes the temperature the other columns see
-        else:
-            raise KeyError(name)
+        columns = cat.terms(name).columns
+        if columns is None:
+            continue  # changes the temperature the other columns see
+        for coef, col in columns(b, cat.shape_values(name, struct.theta)):
+            cols.append(col)
+            names.append(f"{name}.{coef}")
     return np.column_stack(cols), names
+
+
+def redundant(name: str, struct: GyroStructure, ctx: GyroContext) -> bool:
+    """Whether candidate ``name``'s regressors are already columns of ``struct``'s design
+    (``cubic_temp`` when the starting model's polynomial has x³): not a candidate then."""
+    t = cat.terms(name)
+    if t.columns is None or t.shape is not None:
+        return False
+    X, _ = design(struct, ctx)
+    new = [c for _, c in t.columns(bins_of(struct, ctx), cat.shape_values(name, struct.theta))]
+    return all(any(np.array_equal(c, X[:, j]) for j in range(X.shape[1])) for c in new)
 
 
 @dataclass
@@ -202,13 +159,14 @@ def _fit_fixed(struct: GyroStructure, ctx: GyroContext, phi: np.ndarray | None =
     return GyroFit(struct, g, cols, X @ g.beta)
 
 
-def _periodic_scan(
-    struct: GyroStructure, ctx: GyroContext, phi: np.ndarray, periods: np.ndarray
+def _frequency_scan(
+    struct: GyroStructure, ctx: GyroContext, phi: np.ndarray, periods: np.ndarray, name: str
 ) -> np.ndarray:
-    """Whitened RSS of the structure with its sine/cosine pair at each period, vectorized:
-    the other columns are whitened and orthogonalized once (QR), each pair is projected
-    out of their complement, and RSS = ‖r‖² − (Zᵀr)ᵀ(ZᵀZ)⁻¹(Zᵀr) with Z ⟂ the base."""
-    base = GyroStructure([n for n in struct.names if n != "periodic"], struct.theta)
+    """Whitened RSS of the structure with term ``name``'s sine/cosine pair at each period,
+    vectorized: the other columns are whitened and orthogonalized once (QR), each pair is
+    projected out of their complement, and RSS = ‖r‖² − (Zᵀr)ᵀ(ZᵀZ)⁻¹(Zᵀr) with Z ⟂ the
+    base."""
+    base = GyroStructure([n for n in struct.names if n != name], struct.theta)
     X, _ = design(base, ctx)
     scale = np.sqrt(np.mean(X * X, axis=0))
     scale[scale == 0] = 1.0
@@ -249,7 +207,7 @@ def fit_structure(
     multimodal in P). The scan uses an AR(8) noise model held fixed; the refinement the
     known-covariance ``whitener`` when given (the criterion the score uses).
     """
-    nl = [n for n in struct.names if n in NONLINEAR]
+    nl = [n for n in struct.names if cat.shape_of(n)]
     need = set(scan) | {n for n in nl if n not in struct.theta}
     move = [n for n in nl if n in need] if scan else nl
     theta = dict(struct.theta)
@@ -275,8 +233,8 @@ def fit_structure(
 
             if name in need:
                 grid = nonlinear_grid(name, ctx)
-                if name == "periodic":
-                    costs = _periodic_scan(cur.struct, ctx, phi, grid)
+                if cat.terms(name).scan == "frequency":
+                    costs = _frequency_scan(cur.struct, ctx, phi, grid, name)
                 else:
 
                     def ar_rss(
@@ -292,7 +250,7 @@ def fit_structure(
                 start = float(grid[i])
             else:
                 start = cur.struct.theta[name]
-                if name == "periodic":
+                if cat.terms(name).scan == "frequency":
                     half = start * start / ctx.duration_s
                     a, b = max(lo, start - half), min(hi, start + half)
                 else:
@@ -313,74 +271,58 @@ def fit_structure(
 
 
 def effect_params(fit: GyroFit) -> dict[str, dict[str, float]]:
-    """Simulator parameters of every gyro effect of a fit (°/s units as in effects.py)."""
+    """Simulator parameters of every gyro term of a fit (°/s units as in effects.py): its
+    fitted coefficients, shape and held values (or what the term ``derive``s from them),
+    in the order of the effect's parameter table."""
     c = fit.coef()
-    th = fit.struct.theta
     out: dict[str, dict[str, float]] = {}
     for name in fit.struct.names:
-        if name == "bias_poly":
-            p = {f"c{i}": c[f"bias_poly.c{i}"] for i in range(5) if f"bias_poly.c{i}" in c}
-            p["t_ref_c"] = 25.0
-            out[name] = p
-        elif name == "cubic_temp":
-            out[name] = {"c3": c["cubic_temp.c3"], "t_ref_c": 25.0}
-        elif name == "thermal_rate":
-            out[name] = {"k": c["thermal_rate.k"]}
-        elif name == "thermal_lag":
-            out[name] = {"tau_s": th["thermal_lag"]}
-        elif name == "hysteresis":
-            out[name] = {
-                "h": c["hysteresis.h"],
-                "width_c": th["hysteresis"],
-                "width_tc": th.get(HYST_TC, 0.0),
-            }
-        elif name == "warmup":
-            out[name] = {"A": c["warmup.A"], "tau_s": th["warmup"]}
-            if WARMUP2 in th:
-                out[name].update({"A2": c["warmup.A2"], "tau2_s": th[WARMUP2]})
-        elif name == "aging_ramp":
-            out[name] = {"r": c["aging_ramp.r"]}
-        elif name == "periodic":
-            a, b = c["periodic.a_sin"], c["periodic.a_cos"]
-            out[name] = {
-                "A": float(math.hypot(a, b)),
-                "period_s": th["periodic"],
-                "phase_rad": float(math.atan2(b, a)),
-            }
+        t = cat.terms(name)
+        pre = name + "."
+        v = {k[len(pre) :]: x for k, x in c.items() if k.startswith(pre)}
+        v.update(cat.shape_values(name, fit.struct.theta))
+        if t.derive is not None:
+            v.update(t.derive(v))
+        out[name] = {p: v[p] for p in EFFECTS[name].PARAMS if p in v}
     return out
 
 
 def widen_form(fit: GyroFit, ctx: GyroContext, name: str, score: Any) -> tuple[GyroFit, str]:
-    """The wider form of ``name`` within its vocabulary name, when ``score`` (a BIC:
-    lower is better, parameters counted) prefers it: warm-up as two exponentials (the
-    second time constant scanned on the warm-up grid, then the first re-scanned; signs
-    free), hysteresis with a width that changes linearly with temperature (slope scanned
-    over ±2 %/°C of the width at 25 °C). Returns the chosen fit and the form's label."""
+    """The wider form of ``name`` within its vocabulary name (its declared ``wider``), when
+    ``score`` (a BIC: lower is better, parameters counted) prefers it: ``second`` — a
+    second component of the same shape, its shape scanned on the term's grid, then the
+    first re-scanned (signs free; the warm-up's two exponentials); ``slope`` — the shape
+    parameter linear in temperature, the declared relative slopes tried (the hysteresis
+    width over ±2 %/°C). Returns the chosen fit and the form's label."""
     st = fit.struct
     best, best_bic, label = fit, score(fit.struct), "single"
-    if name == "warmup":
-        grid = nonlinear_grid("warmup", ctx)
+    wider = cat.terms(name).wider
+    key = cat.form_key(name)
+    if wider is None or key is None:
+        return best, label
+    if wider.kind == "second":
+        grid = nonlinear_grid(name, ctx)
         phi = fit.gls.phi if fit.gls.phi.size else _fit_fixed(st, ctx).gls.phi
-        t1 = st.theta["warmup"]
+        t1 = st.theta[name]
         cands = [v for v in grid if abs(math.log(v / t1)) > 0.3]
 
         def rss(t1: float, t2: float) -> float:
-            s2 = GyroStructure(st.names, {**st.theta, "warmup": t1, WARMUP2: t2})
+            s2 = GyroStructure(st.names, {**st.theta, name: t1, key: t2})
             return _fit_fixed(s2, ctx, phi).gls.rss
 
         if cands:
             t2 = float(min(cands, key=lambda v: rss(t1, float(v))))
             c1 = [v for v in grid if abs(math.log(v / t2)) > 0.3]
             t1 = float(min(c1, key=lambda v: rss(float(v), t2)))
-            s2 = GyroStructure(st.names, {**st.theta, "warmup": t1, WARMUP2: t2})
+            s2 = GyroStructure(st.names, {**st.theta, name: t1, key: t2})
             b = score(s2)
             if b < best_bic:
-                best, best_bic, label = _fit_fixed(s2, ctx), b, "two exponentials"
-    elif name == "hysteresis":
-        w0 = st.theta["hysteresis"]
-        for rel in (-0.02, -0.01, -0.005, 0.005, 0.01, 0.02):
-            s2 = GyroStructure(st.names, {**st.theta, HYST_TC: rel * w0})
+                best, best_bic, label = _fit_fixed(s2, ctx), b, wider.label
+    elif wider.kind == "slope":
+        w0 = st.theta[name]
+        for rel in wider.tries:
+            s2 = GyroStructure(st.names, {**st.theta, key: rel * w0})
             b = score(s2)
             if b < best_bic:
-                best, best_bic, label = _fit_fixed(s2, ctx), b, "temperature-dependent width"
+                best, best_bic, label = _fit_fixed(s2, ctx), b, wider.label
     return best, label

@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.sim.discrepancy.workflow import LF_WINDOW_S, Fitted, Result, moving_average
+from gyrolab.sim.discrepancy.fitting import LF_WINDOW_S, Fitted, moving_average
+from gyrolab.sim.discrepancy.workflow import Result
 
 
 def _png(fig: Any) -> str:
@@ -105,6 +106,26 @@ def figures(res: Result) -> dict[str, str]:
     axs[1].set_ylabel("PT100 residual (°C)")
     fig.suptitle("Temperature channels")
     out["temperature"] = _png(fig)
+    if res.periodic_content:
+        from gyrolab.sim.discrepancy.periodic import cycle_residual, local_level, spectrum
+
+        freq, p = spectrum(cycle_residual(b), b.ctx.bin_s)
+        fig, ax = plt.subplots(figsize=(9, 3.4))
+        ax.loglog(freq, p, lw=0.7, label="residual (cycles put back)")
+        ax.loglog(freq, local_level(freq, p) * np.log(2.0), lw=1.0, label="local median")
+        for c in res.periodic_content:
+            ax.axvline(1.0 / c["period_s"], color="C3", lw=0.8, ls="--")
+            ax.annotate(
+                f"{c['period_s']:.0f} s: {c['peak_to_local_median']:.0f}× median",
+                (1.0 / c["period_s"], float(np.max(p))),
+                fontsize=8,
+                color="C3",
+            )
+        ax.set_xlabel("frequency (Hz)")
+        ax.set_ylabel("PSD ((°/s)²/Hz)")
+        ax.legend(fontsize=8)
+        ax.set_title("Periodic content in the measurement (check the bench)")
+        out["periodic_content"] = _png(fig)
     return out
 
 
@@ -193,6 +214,8 @@ font-size:13px}}th{{background:#eee}}img{{max-width:100%}}code{{background:#f4f4
 <h2>Each added effect and its own gap</h2>
 <p>An effect is added only when the gap metric that belongs to it shrinks.</p>
 {_table(added_rows, ["effect", "its gap metric", "before", "after", "revisions"])}
+{_ambiguity_html(res)}
+{_periodic_html(res)}
 <h2>Detection limits</h2>
 <p>For every effect not added: the smallest amplitude this run would have revealed
 (expected score at the significance threshold). Below it, "not found" means
@@ -218,6 +241,54 @@ font-size:13px}}th{{background:#eee}}img{{max-width:100%}}code{{background:#f4f4
         html.escape(json.dumps(res.to_json(), indent=1, default=json_default))
     }</pre></details>
 </body></html>"""
+
+
+def _ambiguity_html(res: Result) -> str:
+    """Each ambiguous set: its members' evidence, the look-alike separations and the
+    profile proposed to separate them."""
+    if not res.ambiguity:
+        return ""
+    parts = ["<h2>Ambiguous sets and the next experiment</h2>"]
+    for a in res.ambiguity:
+        rows = [
+            [m, e["delta_bic"], json.dumps(e["params"], default=json_default)]
+            for m, e in a.evidence.items()
+        ]
+        parts.append(f"<h3>{html.escape(' / '.join(a.members))}</h3>")
+        parts.append(_table(rows, ["effect", "ΔBIC", "fitted parameters"]))
+        for la in a.look_alikes:
+            seps = "; ".join(f"{k}: {v:.1f}" for k, v in la["expected_separation"].items())
+            parts.append(
+                f"<p>{html.escape(la['explanation'])}: observed margin "
+                f"{la['observed_margin']:.1f}; expected ΔBIC had either made the data: "
+                f"{html.escape(seps)}.</p>"
+            )
+        if a.proposal is not None:
+            pr = a.proposal
+            seps = "; ".join(f"{k}: {v:.0f}" for k, v in pr.separation.items())
+            parts.append(
+                f"<p>Proposed next run: <code>{html.escape(pr.file)}</code> "
+                f"({html.escape(pr.profile.description)}, {pr.profile.duration_s / 3600:.1f} h; "
+                f"expected ΔBIC {html.escape(seps)}). Run it with <code>gyrolab simulate "
+                f"--profile {html.escape(pr.file)}</code> or <code>gyrolab acquire</code>.</p>"
+            )
+    return "\n".join(parts)
+
+
+def _periodic_html(res: Result) -> str:
+    """Periodic content, apart from the sensor effects."""
+    if not res.periodic_content:
+        return ""
+    rows = [
+        [c["period_s"], c["amplitude_dps"], c["peak_to_local_median"], c["false_alarm_probability"]]
+        for c in res.periodic_content
+    ]
+    return (
+        "<h2>Periodic content in the measurement</h2><p>"
+        + html.escape(res.periodic_content[0]["note"])
+        + ".</p>"
+        + _table(rows, ["period (s)", "amplitude (°/s)", "peak / local median", "false-alarm p"])
+    )
 
 
 def json_default(o: Any) -> Any:

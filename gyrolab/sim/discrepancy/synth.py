@@ -27,12 +27,16 @@ def simulate_bench(
     rate_hz: float = 10.0,
     seed: int = 0,
     post: Callable[[np.ndarray, float], np.ndarray] | None = None,
+    temperature: str = "pt100",
 ) -> BenchData:
     """Simulate ``profile`` with ``model`` and reduce it as a recording would be.
 
     ``post(rate, dt)``, when given, transforms the whole rate stream (°/s, taken before
     the bench ADC) before it is stored, e.g.
-    :func:`gyrolab.sim.discrepancy.reallike.digital_output`."""
+    :func:`gyrolab.sim.discrepancy.reallike.digital_output`. ``temperature="die"``: the
+    unit's internal sensor (its register, offset and noise: ``Physics.die_sensor_codes``)
+    is the temperature channel instead of a PT100, as ``acquire --internal-temperature``
+    records it."""
     phys = Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
     bn = phys.block_n
     starts = profile.step_starts()
@@ -40,6 +44,7 @@ def simulate_bench(
     n_sec = int(round(ends[-1]))
     rate = np.empty(n_sec * bn)
     pt_ohm = np.empty(n_sec)
+    die = np.empty(n_sec)
     ov_sp = np.empty(n_sec)
     ov_pv = np.empty(n_sec)
     step = 0
@@ -48,6 +53,7 @@ def simulate_bench(
             step += 1
         phys.set_setpoint(profile.steps[step].setpoint_c)
         pt_ohm[k] = phys.pt100_ohm()
+        die[k] = phys.die_c()
         ov_sp[k] = phys.setpoint_c
         ov_pv[k] = phys.chamber_c()
         blk = phys.advance(bn)
@@ -57,8 +63,12 @@ def simulate_bench(
         rate[k * bn : (k + 1) * bn] = out
     t = np.arange(n_sec, dtype=float)
     pt_c = np.asarray(cvd_temperature(pt_ohm), dtype=float)
+    if temperature == "die":
+        pt_c = phys.die_sensor.to_celsius(phys.die_sensor_codes(die))
     if post is not None:
         rate = post(rate, 1.0 / phys.rate_hz)
     # the recording stores the rate as float32
     rate32 = rate.astype(np.float32).astype(np.float64)
-    return from_arrays(0.0, 1.0 / phys.rate_hz, rate32, t, pt_c, t, ov_sp, ov_pv)
+    d = from_arrays(0.0, 1.0 / phys.rate_hz, rate32, t, pt_c, t, ov_sp, ov_pv)
+    d.temperature_source = temperature
+    return d

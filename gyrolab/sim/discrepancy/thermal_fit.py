@@ -7,12 +7,14 @@ Two stages, each driven by what the bench measured (docs/sim-model.md has the mo
    (``oven_overshoot``), integrated with the simulator's own kernel on a 0.5 s grid;
    parameters by nonlinear least squares (``scipy.optimize.least_squares``).
 2. **Gyro case** from the recorded air: ``τ_case dTc/dt = PV + ΔT_self − Tc`` with the case
-   at the air temperature at power-on, and the PT100 reading ``Tc + δ`` (``δ`` is the
-   ``rtd_self_heating`` offset, 0 in the nominal model). For a fixed ``τ_case`` the reading
-   is linear in ``(ΔT_self, δ)``: ``PT100 = F_τ[PV] + ΔT_self·(1 − e^{−t/τ}) + δ``, so
-   ``τ_case`` is a one-dimensional search. ``δ`` and the gyro's self-heating differ only
-   in the power-on transient: at power-on the case is at the air temperature and only
-   ``δ`` is already there.
+   at the air temperature at power-on, and the PT100 reading ``Tc + δ·R(T)/R0`` (``δ`` is
+   the ``rtd_self_heating`` error at 0 °C, the multimeter's ``θ·I²·R0``; 0 in the nominal
+   model). For a fixed ``τ_case`` the reading is linear in ``(ΔT_self, δ)``:
+   ``PT100 = F_τ[PV] + ΔT_self·(1 − e^{−t/τ}) + δ·R(T)/R0``, so ``τ_case`` is a
+   one-dimensional search. ``δ`` and the gyro's self-heating differ in the power-on
+   transient (at power-on the case is at the air temperature and only ``δ`` is already
+   there) and, on any profile that moves the temperature, in ``δ``'s growth with the
+   sensor's resistance (0.39 %/°C), which no case parameter has.
 
 The scores are Gaussian log-likelihoods with the residual variance floored at
 ``(resolution)²`` (the oven's process value is assumed known to 0.02 °C, the PT100 to its
@@ -27,24 +29,16 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
-from scipy.signal import lfilter
 
 from gyrolab.sim.discrepancy.data import BenchData
-from gyrolab.sim.thermal import ThermalParams, air_rate, thermal_kernel
+from gyrolab.sim.effects import overshoot_omega_zeta, self_heating_c
+from gyrolab.sim.thermal import ThermalParams, air_rate, lowpass, thermal_kernel
 
 OVEN_DT_S = 0.5
 OVEN_MAX_POINTS = 6000
 """The oven fit uses at most this many (evenly spaced) process-value samples."""
 OVEN_FLOOR_C = 0.02
 """Resolution floor of the oven process value in the likelihood, °C."""
-
-
-def overshoot_to_omega_zeta(overshoot: float, period_s: float) -> tuple[float, float]:
-    """(ω_n rad/s, ζ) of a second-order step response (as ``effects.OvenOvershoot``)."""
-    lo = math.log(overshoot)
-    zeta = -lo / math.sqrt(math.pi**2 + lo * lo)
-    wd = 2.0 * math.pi / period_s
-    return wd / math.sqrt(1.0 - zeta * zeta), zeta
 
 
 @dataclass
@@ -111,7 +105,7 @@ def air_model(
     tau, rh, rc, knee, gap = x[:5]
     w = z = 0.0
     if overshoot is not None:
-        w, z = overshoot_to_omega_zeta(*overshoot)
+        w, z = overshoot_omega_zeta(*overshoot)
     smooth = form == "smooth"
     if smooth:
         p = np.array([tau, rh, rc, knee, gap, w, z])
@@ -357,6 +351,25 @@ class CaseFit:
     """Fitted case temperature at power-on (prior: the air over the first window)."""
     design: np.ndarray | None = None
     """Linear columns (ΔT_self, initial case) at the PT100 times, with the prior row."""
+    offset_column: np.ndarray | None = None
+    """The PT100 error per unit ``δ`` at each reading, ``R(T)/R0``."""
+    die_tau_s: float | None = None
+    """A die sensor's lag behind the case (None: a PT100 on the case)."""
+    die_c: np.ndarray | None = None
+    """A die sensor's model die temperature on ``grid_t`` (without its offset)."""
+
+    def offset_at(self, reading_c: np.ndarray) -> np.ndarray:
+        """The fitted PT100 self-heating error at readings ``reading_c`` (°C)."""
+        return self_heating_c(self.offset_c, reading_c)
+
+    def measured_case(self, d: BenchData) -> np.ndarray:
+        """The case temperature on ``grid_t`` from the readings: a PT100's, less its
+        self-heating; a die sensor's, less its offset, carried back to the case by the
+        model (case + what the die model misses)."""
+        reading = np.asarray(d.pt100_c, dtype=float)
+        if self.die_c is None:
+            return np.interp(self.grid_t, d.pt100_t, reading - self.offset_at(reading))
+        return self.case_c + np.interp(self.grid_t, d.pt100_t, reading - self.offset_c) - self.die_c
 
     @property
     def rms(self) -> float:
@@ -371,20 +384,35 @@ class CaseFit:
         return 4 + int(self.with_offset)
 
 
-def lowpass(u: np.ndarray, alpha: float, c0: float) -> np.ndarray:
-    """``c_{k+1} = c_k + α (u_k − c_k)``, ``c_0 = c0``."""
-    c = np.empty(u.size)
-    c[0] = c0
-    if u.size > 1:
-        c[1:], _ = lfilter([alpha], [1.0, alpha - 1.0], u[:-1], zi=[(1.0 - alpha) * c0])
-    return c
-
-
 MAX_TIME_SHIFT_S = 5.0
 """Bound of the PT100 time-stamp offset fitted as a nuisance parameter, s."""
 
 
 def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
+    """The case model of :func:`fit_pt100_case`, or of :func:`fit_die_case` when the
+    recording's temperature is a unit's internal (die) sensor."""
+    if d.temperature_source == "die":
+        return fit_die_case(d, tau0)
+    return fit_pt100_case(d, tau0, with_offset)
+
+
+def _case_grid(d: BenchData) -> tuple[np.ndarray, np.ndarray, Initial, float]:
+    """The case models' 1 s grid (the readings and the bins, with room for the time
+    skew), the recorded air at its interval midpoints, the air at power-on (a window's
+    estimate with its uncertainty, :func:`initial_value`) and the weight of its prior row.
+    The case starts at that air temperature, fitted as a parameter with a Gaussian prior
+    (one row in the least squares, in units of the reading noise) so that no single
+    reading decides an offset."""
+    t0 = float(min(d.pt100_t[0], d.oven_t[0]))
+    t1 = float(max(d.pt100_t[-1], d.t[-1] + d.bin_s)) + MAX_TIME_SHIFT_S
+    grid = np.arange(t0, t1 + 1.0, 1.0)
+    air = np.interp(grid, d.oven_t, d.oven_pv)
+    a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
+    init = initial_value(d.oven_t, d.oven_pv)
+    return grid, a_mid, init, max(pt100_noise_c(d), 1e-4) / init.sigma
+
+
+def fit_pt100_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     """Fit ``τ_case``, ``ΔT_self`` (and the PT100 offset ``δ``) to the PT100 channel.
 
     A time-stamp offset of the PT100 readings against the oven's (a multimeter integrates
@@ -393,17 +421,11 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     second of skew is 15 mK, three times the reading noise, and would otherwise pass for
     a constant offset.
     """
-    t0 = float(min(d.pt100_t[0], d.oven_t[0]))
-    t1 = float(max(d.pt100_t[-1], d.t[-1] + d.bin_s)) + MAX_TIME_SHIFT_S
-    grid = np.arange(t0, t1 + 1.0, 1.0)
-    air = np.interp(grid, d.oven_t, d.oven_pv)
-    a_mid = np.concatenate([0.5 * (air[:-1] + air[1:]), [air[-1]]])
+    grid, a_mid, init, w_prior = _case_grid(d)
     pt_c = d.pt100_c
-    # The case starts at the air temperature at power-on: estimated from a window with
-    # its uncertainty, and fitted as a parameter with that Gaussian prior (one prior row
-    # in the least squares, in units of the PT100 noise) so no single reading decides δ.
-    init = initial_value(d.oven_t, d.oven_pv)
-    w_prior = max(pt100_noise_c(d), 1e-4) / init.sigma
+    # δ's column: the self-heating per unit δ, R(T)/R0, at the reading (0.3 °C of error
+    # changes R by 0.1 %: the reading is the sensor's temperature to that order)
+    unit_offset = np.asarray(self_heating_c(1.0, pt_c), dtype=float)
 
     def solve(log_tau: float, shift: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         tau = math.exp(log_tau)
@@ -414,7 +436,7 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
         pt_t = d.pt100_t + shift
         cols = [np.interp(pt_t, grid, g), np.interp(pt_t, grid, e0)]
         if with_offset:
-            cols.append(np.ones_like(pt_t))
+            cols.append(unit_offset)
         A = np.column_stack(cols)
         rhs = pt_c - np.interp(pt_t, grid, f)
         prior = np.zeros((1, A.shape[1]))
@@ -476,7 +498,7 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     off = float(coef[2]) if with_offset else 0.0
     case = f + dself * g
     dcase = (a_mid + dself - case) / tau
-    resid = np.interp(d.pt100_t + shift, grid, case) + off - pt_c
+    resid = np.interp(d.pt100_t + shift, grid, case) + off * unit_offset - pt_c
     # the case temperature on the PT100's clock, as the gyro regressors use it
     grid_pt = grid - shift
     alpha = 1.0 - math.exp(-1.0 / tau)
@@ -485,7 +507,18 @@ def fit_case(d: BenchData, tau0: float, with_offset: bool = False) -> CaseFit:
     dm = np.column_stack([np.interp(pt_t, grid, g), np.interp(pt_t, grid, e0)])
     dm = np.vstack([dm, [[0.0, w_prior]]])
     return CaseFit(
-        tau, dself, off, with_offset, grid_pt, case, dcase, resid, shift, init.value + coef[1], dm
+        tau,
+        dself,
+        off,
+        with_offset,
+        grid_pt,
+        case,
+        dcase,
+        resid,
+        shift,
+        init.value + coef[1],
+        dm,
+        unit_offset,
     )
 
 
@@ -493,3 +526,87 @@ def pt100_noise_c(d: BenchData) -> float:
     """White noise of the PT100 channel from its second differences, °C."""
     e = d.pt100_c[1:-1] - 0.5 * (d.pt100_c[:-2] + d.pt100_c[2:])
     return float(1.4826 * np.median(np.abs(e - np.median(e))) / math.sqrt(1.5))
+
+
+DIE_TAU0_S = 120.0
+"""Start of the die lag search (the simulator's default die time constant), s."""
+
+
+def fit_die_case(d: BenchData, tau0: float, die_tau0: float = DIE_TAU0_S) -> CaseFit:
+    """Fit a unit's internal (die) temperature: the case as :func:`fit_pt100_case` has it
+    (``τ_case dTc/dt = PV + ΔT_self − Tc``, at the air temperature at power-on with its
+    prior), the die behind it (``τ_die dTd/dt = Tc − Td``, starting at the case), and the
+    reading ``Td + δ_die``: the sensor's own offset ``δ_die`` a nuisance parameter of the
+    model, never an effect. For fixed (τ_case, τ_die, time skew) the reading is linear in
+    (ΔT_self, initial case, δ_die); the three are searched coordinate-wise, then polished
+    together."""
+    from scipy.optimize import minimize
+
+    grid, a_mid, init, w_prior = _case_grid(d)
+    reading = d.pt100_c
+
+    def chain(p: np.ndarray) -> tuple[np.ndarray, ...]:
+        ac = 1.0 - math.exp(-1.0 / math.exp(p[0]))
+        ad = 1.0 - math.exp(-1.0 / math.exp(p[2]))
+        f = lowpass(a_mid, ac, init.value)
+        g = lowpass(np.ones_like(a_mid), ac, 0.0)
+        e0 = (1.0 - ac) ** np.arange(a_mid.size)
+        return f, g, e0, *(lowpass(u, ad, float(u[0])) for u in (f, g, e0))
+
+    def solve(p: np.ndarray) -> tuple[float, np.ndarray, tuple[np.ndarray, ...]]:
+        f, g, e0, fd, gd, ed = ch = chain(p)
+        t = d.pt100_t + p[1]
+        A = np.column_stack([np.interp(t, grid, gd), np.interp(t, grid, ed), np.ones_like(t)])
+        rhs = reading - np.interp(t, grid, fd)
+        Ap = np.vstack([A, [[0.0, w_prior, 0.0]]])
+        coef, *_ = np.linalg.lstsq(Ap, np.concatenate([rhs, [0.0]]), rcond=None)
+        r = A @ coef - rhs
+        return float(r @ r + (w_prior * coef[1]) ** 2), coef, ch
+
+    bounds = [
+        (math.log(max(5.0, tau0 / 20)), math.log(tau0 * 20)),
+        (-MAX_TIME_SHIFT_S, MAX_TIME_SHIFT_S),
+        (math.log(5.0), math.log(die_tau0 * 30)),
+    ]
+    p = np.array([math.log(tau0), 0.0, math.log(die_tau0)])
+    for _ in range(2):  # coordinate search: τ_case, skew, τ_die
+        for i in (0, 1, 2):
+
+            def cost(v: float, i: int = i) -> float:
+                q = p.copy()
+                q[i] = v
+                return solve(q)[0]
+
+            p[i] = float(minimize_scalar(cost, bounds=bounds[i], method="bounded").x)
+    r0 = solve(p)[0]
+    simplex = [p, p + [0.02, 0, 0], p + [0, 0.1, 0], p + [0, 0, 0.05]]
+    pol = minimize(
+        lambda v: solve(v)[0] / r0,
+        p,
+        method="Nelder-Mead",
+        options={"xatol": 1e-5, "fatol": 1e-9, "initial_simplex": simplex},
+    )
+    p = np.array([np.clip(v, *b) for v, b in zip(pol.x, bounds, strict=True)])
+    _, coef, (f, g, e0, fd, gd, ed) = solve(p)
+    tau, shift, die_tau = math.exp(p[0]), float(p[1]), math.exp(p[2])
+    dself, off = float(coef[0]), float(coef[2])
+    case = f + dself * g + coef[1] * e0
+    die = fd + dself * gd + coef[1] * ed
+    t = d.pt100_t + shift
+    resid = np.interp(t, grid, die) + off - reading
+    dm = np.column_stack([np.interp(t, grid, gd), np.interp(t, grid, ed)])
+    return CaseFit(
+        tau_s=tau,
+        self_heating_c=dself,
+        offset_c=off,
+        with_offset=True,
+        grid_t=grid - shift,
+        case_c=case,
+        dcase_c_per_s=(a_mid + dself - case) / tau,
+        resid=resid,
+        time_shift_s=shift,
+        initial_c=init.value + float(coef[1]),
+        design=np.vstack([dm, [[0.0, w_prior]]]),
+        die_tau_s=die_tau,
+        die_c=die,
+    )
