@@ -66,7 +66,7 @@ def _one(which: str, n: int, rate: float, taus: str, kind: str = "oadev") -> dic
         from gyrolab.numerics.allan import allan_deviation
 
         def call(v: np.ndarray) -> np.ndarray:
-            return allan_deviation(v, rate, taus=taus).adev
+            return allan_deviation(v, rate, taus=taus).dev
     elif which == "gyrolab":
         from gyrolab.numerics.deviations import deviation
 

@@ -31,8 +31,10 @@ import io
 import json
 import os
 import sys
+import threading
 import time
-from collections.abc import Iterable, Sequence
+import uuid
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -205,13 +207,32 @@ def _peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
 
 
-def _run_task(task: str, item: Item, opt: BatchOptions) -> None:
+def _run_task(task: str, item: Item, opt: BatchOptions, progress: Progress | None) -> None:
     """The single-run command's work for one item (imported in the worker that runs it),
-    called as the command calls it."""
+    called as the command calls it; ``progress(fraction)`` follows its stages."""
     run, out, common = str(item.run), str(item.out), {"force": opt.force, "unit": item.unit}
+    model = _item_model(item, opt)
     if task == "compensate":
-        from gyrolab.compensation.commands import compensate
+        from gyrolab.compensation.commands import STAGES, compensate
 
+        stages = len(STAGES)
+    elif task == "report":
+        from gyrolab.record.reader import select_unit
+        from gyrolab.report.commands import report_stages, write_report
+
+        stages = len(report_stages(model is not None))
+    else:
+        from gyrolab.sim.discrepancy.commands import STAGES, discrepancy
+
+        stages = len(STAGES)
+    reached = [0]
+
+    def on_stage(_name: str) -> None:
+        reached[0] += 1
+        if progress is not None:  # the last share is the item's end (run_items)
+            progress(reached[0] / (stages + 1))
+
+    if task == "compensate":
         compensate(
             run,
             out,
@@ -219,17 +240,34 @@ def _run_task(task: str, item: Item, opt: BatchOptions) -> None:
             config=opt.config_file,
             seed=opt.seed,
             base_config=opt.config,
+            on_stage=on_stage,
             **common,
         )
     elif task == "report":
-        from gyrolab.record.reader import select_unit
-        from gyrolab.report.commands import write_report
-
-        write_report(run, out, _item_model(item, opt), opt.force, unit=select_unit(run, item.unit))
+        unit = select_unit(run, item.unit)
+        write_report(run, out, model, opt.force, unit=unit, on_stage=on_stage)
     else:
-        from gyrolab.sim.discrepancy.commands import discrepancy
+        discrepancy(run, out, model=opt.sim_model, on_stage=on_stage, **common)
 
-        discrepancy(run, out, model=opt.sim_model, **common)
+
+#: How far one item is, a fraction (0 … 1) of its stages.
+Progress = Callable[[float], None]
+PROGRESS_TOPIC = "gyrolab-batch-progress"
+
+
+@dataclass(frozen=True)
+class WorkerProgress:
+    """An item's progress sent from the Dask worker running it to the client, as events
+    of :data:`PROGRESS_TOPIC` (``(batch, index, fraction)``; picklable)."""
+
+    batch: str
+    index: int
+
+    def __call__(self, fraction: float) -> None:
+        from distributed import get_worker
+
+        with contextlib.suppress(ValueError):  # not on a worker: nobody to tell
+            get_worker().log_event(PROGRESS_TOPIC, (self.batch, self.index, fraction))
 
 
 def _item_model(item: Item, opt: BatchOptions) -> str | None:
@@ -251,8 +289,11 @@ def item_inputs(task: str, item: Item, opt: BatchOptions) -> list[str]:
     return [v for v in (str(item.run), other) if v]
 
 
-def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
-    """Run one item (in a worker): the single-run command's handler, output silenced.
+def run_item(
+    task: str, item: Item, opt: BatchOptions, progress: Progress | None = None
+) -> ItemResult:
+    """Run one item (in a worker): the single-run command's work, output silenced;
+    ``progress(fraction)`` is told as it goes through its stages.
 
     Never raises for a problem with the item: it comes back as ``status="failed"`` with
     one line naming the file and the problem."""
@@ -276,7 +317,7 @@ def run_item(task: str, item: Item, opt: BatchOptions) -> ItemResult:
     try:
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
             with command_inputs(item_inputs(task, item, opt)):
-                _run_task(task, item, opt)
+                _run_task(task, item, opt, progress)
     except GyrolabError as e:
         res.status, res.error = "failed", str(e)
     except Exception as e:  # a bug or a numerical failure: still one line, the rest go on
@@ -338,9 +379,10 @@ def run_batch(
     options: BatchOptions | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
+    on_progress: Callable[[int, float], None] | None = None,
 ) -> list[ItemResult]:
     """Run ``task`` on every recording matched by ``patterns`` (every unit of a multi-unit
-    one); results in input order."""
+    one); results in input order (``on_progress``: :func:`run_items`)."""
     if task not in TASKS:
         raise GyrolabError(f"gyrolab batch: unknown task {task!r} (one of {', '.join(TASKS)})")
     out_root = Path(out_dir)
@@ -356,7 +398,9 @@ def run_batch(
     out_root.mkdir(exist_ok=True)  # mode 0777 & ~umask
     for it in items:
         it.out.parent.mkdir(exist_ok=True)  # DIR/<stem> of a multi-unit run
-    return run_items(task, items, options, scheduler=scheduler, workers=workers)
+    return run_items(
+        task, items, options, scheduler=scheduler, workers=workers, on_progress=on_progress
+    )
 
 
 def run_items(
@@ -366,11 +410,14 @@ def run_items(
     *,
     scheduler: str | None = None,
     workers: int | None = None,
+    on_progress: Callable[[int, float], None] | None = None,
 ) -> list[ItemResult]:
     """Run ``task`` on ``items`` (complete ones skipped) on Dask; results in item order.
 
     ``workers=1`` without a scheduler runs the items one after the other in this process
-    (no cluster to start: what a one-core machine or a one-unit run wants)."""
+    (no cluster to start: what a one-core machine or a one-unit run wants). The progress
+    bar moves as each item goes through its stages (the workers report them as Dask
+    events); ``on_progress(index, fraction)`` is told the same."""
     opt = options or BatchOptions()
     results: dict[int, ItemResult] = {}
     todo = []
@@ -379,25 +426,56 @@ def run_items(
             results[i] = ItemResult(str(it.run), str(it.out), "skipped", unit=it.unit)
         else:
             todo.append(i)
-    bar = progress(total=len(items), desc=f"{task}", unit="item")
+    # the bar moves by the items' stages: an item is 1, shared among its stages
+    bar = progress(
+        total=len(items),
+        desc=f"{task}",
+        unit="item",
+        bar_format="{l_bar}{bar}| {n:.1f}/{total_fmt} items [{elapsed}<{remaining}{postfix}]",
+    )
     bar.update(len(items) - len(todo))
+    shown: dict[int, float] = {}
+    lock = threading.Lock()
+
+    def advance(i: int, fraction: float) -> None:
+        with lock:
+            if i in results or fraction <= shown.get(i, 0.0):
+                return  # a late report of an item already done
+            bar.update(fraction - shown.get(i, 0.0))
+            shown[i] = fraction
+        if on_progress is not None:
+            on_progress(i, fraction)
 
     def done(i: int, r: ItemResult) -> None:
-        results[i] = r
-        if r.status == "failed":
-            bar.write(f"gyrolab: {task}: failed: {r.error}", file=sys.stderr)
-        bar.update(1)
+        with lock:
+            results[i] = r
+            if r.status == "failed":
+                bar.write(f"gyrolab: {task}: failed: {r.error}", file=sys.stderr)
+            bar.update(1.0 - shown.get(i, 0.0))
 
     try:
         n = max(1, workers or min(os.cpu_count() or 1, len(todo)))
         if todo and n == 1 and not scheduler:
             for i in todo:
-                done(i, run_item(task, items[i], opt))
+                done(i, run_item(task, items[i], opt, functools.partial(advance, i)))
         elif todo:
             from distributed import as_completed
 
             with _client(scheduler, n, opt.threads) as client:
-                futs = {client.submit(run_item, task, items[i], opt, pure=False): i for i in todo}
+                batch_id = uuid.uuid4().hex
+
+                def on_event(event: tuple[float, Any]) -> None:
+                    bid, i, fraction = event[1]
+                    if bid == batch_id:
+                        advance(i, fraction)
+
+                client.subscribe_topic(PROGRESS_TOPIC, on_event)
+                futs = {
+                    client.submit(
+                        run_item, task, items[i], opt, WorkerProgress(batch_id, i), pure=False
+                    ): i
+                    for i in todo
+                }
                 for fut in as_completed(list(futs)):
                     i = futs[fut]
                     try:

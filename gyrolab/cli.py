@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from gyrolab import __version__
 from gyrolab.app import options as o
 from gyrolab.errors import GyrolabError
+from gyrolab.sampling import DEFAULT_RATE_HZ
 
 HANDLERS: dict[str, str] = {
     "simulate": "gyrolab.app.simulate:simulate",
@@ -106,8 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--rate",
         dest="rate_hz",
         type=float,
-        default=100.0,
-        help="ADC sample rate, Hz (default 100)",
+        default=DEFAULT_RATE_HZ,
+        help=f"ADC sample rate, Hz (default {DEFAULT_RATE_HZ:g})",
     )
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument(

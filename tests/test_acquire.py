@@ -132,16 +132,24 @@ def test_acquire_and_simulate_show_the_same_physics(short_run, simulated) -> Non
     assert a.pt100_c.max() == pytest.approx(s.pt100_c.max(), abs=0.3)
     assert a.oven_pv_c.min() == pytest.approx(s.oven_pv_c.min(), abs=0.5)
     assert a.oven_pv_c.max() == pytest.approx(s.oven_pv_c.max(), abs=0.5)
-    for k in range(12):  # per step: PT100 at its end and the gyro drift over its 2nd half
-        lo, hi = k * 240.0 + 120.0, (k + 1) * 240.0 - 5.0
+    # A step the run was held in (a loaded machine starving the simulated bench holds it
+    # as a stalled stream would; docs/reliability.md, "Suspenders") lasted longer than
+    # simulate's: compared are the steps that were not held, each on its own start.
+    starts = [e["t"] for e in a.events if e["event"] == "step_started"]
+    held = {e["step"] for e in a.events if e["event"] == "suspended"}
+    compared = [k for k in range(12) if k not in held]
+    assert len(compared) >= 3, f"held in steps {sorted(held)}: too few left to compare"
+    for k in compared:  # per step: PT100 at its end and the gyro drift over its 2nd half
 
-        def mean(t: np.ndarray, v: np.ndarray, lo: float = lo, hi: float = hi) -> float:
-            return float(v[(t >= lo) & (t < hi)].mean())
+        def mean(t: np.ndarray, v: np.ndarray, t0: float) -> float:
+            return float(v[(t >= t0 + 120.0) & (t < t0 + 235.0)].mean())
 
-        assert mean(a.pt100_t, a.pt100_c) == pytest.approx(mean(s.pt100_t, s.pt100_c), abs=0.15)
+        assert mean(a.pt100_t, a.pt100_c, starts[k]) == pytest.approx(
+            mean(s.pt100_t, s.pt100_c, 240.0 * k), abs=0.15
+        )
         # ARW noise of a 115 s mean is ~1e-4 °/s; the step-to-step drift is ~1e-3.
-        assert mean(a.rate.t, a.rate.values) == pytest.approx(
-            mean(s.rate.t, s.rate.values), abs=4e-4
+        assert mean(a.rate.t, a.rate.values, starts[k]) == pytest.approx(
+            mean(s.rate.t, s.rate.values, 240.0 * k), abs=4e-4
         )
 
 

@@ -32,7 +32,7 @@ def test_three_axis_frames_through_the_pty_match_the_physics_per_axis() -> None:
     bench = SimBench(
         model=model,
         seed=3,
-        adc_rate_hz=1000.0,
+        rate_hz=1000.0,
         samples_per_frame=N,
         speed=20.0,
         faults=FaultPlan(adc=ByteFaults(corrupt_prob=0.001, seed=1)),

@@ -45,6 +45,9 @@ def serial(runs: Path) -> Path:
     return out
 
 
+PROGRESS: list[tuple[int, float]] = []  # what the workers reported of their items' stages
+
+
 @pytest.fixture(scope="module")
 def batched(runs: Path) -> tuple[Path, list[B.ItemResult]]:
     """The batch on a LocalCluster of 2 worker processes, the bad recording among them."""
@@ -57,10 +60,27 @@ def batched(runs: Path) -> tuple[Path, list[B.ItemResult]]:
         out,
         options=B.BatchOptions(config=CLI_CONFIG),
         workers=2,
+        on_progress=lambda i, f: PROGRESS.append((i, f)),
     )
     # the cluster's worker settings stay in the workers
     assert {k: os.environ.get(k) for k in keys} == env
     return out, res
+
+
+def test_progress_moves_with_each_items_stages(
+    batched: tuple[Path, list[B.ItemResult]], runs: Path
+) -> None:
+    """Issue 27: the bar moved while items ran, not only when one ended: the workers
+    reported each item's stages (read, fit, write), in order, as fractions below 1."""
+    assert PROGRESS, "no stage reported by the workers"
+    for i in {i for i, _ in PROGRESS}:
+        got = [f for j, f in PROGRESS if j == i]
+        assert got == sorted(got) and all(0 < f < 1 for f in got)
+    # in one process (one worker) the same stages, read then fit then write
+    seen: list[float] = []
+    item = B.Item(runs / "a.mcap", runs / "inproc")
+    r = B.run_item("compensate", item, B.BatchOptions(config=CLI_CONFIG), seen.append)
+    assert r.status == "done" and seen == [0.25, 0.5, 0.75]
 
 
 def test_batch_gives_the_serial_bytes_and_isolates_a_failure(

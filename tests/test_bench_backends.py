@@ -210,17 +210,17 @@ def test_byte_faults_rates_and_reproducibility() -> None:
 
 
 def test_bench_clock_and_physics_stay_in_step() -> None:
-    with SimBench(speed=100.0, adc_rate_hz=100.0, tcp=False) as bench:
+    with SimBench(speed=100.0, rate_hz=100.0, tcp=False) as bench:
         bench.clock.wait_until(5.0, timeout_wall_s=5.0)
         with bench.lock:
             assert bench.physics.t == pytest.approx(bench.clock.now(), abs=0.11)
-        assert bench.resources()["adc_rate_hz"] == 100.0
+        assert bench.resources()["rate_hz"] == 100.0
         assert os.path.islink(bench.adc_port)
     assert not os.path.exists(bench.workdir)  # cleaned up
 
 
 def test_bench_stall_delivers_the_backlog_late_without_loss() -> None:
-    bench = SimBench(speed=20.0, adc_rate_hz=1000.0, keep_truth=True, tcp=False)
+    bench = SimBench(speed=20.0, rate_hz=1000.0, keep_truth=True, tcp=False)
     bench.inject(FaultEvent("stall", t_s=1.0, duration_s=1.0))
     reader = GyroAdcReader(bench.adc_port, samples_per_frame=10, rate_hz=1000.0)
     quiet = 0.0
@@ -243,7 +243,7 @@ def test_bench_stall_delivers_the_backlog_late_without_loss() -> None:
 
 
 def test_bench_as_fast_as_possible_is_throttled_by_the_reader() -> None:
-    with SimBench(speed=None, adc_rate_hz=1000.0, tcp=False) as bench:
+    with SimBench(speed=None, rate_hz=1000.0, tcp=False) as bench:
         reader = GyroAdcReader(bench.adc_port, samples_per_frame=10, rate_hz=1000.0)
         reader.open()
         t0 = time.monotonic()

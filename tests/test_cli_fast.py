@@ -53,6 +53,9 @@ def test_help_and_argument_errors_import_nothing_heavy(tmp_path: Path) -> None:
         ["fleet", str(tmp_path / "nope"), "--out", str(out)],
         ["batch", "report", str(tmp_path / "run.mcap"), "--out", str(out), "--sim-model", "m"],
         ["convert", str(tmp_path / "missing.mcap"), "--to", "csv", "--out", str(out)],
+        ["acquire", "--bench", str(tmp_path / "lab.toml"), "--out", str(out)],
+        ["acquire", "--bench", str(tmp_path / "run.mcap"), "--speed", "9", "--out", str(out)],
+        ["acquire", "--bench", "sim", "--internal-temperature", "1", "--out", str(out)],
     ]
     code = PROBE.replace("HEAVY", repr(HEAVY)).replace("CASES", repr(cases))
     res = subprocess.run(

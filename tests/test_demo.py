@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import json
 import re
+from html.parser import HTMLParser
 from pathlib import Path
 
+import pypdf
 import pytest
 from contract import METRIC_KEYS
 
@@ -197,3 +199,69 @@ def test_a_failed_acquisition_fails_the_demo_and_leaves_nothing(
     errors = [x for x in captured.err.splitlines() if x.startswith("gyrolab: error")]
     assert len(errors) == 1 and "150" in errors[0], captured.err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hot.toml"]
+
+
+class _Cells(HTMLParser):
+    """Every table cell (th, td) of an HTML page, as text."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cells: list[str] = []
+        self._cell: list[str] | None = None
+
+    def handle_starttag(self, tag: str, attrs: object) -> None:
+        if tag in ("td", "th"):
+            self._cell = []
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in ("td", "th") and self._cell is not None:
+            self.cells.append("".join(self._cell))
+            self._cell = None
+
+    def handle_data(self, data: str) -> None:
+        if self._cell is not None:
+            self._cell.append(data)
+
+
+def test_demo_report_pdf_keeps_every_cell_and_names_the_causal_output(demo_run: Path) -> None:
+    """Issue 27: the signed page never truncates (every table cell of the report, the
+    verdict's included, is whole in the PDF's text layer, with every metric's unit), and
+    the headline, the Allan figure and the verdict all name the causal output."""
+    from test_report_pdf import pdf_misses
+
+    rep = demo_run / "report"
+    parser = _Cells()
+    parser.feed((rep / "index.html").read_text(encoding="utf-8"))
+    assert len(parser.cells) > 200
+    assert pdf_misses(rep / "report.pdf", [([], [parser.cells])]) == []
+    text = " ".join(p.extract_text() for p in pypdf.PdfReader(rep / "report.pdf").pages)
+    for unit in ("°/√h", "°/h", "°/s"):
+        assert unit in text
+    m = json.loads((rep / "metrics.json").read_text())
+    # the demo is judged against examples/spec.toml, on the causal output
+    assert m["verdict"]["series"] == "causal"
+    assert m["verdict"]["spec"] == "example MEMS gyro acceptance"
+    assert "metrics on the causal output" in text  # the verdict in the header
+    assert "Metric limits apply to the causal output" in " ".join(text.split())
+    assert "Headline: causal compensation" in text
+    assert "Allan deviation: raw, causal output, offline reconstruction" in text
+    html = (rep / "index.html").read_text(encoding="utf-8")
+    assert "oracle" not in html.split('id="fig-causal-headline"')[1].split("</figure>")[0]
+
+
+def test_headline_figure_title_names_what_it_draws() -> None:
+    """The headline figure's title lists the outputs drawn: the oracle only when there is
+    one (the demo's acquired run has none)."""
+    import numpy as np
+
+    from gyrolab.report import figures as F
+
+    t = np.arange(0.0, 2000.0, 3.6)
+    x = np.zeros_like(t)
+    base = [("raw", x, "k"), ("causal output (poly)", x, "g"), ("offline reconstruction", x, "C1")]
+    title = F.causal_headline(t, base, 3.6, 100.0).axes[0].get_title().replace("\n", " ")
+    assert "oracle" not in title and "causal output (poly)" in title
+    assert "offline reconstruction" in title
+    with_oracle = [*base, ("oracle (true drift removed)", x, "b")]
+    title = F.causal_headline(t, with_oracle, 3.6, 100.0).axes[0].get_title()
+    assert "oracle (true drift removed)" in title.replace("\n", " ")

@@ -12,7 +12,8 @@ import pytest
 
 from gyrolab.errors import InputError
 from gyrolab.numerics.confidence import edf_greenhall
-from gyrolab.numerics.deviations import KINDS, deviation, gap_filled
+from gyrolab.numerics.deviations import KINDS, deviation
+from gyrolab.numerics.phase import gap_filled
 
 PEER = {
     "oadev": allantools.oadev,

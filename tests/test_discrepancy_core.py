@@ -21,7 +21,7 @@ def test_fast_oadev_matches_stable32_reference(shared_dir):
     m = rows[:, 0].astype(int)
     pick = np.isin(m, [1, 2, 4, 8, 16, 64, 256, 1024])
     res = allan_deviation(y, 1.0, taus=m[pick], confidence=None)
-    tau, ad = res.taus, res.adev
+    tau, ad = res.taus, res.dev
     assert np.allclose(tau, rows[pick, 1])
     np.testing.assert_allclose(ad, rows[pick, 5], rtol=2e-3)
 
@@ -30,7 +30,7 @@ def test_fast_oadev_white_noise_slope():
     rng = np.random.default_rng(1)
     x = rng.standard_normal(200_000) * 0.01
     res = allan_deviation(x, 100.0, confidence=None)
-    tau, ad = res.taus, res.adev
+    tau, ad = res.taus, res.dev
     # white rate noise: σ(τ) = σ_x √(dt/τ)
     np.testing.assert_allclose(ad[:8], 0.01 * np.sqrt(0.01 / tau[:8]), rtol=0.05)
 
@@ -41,7 +41,7 @@ def test_fast_oadev_of_a_noiseless_channel_is_zero():
 
     x = np.full(1000, -0.5)
     res = allan_deviation(x, 20.0, taus=np.array([0.05, 0.1]), confidence=None, allow_constant=True)
-    assert np.array_equal(res.adev, [0.0, 0.0])
+    assert np.array_equal(res.dev, [0.0, 0.0])
     with pytest.raises(InputError, match="constant"):
         allan_deviation(x, 20.0, confidence=None)
 

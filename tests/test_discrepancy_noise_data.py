@@ -94,7 +94,7 @@ def test_reallike_noise_has_the_simulators_level_and_its_own_shape():
 
     dt = 0.1
     x = reallike_noise(int(4 * 3600 / dt), dt, np.random.default_rng(3), RealLike())
-    ad = allan_deviation(x, 1 / dt, taus=np.array([1, 10, 2560, 5120]) * dt, confidence=None).adev
+    ad = allan_deviation(x, 1 / dt, taus=np.array([1, 10, 2560, 5120]) * dt, confidence=None).dev
     # white level as the simulator's N = 0.0523 °/√h at 1 s (plus the resonance's hump)
     assert ad[1] * 3600 == pytest.approx(0.0523 * 60 / math.sqrt(1.0), rel=0.35)
     assert 0.15 < ad[2] * 3600 < 0.45  # the nominal floor's level at a few hundred s

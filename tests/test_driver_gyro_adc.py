@@ -205,7 +205,7 @@ def test_acceptance_1khz_60s_with_corruption_and_drops() -> None:
     """1 kHz for 60 s simulated, 1 % of bytes corrupted and 0.1 % dropped, over a pty."""
     plan = FaultPlan(adc=ByteFaults(corrupt_prob=0.01, drop_prob=0.001, seed=7))
     bench = SimBench(
-        adc_rate_hz=1000.0, samples_per_frame=N, speed=30.0, faults=plan, keep_truth=True, tcp=False
+        rate_hz=1000.0, samples_per_frame=N, speed=30.0, faults=plan, keep_truth=True, tcp=False
     )
     reader = GyroAdcReader(bench.adc_port, samples_per_frame=N, rate_hz=1000.0)
     with bench:
@@ -242,7 +242,7 @@ def test_acceptance_1khz_60s_with_corruption_and_drops() -> None:
 def test_disconnect_reconnect_with_backoff_gap_reported_no_duplicates() -> None:
     plan = FaultPlan(events=[FaultEvent("disconnect", t_s=3.0, duration_s=2.0)])
     bench = SimBench(
-        adc_rate_hz=1000.0, samples_per_frame=N, speed=10.0, faults=plan, keep_truth=True, tcp=False
+        rate_hz=1000.0, samples_per_frame=N, speed=10.0, faults=plan, keep_truth=True, tcp=False
     )
     reader = GyroAdcReader(
         bench.adc_port, samples_per_frame=N, rate_hz=1000.0, backoff_initial_s=0.02

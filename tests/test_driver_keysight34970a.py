@@ -117,7 +117,7 @@ def test_sweeps_over_tcp_match_each_units_pt100() -> None:
 
     units = unit_family(nominal_model(), 3, 5)
     phys = [Physics(u.model, rate_hz=10.0, seed=u.seed, ambient_c=30.0) for u in units]
-    with SimBench(unit_physics=phys, speed=50.0, ambient_c=30.0, adc_rate_hz=10.0) as bench:
+    with SimBench(unit_physics=phys, speed=50.0, ambient_c=30.0, rate_hz=10.0) as bench:
         for src in bench.unit_adcs:
             src.unplug()  # nobody reads the ADC ports here
         assert len(set(bench.unit_adc_ports)) == 3

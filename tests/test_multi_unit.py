@@ -4,6 +4,7 @@ report / discrepancy with and without `--unit` (docs/fleet.md, docs/recording-fo
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -152,7 +153,10 @@ def test_compensate_without_unit_and_report_with_unit(
     single = runs["single"]
     assert main(["compensate", str(single), "--out", str(d / "m_single")]) == 0
     meta = json.loads((d / "m_single" / "model.json").read_text())
-    assert "unit" not in meta["calibration"]
+    # the serial the recording names travels into the model and its metrics (issue 27)
+    serial = read_recording(single).run["unit_serial"]
+    assert serial and meta["calibration"]["unit"] == serial
+    assert json.loads((d / "m_single" / "metrics.json").read_text())["unit"] == serial
     # a unit's report with its model, held out on another unit of the same run
     out = d / "rep2"
     model = fleet_models / "SIM3-01"
@@ -192,14 +196,13 @@ def test_robust_z_and_wilson_against_hand_values() -> None:
 
 def test_fleet_record(fleet_models: Path, runs: dict[str, Path]) -> None:
     import csv
-    import shutil
 
     import pyarrow.parquet as pq
 
     from gyrolab.report.fleet import robust_z
 
     # six units: the three fitted ones and three copies with other serials; one copy's
-    # compensated drift made 50x worse (an outlier, and a spec failure)
+    # causal (compensated) drift made 50x worse (an outlier, and a spec failure)
     root = runs["dir"] / "fleet_in"
     root.mkdir()
     for k, s in enumerate([*SERIALS, *SERIALS]):
@@ -210,10 +213,14 @@ def test_fleet_record(fleet_models: Path, runs: dict[str, Path]) -> None:
         (root / name / "model.json").write_text(json.dumps(meta))
         if name == "SIM3-02-B":
             m = json.loads((root / name / "metrics.json").read_text())
-            m["compensated"]["drift_pp_deg_per_s"] *= 50
+            m["causal"]["drift_pp_deg_per_s"] *= 50
             (root / name / "metrics.json").write_text(json.dumps(m))
     spec = runs["dir"] / "spec.toml"
-    spec.write_text('name = "t"\nmax_drift_pp_deg_per_s = 0.01\nrequire_complete = true\n')
+    # in-sample models of a short run: counted only because this spec allows them
+    spec.write_text(
+        'name = "t"\nmax_drift_pp_deg_per_s = 0.01\nrequire_complete = true\n'
+        "allow_in_sample = true\nmin_calibrated_span_c = 5\n"
+    )
     out = runs["dir"] / "fleet"
     assert main(["fleet", str(root), "--spec", str(spec), "--out", str(out)]) == 0
     assert json.loads((out / MARKER).read_text())["command"] == "fleet"
@@ -222,7 +229,7 @@ def test_fleet_record(fleet_models: Path, runs: dict[str, Path]) -> None:
     assert sorted(u["unit"] for u in units) == sorted([*SERIALS, *(s + "-B" for s in SERIALS)])
     table = pq.read_table(out / "units.parquet").to_pylist()  # the same table, read back
     assert [r["unit"] for r in table] == [u["unit"] for u in units]
-    col = "compensated.drift_pp_deg_per_s"
+    col = "causal.drift_pp_deg_per_s"
     x = np.array([float(u[col]) for u in units])
     np.testing.assert_allclose([r[col] for r in table], x)
     z = robust_z(x)
@@ -246,3 +253,45 @@ def test_fleet_bad_input_is_exit_2(runs: dict[str, Path]) -> None:
     empty.mkdir()
     assert main(["fleet", str(empty), "--out", str(runs["dir"] / "f2")]) == 2
     assert not (runs["dir"] / "f2").exists()
+
+
+def test_fleet_counts_only_validated_units_named_by_serial(
+    fleet_models: Path, runs: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 27: one validated model (--validate) and two in-sample ones: the yield is 1/1,
+    the in-sample units are marked and not counted, every unit is named by its serial; a
+    model calibrated over a short run's 7 °C is marked narrow range unless the spec allows
+    it."""
+    d = runs["dir"] / "fleet3"
+    d.mkdir()
+    argv = ["compensate", str(runs["multi"]), "--unit", "SIM3-01",
+            "--validate", str(runs["single"]), "--out", str(d / "validated")]  # fmt: skip
+    assert main(argv) == 0
+    for s in ("SIM3-02", "SIM3-03"):
+        shutil.copytree(fleet_models / s, d / f"folder-{s}")  # folders named otherwise
+    spec = runs["dir"] / "spec3.toml"
+    spec.write_text("max_drift_pp_deg_per_s = 1.0\nmin_calibrated_span_c = 5\n")
+    out = runs["dir"] / "fleet3-out"
+    assert main(["fleet", str(d), "--spec", str(spec), "--out", str(out)]) == 0
+    assert "yield 1/1" in capsys.readouterr().err
+    doc = json.loads((out / "fleet.json").read_text())
+    assert (doc["yield"]["passed"], doc["yield"]["total"]) == (1, 1)
+    status = {u["unit"]: (u["status"], u["counted_in_yield"]) for u in doc["units"]}
+    assert set(status) == set(SERIALS)  # serials, not folder names
+    assert status["SIM3-01"] == ("validated", True)
+    for s in ("SIM3-02", "SIM3-03"):
+        assert status[s][0].startswith("not validated") and status[s][1] is False
+    html = (out / "index.html").read_text()
+    assert "not validated (in-sample metrics" in html and "1/1" in html
+    # the default span (30 °C): the short run's models are all narrow range, none counted
+    spec.write_text("max_drift_pp_deg_per_s = 1.0\n")
+    out2 = runs["dir"] / "fleet3-default"
+    assert main(["fleet", str(d), "--spec", str(spec), "--out", str(out2)]) == 0
+    doc = json.loads((out2 / "fleet.json").read_text())
+    assert doc["yield"]["total"] == 0
+    assert all("narrow range (calibrated 25" in u["status"] for u in doc["units"])
+    # no cell left empty without its reason: f(T) at 25 °C, just below a unit's range
+    html = (out2 / "index.html").read_text()
+    for u in doc["units"]:
+        if u["bias_at_25c_dps"] is None:  # NaN in the JSON
+            assert u["temp_min_c"] > 25.0 and "25 °C outside 25" in html

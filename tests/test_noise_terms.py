@@ -92,7 +92,7 @@ def test_no_floor_within_the_record() -> None:
     t = noise_terms(r)
     assert np.isnan(t.B) and t.to_dict()["bias_instability_deg_per_h"] is None
     assert t.reasons["B"].startswith("no floor within the record")
-    assert t.upper_bounds["B"] == pytest.approx(r.adev[np.argmin(r.adev)] / FLICKER_FLOOR)
+    assert t.upper_bounds["B"] == pytest.approx(r.dev[np.argmin(r.dev)] / FLICKER_FLOOR)
     # white noise alone falls all the way to T/10: no floor either, and no K, R
     w = noise_terms(allan_deviation(rng.standard_normal(20_000), 1.0))
     assert np.isnan(w.B) and np.isnan(w.K) and np.isnan(w.R)
@@ -122,7 +122,7 @@ def test_real_filtered_record_arw_is_read_above_the_sensor_filter() -> None:
     tau_f = filter_corner_tau(x, fs)
     assert 0.04 <= tau_f <= 0.32
     r = allan_deviation(x, fs, taus="octave")
-    on_line = 60.0 * float(np.exp(np.interp(0.0, np.log(r.taus), np.log(r.adev))))  # σ(1 s)
+    on_line = 60.0 * float(np.exp(np.interp(0.0, np.log(r.taus), np.log(r.dev))))  # σ(1 s)
     arw = noise_terms(r, tau_min=tau_f).deg_h()["arw_deg_per_sqrt_h"]
     assert arw == pytest.approx(on_line, rel=0.05)
     below = noise_terms(r).deg_h()["arw_deg_per_sqrt_h"]  # the filtered taus included
@@ -136,9 +136,9 @@ def test_fit_never_reports_b_above_its_identifiability_bound() -> None:
     x, fs = _adis_record()
     r = allan_deviation(x, fs, taus="octave")
     use = r.taus <= 0.1 * x.size / fs
-    i = int(np.argmin(r.adev[use]))
-    bound = float(r.adev[use][i]) / FLICKER_FLOOR
-    limit = float(r.adev_hi[use][i]) / FLICKER_FLOOR  # the lowest point, up to its CI
+    i = int(np.argmin(r.dev[use]))
+    bound = float(r.dev[use][i]) / FLICKER_FLOOR
+    limit = float(r.dev_hi[use][i]) / FLICKER_FLOOR  # the lowest point, up to its CI
     for tau_min in (None, 0.16):
         nt = noise_terms(r, method="fit", tau_min=tau_min)
         b = nt.value("B")

@@ -119,3 +119,52 @@ def test_pages_render_to_png_with_the_figure_across_the_page(pdf, tmp_path: Path
     im = np.asarray(Image.open(pngs[k]).convert("L"))
     cols = np.flatnonzero((im[int(0.1 * im.shape[0]) : int(0.6 * im.shape[0])] < 200).any(axis=0))
     assert (cols[-1] - cols[0]) / im.shape[1] > 0.75
+
+
+def _squash(text: str) -> str:
+    """Text without whitespace: a wrapped cell reads the same as on one line."""
+    return re.sub(r"\s+", "", text)
+
+
+def pdf_misses(pdf_path: Path, tables: list[tuple[list[str], list[list[str]]]]) -> list[str]:
+    """The cells (headers included) of ``tables`` whose full text is not in the PDF's text
+    layer: a cell may wrap within its column, but no character of it may be lost."""
+    text = _squash("".join(p.extract_text() for p in pypdf.PdfReader(pdf_path).pages))
+    cells = {str(c) for header, rows in tables for c in [*header, *(c for r in rows for c in r)]}
+    return sorted(c for c in cells if _squash(c) and _squash(c) not in text)
+
+
+def test_no_table_cell_is_cut_wide_and_long_cells_wrap_or_split(tmp_path: Path) -> None:
+    """What the old layout clipped ("bias stability…", "0.527–0.…", a coefficient table off
+    the right edge) is all in the text layer: long cells wrap, a table too wide for the page
+    is shown in parts of its columns with the first column repeated."""
+    metric = [
+        ["bias stability (°/h, std of 3.6 s)", "1.795", "0.527–0.612", "0:40:21.5 (2421.5 s)"],
+        ["drift p-p of 100 s averages (°/s)", "0.001165", "—", "a rather long free-text cell " * 4],
+        ["/a/very/long/path/" + "x" * 90 + "/run.mcap", "1", "2", "3"],
+    ]
+    wide_header = ["unit"] + [f"coefficient number {k} of the model (°/s/°C)" for k in range(12)]
+    wide = [[f"SIM0-0{i}"] + [f"{0.1234567 * (i + k):.6g}" for k in range(12)] for i in range(4)]
+    doc = Document(
+        "Table layout",
+        "sub",
+        [],
+        [
+            Section(
+                "t",
+                "Tables",
+                [
+                    TableBlock("m", "Metrics", ["metric", "causal output", "range", "x"], metric),
+                    TableBlock("w", "Coefficients per unit", wide_header, wide, "note under it"),
+                ],
+            )
+        ],
+    )
+    path = tmp_path / "t.pdf"
+    write_pdf(doc, path)
+    assert pdf_misses(path, [(t.header, t.rows) for t in doc.tables()]) == []
+    text = " ".join(p.extract_text() for p in pypdf.PdfReader(path).pages)
+    assert "…" not in text  # nothing abbreviated
+    parts = re.findall(r"Table 2\. Coefficients per unit \(columns (\d+)–(\d+) of 13\)", text)
+    assert len(parts) >= 2 and parts[0][0] == "2" and parts[-1][1] == "13"
+    assert text.count("SIM0-03") == len(parts)  # the first column in every part

@@ -20,11 +20,19 @@ METRICS = {
         "drift_pp_deg_per_s": 0.03,
         "rms_deg_per_s": 0.01,
     },
+    "causal": {
+        "arw_deg_per_sqrt_h": 0.05,
+        "bias_instability_deg_per_h": 0.45,
+        "bias_stability_deg_per_h": 0.7,
+        "drift_pp_deg_per_s": 0.0015,
+        "rms_deg_per_s": None,
+    },
+    # the paper's offline reconstruction (low-passed): judged only when a spec names it
     "compensated": {
         "arw_deg_per_sqrt_h": 0.03,
         "bias_instability_deg_per_h": 0.1,
-        "bias_stability_deg_per_h": 0.7,
-        "drift_pp_deg_per_s": 0.0015,
+        "bias_stability_deg_per_h": 0.5,
+        "drift_pp_deg_per_s": 0.0009,
         "rms_deg_per_s": None,
     },
 }
@@ -48,15 +56,26 @@ def test_each_limit_passes_or_fails_and_the_verdict_needs_all(tmp_path: Path) ->
     v = evaluate(spec, METRICS, has_model=True, coverage_fraction=0.95, gap_s=0.0,
                  complete=True, safe_state_ok=True)  # fmt: skip
     got = {line.quantity: (line.measured, line.passed) for line in v.lines}
-    assert got == {
-        "bias stability (compensated)": ("0.7", True),
-        "drift peak-to-peak (compensated)": ("0.0015", False),
+    assert got == {  # the causal output by default, when there is a model
+        "bias stability (causal output)": ("0.7", True),
+        "drift peak-to-peak (causal output)": ("0.0015", False),
         "temperature coverage (gyro case)": ("95.0 %", True),
         "gyro data missing in gaps": ("0", True),
         "run complete": ("yes", True),
         "oven safe state verified": ("yes", True),
     }
-    assert v.word == "FAIL" and "drift peak-to-peak (compensated)" in v.summary()
+    assert v.word == "FAIL" and "drift peak-to-peak (causal output)" in v.summary()
+    assert "metrics on the causal output" in v.summary()
+    # the failing line as the command prints it: value, unit and limit
+    bad = next(line for line in v.lines if not line.passed)
+    assert bad.text() == "drift peak-to-peak (causal output): 0.0015 °/s (limit ≤ 0.001 °/s) FAIL"
+    # "compensated" is the causal output too; the offline reconstruction only by its name
+    for series, expect in (("compensated", "0.0015"), ("causal", "0.0015"), ("offline", "0.0009")):
+        text = f'series = "{series}"\nmax_drift_pp_deg_per_s = 0.001\n'
+        line = evaluate(load_spec(_spec(tmp_path, text)), METRICS, has_model=True).lines[0]
+        assert line.measured == expect
+        name = "offline" if series == "offline" else "causal"
+        assert line.quantity == f"drift peak-to-peak ({name} output)"
     # raw series chosen explicitly; an unmeasured value fails
     spec2 = load_spec(_spec(tmp_path, 'series = "raw"\nmax_arw_deg_per_sqrt_h = 0.06\n'))
     assert evaluate(spec2, METRICS, has_model=True).word == "PASS"
@@ -71,7 +90,7 @@ def test_each_limit_passes_or_fails_and_the_verdict_needs_all(tmp_path: Path) ->
         ("max_bias_stabilty_deg_per_h = 1\n", "unknown key(s) max_bias_stabilty_deg_per_h"),
         ('max_arw_deg_per_sqrt_h = "low"\n', "max_arw_deg_per_sqrt_h must be a number"),
         ("min_temperature_coverage = 90\n", "must be between 0 and 1"),
-        ('series = "filtered"\n', "series must be one of raw, compensated"),
+        ('series = "filtered"\n', "series must be one of raw, causal, compensated, offline"),
         ("require_complete = 1\n", "require_complete must be true or false"),
         ("max_rms_deg_per_s = \n", "not valid TOML"),
     ],
@@ -89,7 +108,9 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def test_report_with_spec_gives_verdict_and_sign_off(short_run: Path, tmp_path: Path) -> None:
+def test_report_with_spec_gives_verdict_and_sign_off(
+    short_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     spec = _spec(tmp_path, "max_arw_deg_per_sqrt_h = 0.2\nmin_temperature_coverage = 0.99\n")
     out = tmp_path / "rep"
     argv = ["report", str(short_run), "--out", str(out), "--spec", str(spec),
@@ -100,6 +121,12 @@ def test_report_with_spec_gives_verdict_and_sign_off(short_run: Path, tmp_path: 
     assert v["series"] == "raw" and [x["passed"] for x in v["lines"]] == [True, False]
     # the short profile's gyro case stays far inside -40…60 °C: coverage fails, honestly
     assert m["coverage"]["case_fraction"] < 0.99 and v["verdict"] == "FAIL"
+    # the terminal names each failing line with its value and limit (and only those)
+    err = capsys.readouterr().err.splitlines()
+    assert "verdict: FAIL (metric limits on the raw output)" in err
+    cov = f"{100 * m['coverage']['case_fraction']:.1f} %"
+    assert f"  temperature coverage (gyro case): {cov} (limit ≥ 99 %) FAIL" in err
+    assert not any("angle random walk" in line for line in err)
     html = (out / "index.html").read_text(encoding="utf-8")
     assert 'id="tab-verdict"' in html and 'id="tab-signoff"' in html
     assert "A. Tester" in html and "Temperature test report — G-0042" in html

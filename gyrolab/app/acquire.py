@@ -173,12 +173,24 @@ def connect_instruments(
 
 
 def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], None], Any]:
+    """The run's progress bar: run seconds done of the profile's, and one ETA — the run
+    time still to go (the plan's, which knows a step held by its stability rule) at the
+    pace the run keeps (run seconds per wall second, as tqdm measures it)."""
     from gyrolab.progress import progress
 
-    bar = progress(total=round(profile.duration_s), desc="acquire", unit="s")
+    bar = progress(
+        total=round(profile.duration_s),
+        desc="acquire",
+        unit="s",
+        # tqdm's own "<remaining" is left out: it would be a second ETA, from the profile's
+        # nominal duration rather than the plan's
+        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} s [{elapsed}, {rate_fmt}{postfix}]",
+    )
     state = {"t": 0}
 
     def show(st: Status) -> None:
+        if bar.disable:  # GYROLAB_NO_PROGRESS: nothing to draw
+            return
         t = int(min(st.t, profile.duration_s))
         if t > state["t"]:
             bar.update(t - state["t"])
@@ -189,10 +201,12 @@ def _progress(profile: Profile, speed_note: str) -> tuple[Callable[[Status], Non
             units = f" units {ok}/{len(st.units)} ok"
         if st.suspended:
             units += f" SUSPENDED ({', '.join(st.suspended)})"
+        pace = bar.format_dict.get("rate") or 0.0  # run s per wall s; 0 before it is known
+        eta = st.remaining_s / pace if pace > 0 else math.nan
         bar.set_postfix_str(
             f"step {st.step + 1}/{st.n_steps} SP {st.setpoint_c:.1f} "
             f"oven {st.chamber_c:.2f} {_SENSOR[st.temperature_source]} {st.temperature_c:.2f} °C "
-            f"ETA(run) {_hms(st.remaining_s)} lost {st.frames_lost} bad {st.frames_bad}"
+            f"ETA {_hms(eta)} lost {st.frames_lost} bad {st.frames_bad}"
             f"{units}{speed_note}",
             refresh=False,
         )
@@ -408,42 +422,19 @@ def acquire(opts: AcquireOptions) -> RunResult:
     if opts.out is None:
         raise GyrolabError("--out RUN.mcap is required")
     out = Path(opts.out)
-    sim_only = opts.bench == "sim"
-    if opts.speed is not None and not (opts.speed > 0 and math.isfinite(opts.speed)):
-        raise GyrolabError(f"--speed must be a positive number, not {opts.speed}")
-    if opts.drivers and not sim_only:
-        raise GyrolabError("--driver applies to --bench sim only (a bench file names its drivers)")
-    if opts.axis_models and not sim_only:
-        raise GyrolabError(
-            "--axis-model applies to --bench sim only (a bench file sets [adc] axes)"
-        )
-    if opts.units and not sim_only:
-        raise GyrolabError("--units applies to --bench sim only (a bench file lists [[unit]]s)")
-    if opts.internal_temperature and not opts.units:
-        raise GyrolabError(
-            "--internal-temperature applies to --bench sim --units N only "
-            '(a bench file says [[unit]] temperature = "internal")'
-        )
+    sim_only = opts.bench == "sim"  # the options' own rules are checked (AcquireOptions)
     if sim_only:
         base = sim_bench_config(opts.seed, opts.units, opts.internal_temperature)
         cfg = sim_drivers(base, opts.drivers)
     else:
         cfg = load_bench(opts.bench)
-        if opts.speed is not None:
-            raise GyrolabError(
-                "--speed applies to --bench sim only (real hardware runs in real time)"
-            )
     axis_models = []
     if opts.axis_models:
         from gyrolab.sim.model import load_model
 
-        if len(opts.axis_models) > 2:
-            raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
         axis_models = [load_model(m) for m in opts.axis_models]
     faults = None
     if opts.faults is not None:
-        if not sim_only:
-            raise GyrolabError("--faults applies to --bench sim only (it drives the simulator)")
         from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults
 
         faults = load_faults(opts.faults)
@@ -495,13 +486,15 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 own_process=bool(cfg.units),
             )
         speed_note = "" if sim is None else f" ×{opts.speed or 'max'}"
-        show, bar = _progress(profile, speed_note)
         t0 = time.monotonic()
-        live = None
+        live = bar = None
         try:
             interrupts.check()  # a stop signal while the bench started: end here
             if opts.live_port is not None:
+                # before the progress bar starts: the URL gets a line of its own
                 live = _start_live(opts.live_port, opts.live_host)
+            show, bar = _progress(profile, speed_note)
+            if live is not None:
                 show = live.status_hook(show)
             result = run_acquisition(
                 cfg=cfg,
@@ -516,7 +509,8 @@ def acquire(opts: AcquireOptions) -> RunResult:
                 resume=resume,
             )
         finally:
-            bar.close()
+            if bar is not None:
+                bar.close()
             if live is not None:
                 live.close()
                 print(

@@ -11,7 +11,9 @@ The README quick start in one command, using only the real pieces (nothing is fa
    the demo fails with one line (exit 2) and leaves nothing behind;
 2. fit the compensation model on the calibration run, validated on the held-out one;
 3. report the held-out run with the model, so the report's metrics are held out
-   (``"held_out": true``), plus the raw report of the calibration run.
+   (``"held_out": true``), judged against the example spec (:data:`DEMO_SPEC`,
+   ``examples/spec.toml``: the causal output's metrics and the run's limits), plus the
+   raw report of the calibration run.
 
 ``DIR`` ends up holding ``calibration.mcap``, ``heldout.mcap``, ``model/``, ``firmware/``
 (the model exported: ``gyro_comp.c``/``.h``, ``ardupilot.parm``), ``report/`` (the
@@ -43,6 +45,8 @@ from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
 from gyrolab.progress import progress
+from gyrolab.report.spec import Line
+from gyrolab.sampling import DEFAULT_RATE_HZ
 
 # The held-out run is paced: unpaced, the simulated bench runs as fast as the ADC reader
 # drains it (~1 800x) and the multimeter poller gets a PT100 reading only every ~26 s of
@@ -50,6 +54,9 @@ from gyrolab.progress import progress
 DEMO_ACQUIRE_SPEED = 600.0
 
 HELDOUT_SOURCE = "acquire --bench sim"
+# The spec the held-out report is judged against: the example spec (examples/spec.toml
+# links to it), shipped with the package so that an installed gyrolab has it too.
+DEMO_SPEC = Path(__file__).resolve().parents[1] / "report" / "example_spec.toml"
 DEMO_CATALOGUE = "catalogue.sqlite"  # inside DIR unless --catalogue / $GYROLAB_CATALOGUE
 
 
@@ -58,7 +65,7 @@ def run_demo(
     profile: str = "paper",
     seed: int = 1,
     force: bool = False,
-    rate_hz: float = 100.0,
+    rate_hz: float = DEFAULT_RATE_HZ,
     catalogue: str | None = None,
 ) -> dict[str, Any]:
     """Run the whole chain into ``out``; returns the report's metrics and stage timings.
@@ -131,7 +138,7 @@ def run_demo(
             done("export", t0)
 
             t0 = stage("report (held-out run, with model)")
-            metrics = write_report(held, report, model, label=held_label)
+            metrics = write_report(held, report, model, label=held_label, spec=DEMO_SPEC)
             done("report", t0)
 
             t0 = stage("report (calibration run, raw)")
@@ -143,6 +150,7 @@ def run_demo(
                 "seed": seed,
                 "rate_hz": rate_hz,
                 "heldout_source": HELDOUT_SOURCE,
+                "spec": "examples/spec.toml",
                 "timing_s": timings,
             }
             (tmp / "demo.json").write_text(json.dumps(info, indent=2) + "\n")
@@ -214,6 +222,13 @@ def summary(out: Path, res: dict[str, Any]) -> str:
     ]
     if "oracle" not in m:
         lines.append("  (no oracle: the true drift of an acquired run is not known)")
+    v = m.get("verdict")
+    if v:
+        lines.append(
+            f"verdict: {v['verdict']} against {v['spec']} (examples/spec.toml; metric limits "
+            f"on the {v['series']} output)"
+        )
+        lines += [f"  {Line(**d).text()}" for d in v["lines"] if not d["passed"]]
     lines.append(f"report: {out / 'report' / 'index.html'} (PDF: report.pdf beside it)")
     if res.get("catalogue"):
         from gyrolab.catalogue.store import shown

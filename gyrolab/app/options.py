@@ -13,12 +13,14 @@ is imported. This module therefore imports nothing heavy (standard library only)
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from gyrolab.errors import InputError
+from gyrolab.errors import GyrolabError, InputError
 from gyrolab.export.commands import check_request
+from gyrolab.sampling import DEFAULT_RATE_HZ
 
 PathArg = str | os.PathLike[str]
 
@@ -75,7 +77,7 @@ class SimulateOptions:
     profile: str = "paper"
     model: str | None = None
     axis_models: tuple[str, ...] = ()
-    rate_hz: float = 100.0
+    rate_hz: float = DEFAULT_RATE_HZ
     seed: int = 0
     units: int = 1
     effects: tuple[str, ...] = ()
@@ -117,6 +119,30 @@ class AcquireOptions:
         if self.resume is None and (not self.bench or self.out is None):
             raise InputError(None, "acquire needs --bench and --out (or --resume RUN.mcap)")
         need_file(self.resume)
+        sim = self.bench == "sim"
+        if self.speed is not None and not (self.speed > 0 and math.isfinite(self.speed)):
+            raise GyrolabError(f"--speed must be a positive number, not {self.speed}")
+        only_sim = {  # option: (given, why a bench file does not take it)
+            "--driver": (self.drivers, "a bench file names its drivers"),
+            "--axis-model": (self.axis_models, "a bench file sets [adc] axes"),
+            "--units": (self.units, "a bench file lists [[unit]]s"),
+            "--speed": (self.speed is not None, "real hardware runs in real time"),
+            "--faults": (self.faults is not None, "it drives the simulator"),
+        }
+        for name, (given, why) in only_sim.items():
+            # --resume without --bench: the run names its bench (the continuation's
+            # options, built from it, are checked again)
+            if given and not sim and self.bench:
+                raise GyrolabError(f"{name} applies to --bench sim only ({why})")
+        if self.internal_temperature and not self.units:
+            raise GyrolabError(
+                "--internal-temperature applies to --bench sim --units N only "
+                '(a bench file says [[unit]] temperature = "internal")'
+            )
+        if len(self.axis_models) > 2:
+            raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
+        for p in (None if sim else self.bench, self.faults, *self.axis_models):
+            need_file(p)
 
 
 @dataclass(frozen=True)

@@ -242,12 +242,19 @@ def rebuild_entries(root: str | os.PathLike[str]) -> Rebuilt:
             run_file = resolve(str(metrics.get("run") or ""), _near(d, base), runs, out)
             cal = metrics.get("calibration_run")
             serial = metrics.get("unit")
+            # the model fitted on the report's calibration run: of the report's unit, or
+            # held out on this very run (the model's --validate run may be another unit's)
             candidates = [
                 m
                 for m in models.values()
                 if cal
                 and m.calibration_path == cal
-                and (not serial or m.unit is None or m.unit.serial == serial)
+                and (
+                    not serial
+                    or m.unit is None
+                    or m.unit.serial == serial
+                    or (run_file is not None and m.validation_file == run_file)
+                )
             ]
             model_hash = candidates[0].model_hash if len(candidates) == 1 else None
             out.add("reports", report_entry(d, run_file, model_hash, unit_of(run_file, serial)))

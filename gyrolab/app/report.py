@@ -10,7 +10,8 @@ from gyrolab.app.options import FleetOptions, ReportOptions
 from gyrolab.outputs import check_output
 from gyrolab.record.reader import select_unit
 from gyrolab.report.commands import write_report
-from gyrolab.report.fleet import write_fleet
+from gyrolab.report.fleet_record import write_fleet
+from gyrolab.report.spec import Line
 
 
 def report(opts: ReportOptions) -> int:
@@ -31,8 +32,15 @@ def report(opts: ReportOptions) -> int:
     print(f"run outcome: {metrics['outcome']['line']}", file=sys.stderr)
     for name, m in metrics.get("axes", {"": metrics}).items():
         if "verdict" in m:
+            v = m["verdict"]
             axis = f" (axis {name})" if name else ""
-            print(f"verdict{axis}: {m['verdict']['verdict']}", file=sys.stderr)
+            print(
+                f"verdict{axis}: {v['verdict']} (metric limits on the {v['series']} output)",
+                file=sys.stderr,
+            )
+            for line in (Line(**d) for d in v["lines"]):
+                if not line.passed:  # what failed, its value and its limit
+                    print(f"  {line.text()}", file=sys.stderr)
     print(f"report written to {Path(opts.out) / 'index.html'}", file=sys.stderr)
     return 0
 

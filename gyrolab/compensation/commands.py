@@ -30,7 +30,7 @@ import contextlib
 import json
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -53,9 +53,11 @@ from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, atomic_file, check_output
 from gyrolab.record.blocks import decode_block, encode_block
 from gyrolab.record.format import TOPIC_RATE
-from gyrolab.record.reader import iter_messages, list_units, select_unit
+from gyrolab.record.reader import iter_messages, list_units, read_metadata, select_unit
 from gyrolab.record.rewrite import Message, rewrite_recording
 
+#: What :func:`compensate` reports to its ``on_stage`` as each is done (batch's progress).
+STAGES = ("read", "fit", "write")
 TOPIC_RATE_RAW = "/gyro/rate_raw"
 TOPIC_RATE_OFFLINE = "/gyro/rate_offline"
 
@@ -138,9 +140,14 @@ def _summary(m: dict[str, Any]) -> str:
                 f"{m['oracle']['bias_stability_deg_per_h']:.4g} deg/h, drift p-p (100 s) "
                 f"{pp.get('oracle', float('nan')):.4g} deg/s"
             )
+    # IMFs counted from 1, as the report names them
+    classes = "; ".join(
+        f"{c}: {', '.join(f'IMF{i + 1}' for i in m['imf_classes'].get(c, [])) or 'none'}"
+        for c in ("noise", "mixed", "drift")
+    )
     lines += [
         f"  paper's method (offline, low-passed): VMD K={m['vmd']['K']} "
-        f"alpha={m['vmd']['alpha']:.0f}  classes {m['imf_classes']}",
+        f"alpha={m['vmd']['alpha']:.0f}  classes {classes}",
         f"  drift p-p    {r['drift_pp_deg_per_s']:.4g} -> {c['drift_pp_deg_per_s']:.4g} deg/s "
         f"({pct(r['drift_pp_deg_per_s'], c['drift_pp_deg_per_s'])} less)",
         f"  bias stab.   {r['bias_stability_deg_per_h']:.4g} -> "
@@ -185,6 +192,7 @@ def compensate(
     run_label: str = "",
     validate_label: str = "",
     base_config: PipelineConfig | None = None,
+    on_stage: Callable[[str], None] | None = None,
     prior: Any = None,
 ) -> str:
     """Fit on ``run_path``, optionally evaluate on ``validate``, write ``out``; returns
@@ -199,8 +207,10 @@ def compensate(
     ``run_label``/``validate_label`` (:mod:`gyrolab.app.demo`: paths relative to its
     output directory). ``prior``: a fleet prior
     (:class:`~gyrolab.compensation.prior.FleetPrior`) for the causal model's MAP fit
-    (every axis against the same prior)."""
+    (every axis against the same prior). ``on_stage(name)`` is told each of
+    :data:`STAGES` as it is done."""
     t_start = time.perf_counter()
+    stage = on_stage or (lambda _name: None)
     run_s, val_s = str(run_path), None if validate is None else str(validate)
     inputs = (run_s, val_s, config)
     check_output(out, force, inputs=inputs, kind="dir")
@@ -231,7 +241,12 @@ def compensate(
     for prepared, label in ((runs, run_label), (vals or [], validate_label)):
         for r in prepared:
             r.label = label
+    # the serial each model and its metrics belong to (docs/fleet.md): the unit of a
+    # multi-unit recording, else the one the recording's run metadata names
+    serial = unit or recording_serial(run_s)
+    vserial = (vunit or recording_serial(val_s)) if val_s else serial
     t_read = time.perf_counter() - t_start
+    stage("read")
     fitted = []
     for k, run in enumerate(runs):
         t_axis = time.perf_counter()
@@ -241,11 +256,11 @@ def compensate(
         metrics["timing_s"] = total
         metrics["timing_breakdown_s"] = {"read": t_read, **model.timing_s, "total": total}
         model.timing_s = metrics["timing_breakdown_s"]
-        if unit is not None:  # the unit the model belongs to (docs/fleet.md)
-            model.calibration["unit"] = unit
-            metrics_cal["unit"] = unit
-            if vals is None or vunit is not None:  # held out on the same serial
-                metrics["unit"] = unit if vals is None else vunit
+        if serial:  # the unit the model belongs to (docs/fleet.md)
+            model.calibration["unit"] = serial
+            metrics_cal["unit"] = serial
+        if vserial:
+            metrics["unit"] = vserial
     if len(runs) == 1:
         # the floor beside the headline, where the truth is known (gyrolab simulate runs)
         _model, metrics, metrics_cal, results = fitted[0]
@@ -253,6 +268,7 @@ def compensate(
         keep_oracle(results[-1], ob)
         if vals is not None:
             keep_oracle(results[0], add_oracle(metrics_cal, run_s, cfg.block_s, unit))
+    stage("fit")
     with atomic_dir(out, force, command="compensate", inputs=inputs) as tmp:
         md = ModelDir(tmp)
         if len(runs) == 1:
@@ -261,6 +277,7 @@ def compensate(
             for k, f in enumerate(fitted):
                 _write_axis(md.new_axis(k), *f)
             md.write_head(len(runs), [f[1] for f in fitted])
+    stage("write")
     lines = []
     for k, (_model, metrics, metrics_cal, _res) in enumerate(fitted):
         if len(runs) > 1:
@@ -310,6 +327,17 @@ def _write_axis(
     out.write_metrics(metrics)
     out.write_firmware(model.firmware_poly3)
     out.write_results(results)
+
+
+def recording_serial(path: str) -> str | None:
+    """The unit serial a single-unit gyrolab recording's run metadata names (``None`` for
+    none, or for a user's log, whose formats carry no serial)."""
+    from gyrolab.logs import detect_format
+
+    if detect_format(path) != "gyrolab":
+        return None
+    serial = read_metadata(path).get("run", {}).get("unit_serial")
+    return str(serial) if serial else None
 
 
 def units_of(path: str) -> list[str]:

@@ -198,16 +198,17 @@ class ForwardLinearPredictor:
         self.state = np.concatenate([self.state[1:], [float(sample)]])
         return y
 
-    def frequency_response(self, fs: float, n: int = 8192) -> tuple[np.ndarray, np.ndarray]:
-        """(f in Hz, complex H(f)) for 0..fs/2 of the FIR ``sum c_k z^-k``."""
-        f = np.linspace(0.0, fs / 2.0, n)
+    def frequency_response(self, rate_hz: float, n: int = 8192) -> tuple[np.ndarray, np.ndarray]:
+        """(f in Hz, complex H(f)) for 0..rate_hz/2 of the FIR ``sum c_k z^-k`` (``rate_hz``:
+        the series' sample rate)."""
+        f = np.linspace(0.0, rate_hz / 2.0, n)
         k = np.arange(1, self.order + 1)
-        h = np.exp(-2j * np.pi * np.outer(f / fs, k)) @ self.coef
+        h = np.exp(-2j * np.pi * np.outer(f / rate_hz, k)) @ self.coef
         return f, h
 
-    def passband_hz(self, fs: float, n: int = 8192) -> tuple[float, float]:
+    def passband_hz(self, rate_hz: float, n: int = 8192) -> tuple[float, float]:
         """Edges of the -3 dB band around the peak of |H| (low edge 0 for a low-pass)."""
-        f, h = self.frequency_response(fs, n)
+        f, h = self.frequency_response(rate_hz, n)
         g = np.abs(h)
         ipk = int(np.argmax(g))
         above = g >= g[ipk] / math.sqrt(2.0)
@@ -219,10 +220,10 @@ class ForwardLinearPredictor:
             hi += 1
         return float(f[lo]), float(f[hi])
 
-    def bandwidth_hz(self, fs: float, n: int = 8192) -> float:
+    def bandwidth_hz(self, rate_hz: float, n: int = 8192) -> float:
         """Upper -3 dB frequency (Hz) of the filter's passband, relative to its peak gain:
         content above it is attenuated by more than 3 dB, i.e. what the filtering costs."""
-        return self.passband_hz(fs, n)[1]
+        return self.passband_hz(rate_hz, n)[1]
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready parameters (for a saved model directory)."""

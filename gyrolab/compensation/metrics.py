@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import AllanResult, allan_deviation
+from gyrolab.numerics.allan import DeviationResult, allan_deviation
 from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_means
 from gyrolab.numerics.noise_terms import noise_terms
 
@@ -52,12 +52,12 @@ def _num(v: float | None) -> float:
 
 def signal_metrics(
     rate_dps: np.ndarray,
-    fs_hz: float,
+    rate_hz: float,
     stability_window_s: float = PAPER_BLOCK_S,
     drift_window_s: float = PAPER_BLOCK_S,
-    allan: AllanResult | None = None,
+    allan: DeviationResult | None = None,
 ) -> dict[str, float]:
-    """The five metrics (docs/cli.md) of a gyro output in deg/s sampled at ``fs_hz``.
+    """The five metrics (docs/cli.md) of a gyro output in deg/s sampled at ``rate_hz``.
 
     ``allan``: a precomputed overlapping octave :func:`allan_deviation` of the same signal
     (saves recomputing it); otherwise it is computed here without confidence intervals.
@@ -68,15 +68,15 @@ def signal_metrics(
         raise InputError(None, f"metrics need a 1-D rate series, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
         raise InputError(None, "rate series contains NaN or infinite values")
-    if not (np.isfinite(fs_hz) and fs_hz > 0):
-        raise InputError(None, f"sample rate must be positive, got {fs_hz!r}")
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(None, f"sample rate must be positive, got {rate_hz!r}")
     if allan is None:
-        allan = allan_deviation(x, fs_hz, taus="octave", confidence=None)
+        allan = allan_deviation(x, rate_hz, taus="octave", confidence=None)
     terms = noise_terms(allan, method="slope", slope_tol=None, terms=("N", "B")).deg_h()
-    stab = block_means(x, fs_hz, stability_window_s)
+    stab = block_means(x, rate_hz, stability_window_s)
     drift = stab if drift_window_s == stability_window_s else None
     if drift is None:
-        drift = block_means(x, fs_hz, drift_window_s)
+        drift = block_means(x, rate_hz, drift_window_s)
     return {
         "arw_deg_per_sqrt_h": _num(terms["arw_deg_per_sqrt_h"]),
         "bias_instability_deg_per_h": _num(terms["bias_instability_deg_per_h"]),

@@ -6,8 +6,8 @@ the recording's ``/profile/event`` topic shows ending (``step_started`` ... ``st
 the step soaked), the *soaked segment* is the tail of the step in which the PT100 stays
 within ``tol_c`` of its final value (the median of the step's last tenth): the gyro case has
 settled, so the segment is a static test at one temperature. On the segment's rate samples
-(gaps stay gaps: NaN, :func:`~gyrolab.numerics.deviations.gap_filled`) the overlapping
-Allan deviation (:func:`~gyrolab.numerics.deviations.deviation`) and the slope-rule
+(gaps stay gaps: NaN, :func:`~gyrolab.numerics.phase.gap_filled`) the overlapping
+Allan deviation (:func:`~gyrolab.numerics.allan.allan_deviation`) and the slope-rule
 noise terms (:func:`~gyrolab.numerics.noise_terms.noise_terms`) give N and B, with B's
 one-sigma interval from the curve's bounds at the tau of the minimum.
 """
@@ -18,12 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyrolab.numerics.allan import AllanResult
-from gyrolab.numerics.deviations import DeviationResult, deviation, gap_filled
+from gyrolab.numerics.allan import allan_deviation
 from gyrolab.numerics.noise_terms import FLICKER_FLOOR, filter_corner_tau, noise_terms
+from gyrolab.numerics.phase import gap_filled
 from gyrolab.record.reader import Recording
 
-__all__ = ["Plateau", "as_allan_result", "plateau_noise", "soaked_segments"]
+__all__ = ["Plateau", "plateau_noise", "soaked_segments"]
 
 
 @dataclass(frozen=True)
@@ -46,25 +46,6 @@ class Plateau:
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
-
-
-def as_allan_result(r: DeviationResult) -> AllanResult:
-    """An OADEV :class:`DeviationResult` as the :class:`AllanResult` noise_terms reads."""
-    if r.kind != "oadev":
-        raise ValueError(f"noise terms are read from an OADEV curve, not {r.kind}")
-    return AllanResult(
-        taus=r.taus,
-        adev=r.dev,
-        n=r.n,
-        m=r.m,
-        adev_lo=r.dev_lo,
-        adev_hi=r.dev_hi,
-        edf=r.edf,
-        alpha=r.alpha,
-        rate=r.rate,
-        confidence=r.confidence,
-        extra=dict(r.extra),
-    )
 
 
 def soaked_segments(
@@ -102,7 +83,7 @@ def plateau_noise(rec: Recording, tol_c: float = 0.5, min_s: float = 60.0) -> li
         if np.count_nonzero(sel) < 64:
             continue
         y = gap_filled(rate.index[sel], rate.values[sel])
-        r = as_allan_result(deviation(y, rate.rate_hz, "oadev", taus="octave"))
+        r = allan_deviation(y, rate.rate_hz, taus="octave")
         # ARW always read, as metrics, above the sensor's own filter corner
         nt = noise_terms(
             r, method="slope", slope_tol=None, tau_min=filter_corner_tau(y, rate.rate_hz)
@@ -122,8 +103,8 @@ def plateau_noise(rec: Recording, tol_c: float = 0.5, min_s: float = 60.0) -> li
                 missing=int(np.isnan(y).sum()),
                 arw_deg_per_sqrt_h=60.0 * nt.N,
                 bias_instability_deg_per_h=3600.0 * nt.B,
-                bi_lo_deg_per_h=3600.0 * float(r.adev_lo[i_b]) / FLICKER_FLOOR,
-                bi_hi_deg_per_h=3600.0 * float(r.adev_hi[i_b]) / FLICKER_FLOOR,
+                bi_lo_deg_per_h=3600.0 * float(r.dev_lo[i_b]) / FLICKER_FLOOR,
+                bi_hi_deg_per_h=3600.0 * float(r.dev_hi[i_b]) / FLICKER_FLOOR,
                 tau_b_s=nt.tau_b,
             )
         )

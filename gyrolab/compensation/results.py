@@ -39,8 +39,8 @@ from gyrolab.errors import InputError
 
 #: Series of the application kept for the report (the baselines are added by name).
 KEPT_SERIES = ("raw", "compensated", "drift_prediction")
-#: Series whose Allan curve is kept.
-ALLAN_SERIES = ("raw", "compensated")
+#: Series whose Allan curve is kept (``causal``: the causal output, where the model has one).
+ALLAN_SERIES = ("raw", "causal", "compensated")
 
 
 @dataclass
@@ -116,9 +116,9 @@ def allan_summary(x: np.ndarray, rate_hz: float) -> AllanSummary | None:
     n_rng, b_rng = nt.tau_ranges.get("N"), nt.tau_ranges.get("B")
     return AllanSummary(
         tau=np.asarray(res.taus, dtype=float),
-        adev=np.asarray(res.adev, dtype=float),
-        lo=np.asarray(res.adev_lo, dtype=float),
-        hi=np.asarray(res.adev_hi, dtype=float),
+        adev=np.asarray(res.dev, dtype=float),
+        lo=np.asarray(res.dev_lo, dtype=float),
+        hi=np.asarray(res.dev_hi, dtype=float),
         arw=terms["arw_deg_per_sqrt_h"],
         bi=bi,
         arw_tau=None if n_rng is None else (float(n_rng[0]), float(n_rng[1])),
@@ -171,7 +171,7 @@ def run_results(role: str, model: Any, app: Any, run: Any, held_out: bool) -> Ru
     if "stream.causal" in app.series:
         series["causal"] = np.asarray(app.series["stream.causal"], float)
     allan = {}
-    for k in ALLAN_SERIES:
+    for k in (k for k in ALLAN_SERIES if k in series):
         a = allan_summary(series[k], 1.0 / bs)
         if a is not None:
             allan[k] = a

@@ -46,7 +46,6 @@ The paper in ``shared/paper``: section 3.1, eqs. (1)-(8).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -55,44 +54,9 @@ from numba import njit, prange, types
 from numba.core import cgutils
 from numba.core.extending import intrinsic
 
+from gyrolab.compensation.vmd_base import EPS, VMDResult, initial_omega
+
 __all__ = ["VMDResult", "vmd", "vmd_batch", "initial_omega"]
-
-_EPS = float(np.spacing(1.0))  # the reference code's uDiff floor
-
-
-@dataclass(frozen=True)
-class VMDResult:
-    """One decomposition.
-
-    Attributes
-    ----------
-    modes : ndarray, shape (K, N)
-        The modes, same length and units as the input signal; ``modes.sum(0)``
-        approximates the signal (exactly only in the limit ``tau > 0``).
-    omega : ndarray, shape (K,)
-        Centre frequencies in cycles/sample (0 .. 0.5), in mode order.
-    n_iter : int
-        ADMM iterations run.
-    converged : bool
-        Whether the tolerance was met before ``max_iter``.
-    alpha : float
-        Bandwidth constraint used.
-    K : int
-        Number of modes.
-    """
-
-    modes: np.ndarray
-    omega: np.ndarray
-    n_iter: int
-    converged: bool
-    alpha: float
-    K: int
-    spectrum: np.ndarray | None = field(default=None, repr=False)
-
-    @property
-    def frequencies(self) -> np.ndarray:
-        """Alias of ``omega`` (cycles/sample)."""
-        return self.omega
 
 
 # --------------------------------------------------------------------------- kernels
@@ -113,38 +77,27 @@ def _mode_pass(fd, fr, uk, S, lam, use_lam, alpha, w):  # pragma: no cover
 
     The arguments are tile slices indexed from 0: only then can LLVM prove the indices
     non-negative and vectorize the loop (with offsets it stays scalar, 3x slower).
+    ``use_lam`` is loop-invariant: LLVM unswitches the loop into two vectorised copies.
     """
     nk = 0.0
     dk = 0.0
     diff = 0.0
-    if use_lam:
-        for j in range(uk.shape[0]):
-            fj = fr[j]
-            d = fj - w
-            old = uk[j]
-            oth = S[j] - old
-            new = (fd[j] - oth - 0.5 * lam[j]) / (1.0 + alpha * d * d)
-            uk[j] = new
-            S[j] = oth + new
-            p = new * new
-            nk += fj * p
-            dk += p
-            e = new - old
-            diff += e * e
-    else:
-        for j in range(uk.shape[0]):
-            fj = fr[j]
-            d = fj - w
-            old = uk[j]
-            oth = S[j] - old
-            new = (fd[j] - oth) / (1.0 + alpha * d * d)
-            uk[j] = new
-            S[j] = oth + new
-            p = new * new
-            nk += fj * p
-            dk += p
-            e = new - old
-            diff += e * e
+    for j in range(uk.shape[0]):
+        fj = fr[j]
+        d = fj - w
+        old = uk[j]
+        oth = S[j] - old
+        g = fd[j] - oth
+        if use_lam:
+            g -= 0.5 * lam[j]
+        new = g / (1.0 + alpha * d * d)
+        uk[j] = new
+        S[j] = oth + new
+        p = new * new
+        nk += fj * p
+        dk += p
+        e = new - old
+        diff += e * e
     return nk, dk, diff
 
 
@@ -284,33 +237,6 @@ def _modes_from_real(u: np.ndarray, n: int, workers: int | None = None) -> np.nd
     c = np.cos(np.pi * (n - 1) * (0.5 - h) / n) / (2.0 * n)
     modes += (c * u[:, n - 1])[:, None] * sign[None, :]
     return modes
-
-
-def initial_omega(
-    K: int, init: str | np.ndarray = "uniform", n: int | None = None, rng=None
-) -> np.ndarray:
-    """Initial centre frequencies (cycles/sample).
-
-    ``"uniform"``: 0.5 k / K, k = 0..K-1 (reference ``init=1``); ``"zero"``: all 0
-    (``init=0``); ``"random"``: sorted log-uniform in [1/n, 0.5] (``init=2``, needs ``n``);
-    or an explicit array of K values.
-    """
-    if isinstance(init, str):
-        if init == "uniform":
-            return 0.5 * np.arange(K) / K
-        if init == "zero":
-            return np.zeros(K)
-        if init == "random":
-            if n is None:
-                raise ValueError("vmd: init='random' needs the signal length")
-            rng = np.random.default_rng(rng)
-            fs = 1.0 / n
-            return np.sort(np.exp(np.log(fs) + (np.log(0.5) - np.log(fs)) * rng.random(K)))
-        raise ValueError(f"vmd: unknown init {init!r} (uniform, zero, random or an array)")
-    w = np.asarray(init, dtype=np.float64).reshape(-1)
-    if w.size != K:
-        raise ValueError(f"vmd: init has {w.size} frequencies for K = {K}")
-    return w.copy()
 
 
 def _check_params(alpha: float, K: int, tau: float, tol: float, max_iter: int) -> None:
@@ -467,7 +393,7 @@ def vmd_batch(
     backend, device = pick_backend(backend, device)
     args = (xs, units_arr, alphas, Ks_arr, tau, tol, max_iter, init, dc)
     if backend == "triton":
-        # optional GPU extra (Triton), and vmd_triton imports this module: imported here
+        # the optional GPU extra (Triton): imported only when asked for
         from gyrolab.compensation.vmd_triton import vmd_batch_triton
 
         return vmd_batch_triton(*args, device=device, chunk=chunk)
@@ -641,7 +567,7 @@ def _vmd_batch_torch(xs, units, alphas, Ks, tau, tol, max_iter, init, dc, device
                 if tau != 0.0:
                     lam += tau * (S - fd)
                 n_iter += 1
-                ok = ((_EPS + diff / (2.0 * n)) <= tol).cpu().numpy()  # one sync per iteration
+                ok = ((EPS + diff / (2.0 * n)) <= tol).cpu().numpy()  # one sync per iteration
                 done = ok | (n_iter >= max_iter)
                 if not done.any():
                     continue

@@ -45,7 +45,7 @@ import time
 import numpy as np
 import scipy.fft
 
-from gyrolab.compensation.vmd import VMDResult, initial_omega
+from gyrolab.compensation.vmd_base import EPS, VMDResult, initial_omega
 
 try:  # optional: the `gpu` extra
     import triton
@@ -56,7 +56,6 @@ except ImportError:  # pragma: no cover - exercised where Triton is absent
 
 __all__ = ["admm_traffic_bytes", "vmd_batch_triton"]
 
-_EPS = float(np.spacing(1.0))
 # tl.sum without its dtype logic (a no-op for float64): under the interpreter every call
 # of a jit function costs ~1 ms, tl.sum is one, tl.reduce with this combiner is a builtin
 _ADD = tl.standard._sum_combine if tl is not None else None
@@ -270,7 +269,7 @@ def vmd_batch_triton(
     nb_p2 = 1 << max(nb - 1, 0).bit_length()
     chunk = B if chunk is None else max(int(chunk), 1)
     fd = torch.as_tensor(scipy.fft.dct(xs, type=2, axis=-1), device=dev)
-    par = torch.tensor([tau, tol, 1.0 / (2.0 * n), _EPS], dtype=f64, device=dev)
+    par = torch.tensor([tau, tol, 1.0 / (2.0 * n), EPS], dtype=f64, device=dev)
     order = np.lexsort((alphas, -Ks))  # similar candidates side by side
     out: list[VMDResult | None] = [None] * B
     admm_s = 0.0

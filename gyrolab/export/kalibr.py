@@ -50,7 +50,7 @@ def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
         # A +1/2 term cannot exceed the curve anywhere, sigma(tau) >= K sqrt(tau/3), so
         # min over tau <= T/10 of sigma(tau) sqrt(3/tau) bounds K from above.
         usable = res.taus <= 0.1 * res.duration_s
-        bound = res.adev[usable] * np.sqrt(3.0 / res.taus[usable])
+        bound = res.dev[usable] * np.sqrt(3.0 / res.taus[usable])
         K = float(np.min(bound)) if bound.size else float("nan")
         reason = slope.reasons.get("K", "no +1/2 region")
         how_k = f"upper bound min sigma(tau)*sqrt(3/tau), K not identifiable: {reason}"
@@ -62,7 +62,7 @@ def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
         "gyroscope_random_walk": float(K) * DEG2RAD if np.isfinite(K) else float("nan"),
         "random_walk_from": how_k,
         "allan_taus_s": res.taus.tolist(),
-        "allan_adev_dps": res.adev.tolist(),
+        "allan_adev_dps": res.dev.tolist(),
     }
 
 

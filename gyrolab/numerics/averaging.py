@@ -126,14 +126,14 @@ def block_average(
     return acc.result()
 
 
-def block_means(x: np.ndarray, fs_hz: float, window_s: float) -> np.ndarray:
-    """Means of consecutive non-overlapping windows of ``round(window_s · fs_hz)`` ≥ 1
-    samples of a uniformly sampled ``x`` (``fs_hz``, Hz); a trailing partial window is
+def block_means(x: np.ndarray, rate_hz: float, window_s: float) -> np.ndarray:
+    """Means of consecutive non-overlapping windows of ``round(window_s · rate_hz)`` ≥ 1
+    samples of a uniformly sampled ``x`` (``rate_hz``, Hz); a trailing partial window is
     dropped. Fewer than two windows, or a window that is not positive, is an
     :class:`~gyrolab.errors.InputError`."""
     if not window_s > 0:
         raise InputError(None, f"averaging window must be positive, got {window_s} s")
-    w = max(1, int(round(window_s * fs_hz)))
+    w = max(1, int(round(window_s * rate_hz)))
     n = x.size // w
     if n < 2:
         raise InputError(

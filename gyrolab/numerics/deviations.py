@@ -1,4 +1,6 @@
-"""The time-and-frequency family beside the Allan deviation: MDEV, TDEV, HDEV, TOTDEV.
+"""The time-and-frequency family beside the Allan deviation: MDEV, TDEV, HDEV, TOTDEV, and
+:func:`deviation`, one entry to all five (its OADEV is
+:func:`~gyrolab.numerics.allan.allan_deviation`).
 
 All estimators work on the phase (angle) ``x_k = tau0 * sum_{i<k} y_i`` of rate data ``y``
 (built once by :mod:`gyrolab.numerics.phase`'s compensated cumulative sum), ``N`` phase
@@ -16,9 +18,10 @@ HDEV is the overlapping Hadamard deviation; TOTDEV's ``x*`` is the record extend
 reflection at both ends (``x*_{1-j} = 2x_1 - x_{1+j}``, ``x*_{N+j} = 2x_N - x_{N-j}``).
 Units, for rate in deg/s: every deviation in deg/s except TDEV, in deg (an angle).
 
-**Gaps.** Missing samples are NaN (a recording's index jumps, :func:`gap_filled`). They
-are never interpolated: a term (one squared difference, or MDEV's inner sum) is used only
-when every rate sample it integrates is present, i.e. the term's span of phase points
+**Gaps.** Missing samples are NaN (a recording's index jumps,
+:func:`~gyrolab.numerics.phase.gap_filled`). They are never interpolated: a term (one
+squared difference, or MDEV's inner sum) is used only when every rate sample it integrates
+is present, i.e. the term's span of phase points
 ``[p_0, p_K]`` has no missing sample (for angle input: no NaN point in the span); the
 variance is the mean over the terms kept, ``n`` counts them. This is the "skip the
 differences that touch a gap" rule of Stable32's gap handling and of allantools' gap-
@@ -40,17 +43,17 @@ with gaps, ``N`` in the EDF is the number of samples present plus one (an approx
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Literal
 
 import numba
 import numpy as np
 
 from gyrolab.errors import InputError
+from gyrolab.numerics.allan import DeviationResult, allan_deviation, checked_series
 from gyrolab.numerics.confidence import ONE_SIGMA, confidence_bounds, edf_greenhall
-from gyrolab.numerics.phase import phase_detrended, phase_from_rate, tau_grid
+from gyrolab.numerics.phase import phase_of, tau_grid
 
-__all__ = ["KINDS", "DeviationResult", "deviation", "gap_filled"]
+__all__ = ["KINDS", "deviation"]
 
 Kind = Literal["oadev", "mdev", "tdev", "hdev", "totdev"]
 KINDS: tuple[str, ...] = ("oadev", "mdev", "tdev", "hdev", "totdev")
@@ -63,26 +66,6 @@ _TOT_EDF = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
 # ``cb[k]`` = number of missing units before phase point k; span [a, b] is whole iff
 # cb[b] == cb[a]. Without gaps (``gaps`` False) cb is not read.
 # --------------------------------------------------------------------------------------------
-
-
-@numba.njit(cache=True)
-def _all_finite_or_nan(y: np.ndarray) -> bool:
-    for i in range(y.size):
-        if math.isinf(y[i]):
-            return False
-    return True
-
-
-@numba.njit(cache=True)
-def _sum_d2(x: np.ndarray, cb: np.ndarray, m: int, gaps: bool) -> tuple[float, int]:
-    s = 0.0
-    c = 0
-    for i in range(x.size - 2 * m):
-        if not gaps or cb[i + 2 * m] == cb[i]:
-            d = x[i + 2 * m] - 2.0 * x[i + m] + x[i]
-            s += d * d
-            c += 1
-    return s, c
 
 
 @numba.njit(cache=True)
@@ -154,82 +137,6 @@ def _sum_tot(x: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, m: int) -> tup
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class DeviationResult:
-    """One deviation curve. ``taus`` in s; ``dev`` in the data's rate unit (TDEV: rate x s)."""
-
-    kind: str  #: oadev | mdev | tdev | hdev | totdev
-    taus: np.ndarray
-    dev: np.ndarray
-    n: np.ndarray  #: number of terms averaged (terms touching a gap are not counted)
-    m: np.ndarray  #: averaging factor, tau = m / rate
-    dev_lo: np.ndarray  #: lower confidence bound
-    dev_hi: np.ndarray  #: upper confidence bound
-    edf: np.ndarray  #: equivalent degrees of freedom
-    alpha: np.ndarray  #: power-law noise exponent used for the EDF (rate PSD ~ f^alpha)
-    rate: float
-    confidence: float = ONE_SIGMA
-    missing: int = 0  #: samples missing (NaN) in the input
-    extra: dict = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        """JSON-ready copy."""
-        d: dict = {
-            k: [float(v) for v in getattr(self, k)]
-            for k in ("taus", "dev", "dev_lo", "dev_hi", "edf", "alpha")
-        }
-        d.update(
-            kind=self.kind,
-            n=[int(v) for v in self.n],
-            m=[int(v) for v in self.m],
-            rate=self.rate,
-            confidence=self.confidence,
-            missing=self.missing,
-        )
-        return d
-
-
-def gap_filled(index: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Samples placed at their sample index, NaN where the index jumps (a recording gap).
-
-    ``index`` is the sample index of each value (``Series.index``, increasing).
-    """
-    index = np.asarray(index, dtype=np.int64)
-    if index.size == 0:
-        return np.empty(0)
-    out = np.full(int(index[-1] - index[0]) + 1, np.nan)
-    out[index - index[0]] = values
-    return out
-
-
-def _phase_and_mask(
-    arr: np.ndarray, data_type: str, tau0: float
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Phase (finite everywhere), cumulative missing-unit count over phase points, #missing."""
-    bad_pts = np.isnan(arr)
-    missing = int(np.count_nonzero(bad_pts))
-    filled = np.where(bad_pts, 0.0, arr) if missing else arr
-    if data_type in ("rate", "freq"):
-        if missing and missing < arr.size:
-            filled = filled - np.where(bad_pts, 0.0, filled).sum() / (arr.size - missing)
-            filled[bad_pts] = 0.0
-        phase = np.empty(arr.size + 1)
-        phase_from_rate(np.ascontiguousarray(filled), 1.0, phase)
-        bad_units = bad_pts
-    elif data_type in ("angle", "phase"):
-        phase = np.empty(arr.size)
-        phase_detrended(np.ascontiguousarray(filled), phase)
-        phase /= tau0  # angle in rate-unit x samples, as the rate branch builds it
-        bad_units = bad_pts[:-1] | bad_pts[1:]
-    else:
-        raise InputError(None, f"unknown data_type {data_type!r} (rate or angle)")
-    if not missing:
-        return phase, np.zeros(1, dtype=np.int64), 0  # no gaps: no count array (8 B/sample)
-    cb = np.zeros(phase.size, dtype=np.int64)
-    np.cumsum(bad_units, out=cb[1:])
-    return phase, cb, missing
-
-
 def _segments(cb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # maximal runs of phase points joined by whole units: [a, b)
     broken = np.flatnonzero(np.diff(cb) != 0)  # unit k missing: points k and k+1 apart
@@ -244,7 +151,7 @@ def _max_m(kind: str, n_phase: int) -> int:
         return n_phase // 3
     if kind == "hdev":
         return (n_phase - 1) // 3
-    return (n_phase - 1) // 2  # oadev; totdev: Stable32's stop ratio 2
+    return (n_phase - 1) // 2  # totdev: Stable32's stop ratio 2
 
 
 def _edf(kind: str, alpha: int, m: int, n_phase: int) -> float:
@@ -293,15 +200,11 @@ def deviation(
         ]
     if arr.ndim != 1:
         raise InputError(None, f"deviation needs a 1-D or 2-D array, got shape {arr.shape}")
-    if not (np.isfinite(rate) and rate > 0):
-        raise InputError(None, f"sample rate must be positive and finite, got {rate!r}")
-    if not _all_finite_or_nan(arr):
-        raise InputError(None, "series contains infinite values (NaN marks a gap; inf is an error)")
-    if arr.size - np.count_nonzero(np.isnan(arr)) < 3:
-        raise InputError(None, f"series too short for a deviation ({arr.size} samples)")
+    if kind == "oadev":
+        return allan_deviation(arr, rate, taus, data_type, confidence=confidence, alpha=alpha)
+    arr, missing = checked_series(arr, rate, "a deviation")
     tau0 = 1.0 / float(rate)
-    # phase in rate-units x samples; scaled by tau0 where the variance is normalised
-    phase, cb, missing = _phase_and_mask(arr, data_type, tau0)
+    phase, cb = phase_of(arr, data_type, tau0, missing)  # rate-unit x s
     n_phase = phase.size
     ms = tau_grid(n_phase, float(rate), taus)
     ms = ms[ms <= _max_m(kind, n_phase)]
@@ -318,19 +221,17 @@ def deviation(
     nterms = np.zeros(ms.size, dtype=np.int64)
     for k, m in enumerate(ms):
         m = int(m)
-        if kind == "oadev":
-            s, c = _sum_d2(phase, cb, m, gaps)
-            v = s / (2.0 * m * m * c) if c else math.nan
-        elif kind in ("mdev", "tdev"):
+        t = m * tau0
+        if kind in ("mdev", "tdev"):
             s, c = _sum_mod(phase, cb, m, gaps)
-            v = s / (2.0 * m**4 * c) if c else math.nan
+            v = s / (2.0 * m * m * t * t * c) if c else math.nan
         elif kind == "hdev":
             s, c = _sum_d3(phase, cb, m, gaps)
-            v = s / (6.0 * m * m * c) if c else math.nan
+            v = s / (6.0 * t * t * c) if c else math.nan
         else:
             s, c = _sum_tot(phase, seg_a, seg_b, m)
-            v = s / (2.0 * m * m * c) if c else math.nan
-        var[k] = v  # (phase in samples) / m^2: the rate-unit variance, tau0 cancels
+            v = s / (2.0 * t * t * c) if c else math.nan
+        var[k] = v
         nterms[k] = c
     dev = np.sqrt(var)
     taus_s = ms * tau0
@@ -364,5 +265,6 @@ def deviation(
         rate=float(rate),
         confidence=ONE_SIGMA if confidence is None else float(confidence),
         missing=missing,
+        data_type="rate" if data_type in ("rate", "freq") else "angle",
         extra={"record_s": (n_phase - 1) * tau0},
     )

@@ -24,7 +24,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from gyrolab.errors import InputError
-from gyrolab.numerics.allan import AllanResult
+from gyrolab.numerics.allan import DeviationResult
 
 __all__ = ["FLICKER_FLOOR", "NoiseTerms", "filter_corner_tau", "noise_terms"]
 
@@ -116,11 +116,11 @@ class NoiseTerms:
         return out
 
 
-def _log_uncertainty(result: AllanResult, ok: np.ndarray) -> np.ndarray:
+def _log_uncertainty(result: DeviationResult, ok: np.ndarray) -> np.ndarray:
     """One-sigma uncertainty of log10(adev) per point from the confidence bounds (NaN
     where the result has none): half the log width of the interval over its z."""
-    lo = np.asarray(result.adev_lo, dtype=float)[ok]
-    hi = np.asarray(result.adev_hi, dtype=float)[ok]
+    lo = np.asarray(result.dev_lo, dtype=float)[ok]
+    hi = np.asarray(result.dev_hi, dtype=float)[ok]
     z = stats.norm.ppf(0.5 + float(result.confidence) / 2.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         u = (np.log10(hi) - np.log10(lo)) / (2.0 * z)
@@ -258,7 +258,7 @@ def _fmt_tau(t: float) -> str:
 
 
 def noise_terms(
-    result: AllanResult,
+    result: DeviationResult,
     method: Literal["slope", "fit"] = "slope",
     slope_tol: float | None = 0.25,
     terms: tuple[str, ...] = ("Q", "N", "B", "K", "R"),
@@ -301,7 +301,7 @@ def noise_terms(
     samples); the shortest tau used is ``NoiseTerms.tau_min``.
     """
     taus = np.asarray(result.taus, dtype=float)
-    adev = np.asarray(result.adev, dtype=float)
+    adev = np.asarray(result.dev, dtype=float)
     ok = adev > 0
     u_all = _log_uncertainty(result, ok)
     taus, adev = taus[ok], adev[ok]
@@ -406,7 +406,7 @@ def noise_terms(
     elif method == "fit":
         # a flicker floor cannot lie above the curve's lowest point (its upper confidence
         # bound where the curve has one: the point itself scatters)
-        hi_b = float(np.asarray(result.adev_hi, dtype=float)[ok][usable][imin])
+        hi_b = float(np.asarray(result.dev_hi, dtype=float)[ok][usable][imin])
         b_limit = hi_b if np.isfinite(hi_b) and hi_b > 0 else float(adev[imin])
         names = [t for t in "QNBKR" if t in terms]
         powers = np.array([_FIT_POWERS[t] for t in names], dtype=float)

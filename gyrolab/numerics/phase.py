@@ -7,7 +7,13 @@ The phase of rate data ``y`` (sample interval ``tau0``) is ``x_k = tau0 * sum_{i
 constant rate, and removing it keeps the phase small, so that 40 M samples keep float64
 accuracy. Angle (phase) input has the line through its end points removed instead (the
 differences are unchanged). One phase array (8 bytes per sample) is the only large
-allocation of a deviation.
+allocation of a deviation without gaps.
+
+**Gaps.** A missing sample is NaN (:func:`gap_filled` places a recording's samples by their
+index). :func:`phase_of` never interpolates: a missing rate sample adds nothing to the phase
+(the mean of the samples present is removed first), and ``cb[k]``, the number of missing
+units before phase point ``k``, lets a deviation use a term only when its span
+``[p_0, p_K]`` is whole (``cb[p_K] == cb[p_0]``).
 """
 
 from __future__ import annotations
@@ -19,16 +25,40 @@ import numpy as np
 
 from gyrolab.errors import InputError
 
-__all__ = ["all_finite", "phase_detrended", "phase_from_rate", "tau_grid"]
+__all__ = [
+    "count_missing",
+    "gap_filled",
+    "phase_detrended",
+    "phase_from_rate",
+    "phase_of",
+    "tau_grid",
+]
 
 
 @numba.njit(cache=True)
-def all_finite(y: np.ndarray) -> bool:
-    # np.all(np.isfinite(y)) without its n-byte temporary
+def count_missing(y: np.ndarray) -> int:
+    """The number of NaN (missing) samples, or -1 if any sample is infinite (an error, not
+    a gap); without an n-byte temporary."""
+    n = 0
     for i in range(y.size):
-        if not math.isfinite(y[i]):
-            return False
-    return True
+        if math.isinf(y[i]):
+            return -1
+        if math.isnan(y[i]):
+            n += 1
+    return n
+
+
+def gap_filled(index: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Samples placed at their sample index, NaN where the index jumps (a recording gap).
+
+    ``index`` is the sample index of each value (``Series.index``, increasing).
+    """
+    index = np.asarray(index, dtype=np.int64)
+    if index.size == 0:
+        return np.empty(0)
+    out = np.full(int(index[-1] - index[0]) + 1, np.nan)
+    out[index - index[0]] = values
+    return out
 
 
 @numba.njit(cache=True, inline="always")
@@ -110,3 +140,36 @@ def tau_grid(
         m = np.round(t * rate).astype(np.int64)
     m = np.unique(m[(m >= 1) & (m <= mmax)])
     return m
+
+
+def phase_of(
+    data: np.ndarray, data_type: str, tau0: float, missing: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The phase of rate (``"rate"``/``"freq"``) or angle (``"angle"``/``"phase"``) data
+    in rate-unit x s, and ``cb``, the cumulative count of missing units before each phase
+    point (a one-element zero array when ``missing`` is 0: no count array, 8 B/sample).
+
+    ``data`` is float64 and contiguous; ``missing`` its NaN count (:func:`count_missing`).
+    """
+    bad = np.isnan(data) if missing else None
+    filled = data
+    if bad is not None:
+        filled = np.where(bad, 0.0, data)
+    if data_type in ("rate", "freq"):
+        if bad is not None and missing < data.size:
+            filled = filled - filled.sum() / (data.size - missing)
+            filled[bad] = 0.0
+        phase = np.empty(data.size + 1)
+        phase_from_rate(filled, tau0, phase)
+        bad_units = bad
+    elif data_type in ("angle", "phase"):
+        phase = np.empty(data.size)
+        phase_detrended(filled, phase)
+        bad_units = None if bad is None else bad[:-1] | bad[1:]
+    else:
+        raise InputError(None, f"unknown data_type {data_type!r} (rate or angle)")
+    if bad_units is None:
+        return phase, np.zeros(1, dtype=np.int64)
+    cb = np.zeros(phase.size, dtype=np.int64)
+    np.cumsum(bad_units, out=cb[1:])
+    return phase, cb

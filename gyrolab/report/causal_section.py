@@ -17,11 +17,11 @@ import numpy as np
 
 from gyrolab.report import figures as F
 from gyrolab.report.analysis import ModelRun
+from gyrolab.report.data import CAUSAL_LABEL, offline_label
 from gyrolab.report.document import FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.text import dotted
 
 ORACLE_COLOR = "#000000"
-OFFLINE_COLOR = "#ff7f0e"
 POLY_COLOR = "#9467bd"
 
 
@@ -43,28 +43,20 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
     if oracle is not None:
         series.append(("oracle (true drift removed)", oracle, ORACLE_COLOR))
     fam = metrics["causal_model"]["family"]
+    offline = offline_label(metrics)
     series += [
-        (f"causal headline ({fam})", res.series.get("causal"), F.COMP_COLOR),
+        (f"{CAUSAL_LABEL} ({fam})", res.series.get("causal"), F.COMP_COLOR),
         ("baseline: poly(T), causal", res.series.get("baselines.poly"), POLY_COLOR),
-        ("paper's method, offline", res.series["compensated"], OFFLINE_COLOR),
+        (offline, res.series["compensated"], F.OFFLINE_COLOR),
     ]
     series = [s for s in series if s[1] is not None]
 
-    bw = metrics.get("denoising", {}).get("bandwidth", {})
-    f3 = bw.get("f3db_hz")
-    cols: list[tuple[str, str]] = [("causal headline", "causal")]
+    cols: list[tuple[str, str]] = [(f"{CAUSAL_LABEL} (headline)", "causal")]
     if oracle is not None:
         cols.append(("oracle", "oracle"))
     cols += [("raw", "raw")]
     cols += [(f"baseline {k} (T), causal", f"baselines.{k}") for k in metrics.get("baselines", {})]
-    cols += [
-        ("paper GA-BP (T), causal", "compensated_drift_only"),
-        (
-            "paper's method, offline"
-            + (f" (f3dB {1e3 * f3:.2g} mHz)" if isinstance(f3, float) else ""),
-            "compensated",
-        ),
-    ]
+    cols += [("paper GA-BP (T), causal", "compensated_drift_only"), (offline, "compensated")]
 
     def get(path: str) -> dict[str, Any]:
         return dotted(metrics, path)
@@ -81,7 +73,12 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
         ["bias instability (°/h)"]
         + [_fmt(get(k).get("bias_instability_deg_per_h")) for _, k in cols],
     ]
-    tab = TableBlock("causal-headline", "Causal headline", ["metric"] + [c for c, _ in cols], rows)
+    tab = TableBlock(
+        "causal-headline",
+        "Headline: the causal output beside the other outputs, on the same averages",
+        ["metric"] + [c for c, _ in cols],
+        rows,
+    )
     cm = metrics["causal_model"]
     feat = cm.get("features", {})
     tab.note = (
@@ -111,7 +108,9 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
     sec.blocks.append(
         FigureBlock(
             "causal-headline",
-            "Causal headline against the baselines",
+            "Causal output against the baselines"
+            + (", the oracle" if oracle is not None else "")
+            + " and the offline reconstruction",
             F.causal_headline(
                 res.t[:n],
                 [(a, np.asarray(b)[:n], c) for a, b, c in series],

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,11 @@ STAGES = [
 ]
 
 
+def report_stages(has_model: bool) -> list[str]:
+    """The stages a report goes through (the model's two only with a model)."""
+    return [s for s in STAGES if has_model or s not in ("load model", "apply model")]
+
+
 def write_report(
     run: str | Path,
     out: str | Path,
@@ -46,25 +52,29 @@ def write_report(
     log_options: dict | None = None,
     unit: str | None = None,
     label: str | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Build and write the report of ``run`` into ``out``; returns the metrics.
 
     ``spec`` (SPEC.toml, :mod:`gyrolab.report.spec`) adds per-limit pass/fail and the
     verdict; ``operator``/``serial`` fill the sign-off block instead of the recording's;
     ``label``: how metrics.json names the run (default: ``run`` as given; the demo passes
-    a path relative to its output directory).
+    a path relative to its output directory); ``on_stage(name)``: told each stage of
+    :func:`report_stages` as it is reached.
     """
     from gyrolab.report.build import build_report
     from gyrolab.report.html import render
     from gyrolab.report.pdf import write_pdf
 
     check_output(out, force, inputs=(run, model, spec), kind="dir")
-    stages = [s for s in STAGES if model is not None or s not in ("load model", "apply model")]
+    stages = report_stages(model is not None)
     bar = progress(total=len(stages), desc="report", unit="stage")
     if not show_progress:
         bar.disable = True
 
     def step(name: str) -> None:
+        if on_stage is not None:
+            on_stage(name)
         bar.set_postfix_str(name)
         if bar.n < len(stages) - 1:
             bar.update(1)

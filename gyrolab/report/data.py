@@ -38,10 +38,24 @@ def _noop(_: str) -> None:
 @dataclass
 class AllanData:
     """One labelled Allan curve with its noise terms
-    (:class:`~gyrolab.compensation.results.AllanSummary`)."""
+    (:class:`~gyrolab.compensation.results.AllanSummary`); ``key``: its series
+    (``raw``, ``causal``, ``compensated`` — the offline reconstruction)."""
 
     label: str
     curve: Any  # AllanSummary
+    key: str = "raw"
+
+
+def offline_label(metrics: dict[str, Any]) -> str:
+    """How every table and figure names the paper's offline reconstruction (metrics key
+    ``compensated``): by what it is, with its −3 dB bandwidth where known."""
+    f3 = metrics.get("denoising", {}).get("bandwidth", {}).get("f3db_hz")
+    bw = f", f3dB {1e3 * f3:.2g} mHz" if isinstance(f3, (int, float)) else ""
+    return f"offline reconstruction (low-passed{bw})"
+
+
+#: The causal output's name in every table, figure and verdict of the report.
+CAUSAL_LABEL = "causal output"
 
 
 @dataclass
@@ -195,9 +209,17 @@ def assemble(
 
 
 def _allan_curves(data: ReportData) -> list[AllanData]:
-    """Raw and compensated curves: read from the model's results, else computed."""
-    if data.model is not None:
-        stored = data.model.results.allan
-        return [AllanData(k, stored[k]) for k in ("raw", "compensated") if k in stored]
-    a = analysis.allan_summary(data.xb, 1.0 / data.block_s)
-    return [] if a is None else [AllanData("raw", a)]
+    """The raw curve, the causal output's and the offline reconstruction's (under its own
+    label): read from the model's results (the causal one computed from its series for a
+    model directory written before it was kept), else the raw curve computed."""
+    if data.model is None:
+        a = analysis.allan_summary(data.xb, 1.0 / data.block_s)
+        return [] if a is None else [AllanData("raw", a)]
+    res = data.model.results
+    stored = dict(res.allan)
+    if "causal" not in stored and "causal" in res.series:
+        a = analysis.allan_summary(res.series["causal"], 1.0 / res.block_s)
+        if a is not None:
+            stored["causal"] = a
+    labels = {"raw": "raw", "causal": CAUSAL_LABEL, "compensated": offline_label(data.metrics)}
+    return [AllanData(labels[k], stored[k], k) for k in labels if k in stored]

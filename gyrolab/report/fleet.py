@@ -20,17 +20,23 @@ deviation stands in: ``z = (x − median)/(1.253314·MeanAD)``; where that is 0 
 flagged. A quantity is screened only when at least :data:`MIN_UNITS_FOR_OUTLIERS` units
 have it.
 
-Yield against ``--spec`` (:mod:`gyrolab.report.spec`): each unit's ``metrics.json`` is
-checked against the spec's metric limits (by default on the compensated output); the yield
-is passed/total with a Wilson 95 % interval. Run limits (temperature coverage, gaps, run
-complete, safe state) need the recording and are checked per run by ``gyrolab report
---spec``; the fleet record lists them as not checked.
+Which units count (:func:`mark`): a unit whose metrics are in-sample (its model was fitted
+without ``--validate``) is marked "not validated", one whose model covers less than
+``min_calibrated_span_c`` of temperature (default
+:data:`~gyrolab.report.spec.DEFAULT_MIN_CALIBRATED_SPAN_C`) "narrow range"; neither is
+counted in the yield unless the spec says so (``allow_in_sample = true``, a smaller
+``min_calibrated_span_c``). Units are named by the serial their model records.
+
+Yield against ``--spec`` (:mod:`gyrolab.report.spec`): each counted unit's ``metrics.json``
+is checked against the spec's metric limits (by default on the causal output, the
+compensated output the gyro delivers); the yield is passed/counted with a Wilson 95 %
+interval. Run limits (temperature coverage, gaps, run complete, safe state) need the
+recording and are checked per run by ``gyrolab report --spec``; the fleet record lists them
+as not checked. :mod:`gyrolab.report.fleet_record` lays out and writes the record.
 """
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.outputs import atomic_dir, check_output, json_safe
+from gyrolab.report.spec import DEFAULT_MIN_CALIBRATED_SPAN_C, SERIES, load_spec
 
 MIN_UNITS_FOR_OUTLIERS = 5
 Z_LIMIT = 3.5
@@ -66,9 +72,21 @@ COEFFICIENTS: dict[str, tuple[str, str]] = {
 }
 
 
+#: The outputs whose metrics the fleet tabulates (column prefix -> label), read from
+#: metrics.json as the spec reads them (:data:`gyrolab.report.spec.SERIES`): ``causal`` is
+#: the compensated output; ``offline`` the paper's low-passed reconstruction.
+OUTPUTS: dict[str, str] = {
+    "raw": "raw",
+    "causal": "causal output",
+    "offline": "offline reconstruction",
+}
+
+
 @dataclass
 class UnitRow:
-    """One unit of the fleet: where it came from and its numbers."""
+    """One unit of the fleet: where it came from and its numbers. ``serial``: the model
+    records the unit's serial (else ``unit`` is its directory's name); ``flags``: why it
+    is not counted in the yield ("not validated", "narrow range"), ``notes`` say more."""
 
     unit: str
     model_dir: str
@@ -77,6 +95,17 @@ class UnitRow:
     values: dict[str, float] = field(default_factory=dict)
     verdict: str = ""  # PASS / FAIL with a spec
     failed: list[str] = field(default_factory=list)
+    serial: bool = True
+    flags: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    counted: bool = True
+
+    @property
+    def status(self) -> str:
+        """``validated``, or its flags with their reasons."""
+        if not self.flags:
+            return "validated"
+        return "; ".join(f"{f} ({n})" for f, n in zip(self.flags, self.notes, strict=True))
 
 
 def find_model_dirs(paths: list[str]) -> list[Path]:
@@ -99,10 +128,12 @@ def _coefficients(model: Any) -> dict[str, float]:
         return np.asarray(model.drift.predict(X), dtype=float).ravel()
 
     v: dict[str, float] = {}
-    if lo <= REF_TEMP_C - 1 and REF_TEMP_C + 1 <= hi:
-        b = f(np.array([REF_TEMP_C - 1, REF_TEMP_C, REF_TEMP_C + 1]))
-        v["bias_at_25c_dps"] = float(b[1])
-        v["tempco_at_25c_dps_per_c"] = float((b[2] - b[0]) / 2.0)
+    if lo <= REF_TEMP_C <= hi:
+        # slope over ±1 °C, one-sided where 25 °C is within 1 °C of the range's edge
+        a, b = max(lo, REF_TEMP_C - 1), min(hi, REF_TEMP_C + 1)
+        fa, f0, fb = f(np.array([a, REF_TEMP_C, b]))
+        v["bias_at_25c_dps"] = float(f0)
+        v["tempco_at_25c_dps_per_c"] = float((fb - fa) / (b - a)) if b > a else math.nan
     else:  # outside the calibrated range: flagged as missing, never extrapolated
         v["bias_at_25c_dps"] = v["tempco_at_25c_dps_per_c"] = math.nan
     grid = f(np.linspace(lo, hi, 201)) if math.isfinite(lo) and hi > lo else np.array([np.nan])
@@ -124,14 +155,17 @@ def read_unit(model_dir: Path) -> UnitRow:
     md = ModelDir(model_dir)
     model = md.load()
     metrics = md.require_metrics()
-    unit = str(model.calibration.get("unit") or metrics.get("unit") or model_dir.name)
+    serial = model.calibration.get("unit") or metrics.get("unit")
+    unit = str(serial or model_dir.name)
     row = UnitRow(unit, str(model_dir), str(metrics.get("run", "")), bool(metrics.get("held_out")))
+    row.serial = bool(serial)
     row.values.update(_coefficients(model))
-    for series in ("raw", "compensated"):
-        block = metrics.get(series) or {}
+    for name in OUTPUTS:
+        keys = SERIES[name][0]
+        block = next((metrics[k] for k in keys if isinstance(metrics.get(k), dict)), {})
         for k in METRICS:
             x = block.get(k)
-            row.values[f"{series}.{k}"] = float(x) if isinstance(x, (int, float)) else math.nan
+            row.values[f"{name}.{k}"] = float(x) if isinstance(x, (int, float)) else math.nan
     row.values["_metrics"] = metrics  # type: ignore[assignment]  # for the spec, not a column
     return row
 
@@ -168,11 +202,35 @@ def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
 
 
 def columns() -> list[str]:
-    return [*COEFFICIENTS, *(f"{s}.{k}" for s in ("raw", "compensated") for k in METRICS)]
+    return [*COEFFICIENTS, *(f"{s}.{k}" for s in OUTPUTS for k in METRICS)]
+
+
+def mark(rows: list[UnitRow], allow_in_sample: bool, min_span_c: float) -> None:
+    """Flag the units the yield may not count (module docstring): in-sample metrics
+    ("not validated"), a calibrated range narrower than ``min_span_c`` ("narrow range")."""
+    for r in rows:
+        r.flags, r.notes = [], []
+        if not r.held_out:
+            r.flags.append("not validated")
+            r.notes.append("in-sample metrics: fitted without --validate")
+        lo, hi = r.values.get("temp_min_c", math.nan), r.values.get("temp_max_c", math.nan)
+        span = hi - lo
+        if not math.isfinite(span) or span < min_span_c:
+            r.flags.append("narrow range")
+            r.notes.append(
+                f"calibrated {lo:.1f} … {hi:.1f} °C, a span of {span:.1f} °C < {min_span_c:g} °C"
+            )
+        r.counted = (r.held_out or allow_in_sample) and "narrow range" not in r.flags
 
 
 def analyse(rows: list[UnitRow], spec_path: str | None = None) -> dict[str, Any]:
-    """Summary per quantity, outliers and (with a spec) verdicts and yield."""
+    """Summary per quantity, outliers, which units count (:func:`mark`) and (with a spec)
+    verdicts and yield."""
+    spec = load_spec(spec_path) if spec_path is not None else None
+    rules = spec.fleet if spec is not None else {}
+    allow = bool(rules.get("allow_in_sample", False))
+    min_span = float(rules.get("min_calibrated_span_c", DEFAULT_MIN_CALIBRATED_SPAN_C))
+    mark(rows, allow, min_span)
     cols = columns()
     summary, outliers = [], []
     for c in cols:
@@ -209,10 +267,10 @@ def analyse(rows: list[UnitRow], spec_path: str | None = None) -> dict[str, Any]
         "outlier_rule": f"|0.6745 (x - median) / MAD| > {Z_LIMIT} (Iglewicz & Hoaglin 1993; "
         f"MeanAD where MAD = 0), quantities held by >= {MIN_UNITS_FOR_OUTLIERS} units",
     }
-    if spec_path is not None:
-        from gyrolab.report.spec import FLAGS, METRIC_LIMITS, RUN_LIMITS, Spec, evaluate, load_spec
+    result["counting"] = {"allow_in_sample": allow, "min_calibrated_span_c": min_span}
+    if spec is not None:
+        from gyrolab.report.spec import FLAGS, METRIC_LIMITS, RUN_LIMITS, Spec, evaluate
 
-        spec = load_spec(spec_path)
         metric_only = Spec(
             path=spec.path,
             name=spec.name,
@@ -226,23 +284,21 @@ def analyse(rows: list[UnitRow], spec_path: str | None = None) -> dict[str, Any]
             v = evaluate(metric_only, r.values["_metrics"], has_model=True)  # type: ignore[arg-type]
             r.verdict = v.word
             r.failed = [ln.quantity for ln in v.lines if not ln.passed]
-        k = sum(r.verdict == "PASS" for r in rows)
-        lo, hi = wilson(k, len(rows))
+        counted = [r for r in rows if r.counted]
+        k = sum(r.verdict == "PASS" for r in counted)
+        lo, hi = wilson(k, len(counted))
         result["yield"] = {
-            "spec": spec.name or Path(spec_path).name,
-            "series": spec.series or "compensated",
+            "spec": spec.name or Path(str(spec_path)).name,
+            "series": SERIES[spec.series or "causal"][1],
             "limits": metric_only.limits,
             "passed": k,
-            "total": len(rows),
-            "yield": k / len(rows) if rows else math.nan,
+            "total": len(counted),
+            "yield": k / len(counted) if counted else math.nan,
             "wilson95": [lo, hi],
+            "excluded": [{"unit": r.unit, "status": r.status} for r in rows if not r.counted],
             "not_checked": unchecked,
         }
     return result
-
-
-def _fmt(x: float) -> str:
-    return f"{x:.4g}" if isinstance(x, (int, float)) and math.isfinite(x) else "—"
 
 
 def unit_table(rows: list[UnitRow], outliers: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -254,9 +310,12 @@ def unit_table(rows: list[UnitRow], outliers: list[dict[str, Any]]) -> list[dict
     for r in rows:
         d: dict[str, Any] = {
             "unit": r.unit,
+            "serial_in_model": r.serial,
             "model_dir": r.model_dir,
             "run": r.run,
             "held_out": r.held_out,
+            "status": r.status,
+            "counted_in_yield": r.counted,
         }
         d.update({c: r.values.get(c, math.nan) for c in columns()})
         d["outlier_in"] = ";".join(flagged.get(r.unit, []))
@@ -267,225 +326,4 @@ def unit_table(rows: list[UnitRow], outliers: list[dict[str, Any]]) -> list[dict
     return out
 
 
-def _write_tables(tmp: Path, tables: dict[str, list[dict[str, Any]]]) -> list[str]:
-    written = []
-    for name, rows in tables.items():
-        keys: list[str] = []
-        for r in rows:
-            keys.extend(k for k in r if k not in keys)
-        with open(tmp / f"{name}.csv", "w", newline="", encoding="utf-8") as fh:
-            w = csv.DictWriter(fh, fieldnames=keys or ["empty"])
-            w.writeheader()
-            w.writerows(rows)
-        written.append(f"{name}.csv")
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:  # optional: CSV is always there
-        return written
-    for name, rows in tables.items():
-        if rows:
-            pq.write_table(pa.Table.from_pylist(rows), tmp / f"{name}.parquet")
-            written.append(f"{name}.parquet")
-    return written
-
-
-def _strip_figure(rows: list[UnitRow], cols: list[str], outliers: list[dict[str, Any]]):  # type: ignore[no-untyped-def]
-    """One strip per quantity: a point per unit (red: outlier), the median and the
-    ±3.5 robust-z band (``median ± 3.5·MAD/0.6745``)."""
-    from matplotlib.figure import Figure
-
-    n = len(cols)
-    ncol = 3
-    nrow = math.ceil(n / ncol)
-    fig = Figure(figsize=(9.0, 1.6 * nrow + 0.4), layout="constrained")
-    bad = {(o["unit"], o["quantity"]) for o in outliers}
-    rng = np.random.default_rng(0)  # jitter only
-    for i, c in enumerate(cols):
-        ax = fig.add_subplot(nrow, ncol, i + 1)
-        x = np.array([r.values.get(c, math.nan) for r in rows], dtype=float)
-        jit = rng.uniform(-0.3, 0.3, x.size)
-        red = np.array([(r.unit, c) in bad for r in rows])
-        ax.scatter(x[~red], jit[~red], s=14, color="#1f77b4")
-        ax.scatter(x[red], jit[red], s=22, color="#d62728", marker="D")
-        fin = x[np.isfinite(x)]
-        if fin.size:
-            med = float(np.median(fin))
-            mad = float(np.median(np.abs(fin - med)))
-            ax.axvline(med, color="k", lw=0.8)
-            if mad > 0:
-                ax.axvspan(
-                    med - Z_LIMIT * mad / 0.6745,
-                    med + Z_LIMIT * mad / 0.6745,
-                    color="0.9",
-                    zorder=0,
-                )
-        label, unit = COEFFICIENTS.get(c, (c, ""))
-        ax.set_title(f"{label}" + (f" [{unit}]" if unit else ""), fontsize=8)
-        ax.set_yticks([])
-        ax.set_ylim(-0.6, 0.6)
-        ax.tick_params(labelsize=7)
-        ax.locator_params(axis="x", nbins=4)  # readable labels on a narrow spread
-        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4), useOffset=False)
-    return fig
-
-
-def build(rows: list[UnitRow], res: dict[str, Any]):  # type: ignore[no-untyped-def]
-    """The fleet record as a :class:`~gyrolab.report.document.Document`."""
-    from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
-
-    summary = [("units", str(len(rows))), ("outliers flagged", str(len(res["outliers"])))]
-    y = res.get("yield")
-    if y:
-        summary.append(
-            (
-                "yield",
-                f"{y['passed']}/{y['total']} = {100 * y['yield']:.1f} % "
-                f"(Wilson 95 %: {100 * y['wilson95'][0]:.1f}–{100 * y['wilson95'][1]:.1f} %) "
-                f"against {y['spec']} on the {y['series']} output",
-            )
-        )
-    doc = Document(
-        title=f"Fleet record — {len(rows)} units",
-        subtitle="per-unit compensation models and metrics",
-        summary=summary,
-    )
-    header = [
-        "unit",
-        *[
-            f"{s} {k}"
-            for s in ("raw", "comp.")
-            for k in ("drift p-p °/s", "bias stab. °/h", "BI °/h", "ARW °/√h", "RMS °/s")
-        ],
-    ]
-    if y:
-        header.append("verdict")
-    mrows = []
-    for r in rows:
-        cells = [r.unit] + [
-            _fmt(r.values[f"{s}.{k}"]) for s in ("raw", "compensated") for k in METRICS
-        ]
-        if y:
-            cells.append(r.verdict + (f" ({', '.join(r.failed)})" if r.failed else ""))
-        mrows.append(cells)
-    held = sum(r.held_out for r in rows)
-    sec = Section("units", "Per-unit metrics")
-    sec.blocks.append(
-        TableBlock(
-            "metrics",
-            "Metrics per unit",
-            header,
-            mrows,
-            note=f"{held} of {len(rows)} units' metrics are held out "
-            "(another run); the others are in-sample (calibration run).",
-        )
-    )
-    crow = [[r.unit] + [_fmt(r.values[c]) for c in COEFFICIENTS] for r in rows]
-    sec.blocks.append(
-        TableBlock(
-            "coefficients",
-            "Model coefficients per unit",
-            ["unit", *COEFFICIENTS],
-            crow,
-            note="f(T): the unit's GA-BP drift model, static (dT/dt = 0); "
-            "'—' where 25 °C lies outside the unit's calibrated range "
-            "(never extrapolated).",
-        )
-    )
-    doc.sections.append(sec)
-    dist = Section("distributions", "Distributions across the fleet")
-    dist.blocks.append(
-        FigureBlock(
-            "coef",
-            "Model coefficients",
-            _strip_figure(rows, list(COEFFICIENTS), res["outliers"]),
-            caption="one point per unit (red diamonds: outliers); line: "
-            "median; grey: ±3.5 robust z",
-        )
-    )
-    mcols = [f"{s}.{k}" for s in ("raw", "compensated") for k in METRICS]
-    dist.blocks.append(
-        FigureBlock(
-            "metrics",
-            "Metrics (raw, then compensated)",
-            _strip_figure(rows, mcols, res["outliers"]),
-        )
-    )
-    srows = [
-        [
-            s["quantity"],
-            str(s["n"]),
-            *(_fmt(s[k]) for k in ("median", "mad", "mean", "sd", "min", "max")),
-        ]
-        for s in res["summary"]
-    ]
-    dist.blocks.append(
-        TableBlock(
-            "summary",
-            "Summary per quantity",
-            ["quantity", "n", "median", "MAD", "mean", "sd", "min", "max"],
-            srows,
-        )
-    )
-    doc.sections.append(dist)
-    out = Section("outliers", "Outliers")
-    out.blocks.append(TextBlock(f"Rule: {res['outlier_rule']}.", "note"))
-    if len(rows) < MIN_UNITS_FOR_OUTLIERS:
-        out.blocks.append(TextBlock(f"Fewer than {MIN_UNITS_FOR_OUTLIERS} units: not screened."))
-    orows = [
-        [o["unit"], o["quantity"], _fmt(o["value"]), _fmt(o["median"]), f"{o['robust_z']:+.1f}"]
-        for o in res["outliers"]
-    ]
-    out.blocks.append(
-        TableBlock(
-            "outliers",
-            "Flagged units",
-            ["unit", "quantity", "value", "fleet median", "robust z"],
-            orows or [["none", "", "", "", ""]],
-        )
-    )
-    doc.sections.append(out)
-    if y:
-        ys = Section("yield", "Yield against the spec")
-        lim = ", ".join(f"{k} = {v:g}" for k, v in y["limits"].items()) or "none"
-        ys.blocks.append(TextBlock(f"Spec {y['spec']}, {y['series']} output; limits: {lim}."))
-        if y["not_checked"]:
-            ys.blocks.append(
-                TextBlock(
-                    "Not checked here (they need the recording; `gyrolab report --spec` checks "
-                    f"them per run): {', '.join(y['not_checked'])}.",
-                    "note",
-                )
-            )
-        doc.sections.append(ys)
-    return doc
-
-
-def write_fleet(
-    paths: list[str], out: str | Path, spec: str | None = None, force: bool = False
-) -> dict[str, Any]:
-    """Read the units, analyse them and write the fleet record (module docstring)."""
-    from gyrolab.report.html import render
-
-    dirs = find_model_dirs(paths)
-    inputs = [*paths, spec]
-    check_output(out, force, inputs=inputs, kind="dir")
-    rows = [read_unit(d) for d in dirs]
-    seen: dict[str, int] = {}
-    for r in rows:  # one name per row: the same serial fitted twice keeps both
-        seen[r.unit] = seen.get(r.unit, 0) + 1
-        if seen[r.unit] > 1:
-            r.unit = f"{r.unit}#{seen[r.unit]}"
-    res = analyse(rows, spec)
-    units = unit_table(rows, res["outliers"])
-    with atomic_dir(out, force, command="fleet", inputs=inputs) as tmp:
-        files = _write_tables(
-            tmp, {"units": units, "summary": res["summary"], "outliers": res["outliers"]}
-        )
-        (tmp / "index.html").write_text(render(build(rows, res)), encoding="utf-8")
-        doc = {**res, "units": units, "files": ["index.html", "fleet.json", *files]}
-        (tmp / "fleet.json").write_text(json.dumps(json_safe(doc), indent=1) + "\n")
-    return doc
-
-
-__all__ = ["analyse", "find_model_dirs", "robust_z", "wilson", "write_fleet"]
+__all__ = ["analyse", "find_model_dirs", "mark", "read_unit", "robust_z", "unit_table", "wilson"]

@@ -19,7 +19,7 @@ from gyrolab import __version__
 from gyrolab.record.reader import Recording
 from gyrolab.report import figures as F
 from gyrolab.report.causal_section import causal_headline_section
-from gyrolab.report.data import METRIC_ROWS, AllanData, ReportData
+from gyrolab.report.data import CAUSAL_LABEL, METRIC_ROWS, AllanData, ReportData, offline_label
 from gyrolab.report.document import Document, FigureBlock, Section, TableBlock, TextBlock
 from gyrolab.report.model_section import model_section
 from gyrolab.report.record_sections import identity_section, log_section, plateau_noise_section
@@ -230,16 +230,23 @@ def performance_section(data: ReportData) -> Section:
     """Allan deviation of the raw (and compensated) averages, the metrics, the baselines."""
     metrics, block_s, mr = data.metrics, data.block_s, data.model
     sec = Section("performance", "Performance: Allan deviation and metrics")
-    colors = {"raw": F.RAW_COLOR, "compensated": F.COMP_COLOR}
-    curves = [allan_figure_curve(a, colors.get(a.label, F.RAW_COLOR)) for a in data.allan]
+    colors = {"raw": F.RAW_COLOR, "causal": F.COMP_COLOR, "compensated": F.OFFLINE_COLOR}
+    curves = [allan_figure_curve(a, colors.get(a.key, F.RAW_COLOR)) for a in data.allan]
     if curves:
         notes = [allan_caption(a) for a in data.allan]
         sec.blocks.append(
             FigureBlock(
                 "allan",
-                "Allan deviation",
+                "Allan deviation: " + ", ".join(a.label for a in data.allan),
                 F.allan(curves),
-                f"Overlapping Allan deviation of the {block_s:g} s averages, with 1σ confidence "
+                (
+                    f"The compensated output is the {CAUSAL_LABEL} (what the gyro delivers in "
+                    "real time); the offline reconstruction is low-passed, so its curve is not "
+                    "comparable at short τ. "
+                    if mr is not None
+                    else ""
+                )
+                + f"Overlapping Allan deviation of the {block_s:g} s averages, with 1σ confidence "
                 "bands (Greenhall EDF); dotted: angle random walk line (−½ slope), drawn over "
                 "the τ it was identified on; dashed: bias-instability floor 0.664·B (IEEE 952) "
                 "over the flat stretch, ▼ its minimum. Terms are read only at τ ≤ T/10 and where "
@@ -252,11 +259,13 @@ def performance_section(data: ReportData) -> Section:
         sec.blocks.append(TextBlock("Run too short for an Allan deviation.", "note"))
     cols = [("raw", "raw")]
     if mr is not None:
-        cols.append(("compensated", "compensated"))
+        if "causal" in metrics:
+            cols.append((CAUSAL_LABEL, "causal"))
         if "compensated_drift_only" in metrics:
-            cols.append(("drift only (GA-BP)", "compensated_drift_only"))
+            cols.append(("GA-BP drift only (causal)", "compensated_drift_only"))
         if "compensated_streaming" in metrics:
-            cols.append(("streaming (causal)", "compensated_streaming"))
+            cols.append(("GA-BP streaming (causal, full rate)", "compensated_streaming"))
+        cols.append((offline_label(metrics), "compensated"))
     if data.range_note:
         sec.blocks.append(TextBlock(data.range_note, "note"))
     tab = metrics_table(metrics, cols)
@@ -265,11 +274,10 @@ def performance_section(data: ReportData) -> Section:
     )
     sec.blocks.append(tab)
     if mr is not None and metrics.get("baselines"):
-        bcols = [
-            ("GPSO-VMD + GA-BP", "compensated"),
-            ("GA-BP drift only", "compensated_drift_only"),
-        ]
+        bcols = [(CAUSAL_LABEL, "causal")] if "causal" in metrics else []
+        bcols += [("GA-BP drift only", "compensated_drift_only")]
         bcols += [(f"baseline: {n}", f"baselines.{n}") for n in metrics["baselines"]]
+        bcols += [("GPSO-VMD + GA-BP, " + offline_label(metrics), "compensated")]
         bt = metrics_table(metrics, [("raw", "raw")] + bcols)
         bt.key, bt.title = "baselines", "Baseline comparison"
         bt.note = (
@@ -300,7 +308,14 @@ def signoff_section(data: ReportData) -> Section:
                     for x in verdict.lines
                 ],
                 note=f"Overall verdict: {verdict.word}. Metric limits apply to the "
-                f"{verdict.series} output; a limit that could not be measured fails.",
+                f"{verdict.series} output"
+                + (
+                    " (raw − drift estimated from past temperature readings: what the gyro "
+                    "delivers in real time, full bandwidth)"
+                    if verdict.series == "causal"
+                    else ""
+                )
+                + "; a limit that could not be measured fails.",
             )
         )
     else:

@@ -77,11 +77,6 @@ class _Flow:
         return self.page
 
 
-def _clip(cell: str, n: int) -> str:
-    cell = str(cell).replace("\n", " ")
-    return cell if len(cell) <= n else cell[: max(1, n - 1)] + "…"
-
-
 def _is_num(cell: str) -> bool:
     try:
         float(str(cell).replace("−", "-"))
@@ -90,60 +85,155 @@ def _is_num(cell: str) -> bool:
     return True
 
 
-def _col_chars(block: TableBlock) -> list[int]:
-    """Characters per column: the longest cell, shrunk to fit the page width."""
-    ncol = max(1, len(block.header))
-    # bold header characters are ~15 % wider than the body's
-    widest = [int(len(str(h)) * 1.15) + 1 for h in block.header] or [1]
-    for r in block.rows:
-        for i, c in enumerate(r[:ncol]):
-            widest[i] = max(widest[i], len(str(c)))
-    budget = int((RIGHT - LEFT) / CHAR_W) - PAD * ncol
-    chars = [max(3, min(w, 90)) for w in widest]
+def _numeric_column(rows: list[list[str]], i: int) -> bool:
+    """Most of column ``i``'s filled cells are numbers: it is right-aligned."""
+    filled = [str(r[i]) for r in rows if i < len(r) and str(r[i]).strip() not in ("", "—")]
+    return bool(filled) and 2 * sum(_is_num(c) for c in filled) >= len(filled)
+
+
+HEAD_W = 1.15  # bold header characters are ~15 % wider than the body's
+LINE_STEP = 0.0107  # one more line of 7.5 pt text in a cell (linespacing 1.2)
+
+
+def _token(text: str) -> int:
+    """The longest run of characters a cell may not be broken in (a word, a number)."""
+    return max((len(w) for w in str(text).split()), default=1)
+
+
+def _least(header: list[str], rows: list[list[str]], budget: int) -> list[int]:
+    """The narrowest each column may be: its longest word (wrapped cells break between
+    words only), or a third of the page for a longer word (which then breaks)."""
+    least = [int(_token(h) * HEAD_W) + 1 for h in header]
+    for r in rows:
+        for i, c in enumerate(r[: len(header)]):
+            least[i] = max(least[i], _token(c))
+    return [max(3, min(m, budget // 3)) for m in least]
+
+
+def _widths(header: list[str], rows: list[list[str]], budget: int) -> list[int]:
+    """Characters per column: each column's longest cell, the widest narrowed first until
+    the table fits ``budget``, never below :func:`_least`."""
+    natural = [int(len(str(h)) * HEAD_W) + 1 for h in header]
+    for r in rows:
+        for i, c in enumerate(r[: len(header)]):
+            natural[i] = max(natural[i], len(str(c)))
+    least = _least(header, rows, budget)
+    chars = [max(n, m) for n, m in zip(natural, least, strict=True)]
     while sum(chars) > budget:
-        i = max(range(ncol), key=lambda k: chars[k])
-        chars[i] -= 1
+        wider = [k for k in range(len(chars)) if chars[k] > least[k]]
+        if not wider:
+            break  # the words do not fit: _column_groups splits such a table
+        chars[max(wider, key=lambda k: chars[k])] -= 1  # the widest first: even columns
     return chars
 
 
+def _pad(least: list[int], budget: int) -> int:
+    """Characters between columns: ``PAD``, or 2 where that lets the columns fit."""
+    return PAD if sum(least) + PAD * len(least) <= budget else 2
+
+
+def _column_groups(block: TableBlock, budget: int) -> list[list[int]]:
+    """The columns each part of a too-wide table shows: the first column (the row's name)
+    in every part, the others shared out evenly among as few parts as fit side by side at
+    their narrowest."""
+    ncol = len(block.header)
+    rows = [list(r) + [""] * (ncol - len(r)) for r in block.rows]
+    least = _least(block.header, rows, budget)
+    if sum(least) + _pad(least, budget) * ncol <= budget or ncol < 3:
+        return [list(range(ncol))]
+
+    def fits(cols: list[int]) -> bool:
+        return sum(least[k] + 2 for k in cols) <= budget
+
+    rest = list(range(1, ncol))
+    for n in range(2, ncol):
+        size = -(-len(rest) // n)  # ceil: parts of equal size, the last one smaller
+        parts = [[0, *rest[i : i + size]] for i in range(0, len(rest), size)]
+        if all(fits(p) for p in parts):
+            return parts
+    return [[0, c] for c in rest]
+
+
+def _wrap(cell: str, n: int) -> str:
+    """``cell`` on lines of at most ``n`` characters, broken between words (within a word
+    only when the word alone is longer): every character of it is kept."""
+    text = str(cell).replace("\n", " ")
+    if len(text) <= n:
+        return text
+    return "\n".join(
+        textwrap.wrap(text, n, break_on_hyphens=False, break_long_words=_token(text) > n)
+    )
+
+
 def _table(flow: _Flow, block: TableBlock, number: int) -> None:
-    """Caption above, header, rows; continues on the next page when it runs out of room."""
-    rows = block.rows or [["(none)"] + [""] * (len(block.header) - 1)]
-    chars = _col_chars(block)
+    """Caption above, header, rows. Nothing is cut: a long cell wraps within its column; a
+    table too wide for the page is shown in parts of its columns (the first column
+    repeated, "columns a–b of n"); a table longer than the room left continues on the next
+    page with its header repeated."""
+    budget = int((RIGHT - LEFT) / CHAR_W)
+    groups = _column_groups(block, budget)
+    for part, cols in enumerate(groups):
+        sub = TableBlock(
+            block.key,
+            block.title,
+            [block.header[c] for c in cols],
+            [[(list(r) + [""] * len(block.header))[c] for c in cols] for r in block.rows],
+            block.note if part == len(groups) - 1 else "",
+            block.align_numbers,
+        )
+        which = ""
+        if len(groups) > 1:
+            which = f" (columns {cols[1] + 1}–{cols[-1] + 1} of {len(block.header)})"
+        _table_part(flow, sub, f"Table {number}. {block.title}{which}", budget)
+
+
+def _table_part(flow: _Flow, block: TableBlock, caption: str, budget: int) -> None:
+    """One table whose columns fit the page (:func:`_table`)."""
+    ncol = max(1, len(block.header))
+    rows = block.rows or [["(none)"] + [""] * (ncol - 1)]
+    pad = _pad(_least(block.header, rows, budget), budget)
+    chars = _widths(block.header, rows, budget - pad * ncol)
     xs = [LEFT]
     for c in chars[:-1]:
-        xs.append(xs[-1] + (c + PAD) * CHAR_W)
-    width = sum((c + PAD) * CHAR_W for c in chars)
-    numeric = [
-        block.align_numbers and any(_is_num(str(r[i])) for r in block.rows if i < len(r))
-        for i in range(len(chars))
-    ]
+        xs.append(xs[-1] + (c + pad) * CHAR_W)
+    width = sum((c + pad) * CHAR_W for c in chars)
+    numeric = [block.align_numbers and _numeric_column(block.rows, i) for i in range(ncol)]
+
+    def cells(row: list[str], head: bool) -> list[str]:
+        w = [int(c / HEAD_W) if head else c for c in chars]
+        return [_wrap(c, w[i]) for i, c in enumerate(list(row)[:ncol])]
+
+    def height(wrapped: list[str]) -> float:
+        return ROW_H + LINE_STEP * (max((c.count("\n") for c in wrapped), default=0))
+
+    head = cells(block.header, True)
+    body = [cells(r, False) for r in rows]
     note = textwrap.wrap(block.note, 115) if block.note else []
     start = 0
-    while start < len(rows):
-        # caption + header + at least 3 rows (or all) stay together
-        first = min(len(rows) - start, 3)
-        fig = flow.need(0.03 + ROW_H * (1 + first))
+    while start < len(body):
+        # caption + header + the first rows (up to 3) stay together
+        first = sum(height(r) for r in body[start : start + 3])
+        fig = flow.need(0.03 + height(head) + first)
         cont = " (continued)" if start else ""
-        fig.text(
-            LEFT,
-            flow.y,
-            f"Table {number}. {block.title}{cont}",
-            fontsize=9.5,
-            weight="bold",
-            va="top",
-        )
+        fig.text(LEFT, flow.y, f"{caption}{cont}", fontsize=9.5, weight="bold", va="top")
         flow.y -= 0.022
-        fit = int((flow.room() - ROW_H) // ROW_H)
-        chunk = rows[start : start + max(1, fit)]
-        for r_i, row in enumerate([block.header, *chunk]):
-            y = flow.y - r_i * ROW_H
+        room = flow.room() - height(head)
+        chunk, used = [], 0.0
+        while start + len(chunk) < len(body):
+            h = height(body[start + len(chunk)])
+            if chunk and used + h > room:
+                break
+            chunk.append(body[start + len(chunk)])
+            used += h
+        y = flow.y
+        for r_i, row in enumerate([head, *chunk]):
+            h = height(row)
             if r_i == 0:
                 fig.add_artist(
                     Rectangle(
-                        (LEFT - 0.004, y - ROW_H),
+                        (LEFT - 0.004, y - h),
                         width,
-                        ROW_H,
+                        h,
                         transform=fig.transFigure,
                         color="#e8eef5",
                         lw=0,
@@ -153,23 +243,25 @@ def _table(flow: _Flow, block: TableBlock, number: int) -> None:
                 fig.add_artist(_hline(fig, LEFT - 0.004, LEFT - 0.004 + width, y))
             if not block.rows and r_i > 0:  # an empty table says so, across its width
                 fig.text(xs[0], y - ROW_H / 2, "(none)", fontsize=7.5, va="center")
+                y -= h
                 continue
-            for c_i, cell in enumerate(list(row)[: len(chars)]):
-                text = _clip(cell, chars[c_i])
+            for c_i, text in enumerate(row):
                 right = numeric[c_i] and (r_i == 0 or _is_num(text))
                 x = xs[c_i] + chars[c_i] * CHAR_W if right else xs[c_i]
                 fig.text(
                     x,
-                    y - ROW_H / 2,
+                    y - (ROW_H - 0.0089) / 2,
                     text,
                     fontsize=7.5,
-                    va="center",
+                    va="top",
                     ha="right" if right else "left",
                     weight="bold" if r_i == 0 else "normal",
+                    linespacing=1.2,
                 )
-        flow.y -= ROW_H * (len(chunk) + 1)
+            y -= h
+        flow.y = y
         start += len(chunk)
-        if start >= len(rows) and note:
+        if start >= len(body) and note:
             if flow.room() < LINE_H * len(note) + 0.005:
                 flow.new_page()
             fig = flow.page

@@ -102,6 +102,13 @@ def run_log_rows(rec: Recording) -> tuple[list[list[str]], dict[str, int]]:
     return [r for _, r in rows], counts
 
 
+def _step_number(step: Any) -> str:
+    """A profile step as people count it, from 1 (the recording counts from 0; −1, an
+    event of no step, is left blank)."""
+    ok = isinstance(step, int) and not isinstance(step, bool) and step >= 0
+    return str(step + 1) if ok else ""
+
+
 def event_rows(rec: Recording) -> list[list[str]]:
     out = []
     for e in rec.events:
@@ -110,7 +117,7 @@ def event_rows(rec: Recording) -> list[list[str]]:
             [
                 hms(float(e.get("t", 0.0))),
                 str(e.get("event", "")),
-                str(e.get("step", "")),
+                _step_number(e.get("step")),
                 fmt(sp, 4) if sp is not None else "",
                 str(e.get("detail", "")),
             ]
@@ -219,7 +226,7 @@ def identity_section(rec: Recording, calibration_run: str | None) -> Section:
                 "profile-steps",
                 "Profile steps (as commanded)",
                 ["#"] + cols,
-                [[str(i)] + [fmt(s.get(c, "")) for c in cols] for i, s in enumerate(steps)],
+                [[str(i)] + [fmt(s.get(c, "")) for c in cols] for i, s in enumerate(steps, 1)],
             )
         )
     sec.blocks.append(

@@ -8,6 +8,7 @@ import os
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_file, check_output
 from gyrolab.profiles.profile import load_profile
+from gyrolab.sampling import DEFAULT_RATE_HZ
 from gyrolab.sim.family import unit_family
 from gyrolab.sim.model import apply_effect_args, load_model, nominal_model
 from gyrolab.sim.simulate import axis_physics, simulate_run
@@ -22,7 +23,7 @@ def simulate_file(
     *,
     model_path: str | None = None,
     axis_model_paths: tuple[str, ...] = (),
-    rate_hz: float = 100.0,
+    rate_hz: float = DEFAULT_RATE_HZ,
     seed: int = 0,
     units: int = 1,
     effects: tuple[str, ...] = (),

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrolab.sampling import DEFAULT_RATE_HZ
 from gyrolab.sim.effects import EFFECTS, BlockContext, Effect, self_heating_c
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.noise import FlickerStream, effect_rng
@@ -64,7 +65,7 @@ class Physics:
         self,
         model: SimModel,
         *,
-        rate_hz: float = 100.0,
+        rate_hz: float = DEFAULT_RATE_HZ,
         seed: int = 0,
         ambient_c: float = 25.0,
         block_s: float = 1.0,

@@ -26,6 +26,7 @@ from gyrolab.profiles.profile import Profile
 from gyrolab.progress import progress
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
 from gyrolab.record.writer import RecordingWriter
+from gyrolab.sampling import DEFAULT_RATE_HZ
 from gyrolab.sim.family import Unit
 from gyrolab.sim.identities import AGILENT_34401A_IDN, WATLOW_F4
 from gyrolab.sim.model import SimModel
@@ -118,7 +119,7 @@ def simulate_run(
     profile: Profile,
     model: SimModel,
     *,
-    rate_hz: float = 100.0,
+    rate_hz: float = DEFAULT_RATE_HZ,
     seed: int = 0,
     start_time: str = DEFAULT_START,
     show_progress: bool = True,

@@ -33,10 +33,10 @@ from gyrolab.instruments.roles import (
     InstrumentError,
     InstrumentReport,
     InstrumentTimeout,
-    LimitError,
     ThermometerReading,
 )
 from gyrolab.instruments.scpi import parse_error_reply, scpi_reports
+from gyrolab.instruments.settings import Setting, Settings, one_of
 from gyrolab.pt100 import R0_OHM, cvd_temperature
 
 NAME = "34401A"
@@ -58,10 +58,11 @@ class Agilent34401AConfig:
     calibration_due: str = ""
 
 
-class Agilent34401A:
-    """34401A driver (PyMeasure style: settings and readings below, one SCPI line each).
+class Agilent34401A(Settings):
+    """34401A driver (PyMeasure style: settings declared below, readings one SCPI line each).
 
-    Settings
+    Settings (:class:`~gyrolab.instruments.settings.Setting`: checked when the driver is
+    created, sent by :meth:`configure`)
         ``range_ohm``   ``CONF:FRES <range>``  — 100, 1e3, 10e3, 100e3, 1e6, 10e6, 100e6 Ω
         ``nplc``        ``FRES:NPLC <n>``      — 0.02, 0.2, 1, 10, 100 power-line cycles
     Readings
@@ -85,6 +86,24 @@ class Agilent34401A:
     SERIAL_STOP_BITS = "two"
     SERIAL_FLOW_CONTROL = "dtr_dsr"
 
+    range_ohm = Setting(
+        "CONF:FRES {value:g}",
+        "4-wire resistance range, Ω (the 1 kΩ range covers a PT100 from -200 to +850 °C)",
+        label="range",
+        unit="Ω",
+        validator=one_of,
+        values="RANGES_OHM",
+        cast=float,
+    )
+    nplc = Setting(
+        "FRES:NPLC {value:g}",
+        "integration time in power-line cycles (10 rejects mains pickup)",
+        label="NPLC",
+        validator=one_of,
+        values="NPLC_VALUES",
+        cast=float,
+    )
+
     def __init__(
         self,
         resource: str | Any,
@@ -96,12 +115,8 @@ class Agilent34401A:
         r0_ohm: float = R0_OHM,
         baud_rate: int = 9600,
     ) -> None:
-        if range_ohm not in self.RANGES_OHM:
-            raise LimitError(self.NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
-        if nplc not in self.NPLC_VALUES:
-            raise LimitError(self.NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
-        self.range_ohm = float(range_ohm)
-        self.nplc = float(nplc)
+        self.hold("range_ohm", range_ohm)  # LimitError before anything is opened or sent
+        self.hold("nplc", nplc)
         self.r0_ohm = r0_ohm
         self.timeout_s = timeout_s
         self._rm = None
@@ -239,17 +254,12 @@ class Agilent34401A:
         self.write("*CLS")
 
     def configure(self, range_ohm: float | None = None, nplc: float | None = None) -> None:
-        """``CONF:FRES <range>`` and ``FRES:NPLC <n>``, then check the error queue."""
-        if range_ohm is not None:
-            if range_ohm not in self.RANGES_OHM:
-                raise LimitError(self.NAME, f"range {range_ohm} Ω is not one of {self.RANGES_OHM}")
-            self.range_ohm = float(range_ohm)
-        if nplc is not None:
-            if nplc not in self.NPLC_VALUES:
-                raise LimitError(self.NAME, f"NPLC {nplc} is not one of {self.NPLC_VALUES}")
-            self.nplc = float(nplc)
-        self.write(f"CONF:FRES {self.range_ohm:g}")
-        self.write(f"FRES:NPLC {self.nplc:g}")
+        """``CONF:FRES <range>`` and ``FRES:NPLC <n>`` (new values checked before either is
+        sent), then check the error queue."""
+        for name, value in (("range_ohm", range_ohm), ("nplc", nplc)):
+            if value is not None:
+                self.hold(name, value)
+        self.send("range_ohm", "nplc")
         self.check_errors()
 
     def connect(self) -> str:

@@ -38,10 +38,21 @@ from gyrolab.instruments.roles import (
     InstrumentError,
     InstrumentReport,
     InstrumentTimeout,
-    LimitError,
 )
+from gyrolab.instruments.settings import Setting, finite_within, one_of
 
 NAME = "ESPEC"
+MODES = ("CONSTANT", "STANDBY")  # the modes gyrolab sets (MODE? also answers OFF, RUN)
+
+
+def parse_temp(reply: str) -> tuple[float, float, float, float]:
+    """A ``TEMP?`` reply: process value, setpoint, upper and lower limit, °C (ValueError
+    if it is not four numbers)."""
+    f = [p.strip() for p in reply.split(",")]
+    if len(f) < 4:
+        raise ValueError(f"reply has {len(f)} fields, not 4")
+    pv, sp, hi, lo = (float(x) for x in f[:4])
+    return pv, sp, hi, lo
 
 
 @dataclass(frozen=True)
@@ -57,9 +68,40 @@ class EspecConfig:
 
 class EspecChamber:
     """ESPEC P-300/SCP-220 in the chamber role. ``resource``: a VISA resource string or an
-    open pyvisa-like resource (tests)."""
+    open pyvisa-like resource (tests).
 
+    Settings (:class:`~gyrolab.instruments.settings.Setting`)
+        ``setpoint_c``  ``TEMP, S<x.x>`` / ``TEMP?`` field 2 — inside the bench limits and
+                        the controller's range (``TEMP?`` fields 3-4, read at connect)
+        ``mode``        ``MODE, <mode>`` / ``MODE?`` — CONSTANT or STANDBY
+    """
+
+    NAME = NAME
     name = "oven"
+
+    setpoint_c = Setting(
+        "TEMP, S{value:.1f}",
+        "temperature setpoint, °C (one decimal)",
+        get="TEMP?",
+        label="setpoint",
+        unit="°C",
+        validator=finite_within,
+        values=lambda d: [
+            ("bench limits", d.setpoint_limits_c),
+            ("controller range", d.controller_range_c or d.setpoint_limits_c),
+        ],
+        set_process=lambda d, v: round(float(v), 1),
+        get_process=lambda d, reply: d.temp(reply)[1],
+    )
+    mode = Setting(
+        "MODE, {value}",
+        "operating mode: CONSTANT (control to the setpoint) or STANDBY (heater and "
+        "refrigerator off, controller on); MODE? also answers OFF or RUN",
+        get="MODE?",
+        validator=one_of,
+        values=MODES,
+        get_process=lambda d, reply: reply.upper(),
+    )
 
     def __init__(
         self,
@@ -122,7 +164,8 @@ class EspecChamber:
             except Exception:
                 return
 
-    def _command(self, command: str) -> None:
+    def write(self, command: str) -> None:
+        """One setting command, acknowledged ``OK…`` (else :class:`InstrumentError`)."""
         reply = self.query(command)
         if not reply.startswith("OK"):
             self._out_of_step = True
@@ -136,20 +179,14 @@ class EspecChamber:
         return parts
 
     # ------------------------------------------------------------------ readings
-    def temp(self) -> tuple[float, float, float, float]:
-        """``TEMP?``: process value, setpoint, upper and lower limit, °C."""
-        f = self._fields("TEMP?", 4)
+    def temp(self, reply: str | None = None) -> tuple[float, float, float, float]:
+        """``TEMP?`` (or its ``reply``): process value, setpoint, upper and lower limit, °C."""
+        reply = self.query("TEMP?") if reply is None else reply
         try:
-            pv, sp, hi, lo = (float(x) for x in f[:4])
-        except ValueError:
+            return parse_temp(reply)
+        except ValueError as e:
             self._out_of_step = True
-            raise InstrumentError(NAME, f"TEMP? reply {','.join(f)!r}") from None
-        return pv, sp, hi, lo
-
-    @property
-    def mode(self) -> str:
-        """``MODE?``: OFF | STANDBY | CONSTANT | RUN."""
-        return self.query("MODE?").upper()
+            raise InstrumentError(NAME, f"TEMP? reply {reply!r}: {e}") from None
 
     def alarms(self) -> int:
         """``MON?`` field 4: the number of active alarms."""
@@ -166,32 +203,20 @@ class EspecChamber:
         return ChamberReading(sp, pv, alarm)
 
     # ------------------------------------------------------------------ settings
-    def check_setpoint(self, value_c: float) -> None:
-        """:class:`LimitError` unless ``value_c`` may be sent; no I/O."""
-        if not isinstance(value_c, (int, float)) or not math.isfinite(value_c):
-            raise LimitError(NAME, f"setpoint {value_c!r} is not a finite number")
-        for what, (lo, hi) in (
-            ("bench limits", self.setpoint_limits_c),
-            ("controller range", self.controller_range_c or self.setpoint_limits_c),
-        ):
-            if not lo <= value_c <= hi:
-                raise LimitError(NAME, f"setpoint {value_c} °C outside the {what} [{lo}, {hi}] °C")
-
     def set_setpoint(self, value_c: float) -> float:
-        """``TEMP, S<x>``, control on (``MODE, CONSTANT``) and read back with ``TEMP?``."""
-        self.check_setpoint(value_c)
-        want = round(float(value_c), 1)
-        self._command(f"TEMP, S{want:.1f}")
+        """``TEMP, S<x>`` (limits first), control on (``MODE, CONSTANT``), then read back
+        with ``TEMP?``."""
+        want = type(self).setpoint_c.write(self, value_c)
         if self.mode != "CONSTANT":
-            self._command("MODE, CONSTANT")
-        _, sp, _, _ = self.temp()
+            self.mode = "CONSTANT"
+        sp = self.setpoint_c
         if abs(sp - want) > 0.05:
             raise InstrumentError(NAME, f"setpoint read-back {sp} != written {want}")
         return sp
 
     def standby(self) -> str:
         """``MODE, STANDBY`` (temperature control stopped), verified with ``MODE?``."""
-        self._command("MODE, STANDBY")
+        self.mode = "STANDBY"
         m = self.mode
         if m != "STANDBY":
             raise InstrumentError(NAME, f"mode read-back {m!r} after MODE, STANDBY")

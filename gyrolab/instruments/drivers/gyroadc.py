@@ -28,6 +28,7 @@ import serial
 from gyrolab.framing import FrameBatch, FrameDecoder
 from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 from gyrolab.instruments.roles import AdcBlock, AdcEvent, AdcRead, InstrumentReport
+from gyrolab.sampling import DEFAULT_RATE_HZ
 
 NAME = "gyro ADC"
 
@@ -40,7 +41,7 @@ class GyroAdcConfig:
     driver: str = "gyroadc"
     port: str = ""  # "/dev/ttyUSB2"
     baud_rate: int = 921600
-    sample_rate_hz: float = 100.0
+    sample_rate_hz: float = DEFAULT_RATE_HZ
     samples_per_frame: int = 10  # the ADC's frame length (docs/instruments.md)
     axes: int = 1  # values per sample (x, y, z), interleaved in each frame; 1..3
     bits: int = 24
@@ -110,7 +111,7 @@ class GyroAdcReader:
         port: str,
         *,
         samples_per_frame: int = 10,
-        rate_hz: float = 1000.0,
+        rate_hz: float = DEFAULT_RATE_HZ,
         axes: int = 1,
         temperature: tuple[float, float] | None = None,
         baudrate: int = 921600,

@@ -26,6 +26,16 @@ from typing import Any
 from gyrolab.instruments.drivers.agilent34401a import Agilent34401AThermometer, open_thermometer
 from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 from gyrolab.instruments.roles import LimitError
+from gyrolab.instruments.settings import Setting
+
+OCOMP_MAX_RANGE_OHM = 100e3
+
+
+def offset_compensable(on: bool, range_ohm: float) -> bool:
+    """``on`` unless offset compensation is asked for on a range it does not support."""
+    if on and range_ohm > OCOMP_MAX_RANGE_OHM:
+        raise ValueError(f"needs a range <= 100 kΩ, not {range_ohm:g}")
+    return on
 
 
 @dataclass(frozen=True)
@@ -50,23 +60,26 @@ class Keysight34465A(Agilent34401AThermometer):
     NAME = "34465A"
     MODEL_MARK = "34465A"
     NPLC_VALUES = (0.02, 0.06, 0.2, 1.0, 10.0, 100.0)
-    OCOMP_MAX_RANGE_OHM = 100e3
+
+    offset_compensation = Setting(
+        "FRES:OCOM {value}",
+        "offset compensation (current source on and off, thermal EMFs cancel), 100 Ω … "
+        "100 kΩ ranges",
+        validator=offset_compensable,
+        values=lambda d: d.range_ohm,
+        cast=bool,
+        set_process=lambda d, on: "ON" if on else "OFF",
+    )
 
     def __init__(self, resource: Any, *, config: Any, **kw: Any) -> None:
         super().__init__(resource, config=config, **kw)
-        self.offset_compensation = bool(getattr(config, "offset_compensation", True))
-        if self.offset_compensation and self.range_ohm > self.OCOMP_MAX_RANGE_OHM:
-            raise LimitError(
-                self.NAME, f"offset compensation needs a range <= 100 kΩ, not {self.range_ohm:g}"
-            )
+        self.hold("offset_compensation", bool(getattr(config, "offset_compensation", True)))
 
     def configure(self, range_ohm: float | None = None, nplc: float | None = None) -> None:
         """``CONF:FRES``, ``FRES:NPLC``, ``FRES:OCOM``, then the error queue."""
         if range_ohm is not None or nplc is not None:
             raise LimitError(self.NAME, "range and NPLC are set when the driver is created")
-        self.write(f"CONF:FRES {self.range_ohm:g}")
-        self.write(f"FRES:NPLC {self.nplc:g}")
-        self.write(f"FRES:OCOM {'ON' if self.offset_compensation else 'OFF'}")
+        self.send("range_ohm", "nplc", "offset_compensation")
         self.check_errors()
 
     def describe(self) -> dict[str, Any]:

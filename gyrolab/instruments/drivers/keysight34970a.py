@@ -28,10 +28,15 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from gyrolab.instruments.drivers.agilent34401a import Agilent34401AThermometer, open_thermometer
+from gyrolab.instruments.drivers.agilent34401a import (
+    Agilent34401A,
+    Agilent34401AThermometer,
+    open_thermometer,
+)
 from gyrolab.instruments.registry import DriverSpec, OpenContext, register
 from gyrolab.instruments.roles import InstrumentError, LimitError, ThermometerReading
 from gyrolab.instruments.scpi import scpi_reports
+from gyrolab.instruments.settings import Setting
 from gyrolab.pt100 import cvd_temperature
 
 # Multiplexer card → the offset of the sense channel paired with a 4-wire channel n
@@ -76,24 +81,24 @@ def channel_list(channels: tuple[int, ...] | list[int]) -> str:
     return "(@" + ",".join(parts) + ")"
 
 
-def check_channels(channels: tuple[int, ...], card: str, name: str = "34970A") -> None:
-    """:class:`LimitError` unless every channel is a 4-wire source channel of ``card``
-    in slot 1-3 (1xx/2xx/3xx), each once."""
+def four_wire_channels(channels: tuple[int, ...], card: str) -> tuple[int, ...]:
+    """``channels`` if every one is a 4-wire source channel of ``card`` in slot 1-3
+    (1xx/2xx/3xx), each once (a settings validator: ``ValueError`` otherwise)."""
     off = FOUR_WIRE_PAIR_OFFSET.get(card)
     if off is None:
-        raise LimitError(name, f"card {card!r} is not one of {sorted(FOUR_WIRE_PAIR_OFFSET)}")
+        raise ValueError(f"need a card of {sorted(FOUR_WIRE_PAIR_OFFSET)}, not card {card!r}")
     if not channels:
-        raise LimitError(name, "no channels to scan")
+        raise ValueError("are no channels to scan")
     if len(set(channels)) != len(channels):
-        raise LimitError(name, f"channels {list(channels)} name a channel twice")
+        raise ValueError("name a channel twice")
     for ch in channels:
         slot, n = divmod(int(ch), 100)
         if not (1 <= slot <= 3 and 1 <= n <= off):
-            raise LimitError(
-                name,
-                f"channel {ch}: 4-wire channels of a {card} are s01..s{off:02d} in slot s=1..3 "
-                f"(channel n is paired with its sense channel n+{off})",
+            raise ValueError(
+                f"hold channel {ch}: 4-wire channels of a {card} are s01..s{off:02d} in slot "
+                f"s=1..3 (channel n is paired with its sense channel n+{off})"
             )
+    return channels
 
 
 class Keysight34970A(Agilent34401AThermometer):
@@ -109,23 +114,38 @@ class Keysight34970A(Agilent34401AThermometer):
     SERIAL_FLOW_CONTROL = "xon_xoff"
     name = "scanner"
 
+    # the meter's settings, on the scan list's channels
+    range_ohm = Agilent34401A.range_ohm.with_command("CONF:FRES {value:g},{drv.scan_list}")
+    nplc = Agilent34401A.nplc.with_command("FRES:NPLC {value:g},{drv.scan_list}")
+    channels = Setting(
+        "ROUT:SCAN {value}",
+        "the 4-wire channels one READ? sweeps, in order (docs/instruments.md)",
+        validator=four_wire_channels,
+        values=lambda d: d.card,
+        cast=tuple,
+        set_process=lambda d, chans: channel_list(chans),
+    )
+
     def __init__(self, resource: Any, *, config: Keysight34970AConfig, **kw: Any) -> None:
-        check_channels(tuple(config.channels), config.card, self.NAME)
+        self.card = config.card
+        self.hold("channels", tuple(int(c) for c in config.channels))  # before any I/O
         kw.setdefault("range_ohm", config.range_ohm)
         kw.setdefault("nplc", config.nplc)
         kw.setdefault("r0_ohm", config.r0_ohm)
         super().__init__(resource, config=config, **kw)
-        self.channels = tuple(int(c) for c in config.channels)
+
+    @property
+    def scan_list(self) -> str:
+        """The channels as a SCPI channel list, ``(@101:103)``."""
+        return channel_list(self.channels)
 
     def configure(self, range_ohm: float | None = None, nplc: float | None = None) -> None:
         """``CONF:FRES``, ``FRES:NPLC`` and ``ROUT:SCAN`` on the channel list, then the scan
         list's size read back and the error queue checked."""
         if range_ohm is not None or nplc is not None:
             raise LimitError(self.NAME, "range and NPLC are set when the driver is created")
-        chans = channel_list(self.channels)
-        self.write(f"CONF:FRES {self.range_ohm:g},{chans}")
-        self.write(f"FRES:NPLC {self.nplc:g},{chans}")
-        self.write(f"ROUT:SCAN {chans}")
+        chans = self.scan_list
+        self.send("range_ohm", "nplc", "channels")
         size = self.query("ROUT:SCAN:SIZE?")
         try:
             n = int(float(size))

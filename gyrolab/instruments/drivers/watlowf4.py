@@ -69,6 +69,7 @@ from gyrolab.instruments.roles import (
     InstrumentTimeout,
     LimitError,
 )
+from gyrolab.instruments.settings import Setting, finite_within
 
 NAME = "WatlowF4"
 
@@ -195,11 +196,10 @@ class ModbusStats:
 class WatlowF4:
     """Watlow F4 over Modbus RTU.
 
-    Settings
-        ``setpoint_c``        reg 300, write + read-back; limits checked first
+    Settings (:class:`~gyrolab.instruments.settings.Setting` on holding registers)
+        ``setpoint_c``        reg 300, °C: limits checked first, written, read back
     Readings
         ``process_value_c``   reg 100, chamber air temperature, °C
-        ``setpoint_c``        reg 300, °C
         ``status``            regs 200, 103, 107: :class:`OvenStatus`
         ``event(n)``          reg 2000 + 10(n − 1), event output n (``set_event``)
         ``decimals``          reg 606, implied decimal places
@@ -210,6 +210,22 @@ class WatlowF4:
     ``silence_s`` (default ``timeout_s``): after a failed transaction, how long the line
     must stay quiet before the next request (late replies are discarded meanwhile).
     """
+
+    NAME = NAME
+
+    setpoint_c = Setting(
+        REG_SETPOINT,
+        "static setpoint of loop 1, °C (register 300, in the controller's units and decimal "
+        "places: 901, 606)",
+        get=REG_SETPOINT,
+        label="setpoint",
+        unit="°C",
+        validator=finite_within,
+        values=lambda d: [("bench limits", d.setpoint_limits_c)],
+        set_process=lambda d, v: d.register_value(v),
+        get_process=lambda d, raw: d.celsius(raw),
+        readback=True,
+    )
 
     def __init__(
         self,
@@ -384,29 +400,26 @@ class WatlowF4:
             self._units = u
         return self._units
 
-    def _to_c(self, raw: int) -> float:
+    def celsius(self, raw: int) -> float:
+        """A temperature register's raw value in °C (reads 606 and 901 once)."""
         scale = 10**self.decimals  # read 606 before 901, always in that order
         v = raw / scale
         return v if self.units == UNITS_C else (v - 32.0) * 5.0 / 9.0
 
-    def _to_raw(self, value_c: float) -> int:
+    def register_value(self, value_c: float) -> int:
+        """The raw value of a temperature register for ``value_c`` (reads 606 and 901
+        once, never writes); :class:`LimitError` if it does not fit 16 bits."""
         scale = 10**self.decimals
         v = value_c if self.units == UNITS_C else value_c * 9.0 / 5.0 + 32.0
-        return round(v * scale)
+        raw = round(v * scale)
+        if not -32768 <= raw <= 32767:
+            raise LimitError(NAME, f"setpoint {value_c} °C does not fit a 16-bit register")
+        return raw
 
     @property
     def process_value_c(self) -> float:
         """Chamber air temperature, °C (reg 100)."""
-        return self._to_c(self.read_register(REG_PROCESS_VALUE))
-
-    @property
-    def setpoint_c(self) -> float:
-        """Current setpoint, °C (reg 300)."""
-        return self._to_c(self.read_register(REG_SETPOINT))
-
-    @setpoint_c.setter
-    def setpoint_c(self, value_c: float) -> None:
-        self.set_setpoint(value_c)
+        return self.celsius(self.read_register(REG_PROCESS_VALUE))
 
     @property
     def profile_mode(self) -> int:
@@ -435,28 +448,12 @@ class WatlowF4:
             raise InstrumentError(NAME, msg)
 
     # ------------------------------------------------------------------ settings
-    def check_setpoint(self, value_c: float) -> None:
-        """Raise :class:`LimitError` if ``value_c`` may not be sent; no I/O at all."""
-        lo, hi = self.setpoint_limits_c
-        if not isinstance(value_c, (int, float)) or not math.isfinite(value_c):
-            raise LimitError(NAME, f"setpoint {value_c!r} is not a finite number")
-        if not lo <= value_c <= hi:
-            raise LimitError(NAME, f"setpoint {value_c} °C outside the limits [{lo}, {hi}] °C")
-
     def set_setpoint(self, value_c: float) -> float:
-        """Command a new setpoint (°C) and verify it by reading it back.
+        """Command a new setpoint (°C) and verify it by reading it back (``setpoint_c``).
 
         Limits are checked before anything is sent (:class:`LimitError`). Returns the
         setpoint the controller now holds, °C (quantized to its decimal places)."""
-        self.check_setpoint(value_c)
-        raw = self._to_raw(value_c)  # may read 606/901 (reads only, never a write)
-        if not -32768 <= raw <= 32767:
-            raise LimitError(NAME, f"setpoint {value_c} °C does not fit a 16-bit register")
-        self.write_register(REG_SETPOINT, raw)
-        back = self.read_register(REG_SETPOINT)
-        if back != raw:
-            raise InstrumentError(NAME, f"setpoint read-back {back} != written {raw}")
-        return self._to_c(back)
+        return self.celsius(type(self).setpoint_c.write(self, value_c))
 
     def connect(self) -> dict[str, Any]:
         """Read the configuration registers; returns them (for the ``bench`` metadata)."""
@@ -531,8 +528,9 @@ class WatlowF4Chamber(WatlowF4):
         if mode in (PROFILE_RUNNING, PROFILE_PAUSED):
             # A profile drives the loop, not register 300: our setpoints would do nothing.
             raise InstrumentError(
-                NAME, f"a profile is running on the controller (register 200 = {mode}): "
-                "end it at the controller first"
+                NAME,
+                f"a profile is running on the controller (register 200 = {mode}): "
+                "end it at the controller first",
             )
         ev = self.config.control_event
         if ev:

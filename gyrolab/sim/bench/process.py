@@ -75,7 +75,7 @@ class BenchRecipe:
             kw["axis_physics"] = axis_physics(
                 model, list(self.axis_models), self.rate_hz, self.seed, self.ambient_c
             )
-        return SimBench(seed=self.seed, adc_rate_hz=self.rate_hz, ambient_c=self.ambient_c, **kw)
+        return SimBench(seed=self.seed, rate_hz=self.rate_hz, ambient_c=self.ambient_c, **kw)
 
 
 def describe(bench: Any) -> dict[str, Any]:

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrolab.sampling import DEFAULT_RATE_HZ
 from gyrolab.sim.bench.adc_source import AdcSource, AdcTruth
 from gyrolab.sim.bench.clock import SimClock
 from gyrolab.sim.bench.dmm_scpi import Scpi34401A, Scpi34465A, ScpiSerialServer, ScpiTcpServer
@@ -60,7 +61,7 @@ class SimBench:
     """Simulated multimeter, oven and gyro ADC (see module doc).
 
     ``physics`` is a :class:`gyrolab.sim.physics.Physics` (built from ``model``/``seed``/
-    ``adc_rate_hz`` when omitted). ``speed``: simulated seconds per wall second (None: as
+    ``rate_hz`` when omitted). ``speed``: simulated seconds per wall second (None: as
     fast as the ADC reader drains its port). ``tick_s``: simulated time per tick (rounded
     to whole frames). ``keep_truth`` keeps every ADC frame produced, for tests.
     """
@@ -71,7 +72,7 @@ class SimBench:
         *,
         model: Any | None = None,
         seed: int = 0,
-        adc_rate_hz: float = 100.0,
+        rate_hz: float = DEFAULT_RATE_HZ,
         samples_per_frame: int = 10,
         speed: float | None = 1.0,
         faults: FaultPlan | None = None,
@@ -108,7 +109,7 @@ class SimBench:
             from gyrolab.sim.physics import Physics
 
             physics = Physics(
-                model or nominal_model(), rate_hz=adc_rate_hz, seed=seed, ambient_c=ambient_c
+                model or nominal_model(), rate_hz=rate_hz, seed=seed, ambient_c=ambient_c
             )
         self.physics = physics
         # Axes y (and z) of a multi-axis unit (gyrolab.sim.simulate.axis_physics): they
@@ -298,7 +299,7 @@ class SimBench:
             "scanner_tcp_resource": self.scanner_tcp_resource,
             "unit_adc_ports": self.unit_adc_ports,
             "adc_port": self.adc_port,
-            "adc_rate_hz": self.rate_hz,
+            "rate_hz": self.rate_hz,
             "samples_per_frame": self.samples_per_frame,
         }
 

@@ -30,6 +30,9 @@ from gyrolab.sim.discrepancy.report import json_default, render
 from gyrolab.sim.discrepancy.workflow import Result, run_discrepancy
 from gyrolab.sim.model import load_model, nominal_model
 
+#: What :func:`discrepancy` reports to its ``on_stage`` as each is done (batch's progress).
+STAGES = ("read", "analyse", "write")
+
 
 def discrepancy(
     run: str | os.PathLike[str],
@@ -39,25 +42,32 @@ def discrepancy(
     unit: str | None = None,
     force: bool = False,
     log: Callable[[str], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> str:
     """Analyse ``run`` from ``model`` (default nominal), write ``out`` (module docstring);
     returns the one-line summary the command prints. ``log``: progress lines (default:
-    ``discrepancy: ...`` on stderr)."""
+    ``discrepancy: ...`` on stderr); ``on_stage(name)`` is told each of :data:`STAGES` as
+    it is done."""
+    stage = on_stage or (lambda _name: None)
     inputs = (run, model)
     check_output(out, force, inputs=inputs, kind="dir")
     sim_model = load_model(model) if model else nominal_model()
     from gyrolab.record.reader import select_unit
 
     axes = load_recording_axes(run, unit=select_unit(run, unit))
+    stage("read")
 
     def stderr_log(msg: str) -> None:
         print(f"discrepancy: {msg}", file=sys.stderr)
 
     log = log or stderr_log
     if len(axes) > 1:
-        return _discrepancy_axes(run, out, force, axes, sim_model, inputs, log)
+        line = _discrepancy_axes(run, out, force, axes, sim_model, inputs, log, stage)
+        stage("write")
+        return line
     data = replace(axes[0], source=str(run))
     res = run_discrepancy(data, sim_model, log=log)
+    stage("analyse")
     with atomic_dir(out, force, command="discrepancy", inputs=inputs) as tmp:
         (tmp / "discrepancy.json").write_text(
             json.dumps(res.to_json(), indent=1, default=json_default), encoding="utf-8"
@@ -65,6 +75,7 @@ def discrepancy(
         (tmp / "model.toml").write_text(res.model.to_toml(), encoding="utf-8")
         (tmp / "index.html").write_text(render(res, str(run)), encoding="utf-8")
         _write_proposals(tmp, res)
+    stage("write")
     found = ", ".join(res.effects_found) or "nothing"
     amb = "; ".join("{" + ", ".join(s) + "}" for s in res.ambiguous)
     nxt = [a.proposal.file for a in res.ambiguity if a.proposal is not None]
@@ -103,12 +114,14 @@ def _discrepancy_axes(
     model: Any,
     inputs: tuple[Any, ...],
     log: Any,
+    stage: Callable[[str], None],
 ) -> str:
     """The multi-axis layout (module docstring): shared effects once, one model per axis."""
     res = run_discrepancy_axes(axes, model, log=log)
+    stage("analyse")
     n = len(res.axes)
     links = "".join(
-        f'<li>axis {k}: <a href="index_axis{k}.html">report</a>, '
+        f'<li>axis {"xyz"[k]}: <a href="index_axis{k}.html">report</a>, '
         f'<a href="model_axis{k}.toml">model</a>; own effects: '
         f"{escape(', '.join(res.by_axis[k]) or 'none')}</li>"
         for k in range(n)
@@ -130,14 +143,16 @@ def _discrepancy_axes(
             _write_proposals(tmp, r)
             (tmp / f"model_axis{k}.toml").write_text(r.model.to_toml(), encoding="utf-8")
             (tmp / f"index_axis{k}.html").write_text(
-                render(r, f"{run} (axis {k})"), encoding="utf-8"
+                render(r, f"{run} (axis {'xyz'[k]})"), encoding="utf-8"
             )
         (tmp / "index.html").write_text(index, encoding="utf-8")
-    own = "; ".join(f"axis {k}: {', '.join(e) or 'nothing'}" for k, e in enumerate(res.by_axis))
+    own = "; ".join(
+        f"axis {'xyz'[k]}: {', '.join(e) or 'nothing'}" for k, e in enumerate(res.by_axis)
+    )
     return (
         f"wrote {out}: {n} axes; shared {', '.join(res.shared) or 'nothing'}; {own}; "
         + ", ".join(
-            f"axis {k} LF residual {r.gap_before['lf_residual_rms_dps']:.3g} -> "
+            f"axis {'xyz'[k]} LF residual {r.gap_before['lf_residual_rms_dps']:.3g} -> "
             f"{r.gap_after['lf_residual_rms_dps']:.3g} deg/s"
             for k, r in enumerate(res.axes)
         )

@@ -226,7 +226,7 @@ def high_rate_stats(
     m = 2 ** np.arange(int(np.floor(np.log2(max(1, bin_n)))) + 1)
     # the overlapping ADEV alone (no confidence work) at the octave taus up to one bin
     adev = allan_deviation(xd, 1.0 / dt, taus=m * dt, confidence=None, allow_constant=True)
-    tau, ad = adev.taus, adev.adev
+    tau, ad = adev.taus, adev.dev
     hr = HighRate(
         dt=dt,
         n=int(x.size),

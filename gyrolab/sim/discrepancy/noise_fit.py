@@ -70,7 +70,7 @@ def measured_allan(d: BenchData, resid_bins: np.ndarray) -> AllanCurve:
     res = allan_deviation(
         resid_bins, 1.0 / d.bin_s, taus=m_oct * d.bin_s, confidence=None, allow_constant=True
     )
-    tau_b, ad_b = res.taus, res.adev
+    tau_b, ad_b = res.taus, res.dev
     keep = tau_b > d.bin_s * 1.01
     m_b = np.rint(tau_b[keep] / d.bin_s)
     tau = np.concatenate([hr.tau, tau_b[keep]])

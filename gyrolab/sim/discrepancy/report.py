@@ -160,10 +160,13 @@ def render(res: Result, source: str) -> str:
             if c["significant"]
         ]
         loc = s["localize"]
-        worst = ", ".join(f"step {w['step']} ({w['setpoint_c']:g} °C)" for w in loc["worst_steps"])
+        # profile steps and iterations are counted from 1 on the page (0 in the JSON)
+        worst = ", ".join(
+            f"step {w['step'] + 1} ({w['setpoint_c']:g} °C)" for w in loc["worst_steps"]
+        )
         step_rows.append(
             [
-                s["iteration"],
+                s["iteration"] + 1,
                 s.get("added") or "—",
                 ", ".join(s.get("ambiguous_with", [])) or "—",
                 "; ".join(sig) or "none",

@@ -166,7 +166,7 @@ class Workflow:
                 looks.append((amb, accepted))
             if log:
                 log(
-                    f"iteration {it}: added {best.effect}"
+                    f"iteration {it + 1}: added {best.effect}"
                     + (f" (ambiguous: {amb})" if len(amb) > 1 else "")
                 )
             cur = nxt
@@ -183,7 +183,7 @@ class Workflow:
                     ambiguous = [s for s in ambiguous if mv["effect"] not in s]
                     looks = [lk for lk in looks if mv["effect"] not in lk[0]]
                     if log:
-                        log(f"iteration {it}: revised {mv}")
+                        log(f"iteration {it + 1}: revised {mv}")
             steps.append(entry)
         model = self.updated_model(cur)
         return Result(
