@@ -66,20 +66,19 @@ def fit_and_apply(
     import torch
 
     from gyrolab.compensation.causal import CausalCalibration, family_models, fit_causal
-    from gyrolab.compensation.gabp import BPConfig, GAConfig
+    from gyrolab.compensation.config import PipelineConfig
     from gyrolab.numerics.averaging import block_average
 
     torch.set_num_threads(1)
     tb, xb, _ = block_average(cal.t, cal.raw, BLOCK_S, 1.0 / RATE_HZ)
-    bp, ga = BPConfig(), GAConfig()
+    cfg = PipelineConfig()
     if quick:
-        bp, ga = BPConfig(max_iter=60), GAConfig(population=12, generations=6)
+        cfg = PipelineConfig(bp_max_iter=60, ga_population=12, ga_generations=6)
     t0 = time.perf_counter()
     cm = fit_causal(
         CausalCalibration(t=tb, rate=xb, pt_t=cal.pt_t, pt_c=cal.pt_c),
         families=families,
-        bp=bp,
-        ga=ga,
+        config=cfg,
         seed=seed,
     )
     info: dict[str, Any] = {
@@ -177,6 +176,7 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             "oracle",
             "causal",
             "causal.structured",
+            "causal.structured_rate",
             "causal.poly",
             "causal.bp",
             "causal.gabp",
@@ -191,7 +191,8 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     gap = 100.0 * (ocut - cut)
     worse = int(np.sum((a["causal"][BS] >= a["raw"][BS]) | (a["causal"][PP] >= a["raw"][PP])))
     L = [
-        f"`python benchmarks/break_suite.py --protocol {proto}` — {meta['date']}, "
+        f"`python benchmarks/break_suite.py --protocol {proto} --families "
+        f"{','.join(meta['families'])}` — {meta['date']}, "
         f"{meta['machine']}, {len(results)} units × {len(held)} held-out trajectories "
         f"({sum(r['real_noise'] for r in results)} units with real ADIS16405 noise), "
         f"families {', '.join(meta['families'])}; wall clock {meta['wall_s']:.0f} s, "

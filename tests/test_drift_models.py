@@ -28,7 +28,7 @@ from gyrolab.export.spec import evaluate
 torch.set_num_threads(1)
 FAST = PipelineConfig(
     ga_population=8, ga_generations=3, bp_max_iter=60, hidden=4,
-    causal_families=("poly", "structured", "bp", "gabp"),
+    causal_families=("poly", "structured", "structured_rate", "bp", "gabp"),
 )  # fmt: skip
 
 
@@ -53,7 +53,7 @@ def _probe(cal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, pt_t, pt_c
 
 
-@pytest.mark.parametrize("name", ["poly", "structured", "bp", "gabp"])
+@pytest.mark.parametrize("name", ["poly", "structured", "structured_rate", "bp", "gabp"])
 def test_causal_families_sample_by_sample_equals_vectorised(cal, causal, name) -> None:
     m = causal.alternatives[name]
     assert m.family == name
@@ -95,7 +95,7 @@ def test_the_firmware_cubic_is_a_drift_model(cal) -> None:
 
 
 def test_selection_records_every_family_and_the_winner(causal) -> None:
-    fams = {"poly", "structured", "bp", "gabp"}
+    fams = {"poly", "structured", "structured_rate", "bp", "gabp"}
     assert set(causal.cv_rmse) == set(causal.alternatives) == fams
     assert causal.selection["winner"] == causal.family
     assert causal.alternatives[causal.family] is causal

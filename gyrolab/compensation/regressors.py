@@ -15,10 +15,12 @@ The forms (docs/export.md has the JSON reference):
 * ``legendre``: ``Σ c_k P_k(u)`` (+ ``rate_coef``·x_1), ``u = (2 x_0 − lo − hi)/(hi −
   lo)``, not clamped;
 * ``poly3``: ``Σ c_k Δ^k``, ``Δ = clamp(x_0, t_min, t_max) − t_ref``;
-* ``structured``: ``Σ c_i L_i(u) + k x_1 + h x_2 + A x_3 + kp max(x_1, 0) + k2 x_1|x_1| +
+* ``structured``: ``Σ c_i L_i(u) + k x_1 + h x_2 + A x_3 + kp max(x_1, 0) + k2 q(x_1) +
   hT x_2 v``, ``u`` as above in x_0 = F, ``v`` = u clipped to [−1, 1], the Legendre part
-  continued linearly beyond u = ±1 (``kp``, ``k2``, ``hT`` absent = 0: models written
-  before issue 23).
+  continued linearly beyond u = ±1; ``q(R) = R|R|`` on ``[r_lo, r_hi]`` (the calibrated
+  rate range) and its tangent beyond, ``q = R_c|R_c| + 2|R_c|(R − R_c)`` with ``R_c`` = R
+  clipped (``kp``, ``k2``, ``hT`` absent = 0: models written before issue 23; ``r_lo``,
+  ``r_hi`` absent: unbounded).
 """
 
 from __future__ import annotations
@@ -69,10 +71,12 @@ def _eval_structured(m: dict[str, Any], X: np.ndarray) -> np.ndarray:
     y = y + np.polynomial.legendre.legval(uc, np.polynomial.legendre.legder(c)) * (u - uc)
     y = y + m["k"] * X[:, 1] + m["h"] * X[:, 2] + m["A"] * X[:, 3]
     R = X[:, 1]
+    # R|R| on [r_lo, r_hi] and its tangent beyond (absent: unbounded)
+    Rc = np.clip(R, m.get("r_lo", -np.inf), m.get("r_hi", np.inf))
     return (
         y
         + m.get("kp", 0.0) * np.maximum(R, 0.0)
-        + m.get("k2", 0.0) * R * np.abs(R)
+        + m.get("k2", 0.0) * (Rc * np.abs(Rc) + 2.0 * np.abs(Rc) * (R - Rc))
         + m.get("hT", 0.0) * X[:, 2] * uc
     )
 
@@ -145,11 +149,16 @@ def _c_legendre(name: str, m: dict[str, Any]) -> list[str]:
         )
         if m.get("kp") or m.get("k2") or m.get("hT"):
             # issue 23 terms: heating-only rate, R|R|, hysteresis amplitude across T
-            out.append(
+            # R|R| on the calibrated rate range, its tangent beyond
+            rc = "x[1]"
+            if "r_lo" in m and "r_hi" in m:
+                rc = f"clampf(x[1], {c_float(m['r_lo'])}, {c_float(m['r_hi'])})"
+            out += [
+                f"    const float rc = {rc};",
                 f"    y += {c_float(m.get('kp', 0.0))} * fmaxf(x[1], 0.0f) + "
-                f"{c_float(m.get('k2', 0.0))} * x[1] * fabsf(x[1]) + "
-                f"{c_float(m.get('hT', 0.0))} * x[2] * v;"
-            )
+                f"{c_float(m.get('k2', 0.0))} * (rc * fabsf(rc) + 2.0f * fabsf(rc) * "
+                f"(x[1] - rc)) + {c_float(m.get('hT', 0.0))} * x[2] * v;",
+            ]
     else:
         out.append("    (void)dy;")
         if m["rate_coef"] is not None:

@@ -8,9 +8,11 @@ of every PT100 reading)::
 
 a Legendre series in the *lagged* (die) temperature ``F`` plus rate, hysteresis and
 warm-up terms — and, for gyros outside the original class (issue 23), a heating-only rate
-term, R|R| and a hysteresis amplitude that changes across the range, each kept only when
-significant with the effective sample size and ≥ 1 % better in CV (:func:`_select_terms`);
-outside the calibration range of ``F`` the series continues linearly from its edge. The
+term, R|R| and a hysteresis amplitude that changes across the range. The rate terms are
+searched with the lag and kept by backward elimination on the blocked CV (ridge-stabilised
+fold fits, :func:`cv_linear`), ``S·v`` only when also significant with the effective
+sample size (:func:`_select_terms`); outside the calibration range of ``F`` the series
+continues linearly from its edge, and R|R| beyond the calibrated rates likewise. The
 nonlinear parameters (τ, w, τ_w) and the order P are chosen on grids by blocked
 cross-validation inside the calibration run (:func:`select_structured`), the linear ones
 by least squares (:func:`fit_structured`); a term is kept only if it lowers the
@@ -39,6 +41,14 @@ EXTRA_TERMS = ("rate_pos", "rate_sq", "hyst_T")
 ALL_TERMS = TERMS + EXTRA_TERMS
 #: |coefficient / standard error| (with the effective sample size) a term needs to be kept
 T_KEEP = 3.0
+#: the terms on while (τ, τ_w, w, order) are searched, and from which backward
+#: elimination starts (:func:`_select_terms`): the rate sensitivity's sign asymmetry and
+#: its growth are searched with the lag, not after it — a lag chosen without them
+#: absorbs them (the break family, docs/results.md)
+GRID_TERMS = TERMS + ("rate_pos", "rate_sq")
+#: ridge of the blocked CV's fold fits, in units of the whole run's column norms
+#: (:func:`cv_linear`)
+CV_RIDGE = 1e-3
 TAU_GRID_S = (0.0, 60.0, 150.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 WIDTH_GRID_C = (0.25, 0.5, 1.0, 2.0, 4.0)
 WARMUP_GRID_S = (200.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
@@ -59,6 +69,8 @@ class StructuredModel:
     kp: float = 0.0  # °/s per °C/s of heating only: max(R, 0)
     k2: float = 0.0  # °/s per (°C/s)²: R|R|
     hT: float = 0.0  # °/s: S·v, the hysteresis amplitude's change across the range
+    r_lo: float = -np.inf  # calibrated range of R, °C/s: R|R| continues linearly beyond
+    r_hi: float = np.inf
 
     @property
     def order(self) -> int:
@@ -80,7 +92,8 @@ class StructuredModel:
         if self.kp or self.k2 or self.hT:
             v = np.clip((2.0 * X[:, 0] - (self.lo + self.hi)) / (self.hi - self.lo), -1.0, 1.0)
             R = X[:, 1]
-            y = y + self.kp * np.maximum(R, 0.0) + self.k2 * R * np.abs(R) + self.hT * X[:, 2] * v
+            y = y + self.kp * np.maximum(R, 0.0) + self.hT * X[:, 2] * v
+            y = y + self.k2 * rate_square(R, self.r_lo, self.r_hi)
         return y
 
     def spec(self, inputs: list[str], window_s: float | None) -> dict[str, Any]:
@@ -97,6 +110,7 @@ class StructuredModel:
             "kp": float(self.kp),
             "k2": float(self.k2),
             "hT": float(self.hT),
+            **self.rate_range(),
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -112,6 +126,7 @@ class StructuredModel:
             "kp": self.kp,
             "k2": self.k2,
             "hT": self.hT,
+            **self.rate_range(),
         }
 
     @classmethod
@@ -127,7 +142,25 @@ class StructuredModel:
             kp=float(d.get("kp", 0.0)),  # absent in models written before issue 23
             k2=float(d.get("k2", 0.0)),
             hT=float(d.get("hT", 0.0)),
+            # absent before R|R| was bounded: unbounded, as those models were fitted
+            r_lo=float(d.get("r_lo", -np.inf)),
+            r_hi=float(d.get("r_hi", np.inf)),
         )
+
+    def rate_range(self) -> dict[str, float]:
+        """``{"r_lo", "r_hi"}`` where finite (JSON has no infinity)."""
+        pairs = (("r_lo", self.r_lo), ("r_hi", self.r_hi))
+        return {k: float(v) for k, v in pairs if np.isfinite(v)}
+
+
+def rate_square(R: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``R|R|`` inside the calibrated rate range ``[lo, hi]`` (°C/s), continued linearly
+    (its tangent, slope ``2|R|``) beyond it — as the temperature series is: a quadratic
+    fitted on the rates a calibration run showed is not carried to rates it never saw
+    (a fast ramp heats two to three times faster than a cooling staircase)."""
+    R = np.asarray(R, dtype=float)
+    Rc = np.clip(R, lo, hi)
+    return Rc * np.abs(Rc) + 2.0 * np.abs(Rc) * (R - Rc)
 
 
 def _term_column(X: np.ndarray, name: str, u: np.ndarray) -> np.ndarray:
@@ -152,17 +185,21 @@ def _design(X: np.ndarray, order: int, terms: tuple[str, ...], lo: float, hi: fl
     return np.hstack(cols)
 
 
-def _solve(G: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _solve(
+    G: np.ndarray, b: np.ndarray, d: np.ndarray | None = None, ridge: float = 0.0
+) -> np.ndarray:
     """Least squares from the normal equations ``G c = b`` (``G = AᵀA``, ``b = Aᵀy``), with
-    the columns scaled to unit diagonal (the Legendre columns on [−1, 1] are well
-    conditioned; the scaling brings the rate column, ~1e-3 °C/s, to the same size). A
-    column that is zero throughout (no hysteresis reversal seen) gets coefficient 0.
-    Normal equations instead of ``lstsq`` on the tall matrix: the CV search solves a few
-    hundred of these, and a p × p solve costs nothing next to forming ``AᵀA`` once."""
-    d = np.sqrt(np.diag(G))
+    the columns scaled by ``d`` (default: to unit diagonal; the Legendre columns on
+    [−1, 1] are well conditioned; the scaling brings the rate column, ~1e-3 °C/s, to the
+    same size) and ``ridge`` added to the scaled diagonal. A column that is zero
+    throughout (no hysteresis reversal seen) gets coefficient 0. Normal equations instead
+    of ``lstsq`` on the tall matrix: the CV search solves a few hundred of these, and a
+    p × p solve costs nothing next to forming ``AᵀA`` once."""
+    if d is None:
+        d = np.sqrt(np.diag(G))
     ok = d > 0
     c = np.zeros(G.shape[0])
-    Gs = G[np.ix_(ok, ok)] / np.outer(d[ok], d[ok])
+    Gs = G[np.ix_(ok, ok)] / np.outer(d[ok], d[ok]) + ridge * np.eye(int(ok.sum()))
     c[ok] = np.linalg.lstsq(Gs, b[ok] / d[ok], rcond=1e-12)[0] / d[ok]
     return c
 
@@ -191,6 +228,8 @@ def fit_structured(
         kp=float(extra.get("rate_pos", 0.0)),
         k2=float(extra.get("rate_sq", 0.0)),
         hT=float(extra.get("hyst_T", 0.0)),
+        r_lo=float(X[:, 1].min()) if "rate_sq" in terms else -np.inf,
+        r_hi=float(X[:, 1].max()) if "rate_sq" in terms else np.inf,
     )
 
 
@@ -201,18 +240,29 @@ def cv_linear(
     terms: tuple[str, ...],
     folds: list[np.ndarray],
     pred: np.ndarray | None = None,
+    ridge: float = 0.0,
 ) -> float:
     """Blocked-CV RMSE (°/s) of the structured model of ``order`` and ``terms`` on feature
     rows ``X`` and target ``y`` (``folds``: boolean held-out masks); ``pred`` (if given)
     receives every block's held-out prediction (for the prediction band,
-    :mod:`.band`)."""
+    :mod:`.band`).
+
+    With ``ridge`` > 0 (the extended family: :data:`CV_RIDGE`) each fold's fit is a
+    ridge regression on the columns scaled by the *whole run's* norms: a term whose
+    regressor is almost zero on a fold's training blocks — the warm-up when the first
+    hour is held out, a heating-only rate term when the run's one heating step is — then
+    gets a coefficient near 0, and the held-out stretch is predicted as by the model
+    without that term, not by a coefficient fitted to the noise of the few training
+    blocks where the regressor is not zero (which made the CV reject terms that hold on
+    other trajectories)."""
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
     A = _design(X, order, terms, lo, hi)
     G, b = A.T @ A, A.T @ y
+    d = np.sqrt(np.diag(G)) if ridge else None
     sq, n = 0.0, 0
     for held in folds:
         Ah, yh = A[held], y[held]
-        c = _solve(G - Ah.T @ Ah, b - Ah.T @ yh)
+        c = _solve(G - Ah.T @ Ah, b - Ah.T @ yh, d, ridge)
         p = Ah @ c
         if pred is not None:
             pred[held] = p
@@ -302,22 +352,66 @@ def _select_terms(
     return terms, err, log
 
 
+def _without(terms: tuple[str, ...], t: str) -> tuple[str, ...]:
+    return tuple(x for x in terms if x != t)
+
+
+def _select_terms_backward(
+    X: np.ndarray, y: np.ndarray, order: int, folds: list[np.ndarray]
+) -> tuple[tuple[str, ...], float, dict[str, Any]]:
+    """The extended family's term selection (ridge-stabilised CV, :data:`CV_RIDGE`), in
+    two stages. (1) Backward elimination from :data:`GRID_TERMS` (the terms the grid
+    search had on): the term whose removal costs least CV RMSE is dropped while that cost
+    is < 1 % (:data:`~gyrolab.compensation.drift_model.TIE`), so a term stays only if the
+    held-out stretches need it. (2) ``hyst_T`` is added only if it passes both tests: its
+    coefficient is significant with the *effective* number of samples (``|c/se| ≥``
+    :data:`T_KEEP`, :func:`_t_stats`: 3.6 s residuals of a flicker-dominated gyro are
+    far from independent) and it lowers the CV RMSE by ≥ 1 %. Measured on the break
+    family (docs/results.md) against adding the rate asymmetry and R|R| one at a time
+    after the original terms (:func:`_select_terms`): they were then rejected on units
+    that have them (the lag, searched without them, had absorbed part of them)."""
+    terms = GRID_TERMS
+    err = cv_linear(X, y, order, terms, folds, ridge=CV_RIDGE)
+    dropped: list[dict[str, Any]] = []
+    while terms:
+        e, t = min(
+            (cv_linear(X, y, order, _without(terms, t), folds, ridge=CV_RIDGE), t) for t in terms
+        )
+        if e > err * (1.0 + TIE):
+            break
+        terms = _without(terms, t)
+        err = min(err, e)
+        dropped.append({"dropped": t, "cv_rmse": e})
+    added: list[dict[str, Any]] = []
+    for t in (x for x in ALL_TERMS if x not in GRID_TERMS):
+        more = terms + (t,)
+        e = cv_linear(X, y, order, more, folds, ridge=CV_RIDGE)
+        tstat, n_eff = _t_stats(X, y, order, more)
+        if tstat[-1] >= T_KEEP and e < err * (1.0 - TIE):
+            err, terms = e, more
+            added.append({"added": t, "t": float(tstat[-1]), "n_eff": n_eff, "cv_rmse": e})
+    log = {"dropped": dropped, "terms": list(terms), "added": added}
+    return terms, err, log
+
+
 def select_structured(
-    cal: CausalCalibration, folds: list[np.ndarray]
+    cal: CausalCalibration, folds: list[np.ndarray], extended: bool = False
 ) -> tuple[CausalParams, int, tuple[str, ...], float, dict[str, Any]]:
-    """Choose (τ, τ_w, order) on the joint grid with every term on, refine τ between its
-    grid neighbours (golden section), then w and τ_w again on their grids; finally the
-    terms of :data:`ALL_TERMS` by backward elimination (:func:`_select_terms`). The lag and
-    the warm-up are searched together because both shape the first hours of a run.
-    Returns the choice and a log."""
+    """Choose (τ, τ_w, order) on the joint grid with every original term on
+    (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
+    between its grid neighbours (golden section), then w and τ_w again on their grids;
+    finally the terms (:func:`_select_terms`; ``extended``:
+    :func:`_select_terms_backward`). The lag and the warm-up are searched together
+    because both shape the first hours of a run. Returns the choice and a log."""
     y = cal.rate
     base = CausalParams()
     feats: dict[CausalParams, np.ndarray] = {}
+    on, ridge = (GRID_TERMS, CV_RIDGE) if extended else (TERMS, 0.0)
 
-    def cv(p: CausalParams, order: int, terms: tuple[str, ...] = TERMS) -> float:
+    def cv(p: CausalParams, order: int) -> float:
         if p not in feats:
             feats[p] = block_features(cal, p)
-        return cv_linear(feats[p], y, order, terms, folds)
+        return cv_linear(feats[p], y, order, on, folds, ridge=ridge)
 
     best: tuple[float, CausalParams, int] = (np.inf, base, 1)
     for tau in TAU_GRID_S:
@@ -353,9 +447,8 @@ def select_structured(
             e = cv(q, order)
             if e < err:
                 err, p = e, q
-    terms, err, log = _select_terms(
-        feats[p] if p in feats else block_features(cal, p), y, order, folds
-    )
+    select = _select_terms_backward if extended else _select_terms
+    terms, err, log = select(feats[p] if p in feats else block_features(cal, p), y, order, folds)
     log["order"] = order
     return p, order, terms, err, log
 

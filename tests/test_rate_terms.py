@@ -1,0 +1,112 @@
+"""The structured model's R|R| term beyond the calibrated rates (issue 23): continued
+along its tangent, the same in the model, in the exported JSON's evaluation and in the
+C code; a model written before keeps its unbounded R|R|. And the ``structured_rate``
+family keeps a heating-only rate term on a gyro that has one, which the original
+selection drops."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from test_causal import _staircase_run
+
+from gyrolab.compensation.causal import fit_causal
+from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.regressors import c_function, evaluate_inputs
+from gyrolab.compensation.structured import StructuredModel, rate_square
+
+CC = shutil.which("cc") or shutil.which("gcc")
+
+
+def _model() -> StructuredModel:
+    return StructuredModel(
+        coef=np.array([1e-3, 2e-3, -4e-4]),
+        lo=-40.0,
+        hi=60.0,
+        k=0.5,
+        h=2e-4,
+        A=1e-3,
+        terms=("rate", "hyst", "warmup", "rate_pos", "rate_sq"),
+        kp=0.3,
+        k2=40.0,
+        r_lo=-0.02,
+        r_hi=0.03,
+    )
+
+
+def _rows() -> np.ndarray:
+    R = np.array([-0.08, -0.02, -0.005, 0.0, 0.01, 0.03, 0.05, 0.1])
+    F = np.linspace(-50.0, 70.0, R.size)
+    return np.column_stack([F, R, np.linspace(-1.0, 1.0, R.size), np.full(R.size, 0.2)])
+
+
+def test_rate_square_is_r_abs_r_inside_and_its_tangent_beyond() -> None:
+    R = np.linspace(-0.05, 0.05, 101)
+    q = rate_square(R, -0.02, 0.03)
+    inside = (R >= -0.02) & (R <= 0.03)
+    np.testing.assert_array_equal(q[inside], (R * np.abs(R))[inside])
+    # beyond: value and slope continuous at the edges, then linear
+    q_out = rate_square(np.array([-0.05, 0.05]), -0.02, 0.03)
+    np.testing.assert_allclose(q_out, [-(0.02**2) - 0.04 * 0.03, 0.03**2 + 0.06 * 0.02])
+    assert np.array_equal(rate_square(R, -np.inf, np.inf), R * np.abs(R))
+
+
+def test_model_json_and_round_trip_agree_beyond_the_calibrated_rates() -> None:
+    m = _model()
+    X = _rows()
+    y = m.predict(X)
+    spec = m.spec(["F", "R", "S", "E"], None)
+    assert (spec["r_lo"], spec["r_hi"]) == (-0.02, 0.03)
+    np.testing.assert_allclose(evaluate_inputs(spec, X), y, rtol=1e-13, atol=1e-18)
+    assert np.array_equal(StructuredModel.from_dict(m.to_dict()).predict(X), y)
+    # a model written before the bound: R|R| unbounded, as it was fitted
+    old = {k: v for k, v in m.to_dict().items() if k not in ("r_lo", "r_hi")}
+    back = StructuredModel.from_dict(old)
+    assert back.r_lo == -np.inf and back.r_hi == np.inf
+    assert "r_lo" not in back.to_dict()
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+def test_c_code_agrees_beyond_the_calibrated_rates(tmp_path) -> None:
+    m = _model()
+    X = _rows()
+    x32 = X.astype(np.float32)
+    rows = ",\n".join("{" + ", ".join(f"{float(v)!r}f" for v in r) + "}" for r in x32)
+    src = "\n".join(
+        [
+            "#include <math.h>",
+            "#include <stdio.h>",
+            "static float clampf(float x, float lo, float hi)"
+            " { return x < lo ? lo : (x > hi ? hi : x); }",
+            c_function("f", m.spec(["F", "R", "S", "E"], None)),
+            f"static const float X[{len(X)}][4] = {{{rows}}};",
+            "int main(void) {",
+            f'    for (int i = 0; i < {len(X)}; ++i) printf("%.9g\\n", f(X[i]));',
+            "    return 0;",
+            "}",
+        ]
+    )
+    (tmp_path / "f.c").write_text(src)
+    exe = tmp_path / "f"
+    cmd = [CC, "-std=c99", "-O1", "-o", str(exe), str(tmp_path / "f.c"), "-lm"]
+    subprocess.run(cmd, check=True)
+    out = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout
+    got = np.array([float(v) for v in out.split()])
+    np.testing.assert_allclose(got, m.predict(x32), rtol=2e-5, atol=1e-7)
+
+
+def test_structured_rate_keeps_a_heating_only_rate_term() -> None:
+    """A cooling staircase with one heating step, a gyro whose drift follows the die's
+    rate on heating only: the extended family keeps ``max(R, 0)`` and beats the original
+    selection's CV, which has no such term."""
+    cal = _staircase_run(tau_die=200.0, hyst=0.0, seed=7, hours=4.0)
+    R = reading_features(cal.pt_t, cal.pt_c, CausalParams(tau_s=200.0))[:, 1]
+    extra = 0.15 * np.maximum(R, 0.0)  # 2.5e-3 °/s per °C/min of heating, 0 cooling
+    cal.rate = cal.rate + hold(cal.t, cal.pt_t, extra)
+    m = fit_causal(cal, families=("poly", "structured", "structured_rate"), seed=0)
+    ext = m.alternatives["structured_rate"]
+    assert "rate_pos" in ext.model.terms
+    assert m.cv_rmse["structured_rate"] < m.cv_rmse["structured"]
