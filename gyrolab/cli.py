@@ -42,6 +42,7 @@ HANDLERS: dict[str, str] = {
     "batch": "gyrolab.app.batch:batch",
     "fleet": "gyrolab.app.report:fleet",
     "runs": "gyrolab.app.runs:runs",
+    "profile": "gyrolab.app.profile:profile",
 }
 
 
@@ -209,6 +210,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument(
         "--config", metavar="FILE.toml", help="model settings (keys: docs/compensation.md)"
     )
+    c.add_argument(
+        "--prior",
+        metavar="DIR_OR_QUERY",
+        help="fit with a fleet prior learned from earlier units: a directory of their model "
+        "directories, or part-number:PN (the catalogue's latest model of each unit)",
+    )
     _log_options(c)
     c.add_argument("--unit", metavar="SERIAL", help="one unit of a multi-unit run (default: all)")
     c.add_argument("--workers", type=int, help="multi-unit run: parallel fits (default: CPUs)")
@@ -341,6 +348,27 @@ def build_parser() -> argparse.ArgumentParser:
     rr = rsub.add_parser("rebuild", help="register every file under the directories again")
     rr.add_argument("dirs", nargs="+", metavar="DIR")
     _catalogue_option(rr)
+
+    pr = cmd("profile", "temperature profiles: design a short calibration profile")
+    psub = pr.add_subparsers(dest="action", metavar="ACTION", parser_class=_Parser, required=True)
+    pd = psub.add_parser(
+        "design", help="the profile of H hours that shows the drift model best (docs/profiles.md)"
+    )
+    pd.add_argument("--hours", type=float, required=True, help="chamber time, h")
+    pd.add_argument("--out", required=True, help="output PROFILE.toml")
+    pd.add_argument(
+        "--prior", metavar="DIR_OR_QUERY", help="score against this fleet prior (as compensate)"
+    )
+    pd.add_argument(
+        "--sim-model",
+        metavar="SIM_MODEL.toml",
+        help="the chamber's heating/cooling limits from this model's [thermal] (default: nominal)",
+    )
+    pd.add_argument("--setpoint-min", type=float, default=-40.0, help="lowest setpoint, °C (-40)")
+    pd.add_argument("--setpoint-max", type=float, default=60.0, help="highest setpoint, °C (60)")
+    pd.add_argument("--ambient", type=float, default=25.0, help="room temperature, °C (25)")
+    pd.add_argument("--name", help="profile name (default design-<H>h)")
+    pd.add_argument("--force", action="store_true", help="overwrite an existing output")
     return p
 
 
@@ -373,6 +401,7 @@ OPTIONS: dict[str, type] = {
     "batch": o.BatchCommandOptions,
     "fleet": o.FleetOptions,
     "runs": o.RunsOptions,
+    "profile": o.ProfileDesignOptions,
 }
 
 

@@ -73,6 +73,31 @@ def _named(path: str) -> Iterator[None]:
         raise
 
 
+def _prior_lines(cm: dict[str, Any]) -> list[str]:
+    """The fleet prior's line (a MAP fit) and the up/down hysteresis width of a
+    structured model with a hysteresis term."""
+    from gyrolab.compensation.prior import hysteresis_width
+
+    out = []
+    pr = cm.get("selection", {}).get("prior")
+    if pr:
+        mem = pr["membership"]
+        out.append(
+            f"  fleet prior: {pr['prior_units']} units, cluster {pr['cluster']} of "
+            f"{pr['cluster_units']}; this unit's distance d2 = {mem['mahalanobis_d2']:.1f} on "
+            f"{mem['dof']} parameters (p = {mem['p_value']:.2g}): belongs"
+        )
+    st = cm.get("structured")
+    if st and (st.get("h") or st.get("hT")):
+        w = hysteresis_width(st)
+        out.append(
+            "  hysteresis width (heating - cooling branch): "
+            f"{w['at_low_deg_per_h']:+.3g} / {w['at_mid_deg_per_h']:+.3g} / "
+            f"{w['at_high_deg_per_h']:+.3g} deg/h at the low end / middle / high end"
+        )
+    return out
+
+
 def _summary(m: dict[str, Any]) -> str:
     r, c = m["raw"], m["compensated"]
 
@@ -93,6 +118,7 @@ def _summary(m: dict[str, Any]) -> str:
             f"{pp.get('causal', float('nan')):.4g} deg/s "
             f"({pct(pp.get('raw', 0.0), pp.get('causal', 0.0))} less)"
         )
+        lines += _prior_lines(m["causal_model"])
         mb = m.get("headline", {}).get("mean_bias_deg_per_h")
         band = m.get("causal_band")
         if mb is not None:
@@ -168,6 +194,7 @@ def compensate(
     validate_label: str = "",
     base_config: PipelineConfig | None = None,
     on_stage: Callable[[str], None] | None = None,
+    prior: Any = None,
 ) -> str:
     """Fit on ``run_path``, optionally evaluate on ``validate``, write ``out``; returns
     the summary the command prints (one block per axis, the calibration run's after the
@@ -179,7 +206,10 @@ def compensate(
     read with ``log_options``) gets one model per axis in one directory
     (:mod:`gyrolab.compensation.axes`). The outputs name the runs as given, or by
     ``run_label``/``validate_label`` (:mod:`gyrolab.app.demo`: paths relative to its
-    output directory). ``on_stage(name)`` is told each of :data:`STAGES` as it is done."""
+    output directory). ``prior``: a fleet prior
+    (:class:`~gyrolab.compensation.prior.FleetPrior`) for the causal model's MAP fit
+    (every axis against the same prior). ``on_stage(name)`` is told each of
+    :data:`STAGES` as it is done."""
     t_start = time.perf_counter()
     stage = on_stage or (lambda _name: None)
     run_s, val_s = str(run_path), None if validate is None else str(validate)
@@ -189,9 +219,7 @@ def compensate(
     if unit is None and units_of(run_s):
         # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
         # this layer: it runs this function once per unit through gyrolab.batch)
-        raise InputError(
-            run_s, f"holds units {', '.join(units_of(run_s))}: choose one with --unit"
-        )
+        raise InputError(run_s, f"holds units {', '.join(units_of(run_s))}: choose one with --unit")
     opts = log_options or {}
     unit_arg = unit
     unit = select_unit(run_s, unit_arg) if unit_arg is not None or units_of(run_s) else None
@@ -223,7 +251,7 @@ def compensate(
     fitted = []
     for k, run in enumerate(runs):
         t_axis = time.perf_counter()
-        fitted.append(_fit_axis(val_s, cfg, run, None if vals is None else vals[k], seed))
+        fitted.append(_fit_axis(val_s, cfg, run, None if vals is None else vals[k], seed, prior))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
         model, metrics, metrics_cal, _results = fitted[-1]
         metrics["timing_s"] = total
@@ -267,12 +295,13 @@ def _fit_axis(
     run: PreparedRun,
     val: PreparedRun | None,
     seed: int = 0,
+    prior: Any = None,
 ) -> tuple[Any, ...]:
     """Fit one axis → ``(model, metrics, calibration metrics, results)``: the metrics
     (held-out when ``val``) with the firmware cubic's cost, and what the report reads of
     each evaluated run (:mod:`gyrolab.compensation.results`)."""
     with _named(run.path):
-        model, dec = fit(run, cfg, seed=seed)
+        model, dec = fit(run, cfg, seed=seed, prior=prior)
         app = compensate_offline(model, run, dec)
         metrics_cal = evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
