@@ -46,6 +46,7 @@ HANDLERS: dict[str, str] = {
     "batch": "gyrolab.app.batch:batch",
     "fleet": "gyrolab.app.report:fleet",
     "runs": "gyrolab.app.runs:runs",
+    "profile": "gyrolab.app.profile:profile",
 }
 
 
@@ -251,6 +252,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument(
         "--config", metavar="FILE.toml", help="model settings (keys: docs/compensation.md)"
     )
+    c.add_argument(
+        "--prior",
+        metavar="DIR_OR_QUERY",
+        help="fit with a fleet prior learned from earlier units: a directory of their model "
+        "directories, or part-number:PN (the catalogue's latest model of each unit)",
+    )
     _log_options(c)
     c.add_argument("--unit", metavar="SERIAL", help="one unit of a multi-unit run (default: all)")
     c.add_argument(
@@ -287,11 +294,12 @@ def build_parser() -> argparse.ArgumentParser:
     rc.add_argument("--out", required=True, help="output FIXED.mcap")
     rc.add_argument("--force", action="store_true", help="overwrite an existing output")
 
-    cv = cmd("convert", "export a recording to CSV, HDF5, Parquet or NetCDF")
-    cv.add_argument("run", metavar="RUN.mcap")
+    cv = cmd("convert", "export a recording or a user's log to CSV, HDF5, Parquet or NetCDF")
+    cv.add_argument("run", metavar="RUN", help="gyrolab MCAP, PX4 ULog, DataFlash .bin, ROS 2 MCAP")
     cv.add_argument("--to", required=True, choices=["csv", "hdf5", "parquet", "netcdf"])
     cv.add_argument("--out", required=True, help="output FILE")
     cv.add_argument("--unit", metavar="SERIAL", help=UNIT_HELP)
+    _log_options(cv)
     cv.add_argument("--force", action="store_true", help="overwrite an existing output")
     ex = cmd("export", "write a fitted model in a firmware's or another tool's format")
     ex.add_argument("model", metavar="MODEL_DIR")
@@ -322,6 +330,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     dm = cmd("demo", "simulated bench -> recording -> compensation -> report, in one go")
     dm.add_argument("--out", required=True, help="output DIR")
+    dm.add_argument(
+        "--fc",
+        choices=["px4", "ardupilot"],
+        help="a simulated flight controller through the loop: calibration run, compensate, "
+        "export, flash, verification run (docs/instruments.md)",
+    )
     dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
     dm.add_argument("--seed", type=_seed, default=1, help="seed of the calibration run (default 1)")
     dm.add_argument(
@@ -380,6 +394,27 @@ def build_parser() -> argparse.ArgumentParser:
     rr = rsub.add_parser("rebuild", help="register every file under the directories again")
     rr.add_argument("dirs", nargs="+", metavar="DIR")
     _catalogue_option(rr)
+
+    pr = cmd("profile", "temperature profiles: design a short calibration profile")
+    psub = pr.add_subparsers(dest="action", metavar="ACTION", parser_class=_Parser, required=True)
+    pd = psub.add_parser(
+        "design", help="the profile of H hours that shows the drift model best (docs/profiles.md)"
+    )
+    pd.add_argument("--hours", type=float, required=True, help="chamber time, h")
+    pd.add_argument("--out", required=True, help="output PROFILE.toml")
+    pd.add_argument(
+        "--prior", metavar="DIR_OR_QUERY", help="score against this fleet prior (as compensate)"
+    )
+    pd.add_argument(
+        "--sim-model",
+        metavar="SIM_MODEL.toml",
+        help="the chamber's heating/cooling limits from this model's [thermal] (default: nominal)",
+    )
+    pd.add_argument("--setpoint-min", type=float, default=-40.0, help="lowest setpoint, °C (-40)")
+    pd.add_argument("--setpoint-max", type=float, default=60.0, help="highest setpoint, °C (60)")
+    pd.add_argument("--ambient", type=float, default=25.0, help="room temperature, °C (25)")
+    pd.add_argument("--name", help="profile name (default design-<H>h)")
+    pd.add_argument("--force", action="store_true", help="overwrite an existing output")
     return p
 
 
@@ -412,6 +447,7 @@ OPTIONS: dict[str, type] = {
     "batch": o.BatchCommandOptions,
     "fleet": o.FleetOptions,
     "runs": o.RunsOptions,
+    "profile": o.ProfileDesignOptions,
 }
 
 

@@ -51,7 +51,7 @@ from gyrolab.record.format import (
     TOPIC_TEMPERATURE_INTERNAL,
     unit_topic,
 )
-from gyrolab.record.reader import iter_messages, read_metadata, select_unit
+from gyrolab.record.reader import Recording, iter_messages, read_metadata, select_unit
 
 FORMATS = ("csv", "hdf5", "parquet", "netcdf")
 #: rows buffered before one write (a Parquet row group, an HDF5/NetCDF append)
@@ -110,11 +110,15 @@ class RunTables:
     axes: int = 1  # a multi-axis unit has one rate (and ADC) column per axis
     unit: str | None = None  # the unit converted from a multi-unit recording
     temperature_source: str = "pt100"  # or "internal" (Recording.temperature_source)
+    # a user's log (gyrolab.logs: ULog, DataFlash, ROS 2): no oven, the IMU's own
+    # temperature sensor, and its accelerometer where it has one
+    foreign: bool = False
+    has_accel: bool = False
 
     def low_rate(self) -> list[tuple[str, list[tuple[Any, ...]]]]:
         """The low-rate tables (names of :data:`LOW_RATE`) with their rows."""
         temp = "pt100" if self.temperature_source == "pt100" else "internal_temperature"
-        return [(temp, self.pt100), ("oven", self.oven)]
+        return [(temp, self.pt100)] + ([] if self.foreign else [("oven", self.oven)])
 
 
 AXIS_NAMES = "xyz"
@@ -125,6 +129,8 @@ def table_columns(tables: RunTables) -> dict[str, tuple[str, str, str]]:
     (``adc_counts`` only with /gyro/adc); a unit of a axes has ``rate_x_dps``,
     ``rate_y_dps`` (, ``rate_z_dps``) and likewise ``adc_counts_x`` … instead."""
     out: dict[str, tuple[str, str, str]] = {}
+    if tables.foreign:
+        return log_columns(tables.has_accel)
     for k, (dt, u, d) in COLUMNS.items():
         if k == "adc_counts" and not tables.has_adc:
             continue
@@ -139,6 +145,59 @@ def table_columns(tables: RunTables) -> dict[str, tuple[str, str, str]]:
         else:
             out[k] = (dt, u, d)
     return out
+
+
+def log_columns(accel: bool) -> dict[str, tuple[str, str, str]]:
+    """The sample table of a user's log: the gyro in the sensor frame, uncorrected
+    (gyrolab.logs), the accelerometer where the log has one, the IMU's temperature."""
+    out = {k: COLUMNS[k] for k in ("index", "t_s")}
+    for a in AXIS_NAMES:
+        out[f"rate_{a}_dps"] = (
+            "float32", "deg/s", f"angular rate, axis {a}, sensor frame, uncorrected",
+        )  # fmt: skip
+    if accel:
+        for a in AXIS_NAMES:
+            out[f"accel_{a}_mps2"] = (
+                "float32", "m/s^2",
+                f"acceleration, axis {a}, sensor frame, uncorrected; last sample at or before t_s",
+            )  # fmt: skip
+    out[INTERNAL_COLUMN[0]] = (
+        "float64", "degC", "IMU's own temperature sensor, last reading at or before t_s",
+    )  # fmt: skip
+    return out
+
+
+def hold_last(t: np.ndarray, rt: np.ndarray, rv: np.ndarray) -> np.ndarray:
+    """The last reading ``(rt, rv)`` at or before each ``t`` (NaN before the first); ``rv``
+    may have a second axis. Held, never interpolated."""
+    tt = np.asarray(rt, dtype=float)
+    vv = np.asarray(rv, dtype=float)
+    if tt.size == 0:
+        return np.full((np.size(t), *vv.shape[1:]), np.nan)
+    k = np.searchsorted(tt, t, side="right") - 1
+    out = vv[np.maximum(k, 0)]
+    out[k < 0] = np.nan
+    return out
+
+
+def iter_log_blocks(rec: Recording, tables: RunTables) -> Iterator[dict[str, np.ndarray]]:
+    """The sample table of a user's log read into memory (gyrolab.logs.read_log), in blocks
+    of ``ROWS_PER_WRITE`` rows; fills ``tables`` (temperature readings, gap count)."""
+    rate = rec.require_rate()
+    tables.pt100 = [(float(t), float(c), 1) for t, c in zip(rec.pt100_t, rec.pt100_c, strict=True)]
+    tables.gaps = len(rate.gaps())
+    for a in range(0, rate.t.size, ROWS_PER_WRITE):
+        sl = slice(a, a + ROWS_PER_WRITE)
+        t = rate.t[sl]
+        cols: dict[str, np.ndarray] = {"index": rate.index[sl].astype(np.int64), "t_s": t}
+        for j, ax in enumerate(AXIS_NAMES):
+            cols[f"rate_{ax}_dps"] = rate.values[sl, j].astype(np.float32)
+        if tables.has_accel and rec.accel is not None:
+            acc = hold_last(t, rec.accel.t, rec.accel.values)
+            for j, ax in enumerate(AXIS_NAMES):
+                cols[f"accel_{ax}_mps2"] = acc[:, j].astype(np.float32)
+        cols[INTERNAL_COLUMN[0]] = hold_last(t, rec.pt100_t, rec.pt100_c)
+        yield cols
 
 
 def _is_adc(name: str) -> bool:
@@ -181,12 +240,7 @@ def iter_sample_blocks(path: Path, tables: RunTables) -> Iterator[dict[str, np.n
         first = [last] if np.isfinite(last[0]) else []
         tt = np.asarray([r[0] for r in first] + rt, dtype=float)
         vv = np.asarray([r[1] for r in first] + rv, dtype=float)
-        if tt.size == 0:
-            return np.full(t.size, np.nan)
-        k = np.searchsorted(tt, t, side="right") - 1
-        out = vv[np.maximum(k, 0)]
-        out[k < 0] = np.nan
-        return out
+        return hold_last(t, tt, vv)
 
     def emit() -> Iterator[dict[str, np.ndarray]]:
         nonlocal last_pt, last_ov, next_index
@@ -288,7 +342,7 @@ def _batched(blocks: Iterator[dict[str, np.ndarray]], rows: int) -> Iterator[dic
 
 def _attrs(tables: RunTables, src: Path) -> dict[str, str]:
     """File-level attributes: all JSON text (string maps are what every format stores)."""
-    plain = tables.axes == 1 and tables.temperature_source == "pt100"
+    plain = tables.axes == 1 and tables.temperature_source == "pt100" and not tables.foreign
     cols = COLUMNS if plain else table_columns(tables)  # single-axis PT100 run: as always
     unit = {} if tables.unit is None else {"gyrolab_unit": tables.unit}
     return {
@@ -487,9 +541,11 @@ def convert_recording(
     out: str | os.PathLike[str],
     force: bool = False,
     unit: str | None = None,
+    log_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Convert ``src`` to ``out`` in format ``to``; returns ``{"rows", "gaps", "format"}``.
-    ``unit``: the unit of a multi-unit recording (needed when it holds several)."""
+    ``unit``: the unit of a multi-unit recording (needed when it holds several);
+    ``log_options``: :func:`gyrolab.logs.read_log`'s keywords for a user's log."""
     src_p, out_p = Path(src), Path(out)
     if to not in FORMATS:
         raise GyrolabError(f"convert: unknown format {to!r} (one of {', '.join(FORMATS)})")
@@ -502,6 +558,12 @@ def convert_recording(
                 f"pip install 'gyrolab[export]' (or pip install {_LIBS[to]})"
             )
     check_output(out_p, force, inputs=(src_p,), kind="file")  # never the input (outputs.py)
+    from gyrolab.logs import detect_format
+
+    if detect_format(src_p) != "gyrolab":  # a user's log (docs/convert.md, "Users' logs")
+        if unit is not None:
+            raise InputError(src_p, "--unit is for multi-unit gyrolab recordings, not logs")
+        return _convert_log(src_p, to, out_p, force, log_options or {})
     meta = read_metadata(src_p)  # also rejects a missing, foreign or damaged file
     unit = select_unit(src_p, unit)
     counts = _summary(src_p)
@@ -524,16 +586,58 @@ def convert_recording(
         unit=unit,
         temperature_source="internal" if internal else "pt100",
     )
-    bar = progress(total=counts[rate_topic], desc=f"convert → {to}", unit="block")
+    blocks = iter_sample_blocks(src_p, tables)
+    return _write_table(src_p, to, out_p, force, tables, blocks, counts[rate_topic], "block")
+
+
+def _write_table(
+    src: Path,
+    to: str,
+    out: Path,
+    force: bool,
+    tables: RunTables,
+    blocks: Iterator[dict[str, np.ndarray]],
+    total: int,
+    unit: str,
+) -> dict[str, Any]:
+    """Write ``blocks`` as ``to`` into ``out`` (atomically), with a progress bar of
+    ``total`` blocks or samples; the conversion's summary."""
+    bar = progress(total=total, desc=f"convert → {to}", unit=unit)
 
     def counted() -> Iterator[dict[str, np.ndarray]]:
-        for b in iter_sample_blocks(src_p, tables):
-            bar.update(1)
+        for b in blocks:
+            bar.update(1 if unit == "block" else b["t_s"].size)
             yield b
 
     try:
-        with atomic_file(out_p, force, inputs=(src_p,)) as tmp:
-            rows = _WRITERS[to](tmp, counted(), tables, src_p)
+        with atomic_file(out, force, inputs=(src,)) as tmp:
+            rows = _WRITERS[to](tmp, counted(), tables, src)
     finally:
         bar.close()
-    return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out_p)}
+    return {"rows": rows, "gaps": tables.gaps, "format": to, "out": str(out)}
+
+
+def _convert_log(
+    src: Path, to: str, out: Path, force: bool, options: dict[str, Any]
+) -> dict[str, Any]:
+    """A user's log (ULog, DataFlash, ROS 2 MCAP) read into memory by
+    :func:`gyrolab.logs.read_log` — sensor frame, uncorrected — written as the log table
+    (:func:`log_columns`)."""
+    from gyrolab.logs import read_log
+
+    rec = read_log(src, **options)
+    rate = rec.require_rate()
+    if rate.axes != 3:
+        raise InputError(src, f"log gyro has {rate.axes} axes, expected x, y, z")
+    tables = RunTables(
+        metadata={"run": rec.run},
+        has_adc=False,
+        start_time_ns=0,  # users' logs: times are since the log's first gyro sample
+        axes=3,
+        temperature_source="internal",
+        foreign=True,
+        has_accel=rec.accel is not None,
+    )
+    blocks = iter_log_blocks(rec, tables)
+    return _write_table(src, to, out, force, tables, blocks, rate.t.size, "sample")
+

@@ -157,23 +157,42 @@ def _fmt(type_: int, length: int, name: str, fmt: str, cols: str) -> bytes:
     )
 
 
+PARM_TYPE = 64
+
+
+def _parm(t_us: int, name: str, value: float) -> bytes:
+    return b"\xa3\x95" + struct.pack("<BQ16sf", PARM_TYPE, t_us, name.encode(), value)
+
+
 def write_dataflash(
-    path: Path, t_us: np.ndarray, gyro: np.ndarray, temp_c: np.ndarray, instance: int = 0
+    path: Path,
+    t_us: np.ndarray,
+    gyro: np.ndarray,
+    temp_c: np.ndarray,
+    instance: int = 0,
+    *,
+    accel: np.ndarray | None = None,
+    params: list[tuple[int, str, float]] = (),  # type: ignore[assignment]
 ) -> Path:
-    """A DataFlash log: FMT of FMT, FMT of ArduPilot's IMU message, one IMU per sample."""
+    """A DataFlash log: FMT of FMT, FMT of ArduPilot's IMU (and PARM) message, the
+    ``params`` as PARM messages at their times (µs), one IMU per sample (the accelerometer
+    ``accel``, m/s², else 0, 0, −9.81)."""
     imu_len = 3 + struct.calcsize("<" + IMU_FORMAT)
     out = bytearray(_fmt(FMT_TYPE, 89, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"))
     out += _fmt(IMU_TYPE, imu_len, "IMU", IMU_FORMAT, IMU_COLUMNS)
+    out += _fmt(PARM_TYPE, 3 + struct.calcsize("<Q16sf"), "PARM", "QNf", "TimeUS,Name,Value")
+    pending = sorted(params)
+    acc = np.tile([0.0, 0.0, -9.81], (t_us.size, 1)) if accel is None else accel
     for k in range(t_us.size):
+        while pending and pending[0][0] <= t_us[k]:
+            out += _parm(*pending.pop(0))
         out += b"\xa3\x95" + struct.pack(
             "<BQBffffffIIfBBHH",
             IMU_TYPE,
             int(t_us[k]),
             instance,
             *(float(v) for v in gyro[k]),
-            0.0,
-            0.0,
-            -9.81,
+            *(float(v) for v in acc[k]),
             0,
             0,
             float(temp_c[k]),

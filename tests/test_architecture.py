@@ -52,7 +52,7 @@ LAYERS: list[set[str]] = [
     {"record", "profiles", "catalogue"},
     {"numerics"},
     {"errors", "outputs", "progress", "tomlfile", "pt100", "framing", "clock", "sampling",
-     "__init__"},
+     "autopilot", "vectornav", "__init__"},
 ]
 RANK = {unit: len(LAYERS) - i for i, layer in enumerate(LAYERS) for unit in layer}
 

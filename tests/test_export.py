@@ -472,7 +472,7 @@ def test_kalibr_imu_yaml_from_allan(unit: dict[str, Path]) -> None:
     nds = []
     for a, (_n, d) in enumerate(ModelDir(unit["model"]).axes()):
         s = rec.axis(a).rate
-        comp = streaming_compensate(d.load(), s.t, s.values, rec.pt100_t, rec.pt100_c)
+        comp = streaming_compensate(d.load(), s.t, s.values, rec.pt100_t, rec.pt100_c, "chosen")
         nds.append(noise_terms(allan_deviation(comp, RATE_HZ, confidence=None)).N)
     # continuous-time density = Allan N (deg/s * sqrt(s)) in rad/s/sqrt(Hz), largest axis
     assert y["gyroscope_noise_density"] == pytest.approx(max(nds) * math.pi / 180, rel=1e-6)
@@ -537,3 +537,40 @@ def test_c_export_names_that_are_not_identifiers(unit: dict[str, Path]) -> None:
     bad = unit["dir"] / 'q"uote.c'
     assert main(["export", model, "--format", "c", "--kind", "poly", "--out", str(bad)]) == 2
     assert not bad.exists() and not bad.with_suffix(".h").exists()
+
+
+def test_kalibr_on_a_short_real_log_has_no_nan_and_accelerometer_fields(
+    unit: dict[str, Path],
+) -> None:
+    """pymavlink's tests/test.BIN is a 0.9 s log: N (defined at 1 s) and K (at 3 s) lie
+    beyond it, so both are the documented upper bounds, never nan and never labelled as
+    read at a tau the record does not reach; the log has accelerometers, so kalibr's
+    accelerometer fields are written from them."""
+    log = Path(__file__).parent / "data" / "pymavlink_test.BIN"
+    out = unit["dir"] / "short.yaml"
+    assert main(["export", str(unit["model"]), "--format", "kalibr", "--run", str(log),
+                 "--out", str(out)]) == 0  # fmt: skip
+    text = out.read_text()
+    y = yaml.safe_load(text)
+    assert set(y) == {
+        "gyroscope_noise_density", "gyroscope_random_walk", "accelerometer_noise_density",
+        "accelerometer_random_walk", "update_rate", "rostopic",
+    }  # fmt: skip
+    for k, v in y.items():
+        if k != "rostopic":
+            assert isinstance(v, float) and math.isfinite(v) and v > 0, k
+    assert "nan" not in text.lower()
+    assert "read at tau" not in text  # nothing labelled at a tau beyond the record
+    assert text.count("upper bound") >= 12 and "beyond the 0.901 s record" in text
+
+
+def test_export_instance_out_of_range_is_one_line(unit: dict[str, Path], capsys) -> None:
+    out = unit["dir"] / "bad.params"
+    dev = ["--device-id", "1"]
+    cases = [("px4", "4", dev), ("ardupilot", "3", []), ("px4", "-1", dev), ("ardupilot", "-1", [])]
+    for fmt, inst, extra in cases:
+        rc = main(["export", str(unit["model"]), "--format", fmt, "--instance", inst,
+                   "--out", str(out), *extra])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and not out.exists(), (fmt, inst)
+        assert err.count("\n") == 0 and "--instance" in err and f"not {inst}" in err, err

@@ -30,6 +30,7 @@ def test_cli_lists_every_design_subcommand() -> None:
         "batch",
         "fleet",
         "runs",  # issue 29: the catalogue
+        "profile",  # issue 30: profile design
     }
 
 

@@ -65,9 +65,9 @@ def test_a_profile_beyond_the_bounds_is_refused(
         (["acquire", "--bench", "sim", "--speed", "0"], "--speed: must be a finite number > 0"),
         (["export", "{run}", "--format", "json", "--instance", "-1"], "--instance: must be at"),
         (["export", "{run}", "--format", "px4", "--device-id", "1", "--instance", "4"],
-         "--instance: px4 has gyro instances 0..3, not 4"),
+         "--instance: px4 has gyro calibration instances 0..3, not 4"),
         (["export", "{run}", "--format", "ardupilot", "--instance", "99"],
-         "--instance: ardupilot has gyro instances 0..2, not 99"),
+         "--instance: ardupilot has gyro calibration instances 0..2, not 99"),
     ],
     ids=lambda a: " ".join(a) if isinstance(a, list) else None,
 )

@@ -120,7 +120,7 @@ def test_ros2_imu_fast_path_equals_the_library(tmp_path: Path) -> None:
                 "orientation_covariance": [0.5] * 9,
                 "angular_velocity": {"x": v[0], "y": v[1], "z": v[2]},
                 "angular_velocity_covariance": [0.0] * 9,
-                "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81},
+                "linear_acceleration": {"x": 0.1 * k, "y": -0.2, "z": 9.81},
                 "linear_acceleration_covariance": [0.0] * 9,
             }
             w.write_message("/imu", s, msg, log_time=k, publish_time=k)
@@ -130,9 +130,9 @@ def test_ros2_imu_fast_path_equals_the_library(tmp_path: Path) -> None:
         for _s, _c, m, msg in make_reader(
             fh, decoder_factories=[DecoderFactory()]
         ).iter_decoded_messages():
-            a = msg.angular_velocity
+            a, f = msg.angular_velocity, msg.linear_acceleration
             st = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-            assert imu_fast(m.data) == (st, a.x, a.y, a.z)
+            assert imu_fast(m.data) == (st, a.x, a.y, a.z, f.x, f.y, f.z)
             n += 1
     assert n == 24
 
@@ -225,17 +225,17 @@ def test_report_allan_of_a_dataflash_log(logs: dict) -> None:
 
 
 def test_dataflash_fast_path_equals_pymavlink(logs: dict) -> None:
-    """The numpy gather at pymavlink's index (gyrolab.logs.dataflash.imu_rows_fast) against
+    """The numpy gather at pymavlink's index (gyrolab.logs.dataflash.imu_rows) against
     pymavlink's own message-by-message decoding of the same file."""
     from pymavlink import DFReader
 
-    from gyrolab.logs.dataflash import imu_rows_fast
+    from gyrolab.logs.dataflash import COLUMNS, imu_rows
 
     log = DFReader.DFReader_binary(str(logs["dataflash"]), zero_time_base=True)
-    fast = imu_rows_fast(log, 0)
+    fast = imu_rows(log, 0)
     slow = []
     while (m := log.recv_match(type="IMU")) is not None:
-        slow.append((m.TimeUS * 1e-6, m.GyrX, m.GyrY, m.GyrZ, m.T))
-    assert fast is not None and fast.shape == (len(slow), 5)
+        slow.append([m.TimeUS * 1e-6] + [getattr(m, c) for c in COLUMNS[1:]])
+    assert fast.shape == (len(slow), len(COLUMNS))
     np.testing.assert_array_equal(fast, np.asarray(slow))
-    assert imu_rows_fast(log, 1).shape == (0, 5)
+    assert imu_rows(log, 1).shape == (0, len(COLUMNS))

@@ -31,10 +31,17 @@ def units(n: int) -> list[Unit]:
 
 
 def simulate_run(
-    unit: Unit, name: str, seed: int, rate_hz: float = RATE_HZ, noise_path: str = str(DATA)
+    unit: Unit,
+    name: str,
+    seed: int,
+    rate_hz: float = RATE_HZ,
+    noise_path: str = str(DATA),
+    setpoints: np.ndarray | None = None,
 ) -> Run:
-    """One trajectory of one unit, from power-on: output, true drift and PT100."""
-    sp, rest = trajectory(name, seed)
+    """One trajectory of one unit, from power-on: output, true drift and PT100.
+    ``setpoints`` (per second, from rest at 25 °C) replaces the named trajectory: a
+    calibration profile under test (benchmarks/prior_suite.py), run on day 0."""
+    sp, rest = trajectory(name, seed) if setpoints is None else (setpoints, 25.0)
     air = air_temperature(sp, rest)
     P, D = thermal(unit, air, rest)
     rng = np.random.default_rng([seed, 5])

@@ -424,17 +424,14 @@ def validate(cfg: BenchConfig) -> None:
 
 
 def _check_units(cfg: BenchConfig) -> None:
-    """Units: distinct serials and scanner channels; multi-axis units are not supported on a
-    multi-unit bench (yet)."""
+    """Units: distinct serials and scanner channels. A unit may have 1–3 axes (a flight
+    controller's IMUs have three each)."""
     s = cfg.source
     channels = list(cfg.scanner.channels) if cfg.scanner is not None else []
     for what, values in (("serial", [u.serial for u in cfg.units]), ("channel", channels)):
         dup = sorted({v for v in values if values.count(v) > 1}, key=str)
         if dup:
             raise InputError(s, f"[[unit]] {what} {dup[0]} is given to more than one unit")
-    for u in cfg.units:
-        if getattr(u.adc, "axes", 1) != 1:
-            raise InputError(s, f"[[unit]] {u.serial}: multi-axis units are single-unit only")
 
 
 def check_bench_for_profile(cfg: BenchConfig, profile: Any, profile_source: str) -> None:

@@ -30,10 +30,17 @@ def compensate(opts: CompensateOptions) -> int:
     t_start = time.perf_counter()
     run = str(opts.run)
     if opts.unit is None and units_of(run):
+        if opts.prior is not None:  # each unit is tested against the prior on its own
+            raise InputError(run, "--prior fits one unit of a multi-unit run: name it with --unit")
         check_output(opts.out, opts.force, inputs=_inputs(opts), kind="dir")
         # the single-run call's default (tests and benchmarks set it there)
         cfg, seed = resolve_config(opts.config, commands.DEFAULT_CONFIG, opts.seed)
         return compensate_units(opts, cfg, seed)
+    prior = None
+    if opts.prior is not None:
+        from gyrolab.app.prior import load_prior
+
+        prior = load_prior(opts.prior)
     summary = commands.compensate(
         run,
         opts.out,
@@ -45,6 +52,7 @@ def compensate(opts: CompensateOptions) -> int:
         force=opts.force,
         run_label=opts.run_label,
         validate_label=opts.validate_label,
+        prior=prior,
     )
     print(summary)
     total = time.perf_counter() - t_start

@@ -40,7 +40,7 @@ from typing import Any
 
 from gyrolab.app.acquire import acquire
 from gyrolab.app.options import AcquireOptions, CompensateOptions, DemoOptions
-from gyrolab.app.register import register_tree
+from gyrolab.app.register import demo_catalogue, register_tree
 from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
@@ -57,7 +57,6 @@ HELDOUT_SOURCE = "acquire --bench sim"
 # The spec the held-out report is judged against: the example spec (examples/spec.toml
 # links to it), shipped with the package so that an installed gyrolab has it too.
 DEMO_SPEC = Path(__file__).resolve().parents[1] / "report" / "example_spec.toml"
-DEMO_CATALOGUE = "catalogue.sqlite"  # inside DIR unless --catalogue / $GYROLAB_CATALOGUE
 
 
 def run_demo(
@@ -177,15 +176,6 @@ def export_firmware(model: Path, out: Path) -> None:
     export(model, "ardupilot", out / "ardupilot.parm")
 
 
-def demo_catalogue(out: Path, option: str | None) -> str | None:
-    """Where the demo registers (:func:`run_demo`); None when registration is off."""
-    from gyrolab.catalogue.store import ENV, catalogue_url, sqlite_url
-
-    if option or os.environ.get(ENV, "").strip():
-        return catalogue_url(option)
-    return sqlite_url(out / DEMO_CATALOGUE)
-
-
 def summary(out: Path, res: dict[str, Any]) -> str:
     """The causal headline first, the baselines, the paper's offline method and (where the
     truth is known) the oracle beside it, on the same averages."""
@@ -239,7 +229,12 @@ def summary(out: Path, res: dict[str, Any]) -> str:
 
 
 def demo(opts: DemoOptions) -> int:
-    """The ``gyrolab demo`` command: :func:`run_demo`, then its :func:`summary`."""
+    """The ``gyrolab demo`` command: :func:`run_demo`, then its :func:`summary`; with
+    ``--fc``, the flight-controller loop (:mod:`gyrolab.app.fc_demo`)."""
+    if opts.fc is not None:
+        from gyrolab.app.fc_demo import fc_demo
+
+        return fc_demo(opts)
     res = run_demo(opts.out, opts.profile, opts.seed, opts.force, catalogue=opts.catalogue)
     print(summary(Path(opts.out), res))
     return 0

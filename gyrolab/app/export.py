@@ -30,6 +30,13 @@ def export(opts: ExportOptions) -> int:
 
 def convert(opts: ConvertOptions) -> int:
     """The ``gyrolab convert`` command (docs/convert.md)."""
-    res = convert_recording(opts.run, opts.to, opts.out, force=opts.force, unit=opts.unit)
+    res = convert_recording(
+        opts.run,
+        opts.to,
+        opts.out,
+        force=opts.force,
+        unit=opts.unit,
+        log_options=opts.log.read_log_kwargs(),
+    )
     print(f"wrote {res['out']}: {res['rows']} samples ({res['gaps']} gap(s)) as {res['format']}")
     return 0

@@ -25,11 +25,20 @@ from gyrolab.sampling import DEFAULT_RATE_HZ
 PathArg = str | os.PathLike[str]
 
 
-
 def need_file(path: PathArg | None) -> None:
     """``path`` (when given) names an existing file or directory, else ``file not found``."""
     if path is not None and not os.path.exists(path):
         raise InputError(path, "file not found")
+
+
+PRIOR_QUERY = "part-number:"
+
+
+def need_prior(spec: str | None) -> None:
+    """``--prior``: a directory (of model directories) or ``part-number:PN``."""
+    if spec is None or spec.startswith(PRIOR_QUERY) and spec[len(PRIOR_QUERY) :]:
+        return
+    need_model_dir(spec)
 
 
 def need_model_dir(path: PathArg | None) -> None:
@@ -165,10 +174,12 @@ class CompensateOptions:
     force: bool = False
     run_label: str = ""
     validate_label: str = ""
+    prior: str | None = None  # DIR of model directories, or part-number:PN
 
     def __post_init__(self) -> None:
         for p in (self.run, self.validate, self.config):
             need_file(p)
+        need_prior(self.prior)
 
 
 @dataclass(frozen=True)
@@ -223,23 +234,32 @@ class DiscrepancyOptions:
 
 @dataclass(frozen=True)
 class DemoOptions:
-    """``gyrolab demo --out DIR`` (docs/report.md)."""
+    """``gyrolab demo --out DIR`` (docs/report.md); ``fc`` (``px4`` | ``ardupilot``): a
+    simulated flight controller through calibration, compensation, export, flash and an
+    on-device verification run instead (docs/instruments.md)."""
 
     out: PathArg
     profile: str = "paper"
     seed: int = 1
     force: bool = False
     catalogue: str | None = None  # where it registers (docs/catalogue.md, "The demo")
+    fc: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.fc not in (None, "px4", "ardupilot"):
+            raise InputError("--fc", f"px4 or ardupilot, not {self.fc!r}")
 
 
 @dataclass(frozen=True)
 class ConvertOptions:
-    """``gyrolab convert RUN.mcap --to FORMAT --out FILE`` (docs/convert.md)."""
+    """``gyrolab convert RUN --to FORMAT --out FILE`` (docs/convert.md): a recording, or a
+    user's log (``log``: which IMU or topics)."""
 
     run: PathArg
     to: str
     out: PathArg
     unit: str | None = None
+    log: LogOptions = field(default_factory=LogOptions)  # a user's log (docs/convert.md)
     force: bool = False
 
     def __post_init__(self) -> None:
@@ -266,9 +286,7 @@ class ExportOptions:
     force: bool = False
 
     def __post_init__(self) -> None:
-        check_request(
-            self.format, device_id=self.device_id, run=self.run, instance=self.instance
-        )
+        check_request(self.format, device_id=self.device_id, run=self.run, instance=self.instance)
         need_model_dir(self.model)
         need_file(self.run)
 
@@ -351,3 +369,32 @@ class RunsOptions:
     dirs: tuple[PathArg, ...] = ()
     json: bool = False
     catalogue: str | None = None
+
+
+@dataclass(frozen=True)
+class ProfileDesignOptions:
+    """``gyrolab profile design`` (docs/profiles.md): the profile of ``hours`` that shows
+    the drift model best, given the chamber's limits (``sim_model``'s ``[thermal]``) and
+    optionally a fleet prior."""
+
+    hours: float
+    out: PathArg
+    action: str = "design"
+    prior: str | None = None
+    sim_model: str | None = None
+    setpoint_min: float = -40.0
+    setpoint_max: float = 60.0
+    ambient: float = 25.0
+    name: str | None = None
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        need_file(self.sim_model)
+        need_prior(self.prior)
+        if not 0.9 <= self.hours <= 24.0:
+            raise InputError("--hours", f"{self.hours:g}: a designed profile is 0.9 to 24 h")
+        if not self.setpoint_min < self.ambient < self.setpoint_max:
+            raise InputError(
+                "--setpoint-min/--setpoint-max",
+                "the ambient must lie between the lowest and the highest setpoint",
+            )

@@ -254,3 +254,20 @@ def register_command(opts: object, rc: int) -> None:
         register_report(out, opts.run, opts.model, opts.unit)
     elif isinstance(opts, o.BatchCommandOptions) and out.is_dir():
         register_tree(out)
+
+
+DEMO_CATALOGUE = "catalogue.sqlite"  # inside DIR unless --catalogue / $GYROLAB_CATALOGUE
+
+
+def demo_catalogue(out: Path, option: str | None) -> str | None:
+    """Where a demo registers its directory (``gyrolab demo``, ``demo --fc``): ``option``,
+    else ``$GYROLAB_CATALOGUE`` where the user set it, else ``out/catalogue.sqlite`` (a
+    demo's simulated units stay out of a lab's catalogue unless asked); None when
+    registration is off."""
+    import os
+
+    from gyrolab.catalogue.store import ENV, catalogue_url, sqlite_url
+
+    if option or os.environ.get(ENV, "").strip():
+        return catalogue_url(option)
+    return sqlite_url(out / DEMO_CATALOGUE)

@@ -240,7 +240,7 @@ def start_sim_bench(
     needed); else in this one (``SimHandle.bench`` is then the ``SimBench``, for tests).
     """
     from gyrolab.sim.bench.fault_file import plan_to_dict
-    from gyrolab.sim.bench.process import BenchProcess, BenchRecipe, describe
+    from gyrolab.sim.bench.process import BenchProcess, BenchRecipe, describe, device_axes
     from gyrolab.sim.model import nominal_model
     from gyrolab.sim.simulate import axis_physics, provenance
 
@@ -257,6 +257,8 @@ def start_sim_bench(
     for role, spec in specs.items():
         if not spec.sim_backend:
             raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
+    rate_spec = registry.get(cfg.adc.driver, "rate_stream")
+    device = _sim_device(cfg, rate_spec, axis_models)
     if cfg.units and axis_models:
         raise InputError("--axis-model", "multi-axis units are single-unit only (not --units)")
     model = model or nominal_model()
@@ -274,7 +276,7 @@ def start_sim_bench(
             oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
             oven_alarm_input=getattr(cfg.oven, "alarm_input", 0) or None,
             unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
-            samples_per_frame=cfg.adc.samples_per_frame,
+            samples_per_frame=getattr(cfg.adc, "samples_per_frame", 1),  # a VN-100: none
             workdir=workdir,
             faults=faults,
             keep_truth=keep_truth,
@@ -296,6 +298,7 @@ def start_sim_bench(
         model=model,
         axis_models=list(axis_models),
         units=[(u.model, u.seed) for u in family] if family else None,
+        device=device,
     )
     bench: Any
     if own_process:
@@ -315,7 +318,8 @@ def start_sim_bench(
         return replace(a, **adc)
 
     axes = 1 + len(axis_models)
-    cfg = replace(cfg, adc=replace(calibrated(cfg.adc, info["adc"]), axes=axes))
+    if device is None:  # a device (VN-100) reports in its own units
+        cfg = replace(cfg, adc=replace(calibrated(cfg.adc, info["adc"]), axes=axes))
     if cfg.units:
         cfg = replace(
             cfg,
@@ -327,7 +331,12 @@ def start_sim_bench(
     where = info["resources"]
     metadata: dict[str, dict[str, Any]] = {
         "sim_provenance": (
-            provenance(model, seed)
+            {
+                "device": rate_spec.sim_backend,
+                "axes": [provenance(m, p_seed) for m, p_seed in device_axes(device, seed)],
+            }
+            if device is not None
+            else provenance(model, seed)
             if not family  # a family: keyed by serial, as simulate --units writes it
             else {
                 u.serial: {**provenance(u.model, u.seed), "family_seed": int(seed)} for u in family
@@ -346,7 +355,7 @@ def start_sim_bench(
         | (
             {f"unit/{u.serial}": p for u, p in zip(cfg.units, where["unit_adc_ports"], strict=True)}
             if cfg.units
-            else {"rate_stream": where["adc_port"]}
+            else {"rate_stream": where[rate_spec.sim_address]}
         ),
         clock=SimRunClock(bench.clock),
         silence=SimSilence(),
@@ -357,6 +366,19 @@ def start_sim_bench(
         metadata=metadata,
     )
     return handle, cfg
+
+
+def _sim_device(cfg: BenchConfig, spec: registry.DriverSpec, axis_models: Any) -> str | None:
+    """The simulated device a rate-stream driver speaks to, when it is not the gyro ADC
+    (``BenchRecipe.device``): ``"VN100"`` → a simulated VN-100
+    (:mod:`gyrolab.sim.bench.vectornav`); None for the ADC."""
+    if spec.sim_backend == "ADC":
+        return None
+    if spec.sim_backend != "VN100":
+        raise GyrolabError(f"rate_stream driver {spec.name!r}: no simulated back end here")
+    if cfg.units or axis_models:
+        raise InputError("--driver", f"{spec.name}: one simulated unit (no --units, --axis-model)")
+    return spec.sim_backend
 
 
 def _with_die_sensor(adc: Any, unit: dict[str, Any], internal: bool) -> Any:

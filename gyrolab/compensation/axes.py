@@ -15,17 +15,21 @@ from gyrolab.compensation.config import PipelineConfig
 from gyrolab.compensation.prepare import PreparedRun, prepare_file, prepare_run
 
 
-def load_runs(path: str, cfg: PipelineConfig, **log_options: Any) -> list[PreparedRun]:
-    """One :class:`~.prepare.PreparedRun` per axis of the run at ``path``.
+def load_runs(
+    path: str, cfg: PipelineConfig, unit: str | None = None, **log_options: Any
+) -> list[PreparedRun]:
+    """One :class:`~.prepare.PreparedRun` per axis of the run at ``path`` (of unit ``unit``
+    of a multi-unit recording).
 
-    A single-axis gyrolab MCAP is streamed from the file (:func:`.prepare.prepare_file`,
-    bounded memory, exactly as before); a multi-axis recording or a foreign log (ROS 2
-    MCAP, PX4 ULog, ArduPilot DataFlash: :func:`gyrolab.logs.read_log` with
-    ``log_options``) is read into memory and prepared axis by axis
-    (:func:`.prepare.prepare_run`)."""
+    A single-axis gyrolab MCAP (unit) is streamed from the file
+    (:func:`.prepare.prepare_file`, bounded memory, exactly as before); a multi-axis
+    recording (a flight controller's IMU, say) or a foreign log (ROS 2 MCAP, PX4 ULog,
+    ArduPilot DataFlash: :func:`gyrolab.logs.read_log` with ``log_options``) is read into
+    memory and prepared axis by axis (:func:`.prepare.prepare_run`)."""
     from gyrolab.logs import read_log, single_axis_gyrolab
+    from gyrolab.record.reader import read_recording
 
-    if single_axis_gyrolab(path):
-        return [prepare_file(path, cfg)]
-    rec = read_log(path, **log_options)
+    if single_axis_gyrolab(path, unit):
+        return [prepare_file(path, cfg, unit=unit)]
+    rec = read_recording(path, unit=unit) if unit is not None else read_log(path, **log_options)
     return [prepare_run(rec.axis(k), cfg) for k in range(rec.axes)]

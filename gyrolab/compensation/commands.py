@@ -41,7 +41,7 @@ from gyrolab import __version__
 from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
 from gyrolab.compensation.axes import load_runs
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
-from gyrolab.compensation.evaluate import evaluate, poly3_metrics
+from gyrolab.compensation.evaluate import add_firmware_metrics, evaluate
 from gyrolab.compensation.firmware import fit_poly3
 from gyrolab.compensation.fit import fit
 from gyrolab.compensation.guards import check_not_calibration, range_check, warn_outside
@@ -73,6 +73,31 @@ def _named(path: str) -> Iterator[None]:
         raise
 
 
+def _prior_lines(cm: dict[str, Any]) -> list[str]:
+    """The fleet prior's line (a MAP fit) and the up/down hysteresis width of a
+    structured model with a hysteresis term."""
+    from gyrolab.compensation.prior import hysteresis_width
+
+    out = []
+    pr = cm.get("selection", {}).get("prior")
+    if pr:
+        mem = pr["membership"]
+        out.append(
+            f"  fleet prior: {pr['prior_units']} units, cluster {pr['cluster']} of "
+            f"{pr['cluster_units']}; this unit's distance d2 = {mem['mahalanobis_d2']:.1f} on "
+            f"{mem['dof']} parameters (p = {mem['p_value']:.2g}): belongs"
+        )
+    st = cm.get("structured")
+    if st and (st.get("h") or st.get("hT")):
+        w = hysteresis_width(st)
+        out.append(
+            "  hysteresis width (heating - cooling branch): "
+            f"{w['at_low_deg_per_h']:+.3g} / {w['at_mid_deg_per_h']:+.3g} / "
+            f"{w['at_high_deg_per_h']:+.3g} deg/h at the low end / middle / high end"
+        )
+    return out
+
+
 def _summary(m: dict[str, Any]) -> str:
     r, c = m["raw"], m["compensated"]
 
@@ -93,6 +118,7 @@ def _summary(m: dict[str, Any]) -> str:
             f"{pp.get('causal', float('nan')):.4g} deg/s "
             f"({pct(pp.get('raw', 0.0), pp.get('causal', 0.0))} less)"
         )
+        lines += _prior_lines(m["causal_model"])
         mb = m.get("headline", {}).get("mean_bias_deg_per_h")
         band = m.get("causal_band")
         if mb is not None:
@@ -130,13 +156,14 @@ def _summary(m: dict[str, Any]) -> str:
         f"  ARW          {r['arw_deg_per_sqrt_h']:.4g} -> {c['arw_deg_per_sqrt_h']:.4g} deg/rt(h)"
         f" (without noise removal {m['compensated_drift_only']['arw_deg_per_sqrt_h']:.4g})",
     ]
-    fw = m.get("firmware_poly3")
-    if fw:
-        lines.append(
-            f"  firmware cubic (PX4/ArduPilot form) drift p-p {fw['drift_pp_deg_per_s']:.4g} "
-            f"deg/s, {fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the chosen causal "
-            "output's"
-        )
+    for key, name in (("firmware_px4", "PX4"), ("firmware_ardupilot", "ArduPilot")):
+        fw = m.get(key)
+        if fw:
+            lines.append(
+                f"  firmware cubic as {name} runs it: drift p-p "
+                f"{fw['drift_pp_deg_per_s']:.4g} deg/s, "
+                f"{fw['vs_chosen']['drift_pp_deg_per_s_ratio']:.3g}x the chosen causal output's"
+            )
     ext = m.get("baselines_extrapolation", {})
     for name, b in m["baselines"].items():
         e = ext.get(name, {})
@@ -167,6 +194,7 @@ def compensate(
     validate_label: str = "",
     base_config: PipelineConfig | None = None,
     on_stage: Callable[[str], None] | None = None,
+    prior: Any = None,
 ) -> str:
     """Fit on ``run_path``, optionally evaluate on ``validate``, write ``out``; returns
     the summary the command prints (one block per axis, the calibration run's after the
@@ -178,7 +206,10 @@ def compensate(
     read with ``log_options``) gets one model per axis in one directory
     (:mod:`gyrolab.compensation.axes`). The outputs name the runs as given, or by
     ``run_label``/``validate_label`` (:mod:`gyrolab.app.demo`: paths relative to its
-    output directory). ``on_stage(name)`` is told each of :data:`STAGES` as it is done."""
+    output directory). ``prior``: a fleet prior
+    (:class:`~gyrolab.compensation.prior.FleetPrior`) for the causal model's MAP fit
+    (every axis against the same prior). ``on_stage(name)`` is told each of
+    :data:`STAGES` as it is done."""
     t_start = time.perf_counter()
     stage = on_stage or (lambda _name: None)
     run_s, val_s = str(run_path), None if validate is None else str(validate)
@@ -188,21 +219,19 @@ def compensate(
     if unit is None and units_of(run_s):
         # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
         # this layer: it runs this function once per unit through gyrolab.batch)
-        raise InputError(
-            run_s, f"holds units {', '.join(units_of(run_s))}: choose one with --unit"
-        )
+        raise InputError(run_s, f"holds units {', '.join(units_of(run_s))}: choose one with --unit")
     opts = log_options or {}
     unit_arg = unit
     unit = select_unit(run_s, unit_arg) if unit_arg is not None or units_of(run_s) else None
     vunit = None
     if val_s and unit is not None:  # the same unit of a multi-unit held-out run
         vunit = select_unit(val_s, unit if units_of(val_s) else None)
-    if unit is not None:  # one unit of a multi-unit recording (single-axis units)
-        runs = [prepare_file(run_s, cfg, unit=unit)]
+    if unit is not None:  # one unit of a multi-unit recording (1–3 axes)
+        runs = load_runs(run_s, cfg, unit=unit)
     else:
         runs = load_runs(run_s, cfg, **opts)
     if vunit is not None:
-        vals = [prepare_file(val_s, cfg, unit=vunit)]
+        vals = load_runs(val_s, cfg, unit=vunit)
     else:
         vals = load_runs(val_s, cfg, **opts) if val_s else None
     if vals is not None and len(vals) != len(runs):
@@ -222,7 +251,7 @@ def compensate(
     fitted = []
     for k, run in enumerate(runs):
         t_axis = time.perf_counter()
-        fitted.append(_fit_axis(val_s, cfg, run, None if vals is None else vals[k], seed))
+        fitted.append(_fit_axis(val_s, cfg, run, None if vals is None else vals[k], seed, prior))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
         model, metrics, metrics_cal, _results = fitted[-1]
         metrics["timing_s"] = total
@@ -266,22 +295,23 @@ def _fit_axis(
     run: PreparedRun,
     val: PreparedRun | None,
     seed: int = 0,
+    prior: Any = None,
 ) -> tuple[Any, ...]:
     """Fit one axis → ``(model, metrics, calibration metrics, results)``: the metrics
     (held-out when ``val``) with the firmware cubic's cost, and what the report reads of
     each evaluated run (:mod:`gyrolab.compensation.results`)."""
     with _named(run.path):
-        model, dec = fit(run, cfg, seed=seed)
+        model, dec = fit(run, cfg, seed=seed, prior=prior)
         app = compensate_offline(model, run, dec)
         metrics_cal = evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
-        metrics_cal["firmware_poly3"] = poly3_metrics(p3, run, cfg.block_s, metrics_cal)
+        add_firmware_metrics(p3, run, metrics_cal, cfg.block_s)
         results = [run_results("calibration", model, app, run, held_out=False)]
     if val is not None:
         with _named(val.path):
             app_val = compensate_offline(model, val)
             metrics = evaluate(model, app_val, val, held_out=True)
-            metrics["firmware_poly3"] = poly3_metrics(p3, val, cfg.block_s, metrics)
+            add_firmware_metrics(p3, val, metrics, cfg.block_s)
             results.append(run_results("validation", model, app_val, val, held_out=True))
         metrics["calibration"] = metrics_cal
         warn_outside(validate, metrics.get("temperature", {}))

@@ -1,5 +1,5 @@
 """metrics.json of one application of a model (:func:`evaluate`, docs/cli.md keys; the
-firmware cubic's cost beside it, :func:`poly3_metrics`).
+firmware cubic's cost beside it, :func:`add_firmware_metrics`).
 
 Every series is compared at the paper's 1000 points/h (:func:`series_metrics`: the five
 metrics of :func:`gyrolab.compensation.metrics.signal_metrics` on the 3.6 s averages, the
@@ -18,7 +18,14 @@ import numpy as np
 
 from gyrolab.compensation.apply import Application, streaming_block_means_many
 from gyrolab.compensation.band import band_metrics
-from gyrolab.compensation.firmware import Poly3, chosen_key, poly3_block_means
+from gyrolab.compensation.firmware import (
+    FIRMWARES,
+    UPDATE_RULES,
+    Poly3,
+    chosen_key,
+    firmware_block_means,
+    firmware_offset_fn,
+)
 from gyrolab.compensation.fit import CompensationModel
 from gyrolab.compensation.guards import range_check
 from gyrolab.compensation.metrics import signal_metrics
@@ -207,28 +214,38 @@ def headline_info(model: CompensationModel, run: PreparedRun) -> dict[str, Any]:
     }
 
 
-def poly3_metrics(p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any]) -> dict:
-    """metrics.json ``firmware_poly3``: the cubic's causal residual on ``run`` and how much
-    worse it is than the chosen causal output of ``metrics`` (:func:`chosen_key`): ratios
-    > 1 mean the firmware form leaves more."""
+def form_metrics(
+    p3: Poly3, run: PreparedRun, block_s: float, metrics: dict[str, Any], form: str = "poly3"
+) -> dict:
+    """metrics.json ``firmware_<form>``: the cubic's causal residual on ``run`` under
+    ``form``'s update rule (:func:`gyrolab.compensation.firmware.firmware_offset_fn`) and how
+    much worse it is than the chosen causal output of ``metrics`` (:func:`chosen_key`):
+    ratios > 1 mean the firmware leaves more."""
     key = chosen_key(metrics)
     chosen = metrics[key]
-    m = series_metrics(poly3_block_means(p3, run, block_s), block_s)
+    m = series_metrics(
+        firmware_block_means(firmware_offset_fn(p3, run, form), run, block_s), block_s
+    )
     ratio = {
         f"{k}_ratio": (m[k] / chosen[k] if chosen.get(k) else float("nan"))
         for k in ("rms_deg_per_s", "drift_pp_deg_per_s", "bias_stability_deg_per_h")
     }
-    return {
-        **m,
-        "vs_chosen": {"chosen": key, **ratio},
-        "model": p3.to_dict(),
-    }
+    out = {**m, "vs_chosen": {"chosen": key, **ratio}, "model": p3.to_dict()}
+    if form != "poly3":
+        out["update_rule"] = UPDATE_RULES[form]
+    return out
 
 
-def add_firmware_metrics(p3: Poly3 | None, run: PreparedRun, metrics: dict[str, Any]) -> None:
-    """Add ``firmware_poly3`` to a report's ``metrics`` for the model's firmware cubic
-    (``None``: a model fitted before it existed; nothing is added)."""
-    if p3 is not None:
-        metrics["firmware_poly3"] = poly3_metrics(
-            p3, run, float(metrics["sample_period_s"]), metrics
-        )
+def add_firmware_metrics(
+    p3: Poly3 | None, run: PreparedRun, metrics: dict[str, Any], block_s: float | None = None
+) -> None:
+    """Add ``firmware_poly3`` (the form) and ``firmware_px4`` / ``firmware_ardupilot`` (each
+    firmware's own update rule and arithmetic) to ``metrics`` for the model's firmware cubic
+    (``None``: a model fitted before it existed; nothing is added). ``block_s`` defaults to
+    the run's ``metrics["sample_period_s"]``."""
+    if p3 is None:
+        return
+    if block_s is None:
+        block_s = float(metrics["sample_period_s"])
+    for form in ("poly3", *FIRMWARES):
+        metrics[f"firmware_{form}"] = form_metrics(p3, run, block_s, metrics, form)

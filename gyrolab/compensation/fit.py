@@ -180,6 +180,18 @@ def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> Dr
     return fit_causal(cal, config=cfg, seed=seed)
 
 
+def fit_prior_model(run: PreparedRun, prior: Any) -> DriftModel:
+    """The causal model as the MAP fit towards a fleet prior (:mod:`.prior`); a unit
+    outside the prior is an :class:`InputError` asking for the full profile."""
+    from gyrolab.compensation.prior import fit_map
+
+    cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
+    got = fit_map(cal, prior)
+    if not got.membership.belongs:
+        raise InputError(run.path, got.membership.message())
+    return got.model
+
+
 def fit_drift_model(
     X: np.ndarray, drift: np.ndarray, cfg: PipelineConfig, seed: int
 ) -> TemperatureModel:
@@ -190,9 +202,12 @@ def fit_drift_model(
 
 
 def fit(
-    run: PreparedRun, cfg: PipelineConfig = DEFAULT_CONFIG, seed: int = 0
+    run: PreparedRun, cfg: PipelineConfig = DEFAULT_CONFIG, seed: int = 0, prior: Any = None
 ) -> tuple[CompensationModel, Decomposition]:
-    """Fit the hybrid model (and the baselines) on a prepared calibration run."""
+    """Fit the hybrid model (and the baselines) on a prepared calibration run; with a
+    fleet prior (:class:`~gyrolab.compensation.prior.FleetPrior`) the causal model is its
+    MAP fit, and a unit that does not belong to the prior is refused (one line: calibrate
+    it on the full profile)."""
     import torch  # heavy: imported only when a model is fitted
 
     span = float(np.ptp(run.temp))
@@ -221,7 +236,7 @@ def fit(
     }
     timing["baselines"] = time.perf_counter() - t2
     t3 = time.perf_counter()
-    causal = fit_causal_model(run, cfg, seed)
+    causal = fit_causal_model(run, cfg, seed) if prior is None else fit_prior_model(run, prior)
     timing["causal"] = time.perf_counter() - t3
     mixed = dec.part("mixed")
     flp_mixed = fit_flp(mixed, cfg) if dec.classes.get("mixed") else None

@@ -25,26 +25,28 @@ from gyrolab.outputs import atomic_file, check_output
 FORMATS = ("px4", "ardupilot", "c", "json", "kalibr")
 # The options one format requires (the command line's help and docs/cli.md list them)
 REQUIRED_FOR = {"px4": "--device-id", "kalibr": "--run"}
-#: The gyro (IMU) instances a firmware has parameters for: PX4's ``TC_G0..3_*``, ArduPilot's
-#: ``INS_TCAL1..3_*`` (gyrolab.export.params writes them and refuses others too).
-INSTANCES = {"px4": 4, "ardupilot": 3}
 
 
 def check_request(
     fmt: str, *, device_id: int | None, run: object | None, instance: int = 0
 ) -> None:
-    """The format is known and the options it requires are given (:data:`REQUIRED_FOR`):
-    checked before anything is read, one line and exit 2 otherwise. Light (no numerical
-    import), so that the command line answers at once."""
+    """The format is known and the options it requires are given (:data:`REQUIRED_FOR`),
+    and ``--instance`` is one of the firmware's calibration slots (PX4 ``TC_G0…3``: 0–3,
+    ArduPilot ``INS_TCAL1…3``: 0–2): checked before anything is read, one line and exit 2
+    otherwise. Light (no numerical import), so that the command line answers at once."""
+    from gyrolab.autopilot import GYRO_CAL_SLOTS
+
     if fmt not in FORMATS:
         raise InputError("--format", f"unknown format {fmt!r}")
     if fmt == "px4" and device_id is None:
         raise InputError("--device-id", "PX4 needs the gyro's device id (TC_Gi_ID)")
     if fmt == "kalibr" and run is None:
         raise InputError("--run", "the kalibr format needs a run to analyse (--run RUN)")
-    n = INSTANCES.get(fmt)
+    n = GYRO_CAL_SLOTS.get(fmt)
     if n is not None and not 0 <= instance < n:
-        raise InputError("--instance", f"{fmt} has gyro instances 0..{n - 1}, not {instance}")
+        raise InputError(
+            "--instance", f"{fmt} has gyro calibration instances 0..{n - 1}, not {instance}"
+        )
 
 
 def _polys(model_dir: str) -> list[Any]:
@@ -99,7 +101,7 @@ def kalibr_text(
     """``imu.yaml`` for ``model_dir`` applied to ``run`` (every axis)."""
     from gyrolab.compensation.apply import streaming_compensate
     from gyrolab.compensation.model_dir import ModelDir
-    from gyrolab.export.kalibr import axis_noise, imu_yaml
+    from gyrolab.export.kalibr import accel_axis_noise, axis_noise, imu_yaml
     from gyrolab.logs import read_log
 
     rec = read_log(run, **(log_options or {}))
@@ -108,11 +110,22 @@ def kalibr_text(
         raise InputError(run, f"has {rec.axes} axes, the model {len(dirs)}")
     pt_t, pt_c = rec.require_temperature()
     axes = {}
-    for k, (name, d) in enumerate(dirs):
-        s = rec.axis(k).require_rate()
-        y = streaming_compensate(d.load(), s.t, s.values, pt_t, pt_c)
-        axes[name] = axis_noise(y, s.rate_hz)
-    return imu_yaml(axes, rec.require_rate().rate_hz, rostopic, str(run))
+    try:
+        for k, (name, d) in enumerate(dirs):
+            s = rec.axis(k).require_rate()
+            y = streaming_compensate(d.load(), s.t, s.values, pt_t, pt_c, "chosen")
+            axes[name] = axis_noise(y, s.rate_hz)
+    except InputError as e:
+        raise InputError(run, e.problem) from None
+    accel, why = None, "the run has no accelerometer"
+    if rec.accel is not None:  # a user's log with an accelerometer (gyrolab.logs)
+        acc = rec.accel
+        try:
+            accel = {"xyz"[j]: accel_axis_noise(acc.values[:, j], acc.rate_hz) for j in range(3)}
+        except InputError as e:  # e.g. a constant (unlogged, zero-noise) accelerometer
+            why = f"its accelerometer gives no noise terms ({e.problem})"
+    rate_hz = rec.require_rate().rate_hz
+    return imu_yaml(axes, rate_hz, rostopic, str(run), accel, no_accel_reason=why)
 
 
 def export(

@@ -1,4 +1,4 @@
-"""kalibr ``imu.yaml`` gyro noise parameters from the Allan analysis of a run.
+"""kalibr ``imu.yaml`` noise parameters from the Allan analysis of a run.
 
 kalibr's IMU noise model (https://github.com/ethz-asl/kalibr/wiki/IMU-Noise-Model) takes
 continuous-time densities:
@@ -8,20 +8,30 @@ continuous-time densities:
   number: 1/√Hz = √s);
 * ``gyroscope_random_walk`` σ_bg [rad/s²/√Hz] — the bias random walk, i.e. the rate random
   walk K read on the Allan slope +1/2 at τ = 3 s (rate unit / √s);
+* ``accelerometer_noise_density`` [m/s²/√Hz] and ``accelerometer_random_walk``
+  [m/s³/√Hz] — the same two terms of the accelerometer (velocity random walk, acceleration
+  random walk), which kalibr's camera–IMU calibration needs too;
 * ``update_rate`` [Hz] — the rate of the IMU messages (kalibr makes the discrete-time
   σ_d = σ·√rate itself).
 
-gyrolab's terms are in °/s (:func:`gyrolab.numerics.noise_terms.noise_terms`), so both are
-multiplied by π/180 and nothing else. The Allan curve is that of the run's causal,
-full-rate compensated output (the temperature model applied, so the thermal drift is not
-mistaken for random walk); kalibr has one value for all axes, the largest axis is written
-(each axis's value is in a comment). When the curve has no +1/2 region (a run too short for
-the random walk to show) K comes from the weighted least-squares fit of all IEEE 952 terms
-(``noise_terms(method="fit")``); where that does not identify it either, the file carries
-the upper bound min σ(τ)·√(3/τ) over τ ≤ T/10 (a +1/2 line cannot lie above the curve) and
-says so in the axis comment. kalibr also needs the accelerometer
-fields; gyrolab measures no accelerometer, so the file names them in a comment for the user
-to fill in rather than inventing numbers.
+gyrolab's terms are in the data's units (:func:`gyrolab.numerics.noise_terms.noise_terms`):
+°/s for the gyro (×π/180 here, nothing else), m/s² for the accelerometer. The gyro's Allan
+curve is that of the run's causal, full-rate compensated output (the temperature model
+applied, so the thermal drift is not mistaken for random walk); the accelerometer's is its
+raw output (gyrolab models no accelerometer drift: a thermal accelerometer drift shows as
+random walk, which the comment says). kalibr has one value for all axes: the largest axis
+is written, each axis's value and how it was read are in a comment.
+
+**How a term is read, and when it is not.** A term is read off its slope only where the
+curve identifies it (the IEEE 952 slope rules with their confidence test) *and* the τ at
+which it is defined (1 s for the noise density, 3 s for the random walk) lies inside the
+record: a slope is never labelled at a τ the record does not reach. Otherwise the weighted
+least-squares fit of the IEEE 952 terms gives it, on the same condition. Where neither
+does, the file carries an upper bound the curve itself guarantees — every term's share of
+the Allan variance is non-negative, so σ(τ) ≥ N/√τ and σ(τ) ≥ K·√(τ/3) at every τ, hence
+N ≤ min σ(τ)·√τ and K ≤ min σ(τ)·√(3/τ) over τ ≤ T/10 — and its comment names it an upper
+bound with the reason. A record too short for any of that (no τ with ten independent
+averages) is refused in one line: kalibr never gets ``nan``.
 """
 
 from __future__ import annotations
@@ -31,68 +41,141 @@ from typing import Any
 
 import numpy as np
 
+from gyrolab.errors import InputError
+
 DEG2RAD = math.pi / 180.0
+UNITS = {
+    "gyroscope_noise_density": "rad/s/sqrt(Hz)",
+    "gyroscope_random_walk": "rad/s^2/sqrt(Hz)",
+    "accelerometer_noise_density": "m/s^2/sqrt(Hz)",
+    "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
+}
+#: (IEEE 952 term, the τ (s) its value is defined at, its kalibr key stem)
+_TERMS = (("N", 1.0, "noise_density"), ("K", 3.0, "random_walk"))
 
 
-def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
-    """Allan deviation of ``y_dps`` and the N, K terms in kalibr's units (with provenance)."""
+def _bound(res: Any, name: str) -> float:
+    """The upper bound of term ``name`` over τ ≤ T/10 (module doc); NaN without such τ."""
+    usable = (res.taus <= 0.1 * res.duration_s) & (res.dev > 0)
+    t, a = res.taus[usable], res.dev[usable]
+    if t.size == 0:
+        return float("nan")
+    return float(np.min(a * np.sqrt(t) if name == "N" else a * np.sqrt(3.0 / t)))
+
+
+def allan_densities(y: np.ndarray, rate_hz: float, scale: float = 1.0) -> dict[str, Any]:
+    """The white-noise density and the random walk of ``y`` (kalibr's units: the data's
+    units × ``scale``), each with how it was read (module doc), and the Allan curve."""
     from gyrolab.numerics.allan import allan_deviation
     from gyrolab.numerics.noise_terms import noise_terms
 
-    res = allan_deviation(np.asarray(y_dps, dtype=float), rate_hz, taus="octave", confidence=None)
+    y = np.asarray(y, dtype=float)
+    res = allan_deviation(y, rate_hz, taus="octave", confidence=None)
+    record = res.duration_s
+    out: dict[str, Any] = {}
     slope = noise_terms(res, method="slope")
-    N, K, how_k = slope.N, slope.K, "slope +1/2 at tau = 3 s"
-    if not (np.isfinite(K) and K > 0):
-        fit = noise_terms(res, method="fit", terms=("N", "B", "K"))
-        K, how_k = fit.K, "least-squares fit of N, B, K (no +1/2 region on the curve)"
-    if not (np.isfinite(K) and K > 0):
-        # Not identifiable (docs/allan.md): never a guessed number, but kalibr needs one.
-        # A +1/2 term cannot exceed the curve anywhere, sigma(tau) >= K sqrt(tau/3), so
-        # min over tau <= T/10 of sigma(tau) sqrt(3/tau) bounds K from above.
-        usable = res.taus <= 0.1 * res.duration_s
-        bound = res.dev[usable] * np.sqrt(3.0 / res.taus[usable])
-        K = float(np.min(bound)) if bound.size else float("nan")
-        reason = slope.reasons.get("K", "no +1/2 region")
-        how_k = f"upper bound min sigma(tau)*sqrt(3/tau), K not identifiable: {reason}"
-    if not (np.isfinite(N) and N > 0):
-        fit = noise_terms(res, method="fit", terms=("N", "B", "K"))
-        N = fit.N
+    fit = noise_terms(res, method="fit", terms=("N", "B", "K"))
+    for name, tau_def, key in _TERMS:
+        value, how = float("nan"), ""
+        inside = tau_def <= record
+        for terms, label in ((slope, "slope"), (fit, "fit")):
+            v = float(getattr(terms, name))
+            if not (np.isfinite(v) and v > 0 and inside):
+                continue
+            lo, hi = terms.tau_ranges[name]
+            s = "-1/2" if name == "N" else "+1/2"
+            value = v
+            how = (
+                f"slope {s} over tau = {lo:.3g}-{hi:.3g} s, read at tau = {tau_def:g} s"
+                if label == "slope"
+                else f"least-squares fit of N, B, K (its {name} term dominates tau = "
+                f"{lo:.3g}-{hi:.3g} s), read at tau = {tau_def:g} s"
+            )
+            break
+        if not np.isfinite(value):
+            value = _bound(res, name)
+            if not inside:
+                why = f"tau = {tau_def:g} s lies beyond the {record:.3g} s record"
+            else:
+                why = slope.reasons.get(name) or fit.reasons.get(name) or "not identified"
+            what = "sigma(tau)*sqrt(tau)" if name == "N" else "sigma(tau)*sqrt(3/tau)"
+            how = f"upper bound min {what} over tau <= T/10 ({why})"
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(
+                None,
+                f"a {record:.3g} s record is too short to bound its noise terms for kalibr "
+                "(needs taus with ten independent averages, T/10)",
+            )
+        out[key] = value * scale
+        out[f"{key}_from"] = how
+    out["allan_taus_s"] = res.taus.tolist()
+    out["allan_adev"] = res.dev.tolist()
+    return out
+
+
+def axis_noise(y_dps: np.ndarray, rate_hz: float) -> dict[str, Any]:
+    """One gyro axis (compensated, °/s) in kalibr's keys (rad/s units)."""
+    d = allan_densities(y_dps, rate_hz, DEG2RAD)
     return {
-        "gyroscope_noise_density": float(N) * DEG2RAD,
-        "gyroscope_random_walk": float(K) * DEG2RAD if np.isfinite(K) else float("nan"),
-        "random_walk_from": how_k,
-        "allan_taus_s": res.taus.tolist(),
-        "allan_adev_dps": res.dev.tolist(),
+        "gyroscope_noise_density": d["noise_density"],
+        "gyroscope_random_walk": d["random_walk"],
+        "noise_density_from": d["noise_density_from"],
+        "random_walk_from": d["random_walk_from"],
+        "allan_taus_s": d["allan_taus_s"],
+        "allan_adev_dps": d["allan_adev"],
     }
 
 
-def imu_yaml(axes: dict[str, dict[str, Any]], rate_hz: float, rostopic: str, source: str) -> str:
-    """The ``imu.yaml`` text (the largest axis's values; every axis in comments)."""
-    nd = max(a["gyroscope_noise_density"] for a in axes.values())
-    rws = [
-        a["gyroscope_random_walk"] for a in axes.values() if np.isfinite(a["gyroscope_random_walk"])
-    ]
-    if not rws:
-        from gyrolab.errors import InputError
+def accel_axis_noise(a_m_s2: np.ndarray, rate_hz: float) -> dict[str, Any]:
+    """One accelerometer axis (m/s², raw) in kalibr's keys."""
+    d = allan_densities(a_m_s2, rate_hz)
+    return {
+        "accelerometer_noise_density": d["noise_density"],
+        "accelerometer_random_walk": d["random_walk"],
+        "noise_density_from": d["noise_density_from"],
+        "random_walk_from": d["random_walk_from"],
+    }
 
-        raise InputError(source, "Allan curve gives no bias random walk on any axis")
-    rw = max(rws)
+
+def imu_yaml(
+    axes: dict[str, dict[str, Any]],
+    rate_hz: float,
+    rostopic: str,
+    source: str,
+    accel: dict[str, dict[str, Any]] | None = None,
+    no_accel_reason: str = "the run has no accelerometer",
+) -> str:
+    """The ``imu.yaml`` text (the largest axis's values; every axis in comments); without
+    ``accel`` the two accelerometer fields are named in a comment (``no_accel_reason``)."""
     lines = [
         f"# kalibr IMU noise parameters from gyrolab's Allan analysis of {source}",
-        "# (causal compensated output; continuous-time units, kalibr wiki 'IMU Noise Model').",
+        "# (gyro: causal compensated output; continuous-time units, kalibr wiki "
+        "'IMU Noise Model').",
     ]
-    for name, a in axes.items():
+    values: dict[str, float] = {}
+    for prefix, per_axis in (("gyroscope", axes), ("accelerometer", accel or {})):
+        if not per_axis:
+            continue
+        nd, rw = f"{prefix}_noise_density", f"{prefix}_random_walk"
+        for name, a in per_axis.items():
+            lines.append(
+                f"# {prefix} axis {name}: noise density {a[nd]:.6g} {UNITS[nd]} "
+                f"({a['noise_density_from']}); random walk {a[rw]:.6g} {UNITS[rw]} "
+                f"({a['random_walk_from']})"
+            )
+        values[nd] = max(a[nd] for a in per_axis.values())
+        values[rw] = max(a[rw] for a in per_axis.values())
+    if accel:
         lines.append(
-            f"# axis {name}: noise density {a['gyroscope_noise_density']:.6g} rad/s/sqrt(Hz), "
-            f"random walk {a['gyroscope_random_walk']:.6g} rad/s^2/sqrt(Hz) "
-            f"({a['random_walk_from']})"
+            "# accelerometer: raw output (no thermal model); a thermal drift in the run "
+            "raises its random walk."
         )
-    lines += [
-        "# gyrolab measures no accelerometer: add accelerometer_noise_density (m/s^2/sqrt(Hz))",
-        "# and accelerometer_random_walk (m/s^3/sqrt(Hz)) of your IMU before running kalibr.",
-        f"gyroscope_noise_density: {nd:.9g}  # rad/s/sqrt(Hz)",
-        f"gyroscope_random_walk: {rw:.9g}  # rad/s^2/sqrt(Hz)",
-        f"update_rate: {rate_hz:.9g}  # Hz",
-        f"rostopic: {rostopic}",
-    ]
+    else:
+        lines += [
+            f"# {no_accel_reason}: add accelerometer_noise_density (m/s^2/sqrt(Hz))",
+            "# and accelerometer_random_walk (m/s^3/sqrt(Hz)) of your IMU before running kalibr.",
+        ]
+    for key, v in values.items():  # finite and > 0: allan_densities refuses otherwise
+        lines.append(f"{key}: {v:.9g}  # {UNITS[key]}")
+    lines += [f"update_rate: {rate_hz:.9g}  # Hz", f"rostopic: {rostopic}"]
     return "\n".join(lines) + "\n"

@@ -36,27 +36,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyrolab.compensation.firmware import DEG2RAD, Poly3
-
-ARDUPILOT_TREF_C = 35.0  # TEMP_REFERENCE in AP_InertialSensor_tempcal.cpp
-ARDUPILOT_SCALE = 1.0e6  # SCALE_FACTOR
-AXES = "XYZ"
-MAV_PARAM_TYPE_INT32 = 6
-MAV_PARAM_TYPE_REAL32 = 9
+from gyrolab.compensation.firmware import (
+    MAV_PARAM_TYPE_INT8,
+    MAV_PARAM_TYPE_INT32,
+    Poly3,
+    ardupilot_parameter_set,
+    px4_parameter_set,
+)
 
 
 def f32(v: float) -> str:
     """Shortest decimal text that reads back as the same float32."""
     return str(np.float32(v))
 
-
-def _axes3(polys: list[Poly3]) -> list[Poly3 | None]:
-    return [polys[k] if k < len(polys) else None for k in range(3)]
-
-
-def _range(polys: list[Poly3]) -> tuple[float, float]:
-    # one temperature range per sensor in both firmwares: the axes share the calibration run
-    return min(p.t_min for p in polys), max(p.t_max for p in polys)
 
 
 def px4_params(
@@ -69,22 +61,7 @@ def px4_params(
     header: str = "",
 ) -> str:
     """The PX4 ``.params`` text for gyro ``instance`` (module docstring)."""
-    if not 0 <= instance <= 3:
-        raise ValueError("PX4 has thermal compensation for gyro instances 0..3")
-    lo, hi = _range(polys)
-    tref = 0.5 * (lo + hi)
-    g = f"TC_G{instance}_"
-    vals: dict[str, tuple[str, int]] = {
-        "TC_G_ENABLE": ("1", MAV_PARAM_TYPE_INT32),
-        f"{g}ID": (str(int(device_id)), MAV_PARAM_TYPE_INT32),
-        f"{g}TMIN": (f32(lo), MAV_PARAM_TYPE_REAL32),
-        f"{g}TMAX": (f32(hi), MAV_PARAM_TYPE_REAL32),
-        f"{g}TREF": (f32(tref), MAV_PARAM_TYPE_REAL32),
-    }
-    for a, p in enumerate(_axes3(polys)):
-        c = (0.0, 0.0, 0.0, 0.0) if p is None else p.recentred(tref)
-        for k in range(4):
-            vals[f"{g}X{k}_{a}"] = (f32(c[k] * DEG2RAD), MAV_PARAM_TYPE_REAL32)
+    vals = px4_parameter_set(polys, instance, device_id)
     lines = [
         "# Sensor thermal compensation parameters",
         "#",
@@ -93,32 +70,17 @@ def px4_params(
     ]
     for name in sorted(vals):
         v, t = vals[name]
-        lines.append(f"{vehicle_id}\t{component_id}\t{name}\t{v}\t{t}")
+        text = str(int(v)) if t == MAV_PARAM_TYPE_INT32 else f32(v)
+        lines.append(f"{vehicle_id}\t{component_id}\t{name}\t{text}\t{t}")
     return "\n".join(lines) + "\n"
 
 
 def ardupilot_parm(polys: list[Poly3], instance: int, *, header: str = "") -> str:
     """The ArduPilot ``.parm`` text for IMU ``instance`` (0-based; module docstring)."""
-    if not 0 <= instance <= 2:
-        raise ValueError("ArduPilot has temperature calibration for IMU instances 0..2")
-    n = instance + 1
-    lo, hi = _range(polys)
-    cal_temp = min(max(ARDUPILOT_TREF_C, lo), hi)
-    offs = "INS_GYROFFS_" if n == 1 else f"INS_GYR{n}OFFS_"
+    vals = ardupilot_parameter_set(polys, instance)
     lines = [*(f"# {h}" for h in header.splitlines())]
-    lines += [f"INS_TCAL{n}_ENABLE 1", f"INS_TCAL{n}_TMIN {f32(lo)}", f"INS_TCAL{n}_TMAX {f32(hi)}"]
-    body: dict[str, str] = {}
-    ofs: dict[str, str] = {}
-    for a, p in enumerate(_axes3(polys)):
-        c = (0.0,) * 4 if p is None else p.recentred(ARDUPILOT_TREF_C)
-        for k in (1, 2, 3):
-            body[f"INS_TCAL{n}_GYR{k}_{AXES[a]}"] = f32(c[k] * DEG2RAD * ARDUPILOT_SCALE)
-        x = float(np.float32(cal_temp)) - ARDUPILOT_TREF_C
-        # offset = bias at CALTEMP, so that GYROFFS + P(x(T)) − P(x(CALTEMP)) = b(T)
-        ofs[f"{offs}{AXES[a]}"] = f32((c[0] + x * (c[1] + x * (c[2] + x * c[3]))) * DEG2RAD)
-    lines += [f"{k} {v}" for k, v in body.items()]
-    lines += [f"{k} {v}" for k, v in ofs.items()]
-    lines.append(f"INS_GYR{n}_CALTEMP {f32(cal_temp)}")
+    for name, (v, t) in vals.items():
+        lines.append(f"{name} {int(v) if t == MAV_PARAM_TYPE_INT8 else f32(v)}")
     return "\n".join(lines) + "\n"
 
 
@@ -149,32 +111,24 @@ def read_ardupilot_parm(text: str) -> dict[str, float]:
 
 @dataclass(frozen=True)
 class FirmwareCorrection:
-    """The correction a firmware computes from its parameters, in float32 as it does:
-    ``offset_rad_s(axis, T)``."""
+    """The correction a firmware computes from its parameters, in float32 as it does
+    (:mod:`gyrolab.autopilot`): ``offset_rad_s(axis, T)`` is what it subtracts at a
+    steady temperature T (PX4: the TC offsets; ArduPilot: the offsets plus the temperature
+    correction relative to ``CALTEMP``)."""
 
     kind: str
     p: dict[str, float]
     instance: int
 
     def offset_rad_s(self, axis: int, temp_c: np.ndarray) -> np.ndarray:
-        f = np.float32
-        T = np.asarray(temp_c, dtype=np.float32)
+        from gyrolab.autopilot import ardupilot, px4
+
         if self.kind == "px4":
-            g = f"TC_G{self.instance}_"
-            d = np.clip(T, f(self.p[f"{g}TMIN"]), f(self.p[f"{g}TMAX"])) - f(self.p[f"{g}TREF"])
-            c = [f(self.p[f"{g}X{k}_{axis}"]) for k in range(4)]
-            return c[0] + c[1] * d + c[2] * d * d + c[3] * d * d * d
-        n = self.instance + 1
-        lo, hi = f(self.p[f"INS_TCAL{n}_TMIN"]), f(self.p[f"INS_TCAL{n}_TMAX"])
-        c = [f(self.p[f"INS_TCAL{n}_GYR{k}_{AXES[axis]}"]) for k in (1, 2, 3)]
-
-        def poly(x: np.ndarray) -> np.ndarray:  # polynomial_eval()
-            return (c[0] + (c[1] + c[2] * x) * x) * x * f(1.0e-6)
-
-        offs = "INS_GYROFFS_" if n == 1 else f"INS_GYR{n}OFFS_"
-        x = np.clip(T, lo, hi) - f(ARDUPILOT_TREF_C)
-        xc = np.clip(f(self.p[f"INS_GYR{n}_CALTEMP"]), lo, hi) - f(ARDUPILOT_TREF_C)
-        return f(self.p[f"{offs}{AXES[axis]}"]) + poly(x) - poly(np.asarray(xc))
+            return px4.TcGyro.from_params(self.p, self.instance).offsets(temp_c)[..., axis]
+        tcal = ardupilot.Tcal.from_params(self.p, self.instance)
+        cal_temp = self.p[ardupilot.caltemp_name(self.instance)]
+        offs = ardupilot.gyro_offsets(self.p, self.instance)
+        return offs[axis] + tcal.correction(temp_c, cal_temp)[..., axis]
 
     def offset_dps(self, axis: int, temp_c: np.ndarray) -> np.ndarray:
         return self.offset_rad_s(axis, temp_c).astype(float) / (np.pi / 180.0)

@@ -60,15 +60,16 @@ def _mcap_profile(path: Path) -> str:
         return str(src.header().profile)
 
 
-def single_axis_gyrolab(path: str | os.PathLike[str]) -> bool:
-    """True for a gyrolab MCAP whose ``/gyro/rate`` has one axis (streamed as before)."""
+def single_axis_gyrolab(path: str | os.PathLike[str], unit: str | None = None) -> bool:
+    """True for a gyrolab MCAP whose ``/gyro/rate`` (unit ``unit``'s, of a multi-unit
+    recording) has one axis (streamed as before)."""
     from gyrolab.record.blocks import decode_block
     from gyrolab.record.format import TOPIC_RATE
     from gyrolab.record.reader import iter_messages
 
     if detect_format(path) != "gyrolab":
         return False
-    for _topic, _ts, data in iter_messages(path, [TOPIC_RATE]):
+    for _topic, _ts, data in iter_messages(path, [TOPIC_RATE], unit=unit):
         return decode_block(data, "rate")[3].ndim == 1
     return True  # no rate at all: the single-axis path reports it
 
@@ -100,6 +101,21 @@ def read_log(
     return read_dataflash(path, instance=instance)
 
 
+def make_series(t_s: np.ndarray, values: np.ndarray, scale: float = 1.0) -> Series:
+    """Samples at times ``t_s`` (sorted, duplicated stamps dropped) as a :class:`Series`
+    indexed by its nominal period (the median spacing), so that lost samples stay gaps."""
+    t = np.asarray(t_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    keep = np.concatenate([[True], np.diff(t) > 0])  # duplicated stamps: keep the first
+    t, v = t[keep], v[keep]
+    period = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+    if not period > 0:
+        raise ValueError("time stamps do not advance")
+    return Series(t, v * scale, np.rint((t - t[0]) / period).astype(np.int64), period)
+
+
 def build_recording(
     path: str | os.PathLike[str],
     t_s: np.ndarray,
@@ -107,22 +123,21 @@ def build_recording(
     temp_t_s: np.ndarray,
     temp_c: np.ndarray,
     run: dict,
+    *,
+    accel_m_s2: np.ndarray | None = None,
 ) -> Recording:
     """The common tail of every reader: sort by time, convert rad/s → °/s, index the samples
     by nominal period (median spacing) so that gaps stay gaps, drop non-finite temperature
-    readings, and check there is something to work with."""
+    readings, and check there is something to work with. ``accel_m_s2``: the accelerometer
+    at the same samples (m/s²), kept as ``rec.accel`` on the same index."""
     t = np.asarray(t_s, dtype=float)
-    g = np.asarray(gyro_rad_s, dtype=float)
     if t.size < 2:
         raise InputError(path, "log has fewer than 2 gyro samples")
-    order = np.argsort(t, kind="stable")
-    t, g = t[order], g[order]
-    keep = np.concatenate([[True], np.diff(t) > 0])  # duplicated stamps: keep the first
-    t, g = t[keep], g[keep]
-    period = float(np.median(np.diff(t)))
-    if not period > 0:
-        raise InputError(path, "gyro time stamps do not advance")
-    index = np.rint((t - t[0]) / period).astype(np.int64)
+    try:
+        rate = make_series(t, gyro_rad_s, RAD2DEG)
+        accel = None if accel_m_s2 is None else make_series(t, accel_m_s2)
+    except ValueError:
+        raise InputError(path, "gyro time stamps do not advance") from None
     tt = np.asarray(temp_t_s, dtype=float)
     tc = np.asarray(temp_c, dtype=float)
     ok = np.isfinite(tt) & np.isfinite(tc)
@@ -132,8 +147,9 @@ def build_recording(
     o = np.argsort(tt, kind="stable")
     rec = Recording(path=str(path))
     rec.run = dict(run)
-    rec.rate = Series(t, g * RAD2DEG, index, period)
+    rec.rate = rate
+    rec.accel = accel
     rec.pt100_t, rec.pt100_c = tt[o], tc[o]
     rec.pt100_ohm = np.full(tt.size, np.nan)
-    rec.topic_counts = {"gyro": int(t.size), "temperature": int(tt.size)}
+    rec.topic_counts = {"gyro": int(rate.t.size), "temperature": int(tt.size)}
     return rec

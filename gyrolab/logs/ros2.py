@@ -31,24 +31,31 @@ _STAMP_LEN = struct.Struct("<iII")
 _VEC3 = struct.Struct("<3d")
 
 
-def imu_fast(data: bytes) -> tuple[float, float, float, float] | None:
-    """``(stamp s, ω_x, ω_y, ω_z)`` of a ``sensor_msgs/msg/Imu`` in little-endian plain CDR,
-    read at the fixed offsets its definition gives (``None`` for another encapsulation):
-    after the 4-byte encapsulation header, ``header.stamp`` (int32 sec, uint32 nanosec),
-    ``frame_id`` (uint32 length incl. NUL + bytes), padding to 8 (CDR aligns relative to
-    the payload), ``orientation`` (4 float64), its covariance (9 float64), then
-    ``angular_velocity``. :func:`read_ros2` checks it against the library's decoder on the
-    bag's first message and uses the library throughout if they differ."""
+def imu_fast(data: bytes) -> tuple[float, ...] | None:
+    """``(stamp s, ω_x, ω_y, ω_z, a_x, a_y, a_z)`` of a ``sensor_msgs/msg/Imu`` in
+    little-endian plain CDR, read at the fixed offsets its definition gives (``None`` for
+    another encapsulation): after the 4-byte encapsulation header, ``header.stamp`` (int32
+    sec, uint32 nanosec), ``frame_id`` (uint32 length incl. NUL + bytes), padding to 8 (CDR
+    aligns relative to the payload), ``orientation`` (4 float64), its covariance (9
+    float64), ``angular_velocity`` (3 float64), its covariance (9), then
+    ``linear_acceleration``. :func:`read_ros2` checks it against the library's decoder on
+    the bag's first message and uses the library throughout if they differ."""
     if len(data) < 16 or data[0] != 0 or data[1] != 1:
         return None
     sec, nsec, slen = _STAMP_LEN.unpack_from(data, 4)
     rel = 12 + slen
     rel = (rel + 7) & ~7
     off = 4 + rel + 13 * 8
-    if off + 24 > len(data):
+    if off + 24 + 72 + 24 > len(data):
         return None
     wx, wy, wz = _VEC3.unpack_from(data, off)
-    return sec + 1e-9 * nsec, wx, wy, wz
+    ax, ay, az = _VEC3.unpack_from(data, off + 24 + 72)
+    return sec + 1e-9 * nsec, wx, wy, wz, ax, ay, az
+
+
+def _decoded(msg: Any) -> tuple[float, ...]:
+    w, a = msg.angular_velocity, msg.linear_acceleration
+    return (_stamp(msg), w.x, w.y, w.z, a.x, a.y, a.z)
 
 
 def _topics_of(path: str | os.PathLike[str]) -> dict[str, str]:
@@ -82,7 +89,8 @@ def read_ros2(
     temperature_topic: str | None = None,
     imu_topic: str | None = None,
 ) -> Recording:
-    """A ROS 2 MCAP → :class:`Recording` (3 axes, °/s; temperature °C)."""
+    """A ROS 2 MCAP → :class:`Recording` (3 axes, °/s; temperature °C; the Imu's
+    ``linear_acceleration`` in ``rec.accel``, m/s²)."""
     from mcap_ros2.decoder import DecoderFactory
 
     from gyrolab.logs import build_recording
@@ -95,7 +103,7 @@ def read_ros2(
     topics = _topics_of(path)
     imu = _pick(path, topics, IMU, imu_topic, "--imu-topic")
     temp = _pick(path, topics, TEMPERATURE, temperature_topic, "--temperature-topic")
-    t, g, tt, tc, lt, tlt = [], [], [], [], [], []
+    t, g, acc, tt, tc, lt, tlt = [], [], [], [], [], [], []
     try:
         # opened: the bag is checked like every MCAP read (chunk CRCs, gyrolab/record/integrity.py)
         with opened(path) as src:
@@ -110,16 +118,13 @@ def read_ros2(
                     lt.append(log_time * 1e-9)
                     r = imu_fast(data) if fast is not False else None
                     if fast is None:
-                        msg = decode(data)
-                        w = msg.angular_velocity
-                        fast = r == (_stamp(msg), w.x, w.y, w.z)
+                        fast = r == _decoded(decode(data))
                         r = r if fast else None
                     if r is None:
-                        msg = decode(data)
-                        w = msg.angular_velocity
-                        r = (_stamp(msg), w.x, w.y, w.z)
+                        r = _decoded(decode(data))
                     t.append(r[0])
-                    g.append(r[1:])
+                    g.append(r[1:4])
+                    acc.append(r[4:7])
                 else:
                     msg = decode(data)
                     tt.append(_stamp(msg))
@@ -150,4 +155,5 @@ def read_ros2(
             "start_stamp_s": t0,
             "time": "header.stamp" if stamped else "MCAP log_time (header stamps are zero)",
         },
+        accel_m_s2=np.asarray(acc),
     )

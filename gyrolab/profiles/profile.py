@@ -177,7 +177,30 @@ def _short() -> Profile:
     )
 
 
-BUILTIN: dict[str, Profile] = {"paper": _paper(), "short": _short()}
+def _quick() -> Profile:
+    """A 3.25 h calibration run (issue 30) for a unit calibrated with a fleet prior
+    (``gyrolab compensate --prior``): what ``gyrolab profile design --hours 3.25``
+    chooses for the simulator's nominal chamber without a prior (docs/profiles.md) —
+    10 min power-on at 25 °C, 30 min towards 60 °C, 140 min towards −40 °C, 15 min back
+    towards 25 °C, so the die temperature rises, falls and rises (both hysteresis
+    branches, the rate in both signs). The chamber cools slowly when cold: the case
+    reaches about −18 … 46 °C, the prior supplies the rest of the range."""
+    steps = (
+        Step(25.0, 600.0, "power-on"),
+        Step(60.0, 1800.0, "hot"),
+        Step(-40.0, 8400.0, "cold"),
+        Step(25.0, 900.0, "back to ambient"),
+    )
+    return Profile(
+        name="quick",
+        steps=steps,
+        ambient_c=25.0,
+        description="3.25 h up-down-up calibration for compensate --prior (issue 30): "
+        "25, 60, -40, 25 °C",
+    )
+
+
+BUILTIN: dict[str, Profile] = {"paper": _paper(), "short": _short(), "quick": _quick()}
 
 
 # Top-level keys of a profile TOML (docs/profiles.md); ``step`` is the [[step]] list.
@@ -247,7 +270,7 @@ def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
 
 
 def load_profile(spec: str | os.PathLike[str]) -> Profile:
-    """``paper`` / ``short`` (built in) or a path to a profile TOML file."""
+    """``paper`` / ``short`` / ``quick`` (built in) or a path to a profile TOML file."""
     s = str(spec)
     if s in BUILTIN:
         return BUILTIN[s]

@@ -93,6 +93,9 @@ class Recording:
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
     rate: Series | None = None
     adc: Series | None = None
+    # the unit's accelerometer (m/s², x/y/z) where the source has one (users' logs,
+    # gyrolab.logs); None otherwise
+    accel: Series | None = None
     pt100_t: np.ndarray = field(default_factory=lambda: np.empty(0))
     pt100_ohm: np.ndarray = field(default_factory=lambda: np.empty(0))
     pt100_c: np.ndarray = field(default_factory=lambda: np.empty(0))

@@ -46,7 +46,10 @@ class BenchRecipe:
     """What the child builds its bench from: ``settings`` (``SimBench`` keyword arguments
     without the physics), ``model`` / ``axis_models`` (the unit's and its other axes'
     simulator models), or ``units`` (each unit's ``(model, seed)``: a multi-unit bench),
-    ``rate_hz``, ``seed``, ``ambient_c``."""
+    or ``device`` (a device with its own protocol instead of the ADC, by its back end's
+    name: ``"VN100"``, a VectorNav VN-100 whose IMU is :func:`gyrolab.sim.fc_imus.imu_physics`'s
+    first — built in the child, as its prefetched noise is too large to send), ``rate_hz``,
+    ``seed``, ``ambient_c``."""
 
     settings: dict[str, Any]
     rate_hz: float
@@ -55,6 +58,7 @@ class BenchRecipe:
     model: Any = None
     axis_models: list[Any] = field(default_factory=list)
     units: list[tuple[Any, int]] | None = None
+    device: str | None = None
 
     def build(self) -> Any:
         """The :class:`SimBench` (not started)."""
@@ -65,7 +69,9 @@ class BenchRecipe:
 
         model = self.model or nominal_model()
         kw = dict(self.settings)
-        if self.units is not None:
+        if self.device is not None:
+            kw["device"] = device_spec(self.device, self.seed, self.rate_hz, self.ambient_c)
+        elif self.units is not None:
             kw["unit_physics"] = [
                 Physics(m, rate_hz=self.rate_hz, seed=s, ambient_c=self.ambient_c)
                 for m, s in self.units
@@ -76,6 +82,27 @@ class BenchRecipe:
                 model, list(self.axis_models), self.rate_hz, self.seed, self.ambient_c
             )
         return SimBench(seed=self.seed, rate_hz=self.rate_hz, ambient_c=self.ambient_c, **kw)
+
+
+def device_spec(backend: str, seed: int, rate_hz: float, ambient_c: float) -> Any:
+    """The ``SimBench(device=...)`` of a device back end (:class:`BenchRecipe` ``device``)."""
+    from gyrolab.sim.fc_imus import imu_physics
+
+    if backend == "VN100":
+        from gyrolab.sim.bench.vectornav import VnSpec
+
+        return VnSpec(imu_physics(seed, rate_hz, ambient_c, imus=1), seed=seed)
+    raise ValueError(f"no simulated device {backend!r}")
+
+
+def device_axes(backend: str, seed: int) -> list[tuple[Any, int]]:
+    """Each axis's simulator model and noise seed of the device :func:`device_spec` builds
+    (its provenance), without building it."""
+    from gyrolab.sim.fc_imus import imu_axis_model, imu_seed
+
+    if backend != "VN100":
+        raise ValueError(f"no simulated device {backend!r}")
+    return [(imu_axis_model(seed, 0, a), imu_seed(seed, 0, a)) for a in range(3)]
 
 
 def describe(bench: Any) -> dict[str, Any]:

@@ -127,3 +127,56 @@ class PtyPort:
             if e.errno == errno.EBADF:
                 raise PortClosed(self.path) from e
             raise
+
+
+class PtyDevice:
+    """A simulated device on a :class:`PtyPort` (the flight controller, the VN-100): it
+    answers on its own thread — :meth:`on_bytes` gets whatever the driver sent — and writes
+    with :meth:`write`, under one lock (the tick thread streams, the serving thread
+    replies). A subclass calls :meth:`init_device` from its constructor."""
+
+    thread_name = "sim-device"
+
+    def init_device(self, port: PtyPort, write_timeout_s: float) -> None:
+        self.port = port
+        self.write_timeout_s = write_timeout_s
+        self._write_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+
+    def on_bytes(self, data: bytes) -> None:
+        """What the driver sent (the serving thread)."""
+        raise NotImplementedError
+
+    def write(self, data: bytes) -> int | None:
+        """Write ``data`` (back-pressure or overrun as :meth:`PtyPort.write`): the bytes
+        written, None while unplugged."""
+        with self._write_lock:
+            try:
+                return self.port.write(data, timeout_s=self.write_timeout_s)
+            except PortClosed:
+                return None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._serve, name=self.thread_name, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    def _serve(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    data = self.port.read(timeout_s=0.05)
+                except PortClosed:
+                    self._stop.wait(0.05)
+                    continue
+                if data:
+                    self.on_bytes(data)
+        except BaseException as e:  # surfaced by the bench; never silent
+            self.error = e
+            raise

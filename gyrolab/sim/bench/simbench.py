@@ -91,6 +91,7 @@ class SimBench:
         axis_physics: list[Any] | None = None,
         unit_physics: list[Any] | None = None,
         unit_internal_temperature: list[bool] | None = None,
+        device: Any | None = None,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
@@ -104,6 +105,13 @@ class SimBench:
             if not unit_physics or axis_physics or physics is not None:
                 raise ValueError("unit_physics: one or more units, single-axis, no physics=")
             physics = unit_physics[0]
+        # device (a FcSpec or VnSpec): a flight controller or an IMU with its own serial
+        # protocol in the chamber instead of a gyro on the ADC; its first IMU's air is the
+        # chamber's (every IMU axis shares the thermal model)
+        if device is not None:
+            if unit_physics is not None or axis_physics or physics is not None:
+                raise ValueError("device: a device bench has no ADC units")
+            physics = device.imus[0][0]
         if physics is None:
             from gyrolab.sim.model import nominal_model
             from gyrolab.sim.physics import Physics
@@ -167,6 +175,13 @@ class SimBench:
             for pty, internal in zip(self.unit_ptys, self.unit_internal, strict=True)
         ]
         self.adc_pty, self.adc = self.unit_ptys[0], self.unit_adcs[0]
+        self.device: Any = None
+        self.device_pty: PtyPort | None = None
+        self.device_kind = ""
+        if device is not None:
+            self.device_kind = device.port_name
+            self.device_pty = PtyPort(self.workdir / device.port_name)
+            self.device = device.build(self.device_pty, 0.5 if speed is None else 0.05)
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
             control_event=oven_control_event,
@@ -233,6 +248,9 @@ class SimBench:
 
     def _set_setpoint(self, value_c: float) -> None:
         with self.lock:
+            if self.device is not None:
+                self.device.set_setpoint(value_c)  # its IMUs' physics, the chamber's among them
+                return
             self.physics.set_setpoint(value_c)
             for p in self.axis_physics + self.unit_physics[1:]:
                 p.set_setpoint(value_c)
@@ -284,6 +302,11 @@ class SimBench:
         return [p.path for p in self.unit_ptys]
 
     @property
+    def device_port(self) -> str | None:
+        """Serial device path of the device's port (None without one)."""
+        return None if self.device_pty is None else self.device_pty.path
+
+    @property
     def chamber_tcp_resource(self) -> str | None:
         """VISA resource of the ESPEC chamber's socket (None unless ``chamber_model="P300"``)."""
         return None if self.chamber_tcp is None else self.chamber_tcp.resource
@@ -299,6 +322,8 @@ class SimBench:
             "scanner_tcp_resource": self.scanner_tcp_resource,
             "unit_adc_ports": self.unit_adc_ports,
             "adc_port": self.adc_port,
+            "fc_port": self.device_port if self.device_kind == "fc" else None,
+            "vn_port": self.device_port if self.device_kind == "vn" else None,
             "rate_hz": self.rate_hz,
             "samples_per_frame": self.samples_per_frame,
         }
@@ -373,11 +398,18 @@ class SimBench:
         # below then reuses it.
         for p in (*self.unit_physics, *self.axis_physics):
             p.prefetch(n)
+        if self.device is not None:
+            self.device.prefetch(n)
         # Compile the physics' JIT kernels on a throwaway copy first (about 1 s, once per
         # process), so the first tick does not hold the physics lock while responders wait.
         copy.deepcopy(self.physics).advance(n)
         for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):
             p.connect()
+        if self.device is not None:
+            assert self.device_pty is not None
+            self.device_pty.connect()
+            self.adc.port.disconnect()  # no gyro ADC on a device bench
+            self.device.start()
         for s in self._servers:
             s.start()
         self.clock.speed = self.clock.speed  # re-anchor pacing: construction time is not run time
@@ -396,6 +428,8 @@ class SimBench:
             while not self._stop.is_set():
                 for p in (*self.unit_physics, *self.axis_physics):
                     p.prefetch(lead)  # no lock: see Physics.prefetch
+                if self.device is not None:
+                    self.device.prefetch(lead)
                 self._stop.wait(PREFETCH_POLL_S)
         except BaseException as e:  # surfaced like the tick thread's; ticks still work
             self.error = e
@@ -408,6 +442,12 @@ class SimBench:
                 t_next = (self.physics.index + n) / self.rate_hz
                 if not self.clock.advance_to(t_next):
                     break
+                if self.device is not None:
+                    with self.lock:
+                        data = self.device.advance(n)
+                    self.device.send(data)
+                    self._fire_due()
+                    continue
                 with self.lock:
                     block = self.physics.advance(n)
                     counts = block.counts
@@ -441,6 +481,10 @@ class SimBench:
                 th.join(timeout=5.0)
         for s in self._servers:
             s.stop()
+        if self.device is not None:
+            self.device.stop()
+            assert self.device_pty is not None
+            self.device_pty.disconnect()
         for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):
             p.disconnect()
         if self._own_dir:

@@ -1,0 +1,455 @@
+"""Chamber time (issue 30): a unit calibrated in 3.25 h with a fleet prior learned from
+the other units only (leave-unit-out), against the same unit's 13 h calibration, on both
+validation families, held out on the same trajectories.
+
+    python benchmarks/prior_suite.py [--units 8] [--workers 2] [--families validation,break]
+                                     [--held N] [--out docs/results.md] [--tables-only]
+
+**Families.** ``validation``: gyrolab's own Monte-Carlo family
+(benchmarks/validation_suite.py: ``unit_model``, simulated by gyrolab's simulator, 13 h
+calibration on ``paper``). ``break``: the independent break-the-model family
+(benchmarks/breakfam: its own thermal network, physics and noise, half with real ADIS16405
+noise; 13 h calibration on its ``staircase``; the quick profile's setpoints run through
+its own chamber model, on the calibration day).
+
+**Per unit u** of a family (stage 1 for every unit, then stage 2):
+
+1. *13 h*: gyrolab's causal selection (``fit_causal``, families poly and structured — the
+   linear families the prior is over; the networks are left out to keep the suite inside
+   the shared machine's budget) on the 13 h calibration run.
+2. *quick + prior*: a prior learned from the other units' 13 h models only
+   (:func:`gyrolab.compensation.prior.learn_prior`), the unit's 3.25 h ``quick`` run
+   fitted by :func:`~gyrolab.compensation.prior.fit_map` — with its membership verdict.
+3. *quick alone*: the same selection as 1 on the quick run, no prior (what the prior buys).
+
+All three and the oracle (the output minus the true deterministic drift) are applied
+causally at 10 Hz to the same held-out trajectories (``--held`` of them, in the families'
+order). **Another part number**: every unit's quick run is also tested against the prior
+of all units of the *other* family (it should be refused).
+
+Scoring: bias stability (std of 3.6 s means, °/h) and 100 s p-p (breakfam.score, the
+break family's own scorer, for both families). Per-unit results are cached in
+``benchmarks/results/prior_suite/`` (``--tables-only`` re-renders them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from breakfam.score import score  # noqa: E402
+from docsections import write_section  # noqa: E402
+
+CACHE = REPO / "benchmarks" / "results" / "prior_suite"
+RATE_HZ = 10.0
+BLOCK_S = 3.6
+BS, PP = "bias_stability_deg_per_h", "pp_100s_deg_per_s"
+HELD = {
+    "validation": ("heating", "ramp0.5", "ramp2", "random", "soak"),
+    "break": ("heating", "random", "fastramp", "coldstart", "slowramp"),
+}
+CAL = {"validation": "paper", "break": "staircase"}
+
+
+# ------------------------------------------------------------------------------ runs
+
+
+class _Run:
+    """t, raw, drift, pt_t, pt_c of one simulated run (both families)."""
+
+    def __init__(self, t, raw, drift, pt_t, pt_c) -> None:  # noqa: ANN001
+        self.t, self.raw, self.drift, self.pt_t, self.pt_c = t, raw, drift, pt_t, pt_c
+
+
+def simulate(family: str, u: int, name: str, seed: int, other: bool = False) -> _Run:
+    """Run ``name`` (a trajectory of the family, or ``quick``) of unit ``u``; ``other``:
+    the unit as *another part number* — its temperature slope and curvature reversed."""
+    from dataclasses import replace
+
+    from gyrolab.profiles.profile import BUILTIN
+
+    if family == "validation":
+        import validation_suite as vs
+
+        model, p = vs.unit_model(u)
+        if other:
+            c = {k: p.get(k, v) for k, v in (("c0", 0.0), ("c1", 3.84e-4), ("c2", 3.4e-6))}
+            model = model.with_effect("bias_poly", c0=c["c0"], c1=-c["c1"], c2=-c["c2"])
+        prof = BUILTIN["quick"] if name == "quick" else vs.trajectory(name, u)
+        r = vs.simulate(model, prof, RATE_HZ, seed)
+        return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], r["pt_c"])
+    from breakfam.family import simulate_run, units
+
+    unit = units(u + 1)[u]
+    if other:
+        unit = replace(unit, c=(unit.c[0], -unit.c[1], -unit.c[2], *unit.c[3:]))
+    sp = None
+    if name == "quick":
+        q = BUILTIN["quick"]
+        sp = np.concatenate([np.full(int(s.duration_s), s.setpoint_c) for s in q.steps])
+    r = simulate_run(unit, name, seed, setpoints=sp)
+    return _Run(r.t, r.raw, r.drift, r.pt_t, r.pt_c)
+
+
+def truth(family: str, u: int) -> dict[str, Any]:
+    """What the family says of the unit's hysteresis (°/h, up − down) where it is known."""
+    if family == "validation":
+        import validation_suite as vs
+
+        _, p = vs.unit_model(u)
+        # gyrolab's hysteresis effect: bias ± h/2 on the two branches (sim/effects.py)
+        return {"hysteresis_width_deg_per_h": 3600.0 * p.get("hyst_h", 0.0)}
+    from breakfam.family import units
+
+    unit = units(u + 1)[u]
+    return {  # Σ h_i s_i with s_i = ±1 on the two branches (breakfam/physics.py)
+        "hysteresis_width_deg_per_h": 7200.0 * float(sum(unit.h)),
+        "effects": list(unit.effects),
+    }
+
+
+def calibration(run: _Run):
+    from gyrolab.compensation.drift_model import CausalCalibration
+    from gyrolab.numerics.averaging import block_average
+
+    tb, xb, _ = block_average(run.t, run.raw, BLOCK_S, 1.0 / RATE_HZ)
+    return CausalCalibration(t=tb, rate=xb, pt_t=run.pt_t, pt_c=run.pt_c)
+
+
+def select(run: _Run):
+    from gyrolab.compensation.causal import fit_causal
+
+    return fit_causal(calibration(run), families=("poly", "structured"))
+
+
+def _pair(cm) -> dict[str, Any]:  # noqa: ANN001
+    """A fitted causal model (poly or structured) as JSON: its feature parameters and
+    structured model."""
+    return {"params": cm.params.to_dict(), "structured": cm.model.to_dict(), "family": cm.family}
+
+
+def _entry(name: str, d: dict[str, Any]):  # noqa: ANN202
+    from gyrolab.compensation.causal_features import CausalParams
+    from gyrolab.compensation.prior import UnitEntry
+    from gyrolab.compensation.structured import StructuredModel
+
+    return UnitEntry(
+        name, CausalParams.from_dict(d["params"]), StructuredModel.from_dict(d["structured"])
+    )
+
+
+def _drift(e, run: _Run) -> np.ndarray:  # noqa: ANN001
+    """A unit entry's causal drift at the run's samples (°/s)."""
+    from gyrolab.compensation.causal_features import hold, reading_features
+
+    d = e.model.predict(reading_features(run.pt_t, run.pt_c, e.params))
+    return hold(run.t, run.pt_t, d)
+
+
+# ------------------------------------------------------------------------ stage 1, 2
+
+
+def stage1(family: str, u: int) -> dict[str, Any]:
+    """Unit ``u``'s 13 h model and timing (cached: it does not depend on the prior)."""
+    cached = CACHE / f"stage1-{family}-{u}.json"
+    if cached.exists():
+        return json.loads(cached.read_text())
+    t0 = time.perf_counter()
+    cm = select(simulate(family, u, CAL[family], seed=1000 * u + 1))
+    print(f"{family} unit {u}: 13 h fit {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    out = {"unit": u, "model": _pair(cm), "s": time.perf_counter() - t0}
+    CACHE.mkdir(parents=True, exist_ok=True)
+    cached.write_text(json.dumps(out))
+    return out
+
+
+def stage2(
+    family: str,
+    u: int,
+    others: list[dict[str, Any]],
+    foreign: list[dict[str, Any]],
+    held: int,
+    neff: bool = True,
+) -> dict[str, Any]:
+    """Unit ``u``: quick run with the leave-unit-out prior, alone, and the 13 h model, on
+    the held-out runs; the quick run against the other family's prior."""
+    from gyrolab.compensation.prior import fit_map, hysteresis_width, learn_prior
+
+    t0 = time.perf_counter()
+    mine = _entry("13h", next(o["model"] for o in others if o["unit"] == u))
+    prior = learn_prior(
+        [_entry(f"{family}{o['unit']}", o["model"]) for o in others if o["unit"] != u]
+    )
+    quick = simulate(family, u, "quick", seed=1000 * u + 99)
+    cal = calibration(quick)
+    fit = fit_map(cal, prior, neff=neff)
+    alone = _entry("alone", _pair(select(quick)))
+    foreign_mem = fit_map(
+        cal, learn_prior([_entry(f"x{o['unit']}", o["model"]) for o in foreign])
+    ).membership
+    other = simulate(family, u, "quick", seed=1000 * u + 98, other=True)
+    other_mem = fit_map(calibration(other), prior, neff=neff).membership
+    models = {"13h": mine, "quick_prior": _entry("prior", _pair(fit.model)), "quick_alone": alone}
+    res: dict[str, Any] = {
+        "unit": u,
+        "truth": truth(family, u),
+        "membership": fit.membership.to_dict(),
+        "foreign_membership": foreign_mem.to_dict(),
+        "other_part_membership": other_mem.to_dict(),
+        "prior_clusters": len(prior.clusters),
+        "quick_case_range_c": [float(quick.pt_c.min()), float(quick.pt_c.max())],
+        "features": {k: m.params.to_dict() for k, m in models.items()},
+        "hysteresis": {k: hysteresis_width(m.model.to_dict()) for k, m in models.items()},
+        "runs": {},
+    }
+    names = list(HELD[family])[:held]
+    for i, name in enumerate(names):
+        r = simulate(family, u, name, seed=1000 * u + 2 + i)
+        rr = {"raw": score(r.raw), "oracle": score(r.raw - r.drift)}
+        for k, m in models.items():
+            rr[k] = score(r.raw - _drift(m, r))
+        rr["_case_range_c"] = [float(r.pt_c.min()), float(r.pt_c.max())]
+        res["runs"][name] = rr
+    res["s"] = time.perf_counter() - t0
+    print(
+        f"{family} unit {u}: d2 {fit.membership.d2:.1f} (p {fit.membership.p_value:.2g}), "
+        f"foreign d2 {foreign_mem.d2:.0f}; {res['s']:.0f} s",
+        file=sys.stderr,
+        flush=True,
+    )
+    return res
+
+
+# ---------------------------------------------------------------------------- tables
+
+
+def _pass(ok: bool) -> str:
+    return "**pass**" if ok else "**FAIL**"
+
+
+def family_table(family: str, results: list[dict[str, Any]]) -> tuple[list[str], dict]:
+    """Rows of the chamber-time table and the per-unit table of one family."""
+    names = list(results[0]["runs"])
+    a = {
+        k: {m: np.array([[r["runs"][n][k][m] for n in names] for r in results]) for m in (BS, PP)}
+        for k in ("raw", "oracle", "13h", "quick_prior", "quick_alone")
+    }
+    base = a["13h"][BS]
+    cut = {k: 100.0 * (1.0 - a[k][PP] / a["raw"][PP]) for k in a}
+    rows = []
+    for k, label, hours in (
+        ("13h", f"13 h `{CAL[family]}`, own fit", 13.0),
+        ("quick_prior", "3.25 h `quick` + leave-unit-out prior (MAP)", 3.25),
+        ("quick_alone", "3.25 h `quick`, own fit, no prior", 3.25),
+    ):
+        ratio = a[k][BS] / base
+        rows.append(
+            f"| {family} | {label} | {hours:g} | {np.median(ratio):.3f} | {ratio.max():.3f} | "
+            f"{np.median(a[k][BS] / a['oracle'][BS]):.3f} | {np.median(cut[k]):.1f} % | "
+            f"{np.median(cut['13h'] - cut[k]):+.1f} / {np.max(cut['13h'] - cut[k]):+.1f} |"
+        )
+    # the system as a lab runs it: a refused unit goes back for the 13 h profile
+    refused = np.array([not r["membership"]["belongs"] for r in results])
+    sys_bs = np.where(refused[:, None], base, a["quick_prior"][BS])
+    sys_cut = np.where(refused[:, None], cut["13h"], cut["quick_prior"])
+    ratio_s = sys_bs / base
+    hours = 3.25 + 13.0 * refused.mean()
+    rows.append(
+        f"| {family} | 3.25 h `quick` + prior; a refused unit ({int(refused.sum())} of "
+        f"{refused.size}) recalibrated on 13 h | {hours:.2f} (mean) | "
+        f"{np.median(ratio_s):.3f} | {ratio_s.max():.3f} | "
+        f"{np.median(sys_bs / a['oracle'][BS]):.3f} | {np.median(sys_cut):.1f} % | "
+        f"{np.median(cut['13h'] - sys_cut):+.1f} / {np.max(cut['13h'] - sys_cut):+.1f} |"
+    )
+    ratio = a["quick_prior"][BS] / base
+    dcut = cut["13h"] - cut["quick_prior"]
+    stats = {
+        "median": float(np.median(ratio)),
+        "worst": float(ratio.max()),
+        "dcut_median": float(np.median(dcut)),
+        "dcut_worst": float(np.max(dcut)),
+        "ratio": ratio,
+        "names": names,
+        "sys_median": float(np.median(ratio_s)),
+        "sys_worst": float(ratio_s.max()),
+        "sys_hours": hours,
+    }
+    return rows, stats
+
+
+def unit_rows(family: str, results: list[dict[str, Any]], stats: dict) -> list[str]:
+    L = []
+    for i, r in enumerate(results):
+        m, f = r["membership"], r["foreign_membership"]
+        hw = r["hysteresis"]
+        tr = r["truth"]["hysteresis_width_deg_per_h"]
+        worst = int(np.argmax(stats["ratio"][i]))
+        L.append(
+            f"| {family} {r['unit']} | {np.median(stats['ratio'][i]):.3f} | "
+            f"{stats['ratio'][i].max():.3f} ({stats['names'][worst]}) | "
+            f"{m['mahalanobis_d2']:.1f} / {m['dof']} (p {m['p_value']:.2g}) "
+            f"{'belongs' if m['belongs'] else '**refused**'} | "
+            f"{f['mahalanobis_d2']:.0f} (p {f['p_value']:.1g}) "
+            f"{'**refused**' if not f['belongs'] else 'accepted'} | "
+            f"{tr:.2f} | {hw['13h']['at_mid_deg_per_h']:.2f} | "
+            f"{hw['quick_prior']['at_mid_deg_per_h']:.2f} "
+            f"({hw['quick_prior']['at_low_deg_per_h']:.2f} … "
+            f"{hw['quick_prior']['at_high_deg_per_h']:.2f}) |"
+        )
+    return L
+
+
+def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
+    fams = list(data)
+    n = {f: len(data[f]) for f in fams}
+    held = {f: list(data[f][0]["runs"]) for f in fams}
+    L = [
+        f"`python benchmarks/prior_suite.py` — {meta['date']}, {meta['machine']}; "
+        + "; ".join(
+            f"{f}: {n[f]} units × {len(held[f])} held-out runs ({', '.join(held[f])})" for f in fams
+        )
+        + f"; wall clock {meta['wall_s']:.0f} s with {meta['workers']} workers, load average "
+        f"{meta['load_before']} before, {meta['load_after']} after (shared machine).",
+        "",
+        "| family | calibration | chamber h | bias stability ÷ 13 h (median) | worst | ÷ oracle "
+        "(median) | 100 s p-p cut (median) | Δ cut vs 13 h, points (median / worst) |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    st = {}
+    for f in fams:
+        rows, st[f] = family_table(f, data[f])
+        L += rows
+    L += ["", "| target (issue 30) | measured | verdict |", "| --- | --- | --- |"]
+    for f in fams:
+        s = st[f]
+        L.append(
+            f"| {f}: quick + prior bias stability ≤ 1.1 × the unit's 13 h (median over units "
+            f"× runs) | {s['median']:.3f} × | {_pass(s['median'] <= 1.1)} |"
+        )
+        L.append(f"| {f}: worst ≤ 1.3 × | {s['worst']:.3f} × | {_pass(s['worst'] <= 1.3)} |")
+        L.append(
+            f"| {f}, refused units recalibrated on 13 h (mean {s['sys_hours']:.2f} h): median "
+            f"/ worst | {s['sys_median']:.3f} / {s['sys_worst']:.3f} × | "
+            f"{_pass(s['sys_median'] <= 1.1)} / {_pass(s['sys_worst'] <= 1.3)} |"
+        )
+        L.append(
+            f"| {f}: 100 s p-p cut within 5 points of the 13 h calibration (median / worst) "
+            f"| {s['dcut_median']:+.1f} / {s['dcut_worst']:+.1f} points | "
+            f"{_pass(s['dcut_median'] <= 5)} (median), {_pass(s['dcut_worst'] <= 5)} (worst) |"
+        )
+    for f in fams:
+        other = [g for g in fams if g != f]
+        det = sum(not r["foreign_membership"]["belongs"] for r in data[f])
+        odet = sum(not r["other_part_membership"]["belongs"] for r in data[f])
+        fa = sum(not r["membership"]["belongs"] for r in data[f])
+        d2 = [r["other_part_membership"]["mahalanobis_d2"] for r in data[f]]
+        L.append(
+            f"| a unit of another part number is detected: {f} units with their temperature "
+            f"slope and curvature reversed, against the family's leave-unit-out prior | "
+            f"{odet} of {n[f]} refused (d² {min(d2):.0f} … {max(d2):.0f}) | "
+            f"{_pass(odet == n[f])} |"
+        )
+        if other:
+            L.append(
+                f"| (harder) {f} units against the {other[0]} family's prior — the two "
+                f"families are drawn around the same nominal part | {det} of {n[f]} refused "
+                f"| — |"
+            )
+        L.append(
+            f"| {f}: own-family units refused (false alarms, leave-unit-out) | {fa} of {n[f]} | — |"
+        )
+    L += [
+        "",
+        "Per unit (quick + prior against the unit's own 13 h fit; the detector's distance "
+        "d² of the unit's own quick-run estimate from its leave-unit-out prior, and from "
+        "the other family's prior; up/down hysteresis width, heating − cooling branch at "
+        "the middle of the range, °/h — the family's truth where it has one number, the "
+        "13 h fit, the quick + prior fit with its low … high end):",
+        "",
+        "| unit | ÷ 13 h median | worst (run) | d² / dof, own family | d², other family | "
+        "true hyst. °/h | 13 h | quick + prior |",
+        "| --- | ---: | ---: | --- | --- | ---: | ---: | ---: |",
+    ]
+    for f in fams:
+        L += unit_rows(f, data[f], st[f])
+    return "\n".join(L)
+
+
+# ------------------------------------------------------------------------------ main
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--units", type=int, default=8)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--families", default="validation,break")
+    ap.add_argument("--held", type=int, default=5, help="held-out runs per unit (of 5)")
+    ap.add_argument("--out", default=str(REPO / "docs" / "results.md"), help="'' to skip")
+    ap.add_argument("--tables-only", action="store_true")
+    ap.add_argument(
+        "--white", action="store_true", help="MAP data weight without the n_eff inflation"
+    )
+    args = ap.parse_args(argv)
+    fams = args.families.split(",")
+    path = CACHE / ("results-white.json" if args.white else "results.json")
+    if args.tables_only:
+        d = json.loads(path.read_text())
+        body = tables(d["data"], d["meta"])
+    else:
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
+        load_before = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
+        t0 = time.perf_counter()
+        from concurrent.futures import ProcessPoolExecutor
+
+        units = list(range(args.units))
+        with ProcessPoolExecutor(args.workers) as ex:
+            s1 = {f: list(ex.map(stage1, [f] * len(units), units)) for f in fams}
+            futs = {
+                f: [
+                    ex.submit(
+                        stage2,
+                        f,
+                        u,
+                        s1[f],
+                        s1[[g for g in fams if g != f][0]] if len(fams) > 1 else s1[f],
+                        args.held,
+                        not args.white,
+                    )
+                    for u in units
+                ]
+                for f in fams
+            }
+            data = {f: [x.result() for x in futs[f]] for f in fams}
+        meta = {
+            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python "
+            f"{platform.python_version()}",
+            "workers": args.workers,
+            "wall_s": time.perf_counter() - t0,
+            "load_before": load_before,
+            "load_after": "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()),
+        }
+        CACHE.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"meta": meta, "data": data}, indent=1, default=str))
+        body = tables(data, meta)
+    print(body)
+    if args.out:
+        write_section(Path(args.out), "prior_suite", body)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,553 @@
+"""A fleet prior over the structured causal drift model, and the shrinkage (MAP) fit of a
+new unit towards it (issue 30): calibrate a unit on a short run by learning from the
+units calibrated before it.
+
+**Parameter vector.** A unit's structured model (:mod:`gyrolab.compensation.causal`)
+
+    d = Σ c_i L_i(u(F)) + k R + h S + A E + kp max(R, 0) + k2 R|R| + hT S v
+
+is made comparable across units by expressing it on one *reference basis*
+(:class:`Basis`): Legendre polynomials of order ``P`` on the fleet's range ``[lo, hi]`` of
+the die temperature F (the union of the units' calibration ranges), followed by the six
+terms. A unit's own polynomial (on its own range, continued linearly outside it) is
+projected onto that basis by least squares on a grid of F over the reference range; its
+``hT`` term (on its own ``v``) becomes ``hT a`` on the reference ``v`` and ``hT b`` on S
+(``v_unit = a v_ref + b``). The linear parameter vector is θ (``P + 7`` numbers, °/s per
+regressor unit); the nonlinear one φ = (ln(τ + 60 s), ln w, ln τ_w) (feature
+parameters of :class:`~gyrolab.compensation.causal_features.CausalParams`).
+
+**Prior** (:func:`learn_prior`): per cluster of units, the mean μ of θ, and a covariance
+Σ = (1 + 1/n) (½ S + ½ diag(S)) + floor: S the within-cluster covariance pooled over the
+clusters (they differ in their means), shrunk halfway to its diagonal (a few dozen units
+cannot estimate ``P + 7`` dimensions' correlations), widened for the cluster mean's own
+uncertainty (n units), and a floor: no component is claimed known better than
+:data:`FLOOR_DPS` at its regressor's largest value (:data:`REGRESSOR_SCALE`). φ gets a
+mean and standard deviation per cluster (floor 0.1).
+**Clusters**: k-means (k = 2, 3) on what the units' drift does (°/s: the polynomial at 11
+temperatures, each term at its largest regressor value), kept only when every cluster has
+≥ :data:`MIN_CLUSTER` units and the mean silhouette is ≥ :data:`SILHOUETTE_MIN` (the
+units form clear groups, as 250 MPU-9250s did in CEUR Vol-2278); else one cluster.
+
+**MAP fit** (:func:`fit_map`): at feature parameters φ, the features of the unit's run give
+the design A on the reference basis and θ minimises
+
+    J(θ) = |y − A θ|² / s² + (θ − μ)ᵀ Σ⁻¹ (θ − μ)
+
+(closed form), where ``s² = σ² n / n_eff`` — the residual variance of the 3.6 s
+means inflated by the effective sample size of the residual
+(:func:`~gyrolab.compensation.structured.effective_samples`), the same inflation the
+structured model's term test uses: flicker-dominated residuals are far from independent.
+φ is chosen on a grid around the cluster's prior (τ, w, τ_w at the prior mean and ±½ … ±2
+sd, one component at a time, τ twice) by the blocked CV RMSE of that MAP fit (the causal
+selection's folds). Not by a joint J over θ and φ: with the prior on θ in the criterion,
+φ bends the features until θ looks typical (validation unit 10's lag came out 2080 s for
+a true 1176 s, its held-out bias stability 2.5× its 13 h fit's). A unit with much data
+(the 13 h run) is dominated by its own likelihood and reproduces its own fit; a short run
+borrows the prior where it says little (the cold end the chamber cannot reach in 3 h,
+the warm-up, the hysteresis).
+
+**Does the unit belong?** (:class:`Membership`): the unit's own least-squares estimate
+θ̂ (same φ, covariance ``C = s² (AᵀA)⁻¹``) against the prior: the Mahalanobis distance
+``d² = (θ̂ − μ)ᵀ (Σ + C)⁻¹ (θ̂ − μ)`` on the components some unit of the fleet uses, χ²
+with that many degrees of freedom under the prior. A unit whose p-value is below
+:data:`P_OUT` (in every cluster) does not belong: another part number, a defective unit —
+it must be calibrated on the full profile.
+The cluster of a unit is the one of least d².
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.polynomial import legendre
+from scipy import stats
+
+from gyrolab.compensation.band import fit_band
+from gyrolab.compensation.baselines import blocked_folds
+from gyrolab.compensation.causal import CV_FOLDS, CV_SEGMENTS
+from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.causal_models import StructuredCausalModel
+from gyrolab.compensation.drift_model import CausalCalibration
+from gyrolab.compensation.structured import StructuredModel, effective_samples
+
+#: the six terms after the Legendre columns, in θ order
+TERMS = ("rate", "hyst", "warmup", "rate_pos", "rate_sq", "hyst_T")
+#: each term's largest regressor value on a chamber run (R ≤ 3 °C/min = 0.05 °C/s,
+#: R|R| ≤ 0.0025 °C²/s², S, E, v ≤ 1): the scale of the prior's floor
+REGRESSOR_SCALE = {
+    "rate": 0.05,
+    "hyst": 1.0,
+    "warmup": 1.0,
+    "rate_pos": 0.05,
+    "rate_sq": 0.0025,
+    "hyst_T": 1.0,
+}
+#: the prior never claims a component known better than this at its largest value, °/s
+FLOOR_DPS = 1e-4
+PHI_SD_FLOOR = 0.1
+TAU0_S = 60.0  # φ₁ = ln(τ + τ0): τ = 0 is allowed
+MIN_CLUSTER = 3
+SILHOUETTE_MIN = 0.5
+P_OUT = 1e-3
+MAX_ORDER = 6
+#: φ grid of the MAP fit: the prior mean plus these multiples of its sd
+PHI_STEPS = (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
+
+
+@dataclass(frozen=True)
+class Basis:
+    """The fleet's reference basis: Legendre order ``order`` on ``[lo, hi]`` (°C of F),
+    then :data:`TERMS`."""
+
+    lo: float
+    hi: float
+    order: int
+
+    @property
+    def size(self) -> int:
+        return self.order + 1 + len(TERMS)
+
+    def names(self) -> list[str]:
+        return [f"c{i}" for i in range(self.order + 1)] + list(TERMS)
+
+    def u(self, F: np.ndarray) -> np.ndarray:
+        return (2.0 * np.asarray(F, dtype=float) - (self.lo + self.hi)) / (self.hi - self.lo)
+
+    def design(self, X: np.ndarray) -> np.ndarray:
+        """The regressors of feature rows ``X = (F, R, S, E)``; the Legendre part is
+        continued linearly beyond ``[lo, hi]`` as the structured model's is."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        u = self.u(X[:, 0])
+        uc = np.clip(u, -1.0, 1.0)
+        L = legendre.legvander(uc, self.order)
+        if np.any(u != uc):
+            eye = np.eye(self.order + 1)
+            dL = np.stack(
+                [legendre.legval(uc, legendre.legder(eye[i])) for i in range(self.order + 1)],
+                axis=1,
+            )
+            L = L + dL * (u - uc)[:, None]
+        R, S, E = X[:, 1], X[:, 2], X[:, 3]
+        terms = [R, S, E, np.maximum(R, 0.0), R * np.abs(R), S * uc]
+        return np.hstack([L, np.stack(terms, axis=1)])
+
+    def scale(self) -> np.ndarray:
+        """Each regressor's largest value (the floor's scale)."""
+        return np.array([1.0] * (self.order + 1) + [REGRESSOR_SCALE[t] for t in TERMS])
+
+    def model(self, theta: np.ndarray) -> StructuredModel:
+        """θ as a structured model on the reference range."""
+        P = self.order + 1
+        k, h, A, kp, k2, hT = (float(v) for v in theta[P:])
+        terms = tuple(t for t, v in zip(TERMS, theta[P:], strict=True) if v != 0.0)
+        return StructuredModel(
+            coef=np.asarray(theta[:P], dtype=float),
+            lo=self.lo,
+            hi=self.hi,
+            k=k,
+            h=h,
+            A=A,
+            terms=terms,
+            kp=kp,
+            k2=k2,
+            hT=hT,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"lo": self.lo, "hi": self.hi, "order": self.order}
+
+
+def hysteresis_width(m: dict[str, Any]) -> dict[str, float]:
+    """The up/down hysteresis width of a structured model (its ``to_dict()``): the drift
+    on the heating branch minus the cooling branch at the same die temperature,
+    ``2 (h + hT v)`` (S = ±1), at the low end, middle and high end of its range, °/h."""
+    h, hT = float(m.get("h", 0.0)), float(m.get("hT", 0.0))
+    return {
+        f"at_{w}_deg_per_h": 7200.0 * (h + hT * v)
+        for w, v in (("low", -1.0), ("mid", 0.0), ("high", 1.0))
+    }
+
+
+def phi_of(p: CausalParams) -> np.ndarray:
+    """φ = (ln(τ + τ0), ln w, ln τ_w)."""
+    return np.array([math.log(p.tau_s + TAU0_S), math.log(p.width_c), math.log(p.warmup_tau_s)])
+
+
+def params_of(phi: np.ndarray) -> CausalParams:
+    return CausalParams(
+        tau_s=max(float(math.exp(phi[0]) - TAU0_S), 0.0),
+        width_c=float(math.exp(phi[1])),
+        warmup_tau_s=float(math.exp(phi[2])),
+    )
+
+
+def unit_vector(m: StructuredModel, basis: Basis) -> np.ndarray:
+    """A unit's structured model as θ on the reference basis (module docstring)."""
+    F = np.linspace(basis.lo, basis.hi, 201)
+    V = legendre.legvander(basis.u(F), basis.order)
+    c = np.linalg.lstsq(V, m.poly(F), rcond=None)[0]
+    # v_unit = a v_ref + b (their clipping ignored: the two ranges nearly agree)
+    a = (basis.hi - basis.lo) / (m.hi - m.lo)
+    b = ((basis.lo + basis.hi) - (m.lo + m.hi)) / (m.hi - m.lo)
+    tail = [m.k, m.h + m.hT * b, m.A, m.kp, m.k2, m.hT * a]
+    return np.concatenate([c, np.asarray(tail, dtype=float)])
+
+
+@dataclass
+class UnitEntry:
+    """One earlier unit: its name, feature parameters and structured model."""
+
+    name: str
+    params: CausalParams
+    model: StructuredModel
+
+
+@dataclass
+class Cluster:
+    """A group of units: the prior of θ (``mean``, ``cov``) and of φ."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    phi_mean: np.ndarray
+    phi_sd: np.ndarray
+    members: list[str]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "mean": self.mean.tolist(),
+            "cov": self.cov.tolist(),
+            "phi_mean": self.phi_mean.tolist(),
+            "phi_sd": self.phi_sd.tolist(),
+            "members": list(self.members),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Cluster:
+        return cls(
+            np.asarray(d["mean"], float),
+            np.asarray(d["cov"], float),
+            np.asarray(d["phi_mean"], float),
+            np.asarray(d["phi_sd"], float),
+            list(d["members"]),
+        )
+
+
+@dataclass
+class FleetPrior:
+    """The prior learned from earlier units (module docstring)."""
+
+    basis: Basis
+    clusters: list[Cluster]
+    skipped: dict[str, str] = field(default_factory=dict)  # unit → why it was not used
+    #: the components some unit of the fleet uses (the detector's parameters)
+    active: np.ndarray | None = None
+
+    def active_mask(self) -> np.ndarray:
+        if self.active is None:
+            return np.ones(self.basis.size, dtype=bool)
+        return np.asarray(self.active, dtype=bool)
+
+    @property
+    def units(self) -> list[str]:
+        return [m for c in self.clusters for m in c.members]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "basis": self.basis.to_dict(),
+            "parameters": self.basis.names(),
+            "clusters": [c.to_dict() for c in self.clusters],
+            "skipped": dict(self.skipped),
+            "active": self.active_mask().tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FleetPrior:
+        b = d["basis"]
+        return cls(
+            Basis(float(b["lo"]), float(b["hi"]), int(b["order"])),
+            [Cluster.from_dict(c) for c in d["clusters"]],
+            dict(d.get("skipped", {})),
+            np.asarray(d["active"], dtype=bool) if "active" in d else None,
+        )
+
+
+def _cluster(
+    thetas: np.ndarray, phis: np.ndarray, names: list[str], S: np.ndarray, basis: Basis
+) -> Cluster:
+    """A cluster's prior: its mean, and the pooled within-cluster covariance ``S`` shrunk
+    halfway to its diagonal, floored, and widened by ``1 + 1/n`` (the mean itself is
+    estimated from the cluster's ``n`` units: the predictive spread of a new unit)."""
+    n = thetas.shape[0]
+    cov = 0.5 * S + 0.5 * np.diag(np.diag(S))
+    cov = (1.0 + 1.0 / n) * cov + np.diag((FLOOR_DPS / basis.scale()) ** 2)
+    sd = phis.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
+    return Cluster(thetas.mean(axis=0), cov, phis.mean(axis=0), np.maximum(sd, PHI_SD_FLOOR), names)
+
+
+def _silhouette(Z: np.ndarray, lab: np.ndarray) -> float:
+    D = np.sqrt(((Z[:, None, :] - Z[None, :, :]) ** 2).sum(axis=-1))
+    s = []
+    for i in range(Z.shape[0]):
+        same = (lab == lab[i]) & (np.arange(Z.shape[0]) != i)
+        if not same.any():
+            s.append(0.0)
+            continue
+        a = D[i, same].mean()
+        b = min(D[i, lab == k].mean() for k in set(lab.tolist()) if k != lab[i])
+        s.append((b - a) / max(a, b))
+    return float(np.mean(s))
+
+
+def _kmeans(Z: np.ndarray, k: int, seed: int = 0, restarts: int = 10) -> np.ndarray:
+    """Lloyd's k-means, best of ``restarts`` seeded starts (least within-cluster sum)."""
+    rng = np.random.default_rng(seed)
+    best: tuple[float, np.ndarray] | None = None
+    for _ in range(restarts):
+        C = Z[rng.choice(Z.shape[0], k, replace=False)]
+        for _ in range(100):
+            lab = np.argmin(((Z[:, None, :] - C[None]) ** 2).sum(-1), axis=1)
+            new = np.array([Z[lab == j].mean(0) if (lab == j).any() else C[j] for j in range(k)])
+            if np.allclose(new, C):
+                break
+            C = new
+        w = float(((Z - C[lab]) ** 2).sum())
+        if best is None or w < best[0]:
+            best = (w, lab)
+    assert best is not None
+    return best[1]
+
+
+def _drift_space(thetas: np.ndarray, basis: Basis) -> np.ndarray:
+    """Units as what their drift does, in °/s: the polynomial at 11 temperatures across
+    the range and each term at its regressor's largest value (the space the clusters of
+    thermal profiles are found in)."""
+    P = basis.order + 1
+    V = legendre.legvander(np.linspace(-1.0, 1.0, 11), basis.order)
+    return np.hstack([thetas[:, :P] @ V.T, thetas[:, P:] * basis.scale()[P:]])
+
+
+def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -> FleetPrior:
+    """The fleet prior of ``units`` (module docstring): at least 2 units."""
+    if len(units) < 2:
+        raise ValueError(
+            f"a fleet prior needs at least 2 units with a structured model, not {len(units)}"
+        )
+    lo = min(u.model.lo for u in units)
+    hi = max(u.model.hi for u in units)
+    basis = Basis(lo, hi, min(max(u.model.order for u in units), MAX_ORDER))
+    thetas = np.array([unit_vector(u.model, basis) for u in units])
+    phis = np.array([phi_of(u.params) for u in units])
+    names = [u.name for u in units]
+    labels = np.zeros(len(units), dtype=int)
+    Z = _drift_space(thetas, basis)
+    best = SILHOUETTE_MIN
+    for k in (2, 3):
+        if len(units) < k * MIN_CLUSTER:
+            break
+        lab = _kmeans(Z, k)
+        if np.bincount(lab, minlength=k).min() < MIN_CLUSTER:
+            continue
+        s = _silhouette(Z, lab)
+        if s >= best:
+            best, labels = s, lab
+    k = int(labels.max()) + 1
+    # one within-cluster covariance for all clusters (they differ in their means)
+    dev = thetas - np.array([thetas[labels == j].mean(axis=0) for j in range(k)])[labels]
+    S = dev.T @ dev / max(len(units) - k, 1)
+    clusters = [
+        _cluster(
+            thetas[labels == j],
+            phis[labels == j],
+            [n for n, lab in zip(names, labels, strict=True) if lab == j],
+            S,
+            basis,
+        )
+        for j in range(k)
+    ]
+    active = np.any(thetas != 0.0, axis=0)
+    return FleetPrior(basis, clusters, dict(skipped or {}), active)
+
+
+# ----------------------------------------------------------------------------- MAP fit
+
+
+@dataclass
+class Membership:
+    """Whether a unit belongs to the prior (module docstring)."""
+
+    cluster: int
+    d2: float  # Mahalanobis distance² of the unit's own estimate from the cluster's mean
+    dof: int
+    p_value: float
+    belongs: bool
+    d2_all: list[float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "cluster": self.cluster,
+            "mahalanobis_d2": self.d2,
+            "dof": self.dof,
+            "p_value": self.p_value,
+            "belongs": self.belongs,
+            "d2_per_cluster": self.d2_all,
+            "threshold_p": P_OUT,
+        }
+
+    def message(self) -> str:
+        return (
+            f"the unit does not belong to the fleet prior (Mahalanobis d² = {self.d2:.1f} on "
+            f"{self.dof} parameters, p = {self.p_value:.1e} < {P_OUT:g}; another part number "
+            "or a defective unit?): calibrate it on the full profile (--profile paper, 13 h)"
+        )
+
+
+def _features(cal: CausalCalibration, p: CausalParams) -> np.ndarray:
+    return hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
+
+
+def _map(A: np.ndarray, y: np.ndarray, s2: float, c: Cluster) -> tuple[np.ndarray, float]:
+    """θ of least J for fixed φ and its J without the φ term."""
+    P = np.linalg.inv(c.cov)
+    H = A.T @ A / s2 + P
+    theta = np.linalg.solve(H, A.T @ y / s2 + P @ c.mean)
+    r = y - A @ theta
+    d = theta - c.mean
+    return theta, float(r @ r / s2 + d @ P @ d)
+
+
+def _noise_scale(A: np.ndarray, y: np.ndarray, c: Cluster, neff: bool = True) -> float:
+    """s² = σ² n / n_eff of the residual of a first MAP fit at s² = its OLS residual
+    (``neff=False``: σ², the residual taken as independent)."""
+
+    def inflate(r: np.ndarray) -> float:
+        return r.size / max(effective_samples(r), 1.0) if neff else 1.0
+
+    theta = np.linalg.lstsq(A, y, rcond=None)[0]
+    r = y - A @ theta
+    s2 = float(r @ r) / max(r.size - A.shape[1], 1) * inflate(r)
+    theta, _ = _map(A, y, s2, c)
+    r = y - A @ theta
+    return float(r @ r) / r.size * inflate(r)
+
+
+def membership(A: np.ndarray, y: np.ndarray, s2: float, prior: FleetPrior) -> Membership:
+    """The unit's own estimate on design ``A`` against every cluster (module docstring),
+    on the components some unit of the fleet uses (a term no unit has is left out: on a
+    short run its estimate is only the collinearity of the rate terms)."""
+    act = prior.active_mask()
+    Aa = A[:, act]
+    own = np.linalg.lstsq(Aa, y, rcond=None)[0]
+    C = s2 * np.linalg.pinv(Aa.T @ Aa)
+    d2 = []
+    for c in prior.clusters:
+        d = own - c.mean[act]
+        d2.append(float(d @ np.linalg.solve(c.cov[np.ix_(act, act)] + C, d)))
+    j = int(np.argmin(d2))
+    dof = int(act.sum())
+    p = float(stats.chi2.sf(d2[j], dof))
+    return Membership(j, d2[j], dof, p, p >= P_OUT, d2)
+
+
+@dataclass
+class PriorFit:
+    """A unit fitted with the prior: the causal model, whether it belongs, the fit log."""
+
+    model: StructuredCausalModel
+    membership: Membership
+    log: dict[str, Any]
+
+
+def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> PriorFit:
+    """The MAP (shrinkage) fit of a unit's run towards the prior (module docstring);
+    the causal model is a ``structured`` one on the reference basis, its CV RMSE and band
+    measured by the same blocked CV as the selection's."""
+    y = np.asarray(cal.rate, dtype=float)
+    b = prior.basis
+    p0 = params_of(prior.clusters[0].phi_mean)
+    A0 = b.design(_features(cal, p0))
+    s2_0 = _noise_scale(A0, y, prior.clusters[0], neff)
+    mem = membership(A0, y, s2_0, prior)
+    c = prior.clusters[mem.cluster]
+    # φ by the blocked CV of the MAP fit (the selection's folds): what predicts the run's
+    # held-out stretches, not what makes θ look typical (choosing φ by the whole J bent a
+    # validation unit's lag to 2080 s for a true 1176 s; by the least-squares residual on
+    # the fleet's flexible basis, the same)
+    folds = blocked_folds(y.size, CV_FOLDS, CV_SEGMENTS)
+
+    def cv_rmse(A: np.ndarray, pred: np.ndarray | None = None) -> float:
+        sq = 0.0
+        for held in folds:
+            th, _ = _map(A[~held], y[~held], s2_0, c)
+            p = A[held] @ th
+            if pred is not None:
+                pred[held] = p
+            sq += float(np.sum((p - y[held]) ** 2))
+        return math.sqrt(sq / y.size)
+
+    best: tuple[float, np.ndarray] | None = None
+    for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
+        phi_c = c.phi_mean.copy() if best is None else best[1].copy()
+        for step in PHI_STEPS:
+            phi = phi_c.copy()
+            phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
+            e = cv_rmse(b.design(_features(cal, params_of(phi))))
+            if best is None or e < best[0]:
+                best = (e, phi)
+    assert best is not None
+    phi, s2 = best[1], s2_0
+    theta, _ = _map(b.design(_features(cal, params_of(phi))), y, s2, c)
+    params = params_of(phi)
+    A = b.design(_features(cal, params))
+    # the unit's membership at its own φ (the detector's number)
+    mem = membership(A, y, _noise_scale(A, y, c, neff), prior)
+    pred = np.empty_like(y)
+    cv = cv_rmse(A, pred)
+    r = y - A @ theta
+    log = {
+        "method": "MAP towards the fleet prior (gyrolab/compensation/prior.py)",
+        "prior_units": len(prior.units),
+        "cluster": mem.cluster,
+        "cluster_units": len(c.members),
+        "membership": mem.to_dict(),
+        "features": params.to_dict(),
+        "noise_s2": s2,
+        "rms_residual_deg_per_s": float(np.sqrt(np.mean(r * r))),
+        "hysteresis_width": hysteresis_width(b.model(theta).to_dict()),
+    }
+    model = StructuredCausalModel(
+        family="structured",
+        params=params,
+        model=b.model(theta),
+        cv_rmse={"structured": cv},
+        selection={"winner": "structured", "prior": log},
+        band=fit_band(cal.t, y, pred, folds, cal.pt_t, cal.pt_c),
+    )
+    return PriorFit(model, mem, log)
+
+
+def structured_of(causal: Any) -> tuple[CausalParams, StructuredModel] | None:
+    """The feature parameters and structured model of a causal model, or ``None`` when
+    it is a network (the prior is over the structured family's parameters)."""
+    m = getattr(causal, "model", None)
+    if isinstance(m, StructuredModel):
+        return causal.params, m
+    return None
+
+
+__all__ = [
+    "Basis",
+    "Cluster",
+    "FleetPrior",
+    "Membership",
+    "PriorFit",
+    "UnitEntry",
+    "fit_map",
+    "hysteresis_width",
+    "learn_prior",
+    "membership",
+    "structured_of",
+    "unit_vector",
+]

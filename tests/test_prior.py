@@ -1,0 +1,172 @@
+"""The fleet prior and the MAP fit (gyrolab/compensation/prior.py, issue 30): a fleet of
+synthetic units with known structured drift on the simulator's chamber, learned from their
+13 h fits; a new unit calibrated on the 3.25 h ``quick`` profile borrows strength, a unit
+of another part number is detected, and a full-data unit reproduces its own fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.drift_model import CausalCalibration
+from gyrolab.compensation.prior import (
+    FleetPrior,
+    UnitEntry,
+    fit_map,
+    hysteresis_width,
+    learn_prior,
+    unit_vector,
+)
+from gyrolab.compensation.profile_design import case_trace
+from gyrolab.compensation.structured import fit_structured
+from gyrolab.profiles.profile import BUILTIN
+from gyrolab.sim.thermal import ThermalParams
+
+BLOCK = 3.6
+
+
+def _trace(name: str) -> tuple[np.ndarray, np.ndarray]:
+    sched = [(s.setpoint_c, s.duration_s) for s in BUILTIN[name].steps]
+    t, _, case = case_trace(sched, ThermalParams())
+    return t, case
+
+
+TRACES = {name: _trace(name) for name in ("paper", "quick")}
+
+
+def _unit(rng: np.random.Generator, sign: float = 1.0) -> tuple[CausalParams, np.ndarray]:
+    """True feature parameters and (c0, c1, c2, k, h, A) of a unit of the part number."""
+    p = CausalParams(tau_s=float(rng.uniform(200, 400)), width_c=1.0, warmup_tau_s=600.0)
+    c = np.array(
+        [
+            rng.normal(0.01, 0.004),
+            sign * 3.8e-4 * rng.uniform(0.8, 1.2),
+            3.4e-6 * rng.uniform(0.7, 1.3),
+            rng.normal(0.1, 0.02),
+            rng.normal(1e-3, 2e-4),
+            rng.normal(3e-3, 5e-4),
+        ]
+    )
+    return p, c
+
+
+def _run(trace: str, p: CausalParams, c: np.ndarray, seed: int):
+    """Block means of the unit's drift plus white and random-walk noise, and the truth."""
+    t, case = TRACES[trace]
+    rng = np.random.default_rng(seed)
+    pt_c = case + 0.005 * rng.standard_normal(case.size)
+    tb = np.arange(BLOCK / 2, t[-1], BLOCK)
+    X = hold(tb, t, reading_features(t, case, p))
+    dT = X[:, 0] - 25.0
+    d = c[0] + c[1] * dT + c[2] * dT**2 + c[3] * X[:, 1] + c[4] * X[:, 2] + c[5] * X[:, 3]
+    # ARW 0.05 °/√h (5e-4 °/s in 3.6 s) and a random walk of ~0.3 °/h over 13 h
+    noise = 5e-4 * rng.standard_normal(tb.size) + np.cumsum(1e-6 * rng.standard_normal(tb.size))
+    return CausalCalibration(t=tb, rate=d + noise, pt_t=t, pt_c=pt_c), d
+
+
+def _own_fit(cal: CausalCalibration, p: CausalParams):
+    X = hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
+    return fit_structured(X, cal.rate, 3, ("rate", "hyst", "warmup"))
+
+
+@pytest.fixture(scope="module")
+def fleet() -> FleetPrior:
+    rng = np.random.default_rng(30)
+    units = []
+    for i in range(8):
+        p, c = _unit(rng)
+        cal, _ = _run("paper", p, c, seed=i)
+        units.append(UnitEntry(f"u{i}", p, _own_fit(cal, p)))
+    return learn_prior(units)
+
+
+def _err(model, p_fit, trace: str, p: CausalParams, c: np.ndarray) -> float:
+    """RMS error (°/s) of a fitted model's drift against the truth on ``trace``."""
+    cal, d = _run(trace, p, c, seed=99)
+    X = hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p_fit))
+    return float(np.sqrt(np.mean((model.predict(X) - d) ** 2)))
+
+
+def test_quick_profile_is_short_and_goes_up_and_down() -> None:
+    q = BUILTIN["quick"]
+    assert q.duration_s <= 3.25 * 3600
+    t, case = TRACES["quick"]
+    i = int(np.argmax(case))
+    assert case[i] - case[0] > 15 and case[i] - case[i:].min() > 60  # up, then down
+    assert case[-1] - case[i:].min() > 2  # and up again at the end (a second reversal)
+
+
+def test_quick_is_what_the_design_chooses() -> None:
+    from gyrolab.compensation.profile_design import design_profile
+
+    p, rec = design_profile(3.25)
+    assert [(s.setpoint_c, s.duration_s) for s in p.steps] == [
+        (s.setpoint_c, s.duration_s) for s in BUILTIN["quick"].steps
+    ]
+    lo, hi = rec["case_range_c"]
+    assert -19 < lo < -17 and 45 < hi < 47
+
+
+def test_prior_one_cluster_and_in_prior_unit_borrows_strength(fleet: FleetPrior) -> None:
+    assert len(fleet.clusters) == 1 and len(fleet.units) == 8
+    p, c = _unit(np.random.default_rng(1234))
+    cal, _ = _run("quick", p, c, seed=5)
+    got = fit_map(cal, fleet)
+    assert got.membership.belongs, got.membership.to_dict()
+    # held out on the 13 h staircase (the quick run never sees the case below -18 °C):
+    # the shrinkage estimate beats the unit's own short-run fit by far
+    e_map = _err(got.model.model, got.model.params, "paper", p, c)
+    e_own = _err(_own_fit(cal, p), p, "paper", p, c)
+    assert e_map < 0.5 * e_own, (e_map, e_own)
+    assert e_map < 1e-4  # a fifth of the white noise of one 3.6 s block
+    w = hysteresis_width(got.model.model.to_dict())
+    assert w["at_mid_deg_per_h"] == pytest.approx(7200 * c[4], rel=0.5)
+
+
+def test_another_part_number_is_detected(fleet: FleetPrior) -> None:
+    p, c = _unit(np.random.default_rng(77), sign=-1.0)  # temperature slope reversed
+    cal, _ = _run("quick", p, c, seed=6)
+    mem = fit_map(cal, fleet).membership
+    assert not mem.belongs and mem.p_value < 1e-6
+    assert "full profile" in mem.message()
+
+
+def test_full_data_unit_reproduces_its_own_fit(fleet: FleetPrior) -> None:
+    p, c = _unit(np.random.default_rng(4321))
+    cal, d = _run("paper", p, c, seed=8)
+    got = fit_map(cal, fleet)
+    own = _own_fit(cal, p)
+    X = hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, got.model.params))
+    Xo = hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
+    diff = got.model.model.predict(X) - own.predict(Xo)
+    assert float(np.sqrt(np.mean(diff**2))) < 5e-5  # 10 % of the 3.6 s white noise
+
+
+def test_unit_vector_and_prior_round_trip(fleet: FleetPrior) -> None:
+    b = fleet.basis
+    theta = fleet.clusters[0].mean
+    again = unit_vector(b.model(theta), b)
+    np.testing.assert_allclose(again, theta, rtol=1e-9, atol=1e-12)
+    back = FleetPrior.from_dict(fleet.to_dict())
+    np.testing.assert_array_equal(back.clusters[0].cov, fleet.clusters[0].cov)
+
+
+def test_clusters_found_when_the_units_form_groups() -> None:
+    """Two part-number variants (the temperature slope reversed): two clusters, and a new
+    unit of the second variant belongs to its cluster."""
+    rng = np.random.default_rng(3)
+    units = []
+    for i in range(8):
+        p, c = _unit(rng, sign=1.0 if i % 2 else -1.0)
+        cal, _ = _run("paper", p, c, seed=40 + i)
+        units.append(UnitEntry(f"u{i}", p, _own_fit(cal, p)))
+    prior = learn_prior(units)
+    assert sorted(sorted(cl.members) for cl in prior.clusters) == [
+        ["u0", "u2", "u4", "u6"],
+        ["u1", "u3", "u5", "u7"],
+    ]
+    p, c = _unit(np.random.default_rng(8), sign=-1.0)
+    cal, _ = _run("quick", p, c, seed=9)
+    mem = fit_map(cal, prior).membership
+    assert mem.belongs and "u0" in prior.clusters[mem.cluster].members
