@@ -75,13 +75,7 @@ LAZY_BY_DESIGN: dict[tuple[str, str], str] = {}
 
 # Violations in other helpers' areas, being fixed in parallel: (importer module, imported
 # module or name). The merge that lands the fix removes the entry.
-KNOWN: set[tuple[str, str]] = {
-    # issue 24 (fc is reshaping logs/__init__.build_recording): the readers take it from the
-    # package whose dispatch imports them; it moves below them when that work has landed
-    ("gyrolab.logs", "gyrolab.logs.ros2"),
-    ("gyrolab.logs", "gyrolab.logs.ulog"),
-    ("gyrolab.logs", "gyrolab.logs.dataflash"),
-}
+KNOWN: set[tuple[str, str]] = set()
 
 
 @dataclass(frozen=True)

@@ -256,7 +256,7 @@ def read_dataflash(path: str | os.PathLike[str], *, instance: int = 0) -> Record
     from pymavlink import DFReader
 
     from gyrolab.autopilot import ardupilot as ap
-    from gyrolab.logs import build_recording
+    from gyrolab.logs.series import build_recording
 
     try:
         with _quiet():

@@ -93,7 +93,7 @@ def read_ros2(
     ``linear_acceleration`` in ``rec.accel``, m/s²)."""
     from mcap_ros2.decoder import DecoderFactory
 
-    from gyrolab.logs import build_recording
+    from gyrolab.logs.series import build_recording
     from gyrolab.record.source import opened
 
     factory = DecoderFactory()

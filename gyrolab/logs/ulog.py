@@ -72,7 +72,7 @@ def tc_parameters(params: dict[str, Any], device_id: int | None) -> dict[str, An
 def read_ulog(path: str | os.PathLike[str], *, instance: int = 0) -> Recording:
     """A ULog → :class:`Recording` (3 axes, °/s, sensor frame; temperature °C;
     ``sensor_accel`` of the same instance in ``rec.accel`` where logged)."""
-    from gyrolab.logs import build_recording, make_series
+    from gyrolab.logs.series import build_recording, make_series
 
     log = _load(path)
     found = [d for d in log.data_list if d.name == "sensor_gyro"]
