@@ -45,6 +45,9 @@ def test_help_and_argument_errors_import_nothing_heavy(tmp_path: Path) -> None:
         ["compensate", "--help"],
         ["export", "--help"],
         ["simulate"],  # --out missing
+        ["simulate", "--out", str(out), "--profile", str(tmp_path / "nosuch.toml")],
+        ["simulate", "--out", str(out), "--profile", "papr"],
+        ["simulate", "--out", str(out), *["--axis-model", str(tmp_path / "run.mcap")] * 3],
         ["compensate", str(tmp_path / "missing.mcap"), "--out", str(out)],
         ["export", "M", "--format", "px4", "--out", str(tmp_path / "x.params")],
         ["export", str(model), "--format", "kalibr", "--out", str(tmp_path / "imu.yaml")],
@@ -69,6 +72,24 @@ def test_help_and_argument_errors_import_nothing_heavy(tmp_path: Path) -> None:
         assert rc == 2, (argv, err)
         assert len(err.strip().splitlines()) == 1, (argv, err)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["M", "run.mcap"]  # nothing written
+
+
+def test_simulate_effect_errors_come_before_the_simulator(tmp_path: Path) -> None:
+    """An unknown effect or parameter is answered with the vocabulary's module loaded (it
+    needs numba, which loads scipy's base) but not the recording stack (mcap) nor torch or
+    matplotlib."""
+    cases = [
+        ["simulate", "--out", str(tmp_path / "x.mcap"), "--effect", "bogus"],
+        ["simulate", "--out", str(tmp_path / "x.mcap"), "--effect", "arw:Q=1"],
+    ]
+    code = PROBE.replace("HEAVY", repr(HEAVY)).replace("CASES", repr(cases))
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
+    )
+    for argv, rc, loaded, err in json.loads(res.stdout):
+        assert rc == 2 and err.startswith("gyrolab: error: --effect:"), (argv, err)
+        assert not {"mcap", "torch", "matplotlib", "dask"} & set(loaded), (argv, loaded)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_export_help_lists_the_options_one_format_requires(

@@ -86,6 +86,28 @@ class SimulateOptions:
     def __post_init__(self) -> None:
         for p in (self.model, *self.axis_models):
             need_file(p)
+        if len(self.axis_models) > 2:
+            raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
+        # The profile and the effects are read here, before the simulator and its
+        # recording stack are imported: a mistyped name or a bad file is answered in
+        # ~0.2 s (the profile needs numpy only), ~0.6 s with --effect (the vocabulary's
+        # module brings numba), not after the ~2 s of imports a run needs (issue 27).
+        from gyrolab.profiles.profile import load_profile
+
+        load_profile(self.profile)
+        if self.effects:
+            check_effects(self.effects)
+
+
+def check_effects(effects: tuple[str, ...]) -> None:
+    """``--effect NAME[:k=v,...]``: known names, known parameters, values in range — as
+    :func:`gyrolab.sim.model.apply_effect_args` applies them to the nominal model."""
+    from gyrolab.sim.model import apply_effect_args, nominal_model
+
+    try:
+        apply_effect_args(nominal_model(), list(effects))
+    except (ValueError, TypeError) as e:
+        raise InputError("--effect", str(e)) from None
 
 
 @dataclass(frozen=True)

@@ -4,12 +4,13 @@ options in, the one-line summary printed."""
 from __future__ import annotations
 
 from gyrolab.app.options import DiscrepancyOptions, SimulateOptions
-from gyrolab.sim.commands import simulate_file
-from gyrolab.sim.discrepancy.commands import discrepancy as run_discrepancy
 
 
 def simulate(opts: SimulateOptions) -> int:
     """The ``gyrolab simulate`` command (docs/sim-model.md)."""
+    # each command imports its own stack only (the discrepancy's is not the simulator's)
+    from gyrolab.sim.commands import simulate_file
+
     line = simulate_file(
         opts.out,
         opts.profile,
@@ -27,5 +28,7 @@ def simulate(opts: SimulateOptions) -> int:
 
 def discrepancy(opts: DiscrepancyOptions) -> int:
     """The ``gyrolab discrepancy`` command (docs/discrepancy.md)."""
+    from gyrolab.sim.discrepancy.commands import discrepancy as run_discrepancy
+
     print(run_discrepancy(opts.run, opts.out, model=opts.model, unit=opts.unit, force=opts.force))
     return 0

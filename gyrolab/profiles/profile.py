@@ -23,12 +23,13 @@ import math
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from gyrolab.errors import InputError
 from gyrolab.tomlfile import read_toml
+
+if TYPE_CHECKING:  # numpy is imported where a profile is evaluated: reading one needs none
+    import numpy as np
 
 # Bounds every profile lies within (docs/profiles.md, "Bounds"): beyond them a value is a
 # typo, not a test. Setpoints: the widest range of the chambers MEMS tests use (compressor
@@ -112,10 +113,14 @@ class Profile:
 
     def step_starts(self) -> np.ndarray:
         """Nominal start time of every step (s since power-on), time rule only."""
+        import numpy as np
+
         return np.concatenate([[0.0], np.cumsum([s.duration_s for s in self.steps])[:-1]])
 
     def setpoint_at(self, t_s: np.ndarray | float) -> np.ndarray:
         """Setpoint (°C) of the nominal, time-only schedule at times ``t_s``."""
+        import numpy as np
+
         t = np.asarray(t_s, dtype=float)
         idx = np.searchsorted(self.step_starts(), t, side="right") - 1
         idx = np.clip(idx, 0, len(self.steps) - 1)
