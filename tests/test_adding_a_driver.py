@@ -138,7 +138,7 @@ def _connect(cfg: Any, rm: ExpectedResourceManager) -> Any:
 def test_a_driver_defined_in_its_test_opens_from_a_bench_file(tmp_path, pt104) -> None:
     with SimBench(speed=200.0) as bench:
         cfg = load_bench(_bench_file(tmp_path, bench.oven_port, bench.adc_port))
-        assert cfg.multimeter == Pt104Config(resource=RESOURCE, serial="T-7")
+        assert cfg.thermometer == Pt104Config(resource=RESOURCE, serial="T-7")
         rm = ExpectedResourceManager({RESOURCE: [("*IDN?", IDN), ("MEAS:FRES?", R_25C)]})
         inst = _connect(cfg, rm)
         try:

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import ast
 import inspect
+from dataclasses import fields
 from pathlib import Path
 
+from gyrolab.acquisition.bench_config import BenchConfig
+from gyrolab.acquisition.runner import Acquisition
 from gyrolab.app.demo import run_demo
 from gyrolab.app.options import SimulateOptions
 from gyrolab.cli import build_parser
@@ -44,3 +47,15 @@ def test_no_parameter_uses_a_retired_name_for_the_sample_rate() -> None:
             if isinstance(node, ast.arg) and node.arg in RETIRED:
                 bad.append(f"{path.relative_to(ROOT.parent)}:{node.lineno} {node.arg}")
     assert not bad, bad
+
+
+def test_each_role_goes_by_its_role_name_in_code() -> None:
+    """The bench's fields and the run engine's keywords are the roles' names (the BENCH.toml
+    tables ``[thermometer]``, ``[chamber]``); ``multimeter`` and ``oven`` remain only what
+    the recording calls the instruments, and older BENCH.toml tables (tests/test_registry)."""
+    bench = {f.name for f in fields(BenchConfig)}
+    assert {"thermometer", "chamber", "adc", "scanner"} <= bench
+    assert not {"multimeter", "oven"} & bench
+    params = inspect.signature(Acquisition).parameters
+    assert {"thermometer", "chamber", "chamber_period_s"} <= set(params)
+    assert not {"oven", "multimeter", "oven_period_s"} & set(params)

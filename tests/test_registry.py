@@ -54,8 +54,8 @@ def test_new_and_old_table_names_give_the_same_bench() -> None:
         "new",
     )
     assert {**old.to_dict(), "name": ""} == {**new.to_dict(), "name": ""}
-    assert isinstance(new.multimeter, Agilent34401AConfig) and new.multimeter.nplc == 1.0
-    assert isinstance(new.oven, WatlowF4Config) and new.oven.slave_address == 3
+    assert isinstance(new.thermometer, Agilent34401AConfig) and new.thermometer.nplc == 1.0
+    assert isinstance(new.chamber, WatlowF4Config) and new.chamber.slave_address == 3
 
 
 @pytest.mark.parametrize(
@@ -74,7 +74,7 @@ def test_bad_role_tables_are_one_clear_error(d: dict, match: str) -> None:
 
 def test_example_bench_names_its_drivers() -> None:
     cfg = load_bench(REPO / "examples" / "lab.toml")
-    assert (cfg.multimeter.driver, cfg.oven.driver, cfg.adc.driver) == (
+    assert (cfg.thermometer.driver, cfg.chamber.driver, cfg.adc.driver) == (
         "agilent34401a",
         "watlowf4",
         "gyroadc",

@@ -91,13 +91,13 @@ def _run(tmp_path: Path, chamber: MemoryChamber, thermo: MemoryThermometer, dura
         writer=w,
         clock=WallClock(),
         thermometer=thermo,
-        oven=chamber,
+        chamber=chamber,
         gyro=SilentStream(),
         adc=GyroAdcConfig(),
         limits=Limits(comm_timeout_s=30.0),
         safe_state=SafeState(),
         pt100_period_s=0.05,
-        oven_period_s=0.05,
+        chamber_period_s=0.05,
     )
     t0 = time.monotonic()
     res = acq.run()

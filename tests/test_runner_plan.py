@@ -155,7 +155,7 @@ def test_profile_outside_bench_limits_is_refused_before_any_io() -> None:
 
 def test_example_bench_file_loads_and_round_trips() -> None:
     cfg = load_bench(REPO / "examples" / "lab.toml")
-    assert cfg.multimeter.resource.startswith(("ASRL", "TCPIP"))
+    assert cfg.thermometer.resource.startswith(("ASRL", "TCPIP"))
     assert cfg.run.operator and cfg.run.unit_serial
     again = bench_from_dict({**cfg.to_dict()}, "again")
     assert again.to_dict() == cfg.to_dict()

@@ -113,10 +113,10 @@ class BenchConfig:
     name: str = "bench"
     run: RunInfo = field(default_factory=RunInfo)
     # The three roles (``[thermometer]``, ``[chamber]``, ``[adc]``), each the config
-    # dataclass of the driver its table names (gyrolab.instruments.registry). The field
-    # names are the tables' older names, which are still accepted.
-    multimeter: Any = field(default_factory=lambda: registry.default_config("thermometer"))
-    oven: Any = field(default_factory=lambda: registry.default_config("chamber"))
+    # dataclass of the driver its table names (gyrolab.instruments.registry); each field
+    # is named as its table (the older tables [multimeter] and [oven] are still read).
+    thermometer: Any = field(default_factory=lambda: registry.default_config("thermometer"))
+    chamber: Any = field(default_factory=lambda: registry.default_config("chamber"))
     adc: Any = field(default_factory=lambda: registry.default_config("rate_stream"))
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
@@ -138,7 +138,7 @@ class BenchConfig:
         if units:
             # TOML has no null: a unit on its internal sensor has no temperature_channel
             d["unit"] = [{k: v for k, v in u.items() if v is not None} for u in units]
-            del d["multimeter"]  # a multi-unit bench has no [thermometer]
+            del d["thermometer"]  # a multi-unit bench has no [thermometer]
             if scanner is not None:  # none when every unit is on its internal sensor
                 d["scanner"] = {k: v for k, v in scanner.items() if k != "channels"}
         return d
@@ -197,8 +197,8 @@ def _section(cls: type, raw: Any, where: str, source: str) -> Any:
 # Role tables: (BenchConfig field, role, table names: the current one first, then the
 # older name still accepted).
 _ROLE_TABLES = (
-    ("multimeter", "thermometer", ("thermometer", "multimeter")),
-    ("oven", "chamber", ("chamber", "oven")),
+    ("thermometer", "thermometer", ("thermometer", "multimeter")),
+    ("chamber", "chamber", ("chamber", "oven")),
     ("adc", "rate_stream", ("adc",)),
 )
 
@@ -395,7 +395,7 @@ def validate(cfg: BenchConfig) -> None:
                 check(ss.mode)
             except ValueError as e:
                 raise InputError(s, f"{where} {sub.driver}: {e}") from None
-    periods = [("multimeter", cfg.multimeter.period_s), ("oven", cfg.oven.period_s)]
+    periods = [("thermometer", cfg.thermometer.period_s), ("chamber", cfg.chamber.period_s)]
     if cfg.scanner is not None:
         periods.append(("scanner", cfg.scanner.period_s))
     for name, period in periods:

@@ -98,14 +98,14 @@ class Acquisition:
         writer: RecordingWriter,
         clock: Clock,
         thermometer: Thermometer | MultiThermometer | None,
-        oven: Chamber,
+        chamber: Chamber,
         gyro: RateStream | None = None,
         adc: RateStreamConfig | None = None,
         limits: Limits,
         safe_state: SafeState,
         units: list[UnitDevices] | None = None,
         pt100_period_s: float = 1.0,
-        oven_period_s: float = 2.0,
+        chamber_period_s: float = 2.0,
         on_status: Callable[[Status], None] | None = None,
         status_every_s: float = 0.5,
         on_samples: Callable[[float], None] | None = None,
@@ -130,17 +130,17 @@ class Acquisition:
         self.plan = ProfilePlan(profile)
         self.w = writer
         self.clock = clock
-        self.thermo, self.oven = thermometer, oven
+        self.thermo, self.chamber = thermometer, chamber
         self.units = units
         self.limits = limits
         self.safe = safe_state
         self.pt100_period_s = pt100_period_s
-        self.oven_period_s = oven_period_s
+        self.chamber_period_s = chamber_period_s
         self.on_status = on_status
         self.status_every_s = status_every_s
         self.q: queue.Queue[tuple[Any, ...]] = queue.Queue()
         self.stop_ev = threading.Event()
-        self.oven_cmds: queue.Queue[Callable[[], Any]] = queue.Queue()
+        self.chamber_cmds: queue.Queue[Callable[[], Any]] = queue.Queue()
         self.status = Status(n_steps=len(profile.steps))
         self._t0 = 0.0
         self._interrupt: str | None = None
@@ -253,7 +253,7 @@ class Acquisition:
                 )
         thermo = [] if self.thermo is None else [self.thermo.name]
         now = self.clock.now()
-        self.comm.start([*thermo, self.oven.name, *self.streams], now)
+        self.comm.start([*thermo, self.chamber.name, *self.streams], now)
         self.temps.start(now)
         r = self.resume
         if r is None:
@@ -268,7 +268,7 @@ class Acquisition:
         pollers = instrument_pollers(
             [
                 (self.thermo, self.pt100_period_s, None),
-                (self.oven, self.oven_period_s, self.oven_cmds),
+                (self.chamber, self.chamber_period_s, self.chamber_cmds),
             ],
             self.clock,
             self.q.put,
@@ -375,10 +375,10 @@ class Acquisition:
         self._setpoint_pending = sp
 
         def cmd() -> tuple[str, float]:
-            self.oven.set_setpoint(sp)
+            self.chamber.set_setpoint(sp)
             return ("setpoint", sp)
 
-        self.oven_cmds.put(cmd)
+        self.chamber_cmds.put(cmd)
 
     # -- items from the device threads
     def _handle(self, item: tuple[Any, ...]) -> None:
@@ -422,7 +422,7 @@ class Acquisition:
             ohm, c = payload
             self.w.write_pt100(t, ohm, c)
             self._take(t, None, c, PT100)
-        elif source == self.oven.name:
+        elif source == self.chamber.name:
             sp, pv = payload[:2]
             self._chamber_alarm = getattr(payload, "alarm", "")
             self.status.chamber_c = pv
@@ -503,7 +503,7 @@ class Acquisition:
         they say (gyrolab/acquisition/suspend.py)."""
         holding = conditions(
             self._chamber_alarm,
-            self.oven.name,
+            self.chamber.name,
             self.thermo.name if self.thermo is not None else None,
             self.comm,
             self.temps,
@@ -548,11 +548,11 @@ class Acquisition:
         self.stop_ev.set()
         for th in threads:
             th.join(timeout=5.0)
-        ok, attempts = command_safe_state(self.oven, self.safe, self.clock, self.t)
-        reports = getattr(self.oven, "reports", None)
+        ok, attempts = command_safe_state(self.chamber, self.safe, self.clock, self.t)
+        reports = getattr(self.chamber, "reports", None)
         for rep in reports() if reports is not None else []:
             # Exception responses to the safe-state commands: logged like any other.
-            self._on_report(self.oven.name, self.t(), rep)
+            self._on_report(self.chamber.name, self.t(), rep)
         if outcome != "completed":
             self.w.write_event(
                 t_end,
@@ -574,6 +574,6 @@ class Acquisition:
             rec.emit_block()
             self._internal_readings(rec)
             rec.record_tail_gap(t_stop)
-        record_safe_state(self.w, self.journal, self.oven.name, self.safe, ok, attempts)
+        record_safe_state(self.w, self.journal, self.chamber.name, self.safe, ok, attempts)
         self.w.flush()
         return ok

@@ -26,7 +26,7 @@ READBACK_TOLERANCE_C = 0.05
 
 
 def command_safe_state(
-    oven: Chamber, safe: SafeState, clock: Clock, t: Callable[[], float]
+    chamber: Chamber, safe: SafeState, clock: Clock, t: Callable[[], float]
 ) -> tuple[bool, list[Attempt]]:
     """Command the safe setpoint and verify it by reading it back (``ATTEMPTS`` tries,
     ``RETRY_S`` apart); with ``mode = "off"`` then switch the chamber off (the driver
@@ -35,12 +35,12 @@ def command_safe_state(
     for _ in range(ATTEMPTS):
         t0 = t()
         try:
-            oven.set_setpoint(safe.setpoint_c)
-            sp, pv = oven.read()[:2]
+            chamber.set_setpoint(safe.setpoint_c)
+            sp, pv = chamber.read()[:2]
             if abs(sp - safe.setpoint_c) > READBACK_TOLERANCE_C:
                 raise RuntimeError(f"setpoint read back {sp:g} °C")
             if safe.mode == "off":
-                oven.switch_off()  # type: ignore[attr-defined]  # verifies by read-back
+                chamber.switch_off()  # type: ignore[attr-defined]  # verifies by read-back
         except Exception as e:
             attempts.append((t0, f"{type(e).__name__}: {e}", None))
             clock.sleep(RETRY_S)
@@ -51,13 +51,13 @@ def command_safe_state(
 
 
 def record_safe_state(
-    writer: Any, journal: Journal, oven: str, safe: SafeState, ok: bool, attempts: list[Attempt]
+    writer: Any, journal: Journal, chamber: str, safe: SafeState, ok: bool, attempts: list[Attempt]
 ) -> None:
     """Each failed attempt in ``/log``; then the oven's read-back state (mode ``safe``) and
     the ``safe_state`` event, ``setpoint … verified`` or ``FAILED: …``."""
     for k, (t, err, _res) in enumerate(attempts, start=1):
         if err:
-            journal.log("error", oven, f"safe-state attempt {k} failed: {err}", "fault", None, t)
+            journal.log("error", chamber, f"safe-state attempt {k} failed: {err}", "fault", None, t)
     t, err, res = attempts[-1]
     if ok:
         sp, pv = res
@@ -68,7 +68,7 @@ def record_safe_state(
         writer.write_event(t, "safe_state", -1, sp, detail)
         journal.log(
             "info",
-            oven,
+            chamber,
             f"oven in safe state: {detail}",
             "safe_state",
             {"setpoint_c": sp, "process_value_c": pv},
@@ -77,5 +77,5 @@ def record_safe_state(
     else:
         writer.write_event(t, "safe_state", -1, None, f"FAILED: {err}")
         journal.log(
-            "fault", oven, f"could not put the oven in the safe state: {err}", "fault", None, t
+            "fault", chamber, f"could not put the oven in the safe state: {err}", "fault", None, t
         )

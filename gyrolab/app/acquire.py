@@ -62,7 +62,7 @@ class Instruments:
         self.closers: list[Callable[[], None]] = []
         self.identity: dict[str, Any] = {}
         self.thermometer: Thermometer | None = None
-        self.oven: Chamber | None = None
+        self.chamber: Chamber | None = None
         self.gyro: RateStream | None = None
         # A multi-unit bench: the scanner and (serial, stream) per unit, in bench order.
         self.scanner: MultiThermometer | None = None
@@ -91,13 +91,13 @@ def lab_addresses(cfg: BenchConfig) -> dict[str, str]:
             else {}
         )
         return {
-            "chamber": registry.address(cfg.oven, "chamber"),
+            "chamber": registry.address(cfg.chamber, "chamber"),
             **scanner,
             **{f"unit/{u.serial}": registry.address(u.adc, "rate_stream") for u in cfg.units},
         }
     return {
-        "thermometer": registry.address(cfg.multimeter, "thermometer"),
-        "chamber": registry.address(cfg.oven, "chamber"),
+        "thermometer": registry.address(cfg.thermometer, "thermometer"),
+        "chamber": registry.address(cfg.chamber, "chamber"),
         "rate_stream": registry.address(cfg.adc, "rate_stream"),
     }
 
@@ -126,7 +126,7 @@ def connect_instruments(
     # (attribute, role, driver config, address key, table in BENCH.toml)
     opening: list[tuple[str, str, Any, str, str]]
     if cfg.units:
-        opening = [("oven", "chamber", cfg.oven, "chamber", "[chamber]")]
+        opening = [("chamber", "chamber", cfg.chamber, "chamber", "[chamber]")]
         if cfg.scanner is not None:
             opening.append(
                 ("scanner", "multi_thermometer", cfg.scanner, "multi_thermometer", "[scanner]")
@@ -137,8 +137,8 @@ def connect_instruments(
         ]
     else:
         opening = [
-            ("thermometer", "thermometer", cfg.multimeter, "thermometer", "[thermometer]"),
-            ("oven", "chamber", cfg.oven, "chamber", "[chamber]"),
+            ("thermometer", "thermometer", cfg.thermometer, "thermometer", "[thermometer]"),
+            ("chamber", "chamber", cfg.chamber, "chamber", "[chamber]"),
             ("gyro", "rate_stream", cfg.adc, "rate_stream", "[adc]"),
         ]
     try:
@@ -347,7 +347,7 @@ def run_acquisition(
                     if record:
                         writer.write_metadata(name, record)
                 fh.flush()  # header + metadata on disk before the first reading
-                assert inst.oven is not None
+                assert inst.chamber is not None
                 devices: dict[str, Any]
                 if cfg.units:  # the scanner reads the PT100s; a unit's own sensor, its stream
                     devices = {
@@ -365,17 +365,17 @@ def run_acquisition(
                         "thermometer": inst.thermometer,
                         "gyro": inst.gyro,
                         "adc": cfg.adc,
-                        "pt100_period_s": cfg.multimeter.period_s,
+                        "pt100_period_s": cfg.thermometer.period_s,
                     }
                 acq = Acquisition(
                     profile=profile,
                     writer=writer,
                     clock=clock,
-                    oven=inst.oven,
+                    chamber=inst.chamber,
                     limits=cfg.limits,
                     safe_state=cfg.safe_state,
                     **devices,
-                    oven_period_s=cfg.oven.period_s,
+                    chamber_period_s=cfg.chamber.period_s,
                     on_status=on_status,
                     on_samples=on_samples,
                     silence=None if sim is None else sim.silence,
@@ -444,7 +444,7 @@ def acquire(opts: AcquireOptions) -> RunResult:
 
         faults = load_faults(opts.faults)
         # the F4 reports its alarm through [chamber] alarm_input, the ESPEC always
-        alarm = cfg.oven.driver != "watlowf4" or bool(getattr(cfg.oven, "alarm_input", 0))
+        alarm = cfg.chamber.driver != "watlowf4" or bool(getattr(cfg.chamber, "alarm_input", 0))
         check_plan_for_bench(
             faults, opts.units, str(opts.faults), opts.internal_temperature, chamber_alarm=alarm
         )

@@ -146,7 +146,7 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
         name="sim",
         # The simulated F4's limit controller is wired to its digital input 1 (as ESPEC
         # wires an F4 chamber's), so the chamber_alarm fault reaches the driver.
-        oven=replace(registry.default_config("chamber"), alarm_input=1),
+        chamber=replace(registry.default_config("chamber"), alarm_input=1),
         run=RunInfo(
             operator="simulated",
             # the nominal unit, as `gyrolab simulate` names it (its runs of any seed are
@@ -188,7 +188,7 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
 def sim_drivers(cfg: BenchConfig, names: list[str] | tuple[str, ...]) -> BenchConfig:
     """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
     name picks its role; the driver's default settings)."""
-    fields = {"thermometer": "multimeter", "chamber": "oven", "rate_stream": "adc"}
+    fields = {"thermometer": "thermometer", "chamber": "chamber", "rate_stream": "adc"}
     for name in names:
         spec = next((s for s in registry.drivers() if s.name == name), None)
         if spec is None:
@@ -245,13 +245,13 @@ def start_sim_bench(
     from gyrolab.sim.simulate import axis_physics, provenance
 
     specs = {
-        "chamber": registry.get(cfg.oven.driver, "chamber"),
+        "chamber": registry.get(cfg.chamber.driver, "chamber"),
         **(
             {"multi_thermometer": registry.get(cfg.scanner.driver, "multi_thermometer")}
             if cfg.scanner is not None
             else {}
             if cfg.units
-            else {"thermometer": registry.get(cfg.multimeter.driver, "thermometer")}
+            else {"thermometer": registry.get(cfg.thermometer.driver, "thermometer")}
         ),
     }
     for role, spec in specs.items():
@@ -273,8 +273,8 @@ def start_sim_bench(
         settings=dict(
             dmm_model=dmm_spec.sim_backend if dmm_spec is not None else "34401A",
             chamber_model=specs["chamber"].sim_backend,
-            oven_control_event=getattr(cfg.oven, "control_event", 0) or None,
-            oven_alarm_input=getattr(cfg.oven, "alarm_input", 0) or None,
+            oven_control_event=getattr(cfg.chamber, "control_event", 0) or None,
+            oven_alarm_input=getattr(cfg.chamber, "alarm_input", 0) or None,
             unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
             samples_per_frame=getattr(cfg.adc, "samples_per_frame", 1),  # a VN-100: none
             workdir=workdir,

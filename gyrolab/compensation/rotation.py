@@ -31,7 +31,7 @@ def rotation_events(t: np.ndarray, t0: float, seed: int = 0) -> dict[str, np.nda
     from scipy.signal import butter, sosfilt
 
     t = np.asarray(t, dtype=float)
-    fs = 1.0 / float(np.median(np.diff(t)))
+    rate_hz = 1.0 / float(np.median(np.diff(t)))
 
     def box(length_s: float, rate: float) -> np.ndarray:
         return np.where((t >= t0) & (t < t0 + length_s), rate, 0.0)
@@ -44,7 +44,7 @@ def rotation_events(t: np.ndarray, t0: float, seed: int = 0) -> dict[str, np.nda
     }
     on = (t >= t0) & (t < t0 + 1200.0)
     w = np.random.default_rng(seed).standard_normal(int(on.sum()))
-    sos = butter(4, min(0.5, 0.4 * fs), fs=fs, output="sos")
+    sos = butter(4, min(0.5, 0.4 * rate_hz), fs=rate_hz, output="sos")
     x = sosfilt(sos, w)
     r = np.zeros_like(t)
     r[on] = 0.5 + x / np.sqrt(np.mean(x * x))

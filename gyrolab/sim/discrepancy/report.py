@@ -72,9 +72,9 @@ def figures(res: Result) -> dict[str, str]:
     out["residual_temperature"] = _png(fig)
 
     fig, axs = plt.subplots(1, 2, figsize=(9, 3.6))
-    fs = 1.0 / (a.ctx.t[1] - a.ctx.t[0])
+    rate_hz = 1.0 / (a.ctx.t[1] - a.ctx.t[0])
     for f, lab in ((a, "before"), (b, "after")):
-        fr, p = welch(f.resid, fs=fs, nperseg=min(1024, f.resid.size))
+        fr, p = welch(f.resid, fs=rate_hz, nperseg=min(1024, f.resid.size))
         axs[0].loglog(fr[1:], p[1:], lw=0.8, label=lab)
     axs[0].set_xlabel("frequency (Hz)")
     axs[0].set_ylabel("residual PSD ((°/s)²/Hz)")
