@@ -423,9 +423,9 @@ def check_options(task: str, opt: BatchOptions) -> None:
 
         load_config(opt.config_file)
     if opt.sim_model:
-        from gyrolab.sim.model import load_model
+        from gyrolab.sim.model import load_sim_model
 
-        load_model(opt.sim_model)
+        load_sim_model(opt.sim_model)
     if opt.models and not Path(opt.models).is_dir():
         what = "is not a directory" if Path(opt.models).exists() else "directory not found"
         raise InputError(opt.models, f"{what} (--models: MODELS_DIR/<stem> per run)")

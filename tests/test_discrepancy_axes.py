@@ -75,11 +75,11 @@ def test_three_axis_recording_loads_one_bench_per_axis(tmp_path):
 
 def test_cli_on_a_two_axis_recording_writes_the_axes_layout(tmp_path):
     """``gyrolab discrepancy`` on a 2-axis recording: shared effects once in
-    discrepancy.json, one model (readable by ``load_model``) and one report per axis."""
+    discrepancy.json, one model (readable by ``load_sim_model``) and one report per axis."""
     import json
 
     from gyrolab.cli import main
-    from gyrolab.sim.model import load_model
+    from gyrolab.sim.model import load_sim_model
 
     base = tmp_path / "x.toml"
     y = tmp_path / "y.toml"
@@ -104,7 +104,7 @@ def test_cli_on_a_two_axis_recording_writes_the_axes_layout(tmp_path):
     assert "rtd_self_heating" not in doc["effects_by_axis"][1]
     assert doc["axes"][0]["chamber_cooling"]["form"] == "knee"  # the simulator's chamber
     for k in range(2):
-        m = load_model(out / f"model_axis{k}.toml")
+        m = load_sim_model(out / f"model_axis{k}.toml")
         assert "rtd_self_heating" in [e.name for e in m.effects]
         assert (out / f"index_axis{k}.html").read_text().startswith("<")
     assert "index_axis1.html" in (out / "index.html").read_text()

@@ -17,7 +17,7 @@ from gyrolab.cli import main
 from gyrolab.profiles.profile import Profile, Step
 from gyrolab.sim.discrepancy.synth import simulate_bench
 from gyrolab.sim.discrepancy.workflow import run_discrepancy
-from gyrolab.sim.model import load_model, nominal_model
+from gyrolab.sim.model import load_sim_model, nominal_model
 
 STEPS = [(25.0, 1800.0), (60.0, 2400.0), (20.0, 2400.0), (-20.0, 2400.0), (-40.0, 2400.0)]
 PROFILE = Profile("stairs", tuple(Step(sp, d) for sp, d in STEPS))
@@ -139,7 +139,7 @@ def test_cli_reads_only_bench_channels_and_writes_contract(tmp_path, monkeypatch
     assert doc["gap_after"]["lf_residual_rms_dps"] < 0.5 * doc["gap_before"]["lf_residual_rms_dps"]
     html = (out / "index.html").read_text()
     assert html.count("data:image/png;base64,") >= 4 and "<script" not in html
-    m = load_model(out / "model.toml")
+    m = load_sim_model(out / "model.toml")
     assert m.has("warmup")
     assert tomllib.loads((out / "model.toml").read_text())["format"] == "gyrolab-sim-model/1"
     monkeypatch.undo()

@@ -10,7 +10,7 @@ import pytest
 from gyrolab.cli import main
 from gyrolab.errors import InputError
 from gyrolab.record.reader import read_recording
-from gyrolab.sim.model import load_model, nominal_model
+from gyrolab.sim.model import load_sim_model, nominal_model
 
 PROFILE = """
 name = "tiny"
@@ -85,7 +85,7 @@ def test_effect_option_and_model_file(tiny: Path, tmp_path: Path) -> None:
     m = nominal_model().with_effect("warmup", A=0.5, tau_s=10.0)
     mf = tmp_path / "m.toml"
     mf.write_text(m.to_toml())
-    assert load_model(mf) == m  # TOML round trip
+    assert load_sim_model(mf) == m  # TOML round trip
     out = tmp_path / "w.mcap"
     args = ["--out", str(out), "--profile", str(tiny), "--rate", "10", "--model", str(mf)]
     assert sim(*args, "--effect", "periodic:A=0.01,period_s=30") == 0
@@ -132,12 +132,12 @@ def test_bad_model_file_names_the_file(tmp_path: Path) -> None:
     bad = tmp_path / "m.toml"
     bad.write_text('[[effect]]\nname = "bias_poly"\nc9 = 1.0\n')
     with pytest.raises(InputError, match=r"m\.toml: effect bias_poly: unknown parameter"):
-        load_model(bad)
+        load_sim_model(bad)
     bad.write_text('[[effect]]\nname = "flux_capacitor"\n')
     with pytest.raises(InputError, match="unknown effect"):
-        load_model(bad)
+        load_sim_model(bad)
     bad.write_text("[thermal]\nair_tau_s = -3\n")
     with pytest.raises(InputError, match="air_tau_s must be > 0"):
-        load_model(bad)
+        load_sim_model(bad)
     with pytest.raises(InputError, match="not found"):
-        load_model(tmp_path / "missing.toml")
+        load_sim_model(tmp_path / "missing.toml")

@@ -435,9 +435,9 @@ def acquire(opts: AcquireOptions) -> RunResult:
         cfg = load_bench(opts.bench)
     axis_models = []
     if opts.axis_models:
-        from gyrolab.sim.model import load_model
+        from gyrolab.sim.model import load_sim_model
 
-        axis_models = [load_model(m) for m in opts.axis_models]
+        axis_models = [load_sim_model(m) for m in opts.axis_models]
     faults = None
     if opts.faults is not None:
         from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults

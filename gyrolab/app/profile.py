@@ -15,7 +15,7 @@ from gyrolab.outputs import atomic_file
 def profile(opts: ProfileDesignOptions) -> int:
     """The ``gyrolab profile design`` command: prints what the design chose."""
     from gyrolab.compensation.profile_design import design_profile
-    from gyrolab.sim.model import load_model as load_sim_model
+    from gyrolab.sim.model import load_sim_model
 
     thermal = None if opts.sim_model is None else load_sim_model(opts.sim_model).thermal
     prior = None if opts.prior is None else load_prior(opts.prior)

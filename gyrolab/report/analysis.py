@@ -19,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.compensation.results import AllanSummary, RunResults
+# the report's Allan curves are compensation.results' own (re-exported, not wrapped)
+from gyrolab.compensation.results import RunResults
+from gyrolab.compensation.results import allan_summary as allan_summary
 from gyrolab.errors import InputError
 from gyrolab.record.reader import Recording
 
@@ -50,13 +52,6 @@ def paper_block_s() -> float:
     return float(PAPER_BLOCK_S)
 
 
-def load_model(model_dir: str | Path) -> Any:
-    """The model of a single-axis model directory (format version checked)."""
-    from gyrolab.compensation.model_dir import load_model as load
-
-    return load(str(model_dir))
-
-
 def block_averages(rec: Recording, block_s: float) -> tuple[np.ndarray, np.ndarray]:
     """The rate averaged over ``block_s`` (the samples themselves for a shorter run)."""
     from gyrolab.numerics.averaging import block_average
@@ -77,13 +72,6 @@ def raw_metrics(xb: np.ndarray, block_s: float, keys: list[str]) -> dict[str, An
         return series_metrics(xb, block_s)
     except InputError:
         return {k: float("nan") for k in keys}
-
-
-def allan_summary(x: np.ndarray, rate_hz: float) -> AllanSummary | None:
-    """The Allan curve and its terms (:func:`gyrolab.compensation.results.allan_summary`)."""
-    from gyrolab.compensation.results import allan_summary as summary
-
-    return summary(x, rate_hz)
 
 
 def plateau_rows(rec: Recording) -> list[Any]:

@@ -56,7 +56,6 @@ def build_report(
     names the run in metrics.json (default: ``run_path`` as given).
     """
     from gyrolab.outputs import json_safe
-    from gyrolab.report import analysis
     from gyrolab.report.data import assemble, read_run
     from gyrolab.report.layout import document
     from gyrolab.report.spec import load_spec
@@ -66,7 +65,9 @@ def build_report(
     model = None
     if model_dir is not None:
         step("load model")
-        model = analysis.load_model(model_dir)
+        from gyrolab.compensation.model_dir import load_model
+
+        model = load_model(str(model_dir))
     step("read recording")
     if rec is None:
         rec = read_run(run_path, log_options, unit)  # unit: of a multi-unit recording

@@ -10,7 +10,7 @@ from gyrolab.outputs import atomic_file, check_output
 from gyrolab.profiles.profile import load_profile
 from gyrolab.sampling import DEFAULT_RATE_HZ
 from gyrolab.sim.family import unit_family
-from gyrolab.sim.model import apply_effect_args, load_model, nominal_model
+from gyrolab.sim.model import apply_effect_args, load_sim_model, nominal_model
 from gyrolab.sim.simulate import axis_physics, simulate_run
 
 MAX_RATE_HZ = 100_000.0
@@ -40,12 +40,12 @@ def simulate_file(
     if not 1 <= n_units <= MAX_UNITS:
         raise InputError("--units", f"must be 1..{MAX_UNITS}, got {n_units}")
     profile = load_profile(profile_spec)
-    model = load_model(model_path) if model_path else nominal_model()
+    model = load_sim_model(model_path) if model_path else nominal_model()
     try:
         model = apply_effect_args(model, list(effects))
     except (ValueError, TypeError) as e:
         raise InputError("--effect", str(e)) from None
-    axis_models = [load_model(m) for m in axis_model_paths]
+    axis_models = [load_sim_model(m) for m in axis_model_paths]
     if len(axis_models) > 2:
         raise InputError("--axis-model", "a unit has at most 3 axes (give it at most twice)")
     try:

@@ -188,7 +188,7 @@ def nominal_model() -> SimModel:
     )
 
 
-def load_model(path: str | os.PathLike[str]) -> SimModel:
+def load_sim_model(path: str | os.PathLike[str]) -> SimModel:
     """Read a ``SIM_MODEL.toml``; InputError naming the file on any problem."""
     p = Path(path)
     d = read_toml(p, "model file")

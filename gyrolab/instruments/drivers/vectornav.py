@@ -86,8 +86,9 @@ class VectorNavConfig:
 
 
 @dataclass
-class Setting:
-    """One register the driver changed: the user's values and the run's."""
+class RegisterChange:
+    """One register the driver changed: the user's values and the run's (restored on
+    close; not a declared :class:`~gyrolab.instruments.settings.Setting`)."""
 
     register: int
     previous: str
@@ -98,7 +99,7 @@ class Setting:
 class SetupReport:
     """What connect changed (in order) and what close put back."""
 
-    changed: list[Setting] = field(default_factory=list)
+    changed: list[RegisterChange] = field(default_factory=list)
     restored: list[int] = field(default_factory=list)
     restore_failed: list[int] = field(default_factory=list)
 
@@ -204,7 +205,7 @@ class VectorNavStream:
         try:
             for register, values in plan:
                 previous = self.read_register(register)
-                self.setup.changed.append(Setting(register, previous, values))
+                self.setup.changed.append(RegisterChange(register, previous, values))
                 self.write_register(register, values)
         except InstrumentError as e:
             self.restore()

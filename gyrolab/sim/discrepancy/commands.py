@@ -28,7 +28,7 @@ from gyrolab.sim.discrepancy.axes import run_discrepancy_axes
 from gyrolab.sim.discrepancy.data import load_recording_axes
 from gyrolab.sim.discrepancy.report import json_default, render
 from gyrolab.sim.discrepancy.workflow import Result, run_discrepancy
-from gyrolab.sim.model import load_model, nominal_model
+from gyrolab.sim.model import load_sim_model, nominal_model
 
 #: What :func:`discrepancy` reports to its ``on_stage`` as each is done (batch's progress).
 STAGES = ("read", "analyse", "write")
@@ -51,7 +51,7 @@ def discrepancy(
     stage = on_stage or (lambda _name: None)
     inputs = (run, model)
     check_output(out, force, inputs=inputs, kind="dir")
-    sim_model = load_model(model) if model else nominal_model()
+    sim_model = load_sim_model(model) if model else nominal_model()
     from gyrolab.record.reader import select_unit
 
     axes = load_recording_axes(run, unit=select_unit(run, unit))
