@@ -19,7 +19,8 @@ process from its own tree, and says what differs, record by record and key by ke
    file of the model directories (JSON key by key; ``.npz`` array by array);
 4. ``discrepancy CAL`` with each tree: ``discrepancy.json`` key by key.
 
-Wall times (``timing_s``) are left out of the comparison; everything else is compared
+Wall times (``timing_s``, ``timing_breakdown_s``, ``elapsed_s``) and the output marker are left
+out of the comparison; everything else is compared
 exactly. The old tree is a ``git worktree add --detach`` of ``--old`` under ``--work``
 (kept for the next call; ``git worktree remove`` it when done).
 """
@@ -40,7 +41,9 @@ from typing import Any
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-IGNORED_KEYS = {"timing_s"}  # wall times: never equal between two runs
+# wall times: never equal between two runs
+IGNORED_KEYS = {"timing_s", "timing_breakdown_s", "elapsed_s"}
+IGNORED_FILES = {".gyrolab-output"}  # the output marker: the command and when it ran
 
 
 def run(tree: Path, args: list[str], log: Path) -> float:
@@ -150,6 +153,8 @@ def diff_tree(a: Path, b: Path) -> dict[str, list[str]]:
     )
     res: dict[str, list[str]] = {}
     for rel in names:
+        if rel.name in IGNORED_FILES:
+            continue
         pa, pb = a / rel, b / rel
         if not pa.exists() or not pb.exists():
             res[str(rel)] = ["only in " + ("new" if not pa.exists() else "old")]
@@ -170,12 +175,10 @@ def diff_tree(a: Path, b: Path) -> dict[str, list[str]]:
 
 def show(title: str, res: dict[str, list[str]]) -> None:
     same = [k for k, v in res.items() if not v]
-    print(f"{title}: {len(same)} of {len(res)} files identical")
+    print(f"{title}: {len(same)} of {len(res)} files identical ({', '.join(same) or 'none'})")
     for k, v in res.items():
-        for line in v[:40]:
+        for line in v:
             print(f"  {k}: {line}")
-        if len(v) > 40:
-            print(f"  {k}: … {len(v) - 40} more")
 
 
 def main(argv: list[str] | None = None) -> int:
