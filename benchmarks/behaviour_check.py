@@ -181,6 +181,15 @@ def show(title: str, res: dict[str, list[str]]) -> None:
             print(f"  {k}: {line}")
 
 
+def each_tree(trees: dict[str, Path], work: Path, name: str, argv: list[str]) -> None:
+    """``gyrolab ARGV WORK/<tag>/NAME`` with each tree (kept: a later call reuses it)."""
+    for tag, tree in trees.items():
+        out = work / tag / name
+        if not out.exists():
+            s = run(tree, [*argv, str(out)], work / tag / f"{argv[0]}.log")
+            print(f"{argv[0]} ({tag}): {s:.1f} s")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--old", required=True, help="the commit to compare against (e.g. 9edcf5c)")
@@ -246,37 +255,13 @@ def main(argv: list[str] | None = None) -> int:
             )
             print(f"acquire held-out ({a.profile}, new tree): {s:.1f} s")
     if "compensate" not in skip:
-        for tag, tree in trees.items():
-            out = work / tag / "model"
-            if not out.exists():
-                s = run(
-                    tree,
-                    [
-                        "compensate",
-                        str(cal),
-                        "--validate",
-                        str(held),
-                        "--seed",
-                        "1",
-                        "--out",
-                        str(out),
-                    ],
-                    work / tag / "compensate.log",
-                )
-                print(f"compensate ({tag}): {s:.1f} s")
+        argv = ["compensate", str(cal), "--validate", str(held), "--seed", "1", "--out"]
+        each_tree(trees, work, "model", argv)
         show(
             "compensate model directory", diff_tree(work / "old" / "model", work / "new" / "model")
         )
     if "discrepancy" not in skip:
-        for tag, tree in trees.items():
-            out = work / tag / "disc"
-            if not out.exists():
-                s = run(
-                    tree,
-                    ["discrepancy", str(cal), "--out", str(out)],
-                    work / tag / "discrepancy.log",
-                )
-                print(f"discrepancy ({tag}): {s:.1f} s")
+        each_tree(trees, work, "disc", ["discrepancy", str(cal), "--out"])
         res = diff_tree(work / "old" / "disc", work / "new" / "disc")
         show("discrepancy.json", {k: v for k, v in res.items() if k.endswith(".json")})
     return 0
