@@ -9,6 +9,8 @@ process from its own tree, and says what differs, record by record and key by ke
 
     python benchmarks/behaviour_check.py --old 9edcf5c [--new REV] --work /tmp/bc
         [--profile paper] [--cal CAL.mcap] [--held HELD.mcap] [--skip compensate,discrepancy]
+    python benchmarks/validation_suite.py --units 2 --workers 1 --json /tmp/vs.json --out ''
+    python benchmarks/behaviour_check.py --old X --work W --suite-json /tmp/vs.json
 
 1. ``simulate --profile P --seed 1`` with each tree: the two files' bytes, and where they
    differ, which MCAP records differ and in which fields;
@@ -190,9 +192,18 @@ def each_tree(trees: dict[str, Path], work: Path, name: str, argv: list[str]) ->
             print(f"{argv[0]} ({tag}): {s:.1f} s")
 
 
+def diff_suite(new: Path, ref: Path) -> list[str]:
+    """A ``validation_suite.py --units N --json NEW`` run against the committed suite
+    (``REF``, more units): its units (unit ``u`` is drawn from its own seed, so the first
+    N are the same units) and the rotation check, key by key (``meta`` left out)."""
+    a, b = json.loads(ref.read_text()), json.loads(new.read_text())
+    out = diff_json(a["units"][: len(b["units"])], b["units"], "units")
+    return out + diff_json(a["rotation"], b["rotation"], "rotation")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--old", required=True, help="the commit to compare against (e.g. 9edcf5c)")
+    ap.add_argument("--old", help="the commit to compare against (e.g. 9edcf5c)")
     ap.add_argument("--new", default=None, help="the new commit (default: this tree as it is)")
     ap.add_argument(
         "--cal",
@@ -200,11 +211,25 @@ def main(argv: list[str] | None = None) -> int:
         help="the calibration run for compensate/discrepancy "
         "(default: the new tree's simulate output)",
     )
-    ap.add_argument("--work", type=Path, required=True, help="scratch directory")
+    ap.add_argument("--work", type=Path, help="scratch directory")
     ap.add_argument("--profile", default="paper")
     ap.add_argument("--held", type=Path, help="the held-out run (default: acquire one)")
     ap.add_argument("--skip", default="", help="comma list of: compensate, discrepancy")
+    ap.add_argument(
+        "--suite-json",
+        type=Path,
+        help="only compare this validation_suite.py --json output with the committed one",
+    )
     a = ap.parse_args(argv)
+    if a.suite_json is not None:
+        ref = REPO / "benchmarks/results/validation_suite.json"
+        d = diff_suite(a.suite_json, ref)
+        print(f"validation suite: {'identical' if not d else 'DIFFERS'} ({a.suite_json} vs {ref})")
+        for line in d:
+            print(f"  {line}")
+        return 0
+    if a.old is None or a.work is None:
+        ap.error("--old and --work are required (but with --suite-json)")
     work = a.work.resolve()
     work.mkdir(parents=True, exist_ok=True)
     new = REPO if a.new is None else old_tree(a.new, work)
