@@ -77,9 +77,17 @@ class SimSilence:
     GC, an import, a long physics step) is many simulated seconds at 200x, and must not pass
     for a lost instrument."""
 
-    def __init__(self, min_wall_s: float = SIM_COMM_MIN_WALL_S) -> None:
+    def __init__(
+        self, min_wall_s: float = SIM_COMM_MIN_WALL_S, heard: dict[str, float] | None = None
+    ) -> None:
         self.min_wall_s = min_wall_s
-        self._heard: dict[str, float] = {}
+        self._heard: dict[str, float] = {} if heard is None else heard
+
+    def sharing(self, min_wall_s: float) -> SimSilence:
+        """The same rule with another wall floor, on this one's record of when each source
+        was last heard: the watchdog tells only its own policy, so a hold rule that kept a
+        record of its own would never hear anyone and its floor would always be passed."""
+        return SimSilence(min_wall_s, self._heard)
 
     def heard(self, source: str) -> None:
         self._heard[source] = time.monotonic()
@@ -111,7 +119,8 @@ class SimHandle:
     ``addresses``: the address of each role's instrument (``registry`` role names);
     ``clock``/``silence``/``timeout``: the run clock, the watchdog's silence rule and the
     drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict);
-    ``hold_silence``: when a silence holds the run (a suspender), ``SIM_HOLD_MIN_WALL_S``."""
+    ``hold_silence``: when a silence holds the run (a suspender): by default
+    ``SIM_HOLD_MIN_WALL_S`` on the watchdog rule's record (:meth:`SimSilence.sharing`)."""
 
     addresses: dict[str, str]
     clock: SimRunClock
@@ -121,7 +130,11 @@ class SimHandle:
     bench: Any
     stop: Callable[[], None]
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
-    hold_silence: SimSilence = field(default_factory=lambda: SimSilence(SIM_HOLD_MIN_WALL_S))
+    hold_silence: SimSilence | None = None
+
+    def __post_init__(self) -> None:
+        if self.hold_silence is None:
+            self.hold_silence = self.silence.sharing(SIM_HOLD_MIN_WALL_S)
 
     @property
     def provenance(self) -> dict[str, Any]:
