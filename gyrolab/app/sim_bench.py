@@ -35,18 +35,22 @@ SIM_TIMEOUT_FLOOR_S = 0.25
 # Simulated-bench speed while the drivers connect (see start_sim_bench).
 CONNECT_SPEED = 10.0
 
-# Lost communication with a simulated instrument also needs this much wall time of
-# silence (see SimSilence); a real bench runs in real time and needs none.
-SIM_COMM_MIN_WALL_S = 1.0
+# Lost communication with a simulated instrument (and a hold that outlasts its limit) also
+# needs this much wall time of silence (see SimSilence); a real bench runs in real time and
+# needs none. It is longer than the hold's floor below for the reason comm_timeout_s is
+# longer than hold_after_s on a lab bench: a silence is held (the milder answer) before it
+# is given up, and a stalled unit holds the fleet before it is dropped.
+SIM_COMM_MIN_WALL_S = 3.0
 
 # A simulated bench in its own process: how long a unit's ADC waits for its reader to
 # drain the port before frames are lost (wall s; see start_sim_bench).
 SIM_ADC_BACKPRESSURE_S = 1.0
 
 # A hold (a suspender: a stream or the temperature silent) on a simulated bench also needs
-# this much wall time of silence: a process starved of the CPU for a second on a loaded
-# machine must not hold the run as a stalled instrument would (SimSilence).
-SIM_HOLD_MIN_WALL_S = 3.0
+# this much wall time of silence (SimSilence): a hiccup of the run engine's process (a GC,
+# a burst of other work) is hundreds of simulated seconds at 300x and must not hold the
+# run as a stalled instrument would. Shorter than the loss floor above (see there).
+SIM_HOLD_MIN_WALL_S = 1.0
 
 # Timeouts of a free-running simulated bench are scaled as if it ran this much faster
 # than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
