@@ -111,6 +111,7 @@ def units_run(
     cmd = _acquire_cmd(out, profile, speed, seed) + ["--units", str(units)]
     env = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load_before = os.getloadavg()[0]
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
     # The run engine's and the simulated bench's process (its child, when it has one):
@@ -167,6 +168,14 @@ def units_run(
             k: round(v / (run_s / speed), 2) for k, v in per_process.items() if speed
         },
         "cpu_s_per_unit_per_run_hour": round(cpu / len(serials) / (run_s / 3600.0), 2),
+        # the load-independent figure: each process's CPU seconds per unit and simulated hour
+        "cpu_s_per_unit_per_run_hour_per_process": {
+            k: round(v / len(serials) / (run_s / 3600.0), 2) for k, v in per_process.items()
+        },
+        "suspensions": sum(1 for e in shared.events if e["event"] == "suspended"),
+        "faults_logged": sum(1 for m in shared.logs if m.get("kind") == "fault"),
+        "outcome": shared.events[-2]["event"] if len(shared.events) > 1 else "?",
+        "load_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "gaps_total": sum(u["index_gaps"] for u in per_unit),
         "gap_logs": sum(1 for m in shared.logs if m.get("kind") == "gap"),
         "units_dropped": [
