@@ -118,8 +118,16 @@ def units_run(
     # each one's CPU seconds, sampled from /proc until they end (the last sample counts).
     per_process: dict[str, float] = {}
     err: list[str] = []
-    drain = threading.Thread(target=lambda: err.append(proc.stderr.read()), daemon=True)
-    drain.start()
+    at_end: dict[str, float] = {}  # the run engine's CPU when its run ended (before it registers)
+
+    def drain() -> None:
+        for line in proc.stderr:
+            err.append(line)
+            if line.startswith("gyrolab acquire: ") and " recorded in " in line:
+                at_end["run engine"] = _cpu_s(proc.pid) or 0.0
+
+    drainer = threading.Thread(target=drain, daemon=True)
+    drainer.start()
     while proc.poll() is None:
         per_process["run engine"] = _cpu_s(proc.pid) or per_process.get("run engine", 0.0)
         for child in _children(proc.pid):
@@ -127,7 +135,7 @@ def units_run(
                 "simulated bench", 0.0
             )
         time.sleep(0.5)
-    drain.join()
+    drainer.join()
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     stderr = "".join(err)
@@ -172,6 +180,11 @@ def units_run(
         "cpu_s_per_unit_per_run_hour_per_process": {
             k: round(v / len(serials) / (run_s / 3600.0), 2) for k, v in per_process.items()
         },
+        # the run engine's CPU up to the end of its run, and after (the catalogue entry)
+        "run_engine_cpu_s_run_and_after": [
+            round(at_end.get("run engine", 0.0), 1),
+            round(per_process.get("run engine", 0.0) - at_end.get("run engine", 0.0), 1),
+        ],
         "suspensions": sum(1 for e in shared.events if e["event"] == "suspended"),
         "faults_logged": sum(1 for m in shared.logs if m.get("kind") == "fault"),
         "outcome": shared.events[-2]["event"] if len(shared.events) > 1 else "?",
