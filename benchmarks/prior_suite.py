@@ -185,7 +185,8 @@ def stage2(
 ) -> dict[str, Any]:
     """Unit ``u``: quick run with the leave-unit-out prior, alone, and the 13 h model, on
     the held-out runs; the quick run against the other family's prior."""
-    from gyrolab.compensation.prior import fit_map, hysteresis_width, learn_prior
+    from gyrolab.compensation.causal_models import hysteresis_width
+    from gyrolab.compensation.prior import fit_map, learn_prior
 
     t0 = time.perf_counter()
     mine = _entry("13h", next(o["model"] for o in others if o["unit"] == u))
@@ -211,7 +212,7 @@ def stage2(
         "prior_clusters": len(prior.clusters),
         "quick_case_range_c": [float(quick.pt_c.min()), float(quick.pt_c.max())],
         "features": {k: m.params.to_dict() for k, m in models.items()},
-        "hysteresis": {k: hysteresis_width(m.model.to_dict()) for k, m in models.items()},
+        "hysteresis": {k: hysteresis_width(m.model) for k, m in models.items()},
         "runs": {},
     }
     names = list(HELD[family])[:held]

@@ -66,6 +66,26 @@ from gyrolab.compensation.structured import (
 )
 
 
+def hysteresis_width(out_map: Any) -> dict[str, float]:
+    """The up/down hysteresis width of a causal output map (``predict`` on feature rows
+    ``(F, R, S, E)``: a :class:`.structured.StructuredModel` or an MLP): the drift on the
+    heating branch (S = +1) minus the cooling branch (S = −1) at the same die temperature,
+    at rest (R = 0) and warmed up (E = 0), at the low end, middle and high end of the
+    calibrated range of F, °/h (``2 (h + hT v)`` for the structured model), with those
+    temperatures (°C)."""
+    if isinstance(out_map, StructuredModel):
+        lo, hi = float(out_map.lo), float(out_map.hi)
+    else:  # a network: the range of F it was trained on
+        lo, hi = float(out_map.x_min[0]), float(out_map.x_max[0])
+    out: dict[str, float] = {}
+    for where, F in (("low", lo), ("mid", 0.5 * (lo + hi)), ("high", hi)):
+        X = np.array([[F, 0.0, 1.0, 0.0], [F, 0.0, -1.0, 0.0]])
+        up, down = (float(v) for v in out_map.predict(X))
+        out[f"at_{where}_deg_per_h"] = 3600.0 * (up - down)
+        out[f"{where}_c"] = F
+    return out
+
+
 @dataclass
 class CausalState:
     """The feature state, the time of the last reading and the drift held since."""

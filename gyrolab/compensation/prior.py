@@ -69,7 +69,7 @@ from gyrolab.compensation.band import fit_band
 from gyrolab.compensation.baselines import blocked_folds
 from gyrolab.compensation.causal import CV_FOLDS, CV_SEGMENTS
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
-from gyrolab.compensation.causal_models import StructuredCausalModel
+from gyrolab.compensation.causal_models import StructuredCausalModel, hysteresis_width
 from gyrolab.compensation.drift_model import CausalCalibration
 from gyrolab.compensation.structured import StructuredModel, effective_samples
 
@@ -158,17 +158,6 @@ class Basis:
 
     def to_dict(self) -> dict[str, Any]:
         return {"lo": self.lo, "hi": self.hi, "order": self.order}
-
-
-def hysteresis_width(m: dict[str, Any]) -> dict[str, float]:
-    """The up/down hysteresis width of a structured model (its ``to_dict()``): the drift
-    on the heating branch minus the cooling branch at the same die temperature,
-    ``2 (h + hT v)`` (S = ±1), at the low end, middle and high end of its range, °/h."""
-    h, hT = float(m.get("h", 0.0)), float(m.get("hT", 0.0))
-    return {
-        f"at_{w}_deg_per_h": 7200.0 * (h + hT * v)
-        for w, v in (("low", -1.0), ("mid", 0.0), ("high", 1.0))
-    }
 
 
 def phi_of(p: CausalParams) -> np.ndarray:
@@ -515,7 +504,7 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
         "features": params.to_dict(),
         "noise_s2": s2,
         "rms_residual_deg_per_s": float(np.sqrt(np.mean(r * r))),
-        "hysteresis_width": hysteresis_width(b.model(theta).to_dict()),
+        "hysteresis_width": hysteresis_width(b.model(theta)),
     }
     model = StructuredCausalModel(
         family="structured",
@@ -545,7 +534,6 @@ __all__ = [
     "PriorFit",
     "UnitEntry",
     "fit_map",
-    "hysteresis_width",
     "learn_prior",
     "membership",
     "structured_of",
