@@ -460,54 +460,59 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
     measured by the same blocked CV as the selection's."""
     y = np.asarray(cal.rate, dtype=float)
     b = prior.basis
-    p0 = params_of(prior.clusters[0].phi_mean)
-    A0 = b.design(_features(cal, p0))
-    s2_0 = _noise_scale(A0, y, prior.clusters[0], neff)
-    mem = membership(A0, y, s2_0, prior)
-    c = prior.clusters[mem.cluster]
     # φ by the blocked CV of the MAP fit (the selection's folds): what predicts the run's
     # held-out stretches, not what makes θ look typical (choosing φ by the whole J bent a
     # validation unit's lag to 2080 s for a true 1176 s; by the least-squares residual on
     # the fleet's flexible basis, the same)
     folds = blocked_folds(y.size, CV_FOLDS, CV_SEGMENTS)
 
-    def cv_rmse(A: np.ndarray, pred: np.ndarray | None = None) -> float:
+    def cv_rmse(A: np.ndarray, s2: float, c: Cluster, pred: np.ndarray | None = None) -> float:
         sq = 0.0
         for held in folds:
-            th, _ = _map(A[~held], y[~held], s2_0, c)
+            th, _ = _map(A[~held], y[~held], s2, c)
             p = A[held] @ th
             if pred is not None:
                 pred[held] = p
             sq += float(np.sum((p - y[held]) ** 2))
         return math.sqrt(sq / y.size)
 
-    best: tuple[float, np.ndarray] | None = None
-    for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
-        phi_c = c.phi_mean.copy() if best is None else best[1].copy()
-        for step in PHI_STEPS:
-            phi = phi_c.copy()
-            phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
-            e = cv_rmse(b.design(_features(cal, params_of(phi))))
-            if best is None or e < best[0]:
-                best = (e, phi)
-    assert best is not None
-    # that search is local (one component at a time, around the prior mean) and misses a
-    # unit whose lag or warm-up lies elsewhere: the φ the unit's own causal selection
-    # (no prior, OWN_FAMILIES) chooses on the run competes on the same CV (on gyrolab's
-    # validation family it won for 5 of 12 units, their worst held-out ratio 1.71 → 1.17)
-    own_phi = phi_of(fit_causal(cal, families=OWN_FAMILIES).params)
-    e_own = cv_rmse(b.design(_features(cal, params_of(own_phi))))
-    start = "prior"
-    if e_own < best[0]:
-        best, start = (e_own, own_phi), "own"
-    phi, s2 = best[1], s2_0
+    def search(phi0: np.ndarray, grid: bool) -> tuple[float, np.ndarray, float, Cluster]:
+        """From ``phi0``: the noise scale and the cluster there, then (``grid``) φ on the
+        grid around the cluster's mean; the CV RMSE, φ, s², the cluster."""
+        A0 = b.design(_features(cal, params_of(phi0)))
+        s2 = _noise_scale(A0, y, prior.clusters[0], neff)
+        c = prior.clusters[membership(A0, y, s2, prior).cluster]
+        if not grid:
+            return cv_rmse(A0, s2, c), phi0, s2, c
+        best: tuple[float, np.ndarray] | None = None
+        for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
+            phi_c = c.phi_mean.copy() if best is None else best[1].copy()
+            for step in PHI_STEPS:
+                phi = phi_c.copy()
+                phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
+                e = cv_rmse(b.design(_features(cal, params_of(phi))), s2, c)
+                if best is None or e < best[0]:
+                    best = (e, phi)
+        assert best is not None
+        return best[0], best[1], s2, c
+
+    # the grid search is local (one component at a time, around the prior mean) and misses
+    # a unit whose lag or warm-up lies elsewhere: the φ the unit's own causal selection
+    # (no prior, OWN_FAMILIES) chooses on the run competes on the same CV, with the noise
+    # scale and cluster at that φ (a misfit φ inflates s² and hands the fit to the prior)
+    starts = {
+        "prior": search(prior.clusters[0].phi_mean, True),
+        "own": search(phi_of(fit_causal(cal, families=OWN_FAMILIES).params), False),
+    }
+    start = min(starts, key=lambda k: starts[k][0])  # a tie: the prior's
+    _, phi, s2, c = starts[start]
     theta, _ = _map(b.design(_features(cal, params_of(phi))), y, s2, c)
     params = params_of(phi)
     A = b.design(_features(cal, params))
     # the unit's membership at its own φ (the detector's number)
     mem = membership(A, y, _noise_scale(A, y, c, neff), prior)
     pred = np.empty_like(y)
-    cv = cv_rmse(A, pred)
+    cv = cv_rmse(A, s2, c, pred)
     r = y - A @ theta
     log = {
         "method": "MAP towards the fleet prior (gyrolab/compensation/prior.py)",
