@@ -41,6 +41,8 @@ def test_self_heating_grows_with_the_sensors_resistance() -> None:
     assert fres_test_current_a("34970A", 100.0) == pytest.approx(1e-3)
     assert fres_test_current_a("34970A", 1e4) == pytest.approx(1e-4)
     assert fres_test_current_a("Fluke 8846A", 1e3) is None
+    # no cited manual for the 34465A's ohms current: the bench record must state it
+    assert fres_test_current_a("34465A", 1e3) is None
 
 
 def test_spectral_peaks_report_a_real_cycle_and_rarely_noise() -> None:
