@@ -91,6 +91,7 @@ def test_a_short_lag_and_a_rate_term_come_with_the_profile_that_separates_them(
     assert max(sep.values()) < SEPARATION  # not identifiable on this profile
     proposal = amb["proposed_profile"]
     assert min(proposal["expected_separation"].values()) > SEPARATION  # on the new one
+    assert proposal["expected_to_separate"]
     toml = out / proposal["file"]
     assert load_profile(toml).duration_s == pytest.approx(proposal["duration_h"] * 3600.0)
     again = tmp_path / "next.mcap"
