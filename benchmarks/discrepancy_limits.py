@@ -50,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from breakfam.realnoise import real_noise  # noqa: E402
 
 from gyrolab.profiles.profile import BUILTIN, Profile, Step, profile_from_dict  # noqa: E402
+from gyrolab.sim.discrepancy.identify import SEPARATION  # noqa: E402
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output  # noqa: E402
 from gyrolab.sim.discrepancy.synth import simulate_bench  # noqa: E402
 from gyrolab.sim.discrepancy.workflow import run_discrepancy  # noqa: E402
@@ -365,7 +366,20 @@ def tables(rows: list[dict]) -> str:
         for r in la:
             cov = all(s != "missed" for s in r["status"].values())
             sep = r.get("separating_runs") or []
-            prop = ", ".join(f"{s['profile']} ({s['duration_h']:.1f} h)" for s in sep) or "—"
+            props = [a["proposed_profile"] for a in r["ambiguity"] if a.get("proposed_profile")]
+            expect = [
+                ""
+                if min(p["expected_separation"].values()) >= SEPARATION
+                else ", not expected to separate"
+                for p in props
+            ] + [""] * len(sep)
+            prop = (
+                ", ".join(
+                    f"{s['profile']} ({s['duration_h']:.1f} h{e})"
+                    for s, e in zip(sep, expect, strict=False)
+                )
+                or "—"
+            )
             ok = (
                 ", ".join(
                     "yes" if s["separated"] else f"no: {s['effects_found']} {s['ambiguous']}"
