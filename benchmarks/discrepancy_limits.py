@@ -380,17 +380,36 @@ def tables(rows: list[dict]) -> str:
                 )
                 or "—"
             )
+            hid = set(r["effects"])
+
+            def extra(s: dict, hid: set = hid) -> str:
+                """Names in a separating run with no hidden effect in them."""
+                f = [e for e in s["effects_found"] if e not in hid]
+                f += [str(a) for a in s["ambiguous"] if not set(a) & hid]
+                return f" (false: {', '.join(f)})" if f else ""
+
             ok = (
                 ", ".join(
-                    "yes" if s["separated"] else f"no: {s['effects_found']} {s['ambiguous']}"
+                    "yes" + extra(s)
+                    if s["separated"]
+                    else f"no: {s['effects_found']} {s['ambiguous']}"
                     for s in sep
                 )
                 or "—"
             )
             named = ", ".join(r["effects_found"]) or "—"
+            if not cov:  # what the run itself said of what it missed: truth / its limit
+                miss = []
+                for h, st in r["status"].items():
+                    lim = r["detection_limits"].get(h, {})
+                    par = lim.get("parameter")
+                    size = r["effects"][h].get(par) if par else None
+                    if st == "missed" and lim.get("limit") and size is not None:
+                        miss.append(f"{h} at {abs(size) / lim['limit']:.1f}× its limit")
+                cov = "no: " + ", ".join(miss) if miss else "no"
             lines.append(
                 f"| {r['label']} | {r['noise']} | {r['seed']} | {named} "
-                f"| {r['ambiguous'] or '—'} | {'yes' if cov else 'no'} | {prop} | {ok} |"
+                f"| {r['ambiguous'] or '—'} | {'yes' if cov is True else cov} | {prop} | {ok} |"
             )
     return "\n".join(lines)
 
