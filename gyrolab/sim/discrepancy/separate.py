@@ -3,16 +3,17 @@
 
 For an ambiguous pair (:class:`~.identify.LookAlike`), each profile of a small library
 built from the run's own setpoints — the run with a 2 h soak at its end, a heating
-staircase, an up-and-down cycle, a long soak at room temperature, slow ramps, the run
-again — is simulated through the fitted thermal chain (the updated model, deterministic),
-both explanations are evaluated on its bins at their fitted amplitudes and shapes, and the
-expected separation (:func:`~.identify.separation`, both ways, the other's shape at its
-best) is computed with the noise model this run taught. The proposal is the shortest
-profile whose smaller separation reaches :data:`TARGET`, else the one that separates best
-(then flagged: ``expected_to_separate`` is false when even its smaller separation stays
-below the look-alike threshold :data:`~.identify.SEPARATION` — no profile of the library
-tells the two apart at this run's noise, and the report says so rather than promise it);
-it is an ordinary profile (docs/profiles.md) that ``gyrolab simulate --profile`` and
+staircase, an up-and-down cycle, four full-range cycles, a long soak at room temperature,
+slow ramps, the run again — is simulated through the fitted thermal chain (the updated
+model, deterministic), both explanations are evaluated on its bins at their fitted
+amplitudes and shapes, and the expected separation (:func:`~.identify.separation`, both
+ways, the other's shape at its best) is computed with the noise model this run taught.
+The proposal is the shortest profile whose smaller separation reaches :data:`TARGET`,
+else the one that separates best (then flagged: ``expected_to_separate`` is false when
+even its smaller separation stays below the look-alike threshold
+:data:`~.identify.SEPARATION` — no profile of the library tells the two apart at this
+run's noise, and the report says so rather than promise it); it is an ordinary profile
+(docs/profiles.md) that ``gyrolab simulate --profile`` and
 ``gyrolab acquire`` run.
 """
 
@@ -116,6 +117,15 @@ def library(d: BenchData) -> list[Profile]:
                 Step(room, 3600.0, "back"),
             ),
             description="up, down and up again over the whole range",
+        ),
+        Profile(
+            "cycles",
+            tuple(
+                [Step(room, 3600.0, "power-on"), Step(lo, 5400.0, "cold")]
+                + [Step(sp, 5400.0, x) for _ in range(4) for sp, x in ((hi, "hot"), (lo, "cold"))]
+            ),
+            description="four full-range cycles, 1.5 h at each end: every branch change and "
+            "rate four times over",
         ),
         Profile(
             "long-soak",
