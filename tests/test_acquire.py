@@ -297,18 +297,28 @@ def test_over_temperature_watchdog_puts_the_oven_in_the_safe_state(tmp_path: Pat
 
 
 def test_lost_multimeter_ends_the_run_safely(tmp_path: Path) -> None:
+    from gyrolab.app.sim_bench import SIM_COMM_MIN_WALL_S, SIM_HOLD_MIN_WALL_S
     from gyrolab.sim.bench import FaultEvent, FaultPlan
 
     prof = _profile(tmp_path, [(25, 30), (40, 600)])
     faults = FaultPlan(events=[FaultEvent("outage", t_s=40.0, duration_s=10_000.0)])
-    res, rec, bench = _run_in_process(tmp_path, prof, speed=50.0, faults=faults)
+    speed = 50.0
+    res, rec, bench = _run_in_process(tmp_path, prof, speed=speed, faults=faults)
     # the run is held while the multimeter says nothing (a suspender) and ends when that
     # has lasted [suspend] temperature_lost_s (docs/reliability.md, "Suspenders")
     assert res.outcome == "fault" and "temperature lost for" in res.reason
     assert "(> temperature_lost_s 60 s)" in res.reason and "34401A" in res.reason
     assert res.safe_state_ok and bench.physics.setpoint_c == 25.0
     assert rec.events[-1]["event"] == "safe_state"
-    assert 95.0 < rec.events[-2]["t"] < 200.0  # 65 s after the last reading, plus timeouts
+    # When, by the simulated bench's rule: held after hold_after_s (5 s) of silence and
+    # SIM_HOLD_MIN_WALL_S of wall time; ended after temperature_lost_s (60 s) held and
+    # SIM_COMM_MIN_WALL_S of wall time (a starved process slips the clock: never later).
+    # The slack: a reading period and a driver timeout on either side.
+    (held,) = [e["t"] for e in rec.events if e["event"] == "suspended"]
+    ended = rec.events[-2]["t"]
+    last = rec.pt100_t[-1]
+    assert last + 5.0 <= held <= last + max(5.0, SIM_HOLD_MIN_WALL_S * speed) + 10.0
+    assert held + 60.0 <= ended <= held + max(60.0, SIM_COMM_MIN_WALL_S * speed) + 10.0
 
 
 def test_sigint_ends_cleanly_with_the_oven_safe_and_exit_130(tmp_path: Path) -> None:

@@ -308,3 +308,20 @@ def test_sigusr1_pauses_and_sigusr2_resumes_even_before_the_run() -> None:
             os.kill(os.getpid(), signal.SIGUSR1)
     assert got == ["paused by SIGUSR1", "resumed", "paused by SIGUSR1"]
     assert signal.getsignal(signal.SIGUSR1) is signal.SIG_DFL
+
+
+def test_the_simulated_benchs_hold_rule_hears_what_its_watchdog_hears() -> None:
+    """The hold rule's wall floor counts from the last time the watchdog heard a source
+    (one record): a rule of its own, never told, would pass its floor at once and hold the
+    run on every simulated-time silence (a quiet machine's 600x demo held 214 times)."""
+    from gyrolab.app.sim_bench import SIM_HOLD_MIN_WALL_S, SimHandle, SimSilence
+
+    watchdog = SimSilence(1.0)
+    hold = watchdog.sharing(SIM_HOLD_MIN_WALL_S)
+    watchdog.heard("multimeter")
+    assert not hold.lost("multimeter", 100.0, 5.0)  # heard a moment ago: not silent in wall time
+    assert hold.lost("oven", 100.0, 5.0)  # never heard at all
+    handle = SimHandle({}, None, watchdog, float, 300.0, None, lambda: None)  # type: ignore[arg-type]
+    assert handle.hold_silence is not None and not handle.hold_silence.lost(
+        "multimeter", 100.0, 5.0
+    )

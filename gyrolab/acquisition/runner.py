@@ -161,9 +161,10 @@ class Acquisition:
             silence=self.silence,
         )
         self.status.temperature_source = self.temps.plan_source
-        # when a silence is long enough to hold the run, and a hold to outlast its limit
+        # when a silence is long enough to hold the run; a hold outlasts its limit by the
+        # watchdog's rule (a condition that lasts is a loss, as a silent instrument is)
         self.hold_silence: SilencePolicy = hold_silence or self.silence
-        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal, self.hold_silence)
+        self.suspend = Suspenders(suspend or NO_SUSPENDERS, self.journal, self.silence)
         if self.suspend.enabled(TEMPERATURE_LOST) and thermometer is not None:
             self.comm.unjudged.add(thermometer.name)  # lost: the suspender's limit decides
         self._chamber_alarm = ""

@@ -119,11 +119,12 @@ def start_fc_bench(
             for k, serial in enumerate(serials)
         }
     }
+    silence = SimSilence(min_wall_s=FC_COMM_MIN_WALL_S)
     return SimHandle(
         addresses={"chamber": bench.oven_port, **{f"unit/{s}": fc_port for s in serials}},
         clock=SimRunClock(bench.clock),
-        silence=SimSilence(min_wall_s=FC_COMM_MIN_WALL_S),
-        hold_silence=SimSilence(min_wall_s=FC_COMM_MIN_WALL_S),  # the same floor, for holds
+        silence=silence,
+        hold_silence=silence.sharing(FC_COMM_MIN_WALL_S),  # the same floor, for holds
         timeout=scaled_timeouts(speed),
         speed=speed,
         bench=bench,

@@ -35,18 +35,22 @@ SIM_TIMEOUT_FLOOR_S = 0.25
 # Simulated-bench speed while the drivers connect (see start_sim_bench).
 CONNECT_SPEED = 10.0
 
-# Lost communication with a simulated instrument also needs this much wall time of
-# silence (see SimSilence); a real bench runs in real time and needs none.
-SIM_COMM_MIN_WALL_S = 1.0
+# Lost communication with a simulated instrument (and a hold that outlasts its limit) also
+# needs this much wall time of silence (see SimSilence); a real bench runs in real time and
+# needs none. It is longer than the hold's floor below for the reason comm_timeout_s is
+# longer than hold_after_s on a lab bench: a silence is held (the milder answer) before it
+# is given up, and a stalled unit holds the fleet before it is dropped.
+SIM_COMM_MIN_WALL_S = 3.0
 
 # A simulated bench in its own process: how long a unit's ADC waits for its reader to
 # drain the port before frames are lost (wall s; see start_sim_bench).
 SIM_ADC_BACKPRESSURE_S = 1.0
 
 # A hold (a suspender: a stream or the temperature silent) on a simulated bench also needs
-# this much wall time of silence: a process starved of the CPU for a second on a loaded
-# machine must not hold the run as a stalled instrument would (SimSilence).
-SIM_HOLD_MIN_WALL_S = 3.0
+# this much wall time of silence (SimSilence): a hiccup of the run engine's process (a GC,
+# a burst of other work) is hundreds of simulated seconds at 300x and must not hold the
+# run as a stalled instrument would. Shorter than the loss floor above (see there).
+SIM_HOLD_MIN_WALL_S = 1.0
 
 # Timeouts of a free-running simulated bench are scaled as if it ran this much faster
 # than real time (it is throttled by the ADC reader, ~ a few hundred times real time).
@@ -77,9 +81,17 @@ class SimSilence:
     GC, an import, a long physics step) is many simulated seconds at 200x, and must not pass
     for a lost instrument."""
 
-    def __init__(self, min_wall_s: float = SIM_COMM_MIN_WALL_S) -> None:
+    def __init__(
+        self, min_wall_s: float = SIM_COMM_MIN_WALL_S, heard: dict[str, float] | None = None
+    ) -> None:
         self.min_wall_s = min_wall_s
-        self._heard: dict[str, float] = {}
+        self._heard: dict[str, float] = {} if heard is None else heard
+
+    def sharing(self, min_wall_s: float) -> SimSilence:
+        """The same rule with another wall floor, on this one's record of when each source
+        was last heard: the watchdog tells only its own policy, so a hold rule that kept a
+        record of its own would never hear anyone and its floor would always be passed."""
+        return SimSilence(min_wall_s, self._heard)
 
     def heard(self, source: str) -> None:
         self._heard[source] = time.monotonic()
@@ -111,7 +123,8 @@ class SimHandle:
     ``addresses``: the address of each role's instrument (``registry`` role names);
     ``clock``/``silence``/``timeout``: the run clock, the watchdog's silence rule and the
     drivers' timeout rule; ``metadata``: recording metadata records to add (name → dict);
-    ``hold_silence``: when a silence holds the run (a suspender), ``SIM_HOLD_MIN_WALL_S``."""
+    ``hold_silence``: when a silence holds the run (a suspender): by default
+    ``SIM_HOLD_MIN_WALL_S`` on the watchdog rule's record (:meth:`SimSilence.sharing`)."""
 
     addresses: dict[str, str]
     clock: SimRunClock
@@ -121,7 +134,11 @@ class SimHandle:
     bench: Any
     stop: Callable[[], None]
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
-    hold_silence: SimSilence = field(default_factory=lambda: SimSilence(SIM_HOLD_MIN_WALL_S))
+    hold_silence: SimSilence | None = None
+
+    def __post_init__(self) -> None:
+        if self.hold_silence is None:
+            self.hold_silence = self.silence.sharing(SIM_HOLD_MIN_WALL_S)
 
     @property
     def provenance(self) -> dict[str, Any]:
