@@ -111,14 +111,23 @@ def units_run(
     cmd = _acquire_cmd(out, profile, speed, seed) + ["--units", str(units)]
     env = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load_before = os.getloadavg()[0]
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
     # The run engine's and the simulated bench's process (its child, when it has one):
     # each one's CPU seconds, sampled from /proc until they end (the last sample counts).
     per_process: dict[str, float] = {}
     err: list[str] = []
-    drain = threading.Thread(target=lambda: err.append(proc.stderr.read()), daemon=True)
-    drain.start()
+    at_end: dict[str, float] = {}  # the run engine's CPU when its run ended (before it registers)
+
+    def drain() -> None:
+        for line in proc.stderr:
+            err.append(line)
+            if line.startswith("gyrolab acquire: ") and " recorded in " in line:
+                at_end["run engine"] = _cpu_s(proc.pid) or 0.0
+
+    drainer = threading.Thread(target=drain, daemon=True)
+    drainer.start()
     while proc.poll() is None:
         per_process["run engine"] = _cpu_s(proc.pid) or per_process.get("run engine", 0.0)
         for child in _children(proc.pid):
@@ -126,7 +135,7 @@ def units_run(
                 "simulated bench", 0.0
             )
         time.sleep(0.5)
-    drain.join()
+    drainer.join()
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     stderr = "".join(err)
@@ -167,6 +176,19 @@ def units_run(
             k: round(v / (run_s / speed), 2) for k, v in per_process.items() if speed
         },
         "cpu_s_per_unit_per_run_hour": round(cpu / len(serials) / (run_s / 3600.0), 2),
+        # the load-independent figure: each process's CPU seconds per unit and simulated hour
+        "cpu_s_per_unit_per_run_hour_per_process": {
+            k: round(v / len(serials) / (run_s / 3600.0), 2) for k, v in per_process.items()
+        },
+        # the run engine's CPU up to the end of its run, and after (the catalogue entry)
+        "run_engine_cpu_s_run_and_after": [
+            round(at_end.get("run engine", 0.0), 1),
+            round(per_process.get("run engine", 0.0) - at_end.get("run engine", 0.0), 1),
+        ],
+        "suspensions": sum(1 for e in shared.events if e["event"] == "suspended"),
+        "faults_logged": sum(1 for m in shared.logs if m.get("kind") == "fault"),
+        "outcome": shared.events[-2]["event"] if len(shared.events) > 1 else "?",
+        "load_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "gaps_total": sum(u["index_gaps"] for u in per_unit),
         "gap_logs": sum(1 for m in shared.logs if m.get("kind") == "gap"),
         "units_dropped": [

@@ -185,7 +185,8 @@ def stage2(
 ) -> dict[str, Any]:
     """Unit ``u``: quick run with the leave-unit-out prior, alone, and the 13 h model, on
     the held-out runs; the quick run against the other family's prior."""
-    from gyrolab.compensation.prior import fit_map, hysteresis_width, learn_prior
+    from gyrolab.compensation.causal_models import hysteresis_width
+    from gyrolab.compensation.prior import fit_map, learn_prior
 
     t0 = time.perf_counter()
     mine = _entry("13h", next(o["model"] for o in others if o["unit"] == u))
@@ -211,7 +212,7 @@ def stage2(
         "prior_clusters": len(prior.clusters),
         "quick_case_range_c": [float(quick.pt_c.min()), float(quick.pt_c.max())],
         "features": {k: m.params.to_dict() for k, m in models.items()},
-        "hysteresis": {k: hysteresis_width(m.model.to_dict()) for k, m in models.items()},
+        "hysteresis": {k: hysteresis_width(m.model) for k, m in models.items()},
         "runs": {},
     }
     names = list(HELD[family])[:held]
@@ -311,6 +312,39 @@ def unit_rows(family: str, results: list[dict[str, Any]], stats: dict) -> list[s
     return L
 
 
+#: thresholds of the detector's p-value the rates are measured at
+P_LEVELS = (1e-2, 1e-3, 1e-4)
+
+
+def detector_rows(data: dict[str, list[dict[str, Any]]]) -> list[str]:
+    """The out-of-prior detector's measured rates at each threshold in :data:`P_LEVELS`:
+    false alarms (a unit of the family, against its leave-unit-out prior) and detections
+    (the unit with its slope and curvature reversed; the unit against the other family's
+    prior), per family and pooled."""
+    from gyrolab.compensation.prior import P_OUT
+
+    fams = list(data)
+    kinds = (
+        ("membership", "false alarms: own-family units refused"),
+        ("other_part_membership", "another part number (slope, curvature reversed) refused"),
+        ("foreign_membership", "units against the other family's prior refused"),
+    )
+    head = "| p threshold | " + " | ".join(f"{lab} ({', '.join(fams)}; all)" for _, lab in kinds)
+    L = [head + " |", "| ---: |" + " ---: |" * len(kinds)]
+    for lvl in sorted({*P_LEVELS, P_OUT}, reverse=True):
+        cells = []
+        for key, _ in kinds:
+            per = [sum(r[key]["p_value"] < lvl for r in data[f]) for f in fams]
+            n = [len(data[f]) for f in fams]
+            cells.append(
+                " / ".join(f"{a}/{b}" for a, b in zip(per, n, strict=True))
+                + f"; {100.0 * sum(per) / sum(n):.0f} %"
+            )
+        mark = " (gyrolab's)" if lvl == P_OUT else ""
+        L.append(f"| {lvl:g}{mark} | " + " | ".join(cells) + " |")
+    return L
+
+
 def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
     fams = list(data)
     n = {f: len(data[f]) for f in fams}
@@ -370,6 +404,13 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
         L.append(
             f"| {f}: own-family units refused (false alarms, leave-unit-out) | {fa} of {n[f]} | — |"
         )
+    L += [
+        "",
+        "The out-of-prior detector measured (the unit's quick run, its distance d² from the "
+        "prior against χ² — each count is of units whose p-value is below the threshold):",
+        "",
+        *detector_rows(data),
+    ]
     L += [
         "",
         "Per unit (quick + prior against the unit's own 13 h fit; the detector's distance "

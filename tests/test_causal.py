@@ -15,20 +15,21 @@ from gyrolab.compensation.causal_features import (
 )
 
 
-@pytest.mark.parametrize("tau", [0.0, 12.0, 600.0])
-def test_step_equals_vectorised_features_bit_for_bit(tau: float) -> None:
+@pytest.mark.parametrize("tau,s0", [(0.0, 0.0), (12.0, 1.0), (600.0, -0.5)])
+def test_step_equals_vectorised_features_bit_for_bit(tau: float, s0: float) -> None:
     rng = np.random.default_rng(3)
     n = 3000
     T = 25.0 + np.cumsum(rng.normal(0.0, 0.05, n))
     dt = rng.uniform(0.5, 1.5, n)
     dt[0] = 0.0
-    p = CausalParams(tau_s=tau, width_c=0.7, warmup_tau_s=500.0)
+    p = CausalParams(tau_s=tau, width_c=0.7, warmup_tau_s=500.0, start_branch=s0)
     X = features(T, dt, p)
-    s = initial_state(T[0])
+    assert X[0, 2] == pytest.approx(s0)  # the play starts on its power-on branch
+    s = initial_state(T[0], 0.0, p)
     Y = np.array([step(s, float(T[i]), float(dt[i]), p) for i in range(n)])
     assert np.array_equal(X, Y)
     # the state carried across two calls equals one call over the whole run
-    s2 = initial_state(T[0])
+    s2 = initial_state(T[0], 0.0, p)
     Z = np.vstack([features(T[:1234], dt[:1234], p, s2), features(T[1234:], dt[1234:], p, s2)])
     assert np.array_equal(X, Z)
 

@@ -299,3 +299,39 @@ def test_a_damaged_simulation_record_in_an_older_file_is_one_line(tmp_path: Path
     with pytest.raises(InputError, match="sim_provenance model does not decode") as e:
         oracle_rate(read_recording(old))
     assert e.value.path == str(old)
+
+
+def test_a_summary_is_parsed_once_and_reused_only_for_the_same_bytes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Opening a recording again reuses its parsed summary (registration opens a fresh
+    recording five times), but only while the summary's bytes are the ones parsed: a file
+    written anew at the same path, at once, is parsed again and read as it now is."""
+    from mcap.reader import SeekingReader
+
+    from gyrolab.record.source import opened
+
+    parses: list[int] = []
+    real = SeekingReader.get_summary
+
+    def counting(self: Any) -> Any:
+        parses.append(1)
+        return real(self)
+
+    monkeypatch.setattr(SeekingReader, "get_summary", counting)
+
+    def write(path: Path, n: int) -> None:
+        with RecordingWriter(path, start_time_ns=0, run={}, bench={}) as w:
+            for k in range(n):
+                w.write_pt100(float(k), 109.7, 25.0)
+
+    f = tmp_path / "r.mcap"
+    write(f, 3)
+    for _ in range(3):
+        with opened(f) as src:
+            assert src.summary.statistics.message_count == 3
+    assert len(parses) == 1
+    write(f, 5)  # the same path, written again within the same second
+    with opened(f) as src:
+        assert src.summary.statistics.message_count == 5
+    assert len(parses) == 2

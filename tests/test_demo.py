@@ -112,6 +112,8 @@ def test_model_report_contract(demo_run: Path) -> None:
     assert set(m["causal"]) >= METRIC_KEYS and m["headline"]["output"] == "causal"
     assert 'id="tab-causal-headline"' in html and 'id="fig-causal-headline"' in html
     assert html.index('id="tab-causal-headline"') < html.index('id="tab-baselines"')
+    # the causal model's up/down hysteresis width (issue 30)
+    assert 'id="tab-causal-hysteresis"' in html and "causal_hysteresis_width" in m
     assert "oracle" not in m  # an acquired run: its true drift is not known
 
 

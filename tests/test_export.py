@@ -181,6 +181,25 @@ def test_three_axis_report_shows_every_axis(unit: dict[str, Path]) -> None:
         assert any(t.startswith(f"Axis {a} — ") for t in titles)
         assert "firmware_poly3" in metrics["axes"][a]
     assert len({s.key for s in doc.sections}) == len(doc.sections)
+    # the up/down hysteresis width of every axis's causal model (issue 30): its own table
+    # in the axis's headline, and one overview row per axis after the run section
+    with_causal = [a for a in "xyz" if "causal" in metrics["axes"][a]]
+    assert with_causal
+    assert doc.sections[1].key == "hysteresis-axes"
+    overview = doc.sections[1].blocks[0]
+    assert [r[0] for r in overview.rows] == with_causal
+    keys = {t.key for t in doc.tables()}
+    for a, row in zip(with_causal, overview.rows, strict=True):
+        am = metrics["axes"][a]
+        w = am["causal_hysteresis_width"]
+        assert f"{a}-causal-hysteresis" in keys
+        assert row[3] == f"{w['at_mid_deg_per_h']:+.3g}"
+        st = am["causal_model"].get("structured")
+        if st is not None:  # heating - cooling = 2 h (+ 2 hT v) on the structured model
+            assert w["at_mid_deg_per_h"] == pytest.approx(7200.0 * st["h"], abs=1e-9)
+            assert w["at_high_deg_per_h"] == pytest.approx(
+                7200.0 * (st["h"] + st.get("hT", 0.0)), abs=1e-9
+            )
 
 
 # ------------------------------------------------------------------------ PX4

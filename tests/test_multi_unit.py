@@ -146,6 +146,25 @@ def test_compensate_fits_every_unit(fleet_models: Path, runs: dict[str, Path]) -
     ).read_bytes()
 
 
+def test_prior_fits_one_named_unit_of_a_multi_unit_run(
+    runs: dict[str, Path], fleet_models: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--prior`` tests each unit against the prior on its own: a multi-unit run without
+    ``--unit`` is one line asking for it, nothing written; with it, that unit is fitted."""
+    d = runs["dir"]
+    out = d / "prior-all"
+    argv = ["compensate", str(runs["multi"]), "--prior", str(fleet_models)]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "name it with --unit" in err[0] and str(runs["multi"]) in err[0]
+    assert not out.exists()
+    one = d / "prior-one"
+    assert main([*argv, "--unit", "SIM3-03", "--out", str(one)]) == 0
+    m = json.loads((one / "metrics.json").read_text())
+    assert m["unit"] == "SIM3-03"
+    assert m["causal_model"]["selection"]["prior"]["prior_units"] == len(SERIALS)
+
+
 def test_compensate_without_unit_and_report_with_unit(
     runs: dict[str, Path], fleet_models: Path
 ) -> None:

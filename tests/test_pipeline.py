@@ -73,16 +73,21 @@ def write_run(
     heating: bool = False,
     arw_deg_rt_h: float = 0.05,
     serial: str = "",
+    part_number: str = "",
 ) -> Path:
-    """A synthetic recording: bias(T) + white noise at ``fs``, PT100 at 1 Hz; ``serial``:
-    the unit's serial in the run record (none when empty)."""
+    """A synthetic recording: bias(T) + white noise at ``fs``, PT100 at 1 Hz; ``serial``,
+    ``part_number``: the unit's serial and model in the run record (none when empty)."""
     rng = np.random.default_rng(seed)
     n = int(hours * 3600 * fs)
     t = np.arange(n) / fs
     temp = case_temperature(t, heating)
     sigma = arw_deg_rt_h / 60.0 * np.sqrt(fs)  # °/s per sample from N (°/√h)
     rate = true_bias(temp) + rng.normal(0.0, sigma, n)
-    run = {"op": "t", **({"unit_serial": serial} if serial else {})}
+    run = {
+        "op": "t",
+        **({"unit_serial": serial} if serial else {}),
+        **({"unit_model": part_number} if part_number else {}),
+    }
     with RecordingWriter(path, start_time_ns=1_700_000_000 * 10**9, run=run) as w:
         blk = int(fs)
         for s in range(0, n, blk):

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.causal_models import hysteresis_width
 from gyrolab.compensation.drift_model import CausalCalibration
 from gyrolab.compensation.prior import (
     FleetPrior,
     UnitEntry,
     fit_map,
-    hysteresis_width,
     learn_prior,
     unit_vector,
 )
@@ -120,7 +120,7 @@ def test_prior_one_cluster_and_in_prior_unit_borrows_strength(fleet: FleetPrior)
     e_own = _err(_own_fit(cal, p), p, "paper", p, c)
     assert e_map < 0.5 * e_own, (e_map, e_own)
     assert e_map < 1e-4  # a fifth of the white noise of one 3.6 s block
-    w = hysteresis_width(got.model.model.to_dict())
+    w = hysteresis_width(got.model.model)
     assert w["at_mid_deg_per_h"] == pytest.approx(7200 * c[4], rel=0.5)
 
 

@@ -422,8 +422,9 @@ def acquire(opts: AcquireOptions) -> RunResult:
     ended (``RunResult.exit_code``). Bad input raises GyrolabError before anything starts.
     ``opts.resume``: continue that interrupted run instead (:func:`_resumed`)."""
     resume: ResumePoint | None = None
+    resumed_axes: tuple[str, ...] = ()  # a resumed multi-axis run's other axes' models
     if opts.resume is not None:
-        opts, resume = _resumed(opts)
+        opts, resume, resumed_axes = _resumed(opts)
     if opts.out is None:
         raise GyrolabError("--out RUN.mcap is required")
     out = Path(opts.out)
@@ -438,6 +439,11 @@ def acquire(opts: AcquireOptions) -> RunResult:
         from gyrolab.sim.model import load_model
 
         axis_models = [load_model(m) for m in opts.axis_models]
+    elif resumed_axes:
+        from gyrolab.sim.model import SimModel
+        from gyrolab.tomlfile import tomllib
+
+        axis_models = [SimModel.from_dict(tomllib.loads(t)) for t in resumed_axes]
     faults = None
     if opts.faults is not None:
         from gyrolab.sim.bench.fault_file import check_plan_for_bench, load_faults
@@ -545,9 +551,10 @@ def acquire(opts: AcquireOptions) -> RunResult:
     return result
 
 
-def _resumed(opts: AcquireOptions) -> tuple[AcquireOptions, ResumePoint]:
-    """``--resume``: the options of the continuation, from the run (gyrolab/app/resume.py).
-    What the run fixed — its profile, and on the simulated bench its seed, units and
+def _resumed(opts: AcquireOptions) -> tuple[AcquireOptions, ResumePoint, tuple[str, ...]]:
+    """``--resume``: the options of the continuation, from the run (gyrolab/app/resume.py),
+    where it starts, and a simulated multi-axis run's other axes' models (TOML texts).
+    What the run fixed — its profile, and on the simulated bench its seed, units, axes and
     drivers — cannot be given again; a lab bench needs its BENCH.toml."""
     from gyrolab.app.resume import continuation_path, resume_settings
 
@@ -579,7 +586,8 @@ def _resumed(opts: AcquireOptions) -> tuple[AcquireOptions, ResumePoint]:
             drivers=rs.drivers,
             speed=speed,
         )
-    return replace(opts, bench=bench, out=Path(out), resume=None, **sim_kw), rs.point
+    axes = rs.axis_models if bench == "sim" else ()
+    return replace(opts, bench=bench, out=Path(out), resume=None, **sim_kw), rs.point, axes
 
 
 # --------------------------------------------------------------------------- recover

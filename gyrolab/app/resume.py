@@ -30,7 +30,9 @@ _ROLES += (("scanner", "multi_thermometer"),)
 class ResumeSettings:
     """What the continuation runs: ``point`` (where), ``profile`` (the run's, as a
     table), and for a simulated bench its ``seed``, ``units``, ``internal`` (1-based units
-    on their internal sensor), ``drivers`` (those not the default) and ``speed``."""
+    on their internal sensor), ``drivers`` (those not the default), ``speed`` and
+    ``axis_models`` (a 2- or 3-axis unit: its other axes' SIM_MODEL.toml texts, as
+    ``--axis-model`` gave them)."""
 
     point: ResumePoint
     profile: dict[str, Any]
@@ -40,6 +42,7 @@ class ResumeSettings:
     internal: tuple[int, ...] = ()
     drivers: tuple[str, ...] = ()
     speed: float | None = None
+    axis_models: tuple[str, ...] = ()
 
 
 def resume_settings(path: str | Path, force: bool = False) -> ResumeSettings:
@@ -52,10 +55,9 @@ def resume_settings(path: str | Path, force: bool = False) -> ResumeSettings:
             raise
         point = resume_point(_recovered(src, force))
     run, bench = point.run, point.bench
-    if int(run.get("axes", 1) or 1) > 1:
-        raise InputError(src, "resuming a multi-axis run is not supported yet")
     settings: dict[str, Any] = {"point": point, "profile": run["profile"]}
     if not (bench.get("simulated") and bench.get("name") == "sim"):
+        # a lab bench's axes are its BENCH.toml's ([adc] axes), checked once connected
         return ResumeSettings(simulated=False, **settings)
     units = list(run.get("units") or [])
     per_unit = bench.get("units") or {}
@@ -78,8 +80,28 @@ def resume_settings(path: str | Path, force: bool = False) -> ResumeSettings:
         internal=internal,
         drivers=drivers,
         speed=float(speed) if isinstance(speed, (int, float)) else None,
+        axis_models=_axis_models(point),
         **settings,
     )
+
+
+def _axis_models(point: ResumePoint) -> tuple[str, ...]:
+    """The other axes' models of a simulated multi-axis run, from its first segment's
+    ``sim_provenance_axes`` record (what ``--axis-model`` gave; docs/recording-format.md);
+    () for a single-axis run."""
+    from gyrolab.record.reader import read_metadata
+
+    axes = int(point.run.get("axes", 1) or 1)
+    if axes <= 1:
+        return ()
+    texts = (read_metadata(point.previous).get("sim_provenance_axes") or {}).get("models_toml")
+    if not (isinstance(texts, list) and len(texts) == axes - 1):
+        raise InputError(
+            point.previous,
+            f"a {axes}-axis simulated run without its axes' models (sim_provenance_axes): "
+            "cannot be resumed",
+        )
+    return tuple(str(t) for t in texts)
 
 
 def _recovered(src: Path, force: bool) -> Path:

@@ -11,11 +11,17 @@ a live stream, offline over a whole run, or in float32 C on the device.
 Inputs per PT100 reading ``n``: the measured case temperature ``T_n`` (°C) and the time
 since the previous reading ``Δt_n`` (s; ``Δt_0 = 0``). Parameters (:class:`CausalParams`):
 ``tau_s`` = τ ≥ 0 (die lag), ``rate_tau_min_s`` = τ_min > 0 (smoothing floor of the rate),
-``width_c`` = w > 0 (hysteresis play width), ``warmup_tau_s`` = τ_w > 0.
+``width_c`` = w > 0 (hysteresis play width), ``warmup_tau_s`` = τ_w > 0,
+``start_branch`` = s₀ ∈ [−1, 1] (hysteresis branch at power-on, default 0).
 
 State (:class:`State`): ``F`` die-temperature estimate (°C), ``G`` rate filter (°C),
 ``p`` play-operator position (°C), ``t`` time since power-on (s). :func:`initial_state`
-starts at rest: ``F = G = p = T_0``, ``t = t_0``.
+starts at rest: ``F = G = T_0``, ``p = T_0 − s₀ w/2``, ``t = t_0``. ``s₀ = +1`` starts the
+play on its heating branch: at power-on the die warms above the case by its own
+self-heating before the chamber moves, so its hysteresis is on the heating branch while
+the PT100 — and with ``s₀ = 0`` the play — has not moved (issue 23, the break family:
+without it the lag absorbed that first heating, fitted τ 963/824/635 s against the true
+782/525/570 s on units 7, 8, 10).
 
 Equations, evaluated in this order at every reading (τ_r = max(τ, τ_min))::
 
@@ -70,6 +76,7 @@ class CausalParams:
     rate_tau_min_s: float = 30.0  # smoothing floor τ_min of the rate feature
     width_c: float = 1.0  # hysteresis play width w
     warmup_tau_s: float = 600.0  # warm-up time constant τ_w
+    start_branch: float = 0.0  # hysteresis branch s₀ at power-on (−1 cooling … +1 heating)
 
     def __post_init__(self) -> None:
         ok = (
@@ -78,6 +85,7 @@ class CausalParams:
             and self.rate_tau_min_s > 0
             and self.width_c > 0
             and self.warmup_tau_s > 0
+            and -1.0 <= self.start_branch <= 1.0
             and all(
                 math.isfinite(v) for v in (self.rate_tau_min_s, self.width_c, self.warmup_tau_s)
             )
@@ -91,7 +99,12 @@ class CausalParams:
         return max(self.tau_s, self.rate_tau_min_s)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The parameters; ``start_branch`` only when not 0 (model.json and exports of
+        models without it stay as they were)."""
+        d = asdict(self)
+        if not self.start_branch:
+            del d["start_branch"]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> CausalParams:
@@ -108,9 +121,13 @@ class State:
     t: float  # time since power-on, s
 
 
-def initial_state(T0: float, t0: float = 0.0) -> State:
-    """At rest at the first reading ``T0`` (°C), ``t0`` s after power-on."""
-    return State(F=float(T0), G=float(T0), p=float(T0), t=float(t0))
+def initial_state(T0: float, t0: float = 0.0, params: CausalParams | None = None) -> State:
+    """At rest at the first reading ``T0`` (°C), ``t0`` s after power-on; the play at
+    ``T0 − s₀ w/2`` (``params``' start branch; at ``T0`` without ``params``)."""
+    p = float(T0)
+    if params is not None and params.start_branch:
+        p = p - params.start_branch * (0.5 * params.width_c)
+    return State(F=float(T0), G=float(T0), p=p, t=float(t0))
 
 
 def step(state: State, T: float, dt: float, params: CausalParams) -> tuple[float, ...]:
@@ -184,7 +201,7 @@ def features(
     if T.shape != dt.shape or T.ndim != 1:
         raise ValueError("T and dt must be 1-D arrays of the same length")
     if state is None:
-        state = initial_state(float(T[0]) if T.size else 0.0)
+        state = initial_state(float(T[0]) if T.size else 0.0, 0.0, params)
     st = np.array([state.F, state.G, state.p, state.t], dtype=np.float64)
     out = np.empty((T.size, 4))
     _features_kernel(
@@ -209,7 +226,7 @@ def reading_features(
     and gyrolab-acquired runs)."""
     pt_t = np.asarray(pt_t, dtype=float)
     dt = np.diff(pt_t, prepend=pt_t[0]) if pt_t.size else pt_t
-    st = initial_state(float(pt_c[0]), float(pt_t[0] - t_power_on)) if pt_t.size else None
+    st = initial_state(float(pt_c[0]), float(pt_t[0] - t_power_on), params) if pt_t.size else None
     return features(pt_c, dt, params, st)
 
 

@@ -22,7 +22,8 @@ Outside the calibration range of F the polynomial continues linearly from its ed
 the networks do the same (:class:`~gyrolab.compensation.gabp.MLPDriftModel`).
 
 Exported as ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s",
-"width_c", "warmup_tau_s"}, "model": INNER}`` with ``INNER`` a ``structured`` or ``mlp``
+"width_c", "warmup_tau_s"[, "start_branch"]}, "model": INNER}`` (``start_branch`` only
+when not 0) with ``INNER`` a ``structured`` or ``mlp``
 form of :mod:`gyrolab.compensation.regressors` (inputs ``["F", "R", "S", "E"]``);
 :func:`causal_readings` states the state machine's equations as the JSON's reference.
 """
@@ -66,6 +67,26 @@ from gyrolab.compensation.structured import (
 )
 
 
+def hysteresis_width(out_map: Any) -> dict[str, float]:
+    """The up/down hysteresis width of a causal output map (``predict`` on feature rows
+    ``(F, R, S, E)``: a :class:`.structured.StructuredModel` or an MLP): the drift on the
+    heating branch (S = +1) minus the cooling branch (S = −1) at the same die temperature,
+    at rest (R = 0) and warmed up (E = 0), at the low end, middle and high end of the
+    calibrated range of F, °/h (``2 (h + hT v)`` for the structured model), with those
+    temperatures (°C)."""
+    if isinstance(out_map, StructuredModel):
+        lo, hi = float(out_map.lo), float(out_map.hi)
+    else:  # a network: the range of F it was trained on
+        lo, hi = float(out_map.x_min[0]), float(out_map.x_max[0])
+    out: dict[str, float] = {}
+    for where, F in (("low", lo), ("mid", 0.5 * (lo + hi)), ("high", hi)):
+        X = np.array([[F, 0.0, 1.0, 0.0], [F, 0.0, -1.0, 0.0]])
+        up, down = (float(v) for v in out_map.predict(X))
+        out[f"at_{where}_deg_per_h"] = 3600.0 * (up - down)
+        out[f"{where}_c"] = F
+    return out
+
+
 @dataclass
 class CausalState:
     """The feature state, the time of the last reading and the drift held since."""
@@ -90,7 +111,7 @@ class CausalDriftModel(DriftModel):
 
     def reading(self, state: CausalState, t_s: float, temp_c: float) -> None:
         if state.features is None:  # at rest at the first reading, t_s after power-on
-            state.features, dt = initial_state(temp_c, t_s), 0.0
+            state.features, dt = initial_state(temp_c, t_s, self.params), 0.0
         else:
             dt = t_s - state.t_last
         x = step(state.features, temp_c, dt, self.params)
@@ -128,6 +149,8 @@ class CausalDriftModel(DriftModel):
                 "rate_tau_min_s": float(p.rate_tau_min_s),
                 "width_c": float(p.width_c),
                 "warmup_tau_s": float(p.warmup_tau_s),
+                # only when not 0: exports of models without it stay as they were
+                **({"start_branch": float(p.start_branch)} if p.start_branch else {}),
             },
             "model": inner,
         }
@@ -290,7 +313,8 @@ def causal_readings(
 ) -> np.ndarray:
     """The causal features ``(F, R, S, E)`` at every reading (float64, one reading at a
     time as firmware runs it), from the JSON's ``features`` alone. At rest at the first
-    reading (``F = G = p = T_0``, ``t = t_0 − t_power_on``); then, with ``Δt`` the time
+    reading (``F = G = T_0``, ``p = T_0 − s₀ w/2`` with ``s₀`` the ``start_branch``, 0
+    when absent; ``t = t_0 − t_power_on``); then, with ``Δt`` the time
     since the previous reading, ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width::
 
         F += a (T − F),  a = −expm1(−Δt/τ)  (1 when τ = 0)      die temperature
@@ -301,7 +325,8 @@ def causal_readings(
     tau, tmin = features["tau_s"], features["rate_tau_min_s"]
     tau_r, half, tau_w = max(tau, tmin), 0.5 * features["width_c"], features["warmup_tau_s"]
     out = np.empty((len(pt_c), 4))
-    F = G = p = float(pt_c[0])
+    F = G = float(pt_c[0])
+    p = F - features.get("start_branch", 0.0) * half
     t = float(pt_t[0]) - t_power_on
     prev = float(pt_t[0])
     for n, (tn, T) in enumerate(zip(pt_t, pt_c, strict=True)):
@@ -331,10 +356,16 @@ def _c_model(m: dict[str, Any], prefix: str) -> CModel:
     f = m["features"]
     tau, tau_r = f["tau_s"], max(f["tau_s"], f["rate_tau_min_s"])
     half = 0.5 * f["width_c"]
+    s0 = f.get("start_branch", 0.0)
     a = f"-expm1f(-dt / {c_float(tau)})" if tau > 0 else "1.0f"
+    first = (
+        f"    if (first) {{ st->F = st->G = T; st->p = T - {c_float(s0 * half)}; }}"
+        if s0
+        else "    if (first) st->F = st->G = st->p = T;"
+    )
     reading = "\n".join(
         [
-            "    if (first) st->F = st->G = st->p = T;",
+            first,
             f"    const float a = {a};",
             "    st->F += a * (T - st->F);",
             f"    st->G += -expm1f(-dt / {c_float(tau_r)}) * (T - st->G);",

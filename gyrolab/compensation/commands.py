@@ -76,7 +76,8 @@ def _named(path: str) -> Iterator[None]:
 def _prior_lines(cm: dict[str, Any]) -> list[str]:
     """The fleet prior's line (a MAP fit) and the up/down hysteresis width of a
     structured model with a hysteresis term."""
-    from gyrolab.compensation.prior import hysteresis_width
+    from gyrolab.compensation.causal_models import hysteresis_width
+    from gyrolab.compensation.structured import StructuredModel
 
     out = []
     pr = cm.get("selection", {}).get("prior")
@@ -89,7 +90,7 @@ def _prior_lines(cm: dict[str, Any]) -> list[str]:
         )
     st = cm.get("structured")
     if st and (st.get("h") or st.get("hT")):
-        w = hysteresis_width(st)
+        w = hysteresis_width(StructuredModel.from_dict(st))
         out.append(
             "  hysteresis width (heating - cooling branch): "
             f"{w['at_low_deg_per_h']:+.3g} / {w['at_mid_deg_per_h']:+.3g} / "

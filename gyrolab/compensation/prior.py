@@ -39,9 +39,12 @@ means inflated by the effective sample size of the residual
 structured model's term test uses: flicker-dominated residuals are far from independent.
 φ is chosen on a grid around the cluster's prior (τ, w, τ_w at the prior mean and ±½ … ±2
 sd, one component at a time, τ twice) by the blocked CV RMSE of that MAP fit (the causal
-selection's folds). Not by a joint J over θ and φ: with the prior on θ in the criterion,
-φ bends the features until θ looks typical (validation unit 10's lag came out 2080 s for
-a true 1176 s, its held-out bias stability 2.5× its 13 h fit's). A unit with much data
+selection's folds); the φ the unit's own causal selection chooses without a prior
+(:data:`OWN_FAMILIES`) competes on the same CV — the grid search is local, and a unit
+whose lag lies away from its cluster's was otherwise fitted at the wrong one. Not by a
+joint J over θ and φ: with the prior on θ in the criterion, φ bends the features until θ
+looks typical (validation unit 10's lag came out 2080 s for a true 1176 s, its held-out
+bias stability 2.5× its 13 h fit's). A unit with much data
 (the 13 h run) is dominated by its own likelihood and reproduces its own fit; a short run
 borrows the prior where it says little (the cold end the chamber cannot reach in 3 h,
 the warm-up, the hysteresis).
@@ -67,9 +70,9 @@ from scipy import stats
 
 from gyrolab.compensation.band import fit_band
 from gyrolab.compensation.baselines import blocked_folds
-from gyrolab.compensation.causal import CV_FOLDS, CV_SEGMENTS
+from gyrolab.compensation.causal import CV_FOLDS, CV_SEGMENTS, fit_causal
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
-from gyrolab.compensation.causal_models import StructuredCausalModel
+from gyrolab.compensation.causal_models import StructuredCausalModel, hysteresis_width
 from gyrolab.compensation.drift_model import CausalCalibration
 from gyrolab.compensation.structured import StructuredModel, effective_samples
 
@@ -93,6 +96,8 @@ MIN_CLUSTER = 3
 SILHOUETTE_MIN = 0.5
 P_OUT = 1e-3
 MAX_ORDER = 6
+#: the families whose causal selection gives the unit's own φ, the MAP fit's second start
+OWN_FAMILIES = ("poly", "structured")
 #: φ grid of the MAP fit: the prior mean plus these multiples of its sd
 PHI_STEPS = (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
 
@@ -158,17 +163,6 @@ class Basis:
 
     def to_dict(self) -> dict[str, Any]:
         return {"lo": self.lo, "hi": self.hi, "order": self.order}
-
-
-def hysteresis_width(m: dict[str, Any]) -> dict[str, float]:
-    """The up/down hysteresis width of a structured model (its ``to_dict()``): the drift
-    on the heating branch minus the cooling branch at the same die temperature,
-    ``2 (h + hT v)`` (S = ±1), at the low end, middle and high end of its range, °/h."""
-    h, hT = float(m.get("h", 0.0)), float(m.get("hT", 0.0))
-    return {
-        f"at_{w}_deg_per_h": 7200.0 * (h + hT * v)
-        for w, v in (("low", -1.0), ("mid", 0.0), ("high", 1.0))
-    }
 
 
 def phi_of(p: CausalParams) -> np.ndarray:
@@ -466,45 +460,59 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
     measured by the same blocked CV as the selection's."""
     y = np.asarray(cal.rate, dtype=float)
     b = prior.basis
-    p0 = params_of(prior.clusters[0].phi_mean)
-    A0 = b.design(_features(cal, p0))
-    s2_0 = _noise_scale(A0, y, prior.clusters[0], neff)
-    mem = membership(A0, y, s2_0, prior)
-    c = prior.clusters[mem.cluster]
     # φ by the blocked CV of the MAP fit (the selection's folds): what predicts the run's
     # held-out stretches, not what makes θ look typical (choosing φ by the whole J bent a
     # validation unit's lag to 2080 s for a true 1176 s; by the least-squares residual on
     # the fleet's flexible basis, the same)
     folds = blocked_folds(y.size, CV_FOLDS, CV_SEGMENTS)
 
-    def cv_rmse(A: np.ndarray, pred: np.ndarray | None = None) -> float:
+    def cv_rmse(A: np.ndarray, s2: float, c: Cluster, pred: np.ndarray | None = None) -> float:
         sq = 0.0
         for held in folds:
-            th, _ = _map(A[~held], y[~held], s2_0, c)
+            th, _ = _map(A[~held], y[~held], s2, c)
             p = A[held] @ th
             if pred is not None:
                 pred[held] = p
             sq += float(np.sum((p - y[held]) ** 2))
         return math.sqrt(sq / y.size)
 
-    best: tuple[float, np.ndarray] | None = None
-    for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
-        phi_c = c.phi_mean.copy() if best is None else best[1].copy()
-        for step in PHI_STEPS:
-            phi = phi_c.copy()
-            phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
-            e = cv_rmse(b.design(_features(cal, params_of(phi))))
-            if best is None or e < best[0]:
-                best = (e, phi)
-    assert best is not None
-    phi, s2 = best[1], s2_0
+    def search(phi0: np.ndarray, grid: bool) -> tuple[float, np.ndarray, float, Cluster]:
+        """From ``phi0``: the noise scale and the cluster there, then (``grid``) φ on the
+        grid around the cluster's mean; the CV RMSE, φ, s², the cluster."""
+        A0 = b.design(_features(cal, params_of(phi0)))
+        s2 = _noise_scale(A0, y, prior.clusters[0], neff)
+        c = prior.clusters[membership(A0, y, s2, prior).cluster]
+        if not grid:
+            return cv_rmse(A0, s2, c), phi0, s2, c
+        best: tuple[float, np.ndarray] | None = None
+        for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
+            phi_c = c.phi_mean.copy() if best is None else best[1].copy()
+            for step in PHI_STEPS:
+                phi = phi_c.copy()
+                phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
+                e = cv_rmse(b.design(_features(cal, params_of(phi))), s2, c)
+                if best is None or e < best[0]:
+                    best = (e, phi)
+        assert best is not None
+        return best[0], best[1], s2, c
+
+    # the grid search is local (one component at a time, around the prior mean) and misses
+    # a unit whose lag or warm-up lies elsewhere: the φ the unit's own causal selection
+    # (no prior, OWN_FAMILIES) chooses on the run competes on the same CV, with the noise
+    # scale and cluster at that φ (a misfit φ inflates s² and hands the fit to the prior)
+    starts = {
+        "prior": search(prior.clusters[0].phi_mean, True),
+        "own": search(phi_of(fit_causal(cal, families=OWN_FAMILIES).params), False),
+    }
+    start = min(starts, key=lambda k: starts[k][0])  # a tie: the prior's
+    _, phi, s2, c = starts[start]
     theta, _ = _map(b.design(_features(cal, params_of(phi))), y, s2, c)
     params = params_of(phi)
     A = b.design(_features(cal, params))
     # the unit's membership at its own φ (the detector's number)
     mem = membership(A, y, _noise_scale(A, y, c, neff), prior)
     pred = np.empty_like(y)
-    cv = cv_rmse(A, pred)
+    cv = cv_rmse(A, s2, c, pred)
     r = y - A @ theta
     log = {
         "method": "MAP towards the fleet prior (gyrolab/compensation/prior.py)",
@@ -513,9 +521,10 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
         "cluster_units": len(c.members),
         "membership": mem.to_dict(),
         "features": params.to_dict(),
+        "features_from": start,
         "noise_s2": s2,
         "rms_residual_deg_per_s": float(np.sqrt(np.mean(r * r))),
-        "hysteresis_width": hysteresis_width(b.model(theta).to_dict()),
+        "hysteresis_width": hysteresis_width(b.model(theta)),
     }
     model = StructuredCausalModel(
         family="structured",
@@ -545,7 +554,6 @@ __all__ = [
     "PriorFit",
     "UnitEntry",
     "fit_map",
-    "hysteresis_width",
     "learn_prior",
     "membership",
     "structured_of",

@@ -53,6 +53,13 @@ TAU_GRID_S = (0.0, 60.0, 150.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 WIDTH_GRID_C = (0.25, 0.5, 1.0, 2.0, 4.0)
 WARMUP_GRID_S = (200.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 ORDERS = range(1, 7)
+#: the hysteresis branch at power-on (:class:`CausalParams` ``start_branch``) searched
+#: with the lag by the extended family (``structured_rate``) only: 0 (the play starts
+#: where the PT100 reads) or +1 (on its heating branch: the die's self-heating at
+#: power-on). Chosen only if ≥ 1 % (TIE) better in CV. Not in the original family: there
+#: it let ``structured`` (symmetric rate term) win the selection over ``structured_rate``
+#: on units whose rate sensitivity differs heating and cooling (docs/results.md).
+START_BRANCHES = (0.0, 1.0)
 
 
 @dataclass
@@ -397,12 +404,13 @@ def _select_terms_backward(
 def select_structured(
     cal: CausalCalibration, folds: list[np.ndarray], extended: bool = False
 ) -> tuple[CausalParams, int, tuple[str, ...], float, dict[str, Any]]:
-    """Choose (τ, τ_w, order) on the joint grid with every original term on
+    """Choose (τ, τ_w, order, s₀) on the joint grid with every original term on
     (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
     between its grid neighbours (golden section), then w and τ_w again on their grids;
     finally the terms (:func:`_select_terms`; ``extended``:
-    :func:`_select_terms_backward`). The lag and the warm-up are searched together
-    because both shape the first hours of a run. Returns the choice and a log."""
+    :func:`_select_terms_backward`). The lag, the warm-up and (``extended`` only) the
+    start branch (:data:`START_BRANCHES`) are searched together because all three shape
+    the first hours of a run. Returns the choice and a log."""
     y = cal.rate
     base = CausalParams()
     feats: dict[CausalParams, np.ndarray] = {}
@@ -413,15 +421,21 @@ def select_structured(
             feats[p] = block_features(cal, p)
         return cv_linear(feats[p], y, order, on, folds, ridge=ridge)
 
-    best: tuple[float, CausalParams, int] = (np.inf, base, 1)
-    for tau in TAU_GRID_S:
-        for tw in WARMUP_GRID_S:
-            p = replace(base, tau_s=tau, warmup_tau_s=tw)
-            for order in ORDERS:
-                e = cv(p, order)
-                if e < best[0]:
-                    best = (e, p, order)
-    err, p, order = best
+    bests: dict[float, tuple[float, CausalParams, int]] = {}
+    for s0 in START_BRANCHES if extended else (0.0,):
+        best: tuple[float, CausalParams, int] = (np.inf, base, 1)
+        for tau in TAU_GRID_S:
+            for tw in WARMUP_GRID_S:
+                p = replace(base, tau_s=tau, warmup_tau_s=tw, start_branch=s0)
+                for order in ORDERS:
+                    e = cv(p, order)
+                    if e < best[0]:
+                        best = (e, p, order)
+        bests[s0] = best
+    err, p, order = bests[0.0]
+    for s0 in list(bests)[1:]:  # a start branch must beat starting at 0 by TIE
+        if bests[s0][0] < err * (1.0 - TIE):
+            err, p, order = bests[s0]
     # refine τ between its grid neighbours (golden-section on the CV error, 8 steps)
     g = list(TAU_GRID_S)
     i = g.index(p.tau_s)
@@ -450,6 +464,7 @@ def select_structured(
     select = _select_terms_backward if extended else _select_terms
     terms, err, log = select(feats[p] if p in feats else block_features(cal, p), y, order, folds)
     log["order"] = order
+    log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
     return p, order, terms, err, log
 
 
@@ -457,6 +472,7 @@ __all__ = [
     "ALL_TERMS",
     "EXTRA_TERMS",
     "ORDERS",
+    "START_BRANCHES",
     "TERMS",
     "T_KEEP",
     "effective_samples",

@@ -43,6 +43,18 @@ class ModelRun:
     computed: str = ""
 
 
+def hysteresis(model: Any) -> dict[str, float] | None:
+    """The up/down hysteresis width of the model's causal drift model (heating − cooling
+    branch at the low end, middle and high end of its calibrated range, °/h:
+    :func:`gyrolab.compensation.causal_models.hysteresis_width`); ``None`` without one."""
+    causal = getattr(model, "causal", None)
+    if causal is None:
+        return None
+    from gyrolab.compensation.causal_models import hysteresis_width
+
+    return hysteresis_width(causal.model)
+
+
 def paper_block_s() -> float:
     """The averaging time of a report without a model (the paper's 1000 points/h)."""
     from gyrolab.numerics.averaging import PAPER_BLOCK_S

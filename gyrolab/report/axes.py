@@ -15,6 +15,7 @@ from typing import Any
 
 from gyrolab.record.format import AXIS_NAMES
 from gyrolab.record.reader import Recording
+from gyrolab.report.causal_section import hysteresis_axes_section
 from gyrolab.report.document import Document
 
 
@@ -74,6 +75,9 @@ def build_axes_report(
         else:
             doc.sections.extend(d.sections)
     assert doc is not None
+    hyst = hysteresis_axes_section(metrics["axes"])
+    if hyst is not None:  # after the run section, before the axes' own sections
+        doc.sections.insert(1, hyst)
     # one recording: how the run ended is the same for every axis
     metrics["outcome"] = metrics["axes"]["x"].get("outcome", {})
     metrics["timing_s"] = time.perf_counter() - t0

@@ -105,6 +105,9 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
         )
     )
     sec.blocks.append(tab)
+    hyst = hysteresis_table(metrics)
+    if hyst is not None:
+        sec.blocks.append(hyst)
     sec.blocks.append(
         FigureBlock(
             "causal-headline",
@@ -120,6 +123,61 @@ def causal_headline_section(mr: ModelRun) -> Section | None:
             "100 s averages of the raw output (top) and of each compensated output (bottom).",
         )
     )
+    return sec
+
+
+def hysteresis_table(metrics: dict[str, Any]) -> TableBlock | None:
+    """The causal model's up/down hysteresis width (metrics.json
+    ``causal_hysteresis_width``) at the low end, middle and high end of its calibrated
+    range; ``None`` when the report has none."""
+    w = metrics.get("causal_hysteresis_width")
+    if not w:
+        return None
+    ends = ("low", "mid", "high")
+    tab = TableBlock(
+        "causal-hysteresis",
+        "Up/down hysteresis width of the causal model",
+        ["", "low end", "middle", "high end"],
+        [
+            ["die temperature (°C)"] + [f"{w[f'{e}_c']:.1f}" for e in ends],
+            ["heating − cooling branch (°/h)"] + [f"{w[f'at_{e}_deg_per_h']:+.3g}" for e in ends],
+        ],
+    )
+    fam = metrics.get("causal_model", {}).get("family", "")
+    tab.note = (
+        f"The drift of the {fam} model on the heating branch minus the cooling branch at the "
+        "same die temperature, at rest and warmed up: the width of the up/down loop it "
+        "compensates (0 when the model has no hysteresis term)."
+    )
+    return tab
+
+
+def hysteresis_axes_section(axes: dict[str, dict[str, Any]]) -> Section | None:
+    """A multi-axis report's overview: each axis's up/down hysteresis width (its
+    metrics); ``None`` when no axis has a causal model."""
+    rows = []
+    for name, m in axes.items():
+        w = m.get("causal_hysteresis_width")
+        if w:
+            rows.append(
+                [name, m.get("causal_model", {}).get("family", "")]
+                + [f"{w[f'at_{e}_deg_per_h']:+.3g}" for e in ("low", "mid", "high")]
+                + [f"{w['low_c']:.1f} … {w['high_c']:.1f}"]
+            )
+    if not rows:
+        return None
+    sec = Section("hysteresis-axes", "Up/down hysteresis width per axis")
+    tab = TableBlock(
+        "hysteresis-axes",
+        "Heating − cooling branch of each axis's causal model (°/h)",
+        ["axis", "model", "low end", "middle", "high end", "calibrated range (°C)"],
+        rows,
+    )
+    tab.note = (
+        "At rest and warmed up, at the ends and the middle of each axis's calibrated range "
+        "of the die temperature; each axis's headline section has its own table."
+    )
+    sec.blocks.append(tab)
     return sec
 
 

@@ -144,6 +144,9 @@ def assemble(
     step("metrics")
     if mr is not None:
         metrics = mr.metrics
+        hyst = analysis.hysteresis(mr.model)
+        if hyst is not None:
+            metrics["causal_hysteresis_width"] = hyst
     else:
         metrics = {
             "run": label or str(rec.path),
