@@ -50,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from breakfam.realnoise import real_noise  # noqa: E402
 
 from gyrolab.profiles.profile import BUILTIN, Profile, Step, profile_from_dict  # noqa: E402
+from gyrolab.sim.discrepancy.identify import SEPARATION  # noqa: E402
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output  # noqa: E402
 from gyrolab.sim.discrepancy.synth import simulate_bench  # noqa: E402
 from gyrolab.sim.discrepancy.workflow import run_discrepancy  # noqa: E402
@@ -365,18 +366,50 @@ def tables(rows: list[dict]) -> str:
         for r in la:
             cov = all(s != "missed" for s in r["status"].values())
             sep = r.get("separating_runs") or []
-            prop = ", ".join(f"{s['profile']} ({s['duration_h']:.1f} h)" for s in sep) or "—"
+            props = [a["proposed_profile"] for a in r["ambiguity"] if a.get("proposed_profile")]
+            expect = [
+                ""
+                if min(p["expected_separation"].values()) >= SEPARATION
+                else ", not expected to separate"
+                for p in props
+            ] + [""] * len(sep)
+            prop = (
+                ", ".join(
+                    f"{s['profile']} ({s['duration_h']:.1f} h{e})"
+                    for s, e in zip(sep, expect, strict=False)
+                )
+                or "—"
+            )
+            hid = set(r["effects"])
+
+            def extra(s: dict, hid: set = hid) -> str:
+                """Names in a separating run with no hidden effect in them."""
+                f = [e for e in s["effects_found"] if e not in hid]
+                f += [str(a) for a in s["ambiguous"] if not set(a) & hid]
+                return f" (false: {', '.join(f)})" if f else ""
+
             ok = (
                 ", ".join(
-                    "yes" if s["separated"] else f"no: {s['effects_found']} {s['ambiguous']}"
+                    "yes" + extra(s)
+                    if s["separated"]
+                    else f"no: {s['effects_found']} {s['ambiguous']}"
                     for s in sep
                 )
                 or "—"
             )
             named = ", ".join(r["effects_found"]) or "—"
+            if not cov:  # what the run itself said of what it missed: truth / its limit
+                miss = []
+                for h, st in r["status"].items():
+                    lim = r["detection_limits"].get(h, {})
+                    par = lim.get("parameter")
+                    size = r["effects"][h].get(par) if par else None
+                    if st == "missed" and lim.get("limit") and size is not None:
+                        miss.append(f"{h} at {abs(size) / lim['limit']:.1f}× its limit")
+                cov = "no: " + ", ".join(miss) if miss else "no"
             lines.append(
                 f"| {r['label']} | {r['noise']} | {r['seed']} | {named} "
-                f"| {r['ambiguous'] or '—'} | {'yes' if cov else 'no'} | {prop} | {ok} |"
+                f"| {r['ambiguous'] or '—'} | {'yes' if cov is True else cov} | {prop} | {ok} |"
             )
     return "\n".join(lines)
 

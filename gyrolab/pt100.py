@@ -82,13 +82,17 @@ def cvd_temperature(r_ohm: float | np.ndarray, r0_ohm: float = R0_OHM) -> float 
     return float(t) if t.ndim == 0 else t
 
 
-# 4-wire resistance test current of the multimeters the project drives, by range (Ω → A).
-# The full-scale voltage across the resistor on each ohms range, from the service guides'
-# "Theory of Operation" tables, over the range: 100 mV on 100 Ω, 1 V on 1 kΩ…100 kΩ, 5 V on
-# 1 MΩ (docs/instruments.md, "PT100 excitation current").
+# 4-wire resistance test current of the multimeters the project drives, by range (Ω → A):
+# the full-scale voltage the ohms current source develops across the resistor on each range
+# (the "Ohms Range / Voltage Across R" table of the service guides' Theory of Operation:
+# 34401A Service Guide ch. 5, "DC Amplifier"; 34970A/34972A Service Guide ch. 5, "Internal
+# DMM"), over the range: 100 mV on 100 Ω, 1 V on 1 kΩ…100 kΩ, 5 V on 1 MΩ
+# (docs/instruments.md, "PT100 excitation current").
 _OHMS_FULL_SCALE_V = {100.0: 0.1, 1e3: 1.0, 1e4: 1.0, 1e5: 1.0, 1e6: 5.0}
-FRES_FAMILIES = ("34401A", "34465A", "34970A", "34972A", "DAQ970A")
-"""Meters with that ohms architecture (the 34465A by assumption: docs/instruments.md)."""
+FRES_FAMILIES = ("34401A", "34970A", "34972A")
+"""Meters whose ohms current source is documented by that table. The 34465A, the DAQ970A
+and others are not (no cited source): their bench record must carry
+``excitation_current_a`` for a fitted self-heating to be stated as θ."""
 
 
 def fres_test_current_a(model: str, range_ohm: float | None) -> float | None:

@@ -41,6 +41,8 @@ def test_self_heating_grows_with_the_sensors_resistance() -> None:
     assert fres_test_current_a("34970A", 100.0) == pytest.approx(1e-3)
     assert fres_test_current_a("34970A", 1e4) == pytest.approx(1e-4)
     assert fres_test_current_a("Fluke 8846A", 1e3) is None
+    # no cited manual for the 34465A's ohms current: the bench record must state it
+    assert fres_test_current_a("34465A", 1e3) is None
 
 
 def test_spectral_peaks_report_a_real_cycle_and_rarely_noise() -> None:
@@ -89,6 +91,7 @@ def test_a_short_lag_and_a_rate_term_come_with_the_profile_that_separates_them(
     assert max(sep.values()) < SEPARATION  # not identifiable on this profile
     proposal = amb["proposed_profile"]
     assert min(proposal["expected_separation"].values()) > SEPARATION  # on the new one
+    assert proposal["expected_to_separate"]
     toml = out / proposal["file"]
     assert load_profile(toml).duration_s == pytest.approx(proposal["duration_h"] * 3600.0)
     again = tmp_path / "next.mcap"
@@ -108,3 +111,18 @@ def test_a_unit_on_its_die_sensor_is_analysed() -> None:
     assert "rtd_self_heating" not in res.detection_limits
     assert not [c for c in res.steps[0]["candidates"] if c["effect"] == "rtd_self_heating"]
     assert math.isclose(res.final.case.rms, 0.02, rel_tol=0.3)  # the sensor's own noise
+
+
+def test_a_die_lag_is_not_learned_as_noise() -> None:
+    """A 400 s die lag with a hysteresis on an up–down–up profile (the run a 2.8 h
+    staircase proposes for them): both are named. The noise model the gyro candidates are
+    judged with is learned from the saturated model's residual; with the lag left out of
+    it, the lag was learned as a Gauss–Markov hump and the run came out as
+    `rate_random_walk` alone (issue 26)."""
+    updown = [(25.0, 3600.0), (60.0, 5400.0), (-40.0, 9000.0), (60.0, 9000.0), (25.0, 3600.0)]
+    prof = Profile("updown", tuple(Step(s, d) for s, d in updown))
+    m = nominal_model().with_effect("thermal_lag", tau_s=400.0)
+    m = m.with_effect("hysteresis", h=2e-3, width_c=1.0)
+    res = run_discrepancy(simulate_bench(m, prof, 1.0, 1400))
+    assert {"thermal_lag", "hysteresis"} <= set(res.effects_found)
+    assert "rate_random_walk" not in res.effects_found

@@ -78,7 +78,11 @@ def discrepancy(
     stage("write")
     found = ", ".join(res.effects_found) or "nothing"
     amb = "; ".join("{" + ", ".join(s) + "}" for s in res.ambiguous)
-    nxt = [a.proposal.file for a in res.ambiguity if a.proposal is not None]
+    nxt = [
+        a.proposal.file + ("" if a.proposal.expected_to_separate else " (not expected to separate)")
+        for a in res.ambiguity
+        if a.proposal is not None
+    ]
     cyc = "; ".join(
         f"a {c['period_s']:.0f} s cycle at {c['peak_to_local_median']:.0f}x the local median "
         "(present in the measurement: check the bench)"

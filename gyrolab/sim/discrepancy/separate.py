@@ -3,13 +3,17 @@
 
 For an ambiguous pair (:class:`~.identify.LookAlike`), each profile of a small library
 built from the run's own setpoints — the run with a 2 h soak at its end, a heating
-staircase, an up-and-down cycle, a long soak at room temperature, slow ramps, the run
-again — is simulated through the fitted thermal chain (the updated model, deterministic),
-both explanations are evaluated on its bins at their fitted amplitudes and shapes, and the
-expected separation (:func:`~.identify.separation`, both ways, the other's shape at its
-best) is computed with the noise model this run taught. The proposal is the shortest
-profile whose smaller separation reaches :data:`TARGET`, else the one that separates best;
-it is an ordinary profile (docs/profiles.md) that ``gyrolab simulate --profile`` and
+staircase, an up-and-down cycle, four full-range cycles, a long soak at room temperature,
+slow ramps, the run again — is simulated through the fitted thermal chain (the updated
+model, deterministic), both explanations are evaluated on its bins at their fitted
+amplitudes and shapes, and the expected separation (:func:`~.identify.separation`, both
+ways, the other's shape at its best) is computed with the noise model this run taught.
+The proposal is the shortest profile whose smaller separation reaches :data:`TARGET`,
+else the one that separates best (then flagged: ``expected_to_separate`` is false when
+even its smaller separation stays below the look-alike threshold
+:data:`~.identify.SEPARATION` — no profile of the library tells the two apart at this
+run's noise, and the report says so rather than promise it); it is an ordinary profile
+(docs/profiles.md) that ``gyrolab simulate --profile`` and
 ``gyrolab acquire`` run.
 """
 
@@ -24,7 +28,7 @@ from gyrolab.profiles.profile import Profile, Step
 from gyrolab.sim.discrepancy.data import BenchData, choose_bin_s
 from gyrolab.sim.discrepancy.gls import CovWhitener, bin_noise_autocov
 from gyrolab.sim.discrepancy.gyro_fit import GyroContext
-from gyrolab.sim.discrepancy.identify import LookAlike, separation
+from gyrolab.sim.discrepancy.identify import SEPARATION, LookAlike, separation
 from gyrolab.sim.discrepancy.noise_fit import CovNoise
 from gyrolab.sim.model import SimModel
 from gyrolab.sim.physics import Physics
@@ -47,6 +51,12 @@ class Proposal:
     file: str = "separating_profile.toml"
     """Its name in the output directory."""
 
+    @property
+    def expected_to_separate(self) -> bool:
+        """Whether the new run is expected to tell them apart: both expected separations
+        reach the look-alike threshold."""
+        return min(self.separation.values()) >= SEPARATION
+
     def toml(self) -> str:
         """The profile as a PROFILE.toml (docs/profiles.md)."""
         import tomli_w
@@ -60,6 +70,7 @@ class Proposal:
             "description": self.profile.description,
             "duration_h": self.profile.duration_s / 3600.0,
             "expected_separation": self.separation,
+            "expected_to_separate": self.expected_to_separate,
             "considered": self.considered,
             "profile": self.profile.to_dict(),
         }
@@ -106,6 +117,15 @@ def library(d: BenchData) -> list[Profile]:
                 Step(room, 3600.0, "back"),
             ),
             description="up, down and up again over the whole range",
+        ),
+        Profile(
+            "cycles",
+            tuple(
+                [Step(room, 3600.0, "power-on"), Step(lo, 5400.0, "cold")]
+                + [Step(sp, 5400.0, x) for _ in range(4) for sp, x in ((hi, "hot"), (lo, "cold"))]
+            ),
+            description="four full-range cycles, 1.5 h at each end: every branch change and "
+            "rate four times over",
         ),
         Profile(
             "long-soak",
@@ -183,12 +203,18 @@ def propose(
     good = [r for r in rows if r[0] >= TARGET]
     best = min(good, key=lambda r: r[1]) if good else max(rows, key=lambda r: r[0])
     sep, _, s_ab, s_ba, prof = best
+    caveat = (
+        ""
+        if sep >= SEPARATION
+        else f"; not expected to separate them (below {SEPARATION:.0f}): no profile of the "
+        "library tells them apart at this noise"
+    )
     named = Profile(
         f"separate-{'-'.join(a.members)}-from-{'-'.join(b.members)}",
         prof.steps,
         prof.ambient_c,
         f"{prof.description}; proposed by gyrolab discrepancy to tell {a.label} from "
-        f"{b.label} (expected ΔBIC {s_ab:.0f} and {s_ba:.0f})",
+        f"{b.label} (expected ΔBIC {s_ab:.0f} and {s_ba:.0f}{caveat})",
     )
     return Proposal(
         named,

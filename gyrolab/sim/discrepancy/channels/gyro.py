@@ -71,9 +71,15 @@ def _judging_noises(
             scan=(name,) if cat.shape_of(name) else (),
             whitener=cur.whitener,
         )
-    # the saturated model: every candidate at the shape its own scan chose, except those
-    # that change the temperature the others see (they cannot all hold at once)
+    # the saturated model: every candidate at the shape its own scan chose; of those that
+    # change the temperature the others see (they cannot all hold at once) the one whose
+    # own fit is best — left out, a real die lag stays in the residual, the noise model
+    # learns it as a Gauss–Markov hump, and the lag and whatever comes with it no longer
+    # score (issue 26: a 400 s lag + hysteresis named rate_random_walk)
     sat = [n for n in fits if cat.terms(n).temperature is None]
+    temp = [n for n in fits if cat.terms(n).temperature is not None]
+    if temp:
+        sat.append(min(temp, key=lambda n: fits[n].bic))
     sat_theta = dict(cur.gyro.struct.theta)
     for n in sat:
         if cat.shape_of(n):
