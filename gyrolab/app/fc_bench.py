@@ -31,8 +31,9 @@ FC_RATE_HZ = 25.0  # IMU message rate of the simulated controller (and its IMU r
 # Free-running, the bench covers a few hundred simulated seconds per wall second while the
 # MAVLink streams keep the process busy: on a loaded machine the chamber's poller may get
 # no reply for several wall seconds without the chamber being lost. The watchdog's wall
-# floor (SimSilence) is therefore longer than the ADC bench's 1 s, and holds the run
-# (suspenders) only after the same wall silence.
+# floor (SimSilence) is therefore longer than the ADC bench's (1 s to hold, 3 s to give a
+# source up), and the same rule holds the run (suspenders): a stall is held and given up
+# after the same wall silence.
 FC_COMM_MIN_WALL_S = 15.0
 
 
@@ -124,7 +125,7 @@ def start_fc_bench(
         addresses={"chamber": bench.oven_port, **{f"unit/{s}": fc_port for s in serials}},
         clock=SimRunClock(bench.clock),
         silence=silence,
-        hold_silence=silence.sharing(FC_COMM_MIN_WALL_S),  # the same floor, for holds
+        hold_silence=silence,  # the same rule (and floor) for holds
         timeout=scaled_timeouts(speed),
         speed=speed,
         bench=bench,

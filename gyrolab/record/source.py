@@ -365,11 +365,11 @@ def _open(p: Path, fh: BinaryIO, hint: str) -> Source:
             raise InputError(p, "not an MCAP file")
         layout = check_layout(fh)
         fh.seek(0)
-        key = _summary_key(fh, layout)
-        src = Source(p, fh, make_reader(fh), layout, hint, _SUMMARY.get(key) if key else None)
-        if key is not None and key not in _SUMMARY:
+        skey = _summary_key(fh, layout)
+        src = Source(p, fh, make_reader(fh), layout, hint, _SUMMARY.get(skey) if skey else None)
+        if skey is not None and skey not in _SUMMARY:
             _SUMMARY.clear()
-            _SUMMARY[key] = src.summary
+            _SUMMARY[skey] = src.summary
         if layout.data_crc:
             key = _file_key(fh)
             if key not in _CHECKED:
