@@ -507,6 +507,17 @@ def _stop_signals_like_sigint() -> Iterator[None]:
             signal.signal(sig, handler)
 
 
+def _forget_interrupt_in_exec() -> None:
+    """Clear CPython's note that a ``KeyboardInterrupt`` escaped an ``exec`` of a string.
+
+    A stop signal that lands while a library runs ``exec(source)`` (scipy, dask and numba do,
+    at import) makes CPython 3.11 remember an "unhandled" interrupt even though ``_main``
+    handled it; under ``python -m gyrolab`` the interpreter then ends itself by SIGINT (exit
+    status -2) instead of the 130 ``main`` returned. Each ``exec`` of a string resets that
+    note before it runs (Python/pythonrun.c ``run_eval_code_obj``), so one empty one does."""
+    exec("pass")  # noqa: S102 - an empty constant, run only for its reset
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     with _stop_signals_like_sigint():
         return _main(argv)
@@ -534,6 +545,7 @@ def _main(argv: Sequence[str] | None) -> int:
     except KeyboardInterrupt as e:
         by = f" by {e.args[0]}" if e.args and str(e.args[0]).startswith("SIG") else ""
         print(f"gyrolab: interrupted{by}", file=sys.stderr)
+        _forget_interrupt_in_exec()
         return 130
     except BrokenPipeError:
         # the reader went away (`gyrolab runs list --json | head`): stop quietly, as a

@@ -91,3 +91,29 @@ def test_a_stop_signal_cleans_up_like_sigint(
     assert f"gyrolab: interrupted by {sig.name}" in err
     assert "Traceback" not in err, err
     assert list(out.iterdir()) == [], "left behind: " + ", ".join(p.name for p in out.iterdir())
+
+
+def test_an_interrupt_inside_a_libraries_exec_still_exits_130(tmp_path: Path) -> None:
+    """A stop signal that lands while a library runs ``exec(source)`` at import (scipy,
+    dask) made ``python -m gyrolab`` end by SIGINT (status -2) after ``main`` returned 130:
+    CPython remembered the interrupt as unhandled (gyrolab/cli.py
+    ``_forget_interrupt_in_exec``). The command here raises it from such an ``exec``."""
+    pkg = tmp_path / "execstop"
+    pkg.mkdir()
+    (pkg / "__main__.py").write_text(
+        "from gyrolab import cli\n"
+        "def _stopped_in_exec(opts):\n"
+        "    exec(\"raise KeyboardInterrupt('SIGTERM')\")\n"
+        "cli._handler = lambda command: _stopped_in_exec\n"
+        "raise SystemExit(cli.main(['runs', 'list']))\n"
+    )
+    path = os.pathsep.join(p for p in (str(tmp_path), os.environ.get("PYTHONPATH")) if p)
+    p = subprocess.run(
+        [sys.executable, "-m", "execstop"],
+        env={**ENV, "PYTHONPATH": path},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert p.returncode == 130, p.stderr
+    assert "gyrolab: interrupted by SIGTERM" in p.stderr
