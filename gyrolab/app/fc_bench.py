@@ -148,7 +148,9 @@ def with_ports(cfg: BenchConfig, handle: SimHandle) -> BenchConfig:
     return replace(
         cfg,
         units=tuple(
-            replace(u, adc=replace(u.adc, port=handle.addresses[f"unit/{u.serial}"]))
+            replace(
+                u, rate_stream=replace(u.rate_stream, port=handle.addresses[f"unit/{u.serial}"])
+            )
             for u in cfg.units
         ),
     )
