@@ -132,7 +132,7 @@ def _run(
         thermometer=Thermometer(clock, chamber, therm_faults),
         chamber=chamber,
         gyro=Stream(clock),
-        adc=GyroAdcConfig(sample_rate_hz=100.0),
+        rate_stream=GyroAdcConfig(sample_rate_hz=100.0),
         limits=Limits(comm_timeout_s=comm_timeout_s, pt100_max_c=75.0, watchdog_samples=3),
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,

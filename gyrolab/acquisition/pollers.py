@@ -4,7 +4,7 @@ Each runs in its own thread during a lab run (``Acquisition(threaded=True)``), o
 stepped by the engine's own loop, one turn at a time, on any clock
 (``Acquisition(threaded=False)``: ``tests/test_run_core.py`` drives it with a fake clock).
 Neither interprets what it gets: every result or failure is posted to the engine's queue
-as ``(kind, source, clock time, payload)`` (kinds: ``reading``, ``command``, ``adc``,
+as ``(kind, source, clock time, payload)`` (kinds: ``reading``, ``command``, ``stream``,
 ``error`` — retried —, ``fatal``, ``report``), classified by
 :func:`gyrolab.instruments.roles.is_transient`.
 """
@@ -25,13 +25,13 @@ from gyrolab.instruments.roles import RateStream, is_transient
 @dataclass(frozen=True)
 class UnitDevices:
     """One unit of a multi-unit run: its ``serial``, its connected rate ``stream`` (whose
-    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``adc`` and the
+    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``rate_stream`` and the
     scanner ``channel`` of its PT100 — None for a unit read by its internal sensor, whose
     stream delivers its temperature (``AdcBlock.temperature_c``)."""
 
     serial: str
     stream: RateStream
-    adc: Any
+    rate_stream: Any
     channel: int | None
 
     @property
@@ -140,7 +140,7 @@ class StreamReader(threading.Thread):
         stop: threading.Event,
         clock: Clock,
     ) -> None:
-        super().__init__(name="adc", daemon=True)
+        super().__init__(name="rate_stream", daemon=True)
         self.dev, self.post, self.stop_ev, self.clock = dev, post, stop, clock
         self.failed = False
 
@@ -157,7 +157,7 @@ class StreamReader(threading.Thread):
             self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
             return False
         if got.blocks or got.events or got.gaps:
-            self.post(("adc", self.dev.name, self.clock.now(), got))
+            self.post(("stream", self.dev.name, self.clock.now(), got))
         return True
 
     def run(self) -> None:
