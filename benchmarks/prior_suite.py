@@ -307,54 +307,40 @@ def family_table(family: str, results: list[dict[str, Any]]) -> tuple[list[str],
     )
     ratio = a["quick_prior"][BS] / base
     dcut = cut["13h"] - cut["quick_prior"]
+
+    def grid(get: Any) -> np.ndarray:
+        """``get`` of every held-out run, units × runs (keys absent in results written
+        before them: what ``get`` does with ``{}``)."""
+        return np.array([[get(r["runs"][n]) for n in names] for r in results])
+
+    def subset_row(label: str, mask: np.ndarray) -> None:
+        """The quick + prior row over the runs in ``mask``."""
+        if mask.any():
+            rows.append(
+                f"| {family} | 3.25 h `quick` + prior, held-out runs {label} "
+                f"({int(mask.sum())} of {mask.size}; refused units left out) | 3.25 | "
+                f"{np.median(ratio[mask]):.3f} | {ratio[mask].max():.3f} | "
+                f"{np.median((a['quick_prior'][BS] / a['oracle'][BS])[mask]):.3f} | "
+                f"{np.median(cut['quick_prior'][mask]):.1f} % | "
+                f"{np.median(dcut[mask]):+.1f} / {np.max(dcut[mask]):+.1f} |"
+            )
+
     # gyrolab's range guard on the quick calibration: a held-out run reaching beyond the
     # quick run's case range is flagged (extrapolated) when the model is applied
-    flag = np.array(
-        [
-            [
-                r["runs"][n].get("_outside", {}).get("quick", {}).get("fraction", 0.0) > 0
-                for n in names
-            ]
-            for r in results
-        ]
-    )
+    flag = grid(lambda rr: rr.get("_outside", {}).get("quick", {}).get("fraction", 0.0) > 0)
     beyond = np.array(
         [
-            [
-                [r["runs"][n].get("_outside", {}).get(k, {}).get("beyond_c", 0.0) for n in names]
-                for r in results
-            ]
+            grid(lambda rr, k=k: rr.get("_outside", {}).get(k, {}).get("beyond_c", 0.0))
             for k in ("quick", "13h")
         ]
     )
-    severe = np.array(
-        [
-            [r["runs"][n].get("_expected_error", {}).get("grade") == "severe" for n in names]
-            for r in results
-        ]
-    )
+    severe = grid(lambda rr: rr.get("_expected_error", {}).get("grade") == "severe")
     trusted = ~severe & ~refused[:, None]
     if severe.any():
-        rows.append(
-            f"| {family} | 3.25 h `quick` + prior, held-out runs whose expected error is "
-            f"not graded severe ({int(trusted.sum())} of {trusted.size}; refused units "
-            f"left out) | 3.25 | {np.median(ratio[trusted]):.3f} | "
-            f"{ratio[trusted].max():.3f} | "
-            f"{np.median((a['quick_prior'][BS] / a['oracle'][BS])[trusted]):.3f} | "
-            f"{np.median(cut['quick_prior'][trusted]):.1f} % | "
-            f"{np.median(dcut[trusted]):+.1f} / {np.max(dcut[trusted]):+.1f} |"
-        )
+        subset_row("whose expected error is not graded severe", trusted)
     ws = np.unravel_index(np.argmax(np.where(severe, ratio, -np.inf)), ratio.shape)
     inside = ~flag & ~refused[:, None]
-    if inside.any():
-        rows.append(
-            f"| {family} | 3.25 h `quick` + prior, held-out runs the range guard does not "
-            f"flag ({int(inside.sum())} of {inside.size}; refused units left out) | 3.25 | "
-            f"{np.median(ratio[inside]):.3f} | {ratio[inside].max():.3f} | "
-            f"{np.median((a['quick_prior'][BS] / a['oracle'][BS])[inside]):.3f} | "
-            f"{np.median(cut['quick_prior'][inside]):.1f} % | "
-            f"{np.median(dcut[inside]):+.1f} / {np.max(dcut[inside]):+.1f} |"
-        )
+    subset_row("the range guard does not flag", inside)
     fl = flag & ~refused[:, None]
     wf = np.unravel_index(np.argmax(np.where(fl, ratio, -np.inf)), ratio.shape)
     stats = {
