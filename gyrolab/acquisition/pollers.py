@@ -130,8 +130,18 @@ class Poller(threading.Thread):
             self.clock.sleep(min(dt, 0.5))
 
 
+# A stream reader's shortest wall time between the reads that bring data. A real stream
+# (an ADC's 10 frames/s, an IMU's 25 messages/s) sends less often than this, so each of its
+# frames is still read as it arrives; a simulated bench at 300x delivers a simulated
+# second every 3.3 ms, and a read per delivery (8 units: 2 400 reads, posts and recorded
+# blocks a wall second) was a large part of the run engine's CPU (docs/performance.md).
+# Data waits at most this long in the port's buffer, none is lost.
+READ_MIN_INTERVAL_S = 0.01
+
+
 class StreamReader(threading.Thread):
-    """Reads the ADC stream continuously and posts what arrives."""
+    """Reads the ADC stream continuously and posts what arrives (at most one read that
+    brings data per ``READ_MIN_INTERVAL_S`` of wall time)."""
 
     def __init__(
         self,
@@ -161,7 +171,13 @@ class StreamReader(threading.Thread):
         return True
 
     def run(self) -> None:
+        last = -READ_MIN_INTERVAL_S
         while not self.stop_ev.is_set() and not self.failed:
+            # after a read, the next no sooner than READ_MIN_INTERVAL_S after it
+            rest = last + READ_MIN_INTERVAL_S - time.monotonic()
+            if rest > 0:
+                time.sleep(rest)
+            last = time.monotonic()
             if not self.step() and not self.failed:
                 time.sleep(0.05)
 
