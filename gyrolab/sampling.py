@@ -1,7 +1,7 @@
 """The sample rate: one name and one default (docs/architecture.md, "Names").
 
 In code the gyro's sample rate is ``rate_hz`` (samples per second on each axis, Hz); the
-files name it ``sample_rate_hz`` (BENCH.toml's ``[adc]`` and the recording's bench
+files name it ``sample_rate_hz`` (BENCH.toml's ``[rate_stream]`` and the recording's bench
 metadata: docs/bench-config.md, docs/recording-format.md). Its inverse is ``period`` (s);
 an Allan deviation's sampling interval is ``tau0`` (s), the name of its literature.
 Here, on the floor and free of numerical imports, so that the command line can give the

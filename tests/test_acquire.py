@@ -84,7 +84,14 @@ def test_short_profile_completes_with_every_transition_recorded(short_run) -> No
     assert verified == [25.0, 60.0, 50.0, 40.0, 30.0, 20.0, 10.0, 0.0, -10.0, -20.0, -30.0, -40.0]
     lag = np.array([m["t"] for m in cmds]) - np.array(starts)
     assert np.all(lag >= 0.0) and np.all(lag < 60.0) and np.median(lag) <= 5.0, lag
-    assert not [m for m in rec.logs if m.get("kind") in ("fault", "abort")]
+    # A loaded test machine can hold a simulated reply past the drivers' 0.25 s wall floor
+    # (gyrolab/app/sim_bench.py): that reading times out, is logged as a warning and the run
+    # goes on (seen at load 10). Anything else (an error, an abort) fails the run.
+    faults = [m for m in rec.logs if m.get("kind") in ("fault", "abort")]
+    assert all(
+        m["kind"] == "fault" and m["level"] == "warning" and "InstrumentTimeout" in m["message"]
+        for m in faults
+    ), faults
 
 
 def test_short_run_adc_stream_is_whole_and_converted_exactly(short_run) -> None:

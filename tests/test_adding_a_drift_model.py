@@ -36,7 +36,7 @@ from gyrolab.compensation.drift_model import (
     drift_sample_by_sample,
 )
 from gyrolab.compensation.model_dir import ModelDir
-from gyrolab.export.spec import evaluate
+from gyrolab.export.model_json import evaluate
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.reader import read_recording
 from gyrolab.sim.model import nominal_model

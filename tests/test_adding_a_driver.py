@@ -125,7 +125,7 @@ def _bench_file(tmp_path: Path, oven_port: str, adc_port: str) -> Path:
     f = tmp_path / "BENCH.toml"
     f.write_text(
         f'[thermometer]\ndriver = "pt104"\nresource = "{RESOURCE}"\nserial = "T-7"\n'
-        f'[chamber]\nport = "{oven_port}"\n[adc]\nport = "{adc_port}"\n'
+        f'[chamber]\nport = "{oven_port}"\n[rate_stream]\nport = "{adc_port}"\n'
     )
     return f
 

@@ -492,7 +492,7 @@ def test_the_checker_sees_every_form_of_import() -> None:
         "def f():\n"
         "    from gyrolab.cli import main\n"
         "    importlib.import_module('gyrolab.report.data')\n"
-        "    __import__('gyrolab.export.spec')\n"
+        "    __import__('gyrolab.export.model_json')\n"
         "    importlib.import_module(f'gyrolab.{main}')  # not a literal: not seen\n"
         "    return gyrolab.compensation.fit.fit, sim.discrepancy.workflow.Workflow\n"
     )
@@ -503,7 +503,7 @@ def test_the_checker_sees_every_form_of_import() -> None:
         ("gyrolab.app.report.report", False),
         ("gyrolab.cli.main", True),
         ("gyrolab.report.data", True),
-        ("gyrolab.export.spec", True),
+        ("gyrolab.export.model_json", True),
         ("gyrolab.compensation.fit.fit", True),
         ("gyrolab.sim.discrepancy.workflow.Workflow", True),
     }

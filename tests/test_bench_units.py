@@ -12,7 +12,7 @@ from gyrolab.instruments.drivers.gyroadc import GyroAdcConfig
 
 TWO = {
     "chamber": {"port": "/dev/ttyUSB1"},
-    "adc": {"sample_rate_hz": 200.0, "gain_v_per_dps": 0.01},
+    "rate_stream": {"sample_rate_hz": 200.0, "gain_v_per_dps": 0.01},
     "scanner": {"driver": "keysight34970a", "resource": "TCPIP::10.0.0.9::5025::SOCKET"},
     "unit": [
         {"serial": "G-001", "port": "/dev/ttyUSB3", "temperature_channel": 101},
@@ -20,18 +20,18 @@ TWO = {
             "serial": "G-002",
             "port": "/dev/ttyUSB4",
             "temperature_channel": 103,
-            "adc": {"gain_v_per_dps": 0.0102},
+            "rate_stream": {"gain_v_per_dps": 0.0102},
         },
     ],
 }
 
 
-def test_units_take_the_adc_table_with_their_port_and_overrides() -> None:
+def test_units_take_the_rate_stream_table_with_their_port_and_overrides() -> None:
     cfg = bench_from_dict(TWO, "b.toml")
     assert [u.serial for u in cfg.units] == ["G-001", "G-002"]
-    a, b = (u.adc for u in cfg.units)
+    a, b = (u.rate_stream for u in cfg.units)
     assert isinstance(a, GyroAdcConfig) and (a.port, b.port) == ("/dev/ttyUSB3", "/dev/ttyUSB4")
-    assert a.sample_rate_hz == b.sample_rate_hz == 200.0  # from [adc]
+    assert a.sample_rate_hz == b.sample_rate_hz == 200.0  # from [rate_stream]
     assert (a.gain_v_per_dps, b.gain_v_per_dps) == (0.01, 0.0102)  # the unit's own
     assert cfg.scanner.channels == (101, 103)  # the scan list: the units' channels
     assert bench_from_dict({}, "one.toml").units == ()  # a single-unit bench: none
@@ -48,6 +48,11 @@ def test_units_take_the_adc_table_with_their_port_and_overrides() -> None:
         ({"unit": [{"serial": "A", "temperature_channel": "101"}]}, "temperature_channel"),
         ({"unit": [{"serial": "A", "temperature_channel": 101, "colour": 1}]}, "colour"),
         ({"unit": [{"serial": "A", "temperature_channel": 101, "adc": {"bitz": 3}}]}, "bitz"),
+        (
+            {"unit": [{"serial": "A", "temperature_channel": 101, "adc": {}, "rate_stream": {}}]},
+            r"\[\[unit\]\] A: rate_stream and adc are the same table: keep one",
+        ),
+        ({"adc": {}}, r"\[rate_stream\] and \[adc\] are the same role: keep one"),
         (
             {"unit": [{"serial": "A", "temperature_channel": 101}] * 2},
             "serial A is given to more than one unit",
@@ -81,17 +86,28 @@ def test_a_real_bench_needs_every_units_port(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"\[\[unit\]\] G-2 port is required"):
         load_bench(f)
     f.write_text(f.read_text() + 'port = "/dev/ttyUSB4"\n')
-    cfg = load_bench(f)  # no [thermometer] resource nor [adc] port needed
-    assert [u.adc.port for u in cfg.units] == ["/dev/ttyUSB3", "/dev/ttyUSB4"]
+    cfg = load_bench(f)  # no [thermometer] resource nor [rate_stream] port needed
+    assert [u.rate_stream.port for u in cfg.units] == ["/dev/ttyUSB3", "/dev/ttyUSB4"]
 
 
 def test_example_fixture_bench() -> None:
     cfg = load_bench(Path(__file__).resolve().parents[1] / "examples" / "fixture.toml")
     assert [u.temperature_channel for u in cfg.units] == [101, 102]
-    assert cfg.units[1].adc.gain_v_per_dps == 0.01008 and cfg.scanner.card == "34901A"
+    assert cfg.units[1].rate_stream.gain_v_per_dps == 0.01008 and cfg.scanner.card == "34901A"
 
 
 def test_multi_unit_bench_round_trips() -> None:
     cfg = bench_from_dict(TWO, "b.toml")
     again = bench_from_dict(cfg.to_dict(), "again")
     assert again.units == cfg.units and again.scanner == cfg.scanner
+
+
+def test_older_adc_tables_read_as_rate_stream() -> None:
+    """A BENCH.toml written before the rename (``[adc]``, ``[[unit]] adc``) reads as the
+    same bench."""
+    old = {k: v for k, v in TWO.items() if k not in ("rate_stream", "unit")}
+    old["adc"] = TWO["rate_stream"]
+    old["unit"] = [
+        {("adc" if k == "rate_stream" else k): v for k, v in u.items()} for u in TWO["unit"]
+    ]
+    assert bench_from_dict(old, "b.toml").units == bench_from_dict(TWO, "b.toml").units

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gyrolab.profiles.profile import Profile, Step
-from gyrolab.sim.discrepancy.axes import from_arrays_axes, run_discrepancy_axes
+from gyrolab.sim.discrepancy.axes_workflow import from_arrays_axes, run_discrepancy_axes
 from gyrolab.sim.discrepancy.synth import simulate_bench
 from gyrolab.sim.model import nominal_model
 

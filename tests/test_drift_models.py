@@ -23,7 +23,7 @@ from gyrolab.compensation.temperature_model import (
     load_temperature_model,
     temperature_inputs,
 )
-from gyrolab.export.spec import evaluate
+from gyrolab.export.model_json import evaluate
 
 torch.set_num_threads(1)
 FAST = PipelineConfig(

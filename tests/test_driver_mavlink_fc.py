@@ -44,6 +44,10 @@ def test_every_imu_recorded_in_the_sensor_frame_and_the_parameters_put_back(
 ) -> None:
     h = _handle(fw)
     out = tmp_path / "run.mcap"
+    # the bench's two wall floors (hold 5 s, loss 15 s) on the watchdog's one record
+    assert (h.silence.min_wall_s, h.hold_silence.min_wall_s) == (15.0, 5.0)
+    h.silence.heard("probe")
+    assert not h.hold_silence.lost("probe", 1e9, 0.0)
     try:
         before = h.bench.device.values()
         cfg = with_ports(fc_bench_config(fw, rate_hz=RATE), h)

@@ -24,13 +24,13 @@ from gyrolab.compensation.firmware import DEG2RAD
 from gyrolab.compensation.model_dir import ModelDir, load_model
 from gyrolab.compensation.prepare import causal_temperature
 from gyrolab.compensation.regressors import evaluate_inputs
+from gyrolab.export.model_json import export_spec
 from gyrolab.export.params import (
     ardupilot_correction,
     px4_correction,
     read_ardupilot_parm,
     read_px4_params,
 )
-from gyrolab.export.spec import export_spec
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.reader import read_recording
@@ -172,7 +172,7 @@ def test_apply_three_axes_runs_the_model_the_c_export_runs(unit: dict[str, Path]
 
 
 def test_three_axis_report_shows_every_axis(unit: dict[str, Path]) -> None:
-    from gyrolab.report.axes import build_axes_report
+    from gyrolab.report.axes_report import build_axes_report
 
     doc, metrics = build_axes_report(unit["val"], unit["model"], 3, lambda _s: None)
     assert set(metrics["axes"]) == {"x", "y", "z"}

@@ -2,7 +2,7 @@
 rate, hysteresis, warm-up) on a 3-axis unit with a die lag and hysteresis: the generated
 C, compiled with the system compiler and run reading by reading over a whole held-out
 profile (115 200 samples × 3 axes), matches the Python causal output; the JSON's own
-evaluator (gyrolab.export.spec.causal_readings) matches the fitted model exactly."""
+evaluator (gyrolab.export.model_json.causal_readings) matches the fitted model exactly."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from gyrolab.compensation.apply import StreamingCompensator
 from gyrolab.compensation.causal_models import evaluate_causal
 from gyrolab.compensation.evaluate import series_metrics
 from gyrolab.compensation.model_dir import ModelDir
-from gyrolab.export.spec import export_spec
+from gyrolab.export.model_json import export_spec
 from gyrolab.numerics.averaging import BlockAverager
 from gyrolab.profiles.profile import load_profile
 from gyrolab.record.reader import read_recording

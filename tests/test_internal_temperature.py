@@ -112,12 +112,12 @@ MIXED = {
 def test_units_may_mix_internal_sensors_and_pt100s() -> None:
     cfg = bench_from_dict(MIXED, "b.toml")
     a, b = cfg.units
-    assert (a.temperature, a.temperature_channel, a.adc.internal_temperature) == (
+    assert (a.temperature, a.temperature_channel, a.rate_stream.internal_temperature) == (
         "internal",
         None,
         True,
     )
-    assert (b.temperature, b.temperature_channel, b.adc.internal_temperature) == (
+    assert (b.temperature, b.temperature_channel, b.rate_stream.internal_temperature) == (
         "pt100",
         102,
         False,
@@ -133,11 +133,11 @@ def test_every_unit_internal_needs_no_scanner(tmp_path: Path) -> None:
         '[chamber]\nport = "/dev/ttyUSB1"\n'
         '[[unit]]\nserial = "G-1"\nport = "/dev/ttyUSB3"\ntemperature = "internal"\n'
         '[[unit]]\nserial = "G-2"\nport = "/dev/ttyUSB4"\ntemperature = "internal"\n'
-        "adc = { temperature_c_per_lsb = 0.0106 }\n"
+        "rate_stream = { temperature_c_per_lsb = 0.0106 }\n"
     )
     cfg = load_bench(f)
     assert cfg.scanner is None and all(u.internal for u in cfg.units)
-    assert cfg.units[1].adc.temperature_c_per_lsb == 0.0106
+    assert cfg.units[1].rate_stream.temperature_c_per_lsb == 0.0106
     assert bench_from_dict(cfg.to_dict(), "again").units == cfg.units
 
 
@@ -154,9 +154,9 @@ def test_every_unit_internal_needs_no_scanner(tmp_path: Path) -> None:
         ({"temperature": "internal"}, True, r"b.toml: \[scanner\]: every \[\[unit\]\] has"),
         ({"temperature_channel": 101}, False, r"b.toml: \[\[unit\]\] needs \[scanner\]"),
         (
-            {"temperature": "internal", "adc": {"temperature_c_per_lsb": -1.0}},
+            {"temperature": "internal", "rate_stream": {"temperature_c_per_lsb": -1.0}},
             False,
-            r"b.toml: \[\[unit\]\] G-1 adc gyroadc: temperature_c_per_lsb",
+            r"b.toml: \[\[unit\]\] G-1 rate_stream gyroadc: temperature_c_per_lsb",
         ),
     ],
 )

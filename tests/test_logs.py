@@ -213,7 +213,7 @@ def test_log_options_from_the_command_line(logs: dict, tmp_path: Path) -> None:
 
 
 def test_report_allan_of_a_dataflash_log(logs: dict) -> None:
-    from gyrolab.report.axes import build_axes_report
+    from gyrolab.report.axes_report import build_axes_report
 
     doc, metrics = build_axes_report(logs["dataflash"], None, 3, lambda _s: None)
     assert set(metrics["axes"]) == {"x", "y", "z"}

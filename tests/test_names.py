@@ -7,8 +7,8 @@ import inspect
 from dataclasses import fields
 from pathlib import Path
 
-from gyrolab.acquisition.bench_config import BenchConfig
-from gyrolab.acquisition.runner import Acquisition
+from gyrolab.acquisition.bench_config import BenchConfig, UnitConfig
+from gyrolab.acquisition.runner import Acquisition, UnitDevices
 from gyrolab.app.demo import run_demo
 from gyrolab.app.options import SimulateOptions
 from gyrolab.cli import build_parser
@@ -51,11 +51,14 @@ def test_no_parameter_uses_a_retired_name_for_the_sample_rate() -> None:
 
 def test_each_role_goes_by_its_role_name_in_code() -> None:
     """The bench's fields and the run engine's keywords are the roles' names (the BENCH.toml
-    tables ``[thermometer]``, ``[chamber]``); ``multimeter`` and ``oven`` remain only what
-    the recording calls the instruments, and older BENCH.toml tables (tests/test_registry)."""
+    tables ``[thermometer]``, ``[chamber]``, ``[rate_stream]``); ``multimeter``, ``oven`` and
+    ``adc`` remain only what the recording calls the instruments, and older BENCH.toml
+    tables (tests/test_registry)."""
     bench = {f.name for f in fields(BenchConfig)}
-    assert {"thermometer", "chamber", "adc", "scanner"} <= bench
-    assert not {"multimeter", "oven"} & bench
+    assert {"thermometer", "chamber", "rate_stream", "scanner"} <= bench
+    assert not {"multimeter", "oven", "adc"} & bench
+    assert "rate_stream" in {f.name for f in fields(UnitConfig)}
+    assert "rate_stream" in {f.name for f in fields(UnitDevices)}
     params = inspect.signature(Acquisition).parameters
-    assert {"thermometer", "chamber", "chamber_period_s"} <= set(params)
-    assert not {"oven", "multimeter", "oven_period_s"} & set(params)
+    assert {"thermometer", "chamber", "chamber_period_s", "rate_stream"} <= set(params)
+    assert not {"oven", "multimeter", "oven_period_s", "adc"} & set(params)

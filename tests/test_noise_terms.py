@@ -123,13 +123,50 @@ def test_real_filtered_record_arw_is_read_above_the_sensor_filter() -> None:
     assert 0.04 <= tau_f <= 0.32
     r = allan_deviation(x, fs, taus="octave")
     on_line = 60.0 * float(np.exp(np.interp(0.0, np.log(r.taus), np.log(r.dev))))  # σ(1 s)
+    # the -1/2-region reading (benchmarks/noise_terms_real.py): the line of slope -1/2
+    # through the longest run of taus (<= T/10) whose local slopes are within 0.1 of -1/2
+    use = r.taus <= 0.1 * r.duration_s
+    lt, la = np.log10(r.taus[use]), np.log10(r.dev[use])
+    half = np.abs(np.diff(la) / np.diff(lt) + 0.5) <= 0.1
+    runs, i = [], 0
+    for j in range(half.size + 1):
+        if j == half.size or not half[j]:
+            runs.append((i, j))  # pairs i..j-1 -> points i..j
+            i = j + 1
+    a, b = max(runs, key=lambda ab: ab[1] - ab[0])
+    assert b - a >= 4
+    reading = 60.0 * 10.0 ** float(np.mean((la + 0.5 * lt)[a : b + 1]))
+    for arw in (
+        noise_terms(r, tau_min=tau_f).deg_h()["arw_deg_per_sqrt_h"],
+        noise_terms(r, method="fit", tau_min=tau_f).deg_h()["arw_deg_per_sqrt_h"],
+        # the single-point rule (the plateau noise table) above the corner
+        noise_terms(r, slope_tol=None, tau_min=tau_f).deg_h()["arw_deg_per_sqrt_h"],
+    ):
+        assert arw == pytest.approx(on_line, rel=0.05)
+        assert arw == pytest.approx(reading, rel=0.05)
     arw = noise_terms(r, tau_min=tau_f).deg_h()["arw_deg_per_sqrt_h"]
-    assert arw == pytest.approx(on_line, rel=0.05)
     below = noise_terms(r).deg_h()["arw_deg_per_sqrt_h"]  # the filtered taus included
     assert abs(below / on_line - 1.0) > abs(arw / on_line - 1.0)
     # white noise has no corner: one sample
     rng = np.random.default_rng(3)
     assert filter_corner_tau(rng.standard_normal(50_000), 100.0) == pytest.approx(0.01)
+
+
+def test_filter_corner_waits_for_a_ringing_filter_to_settle() -> None:
+    # a filter that rings (as the ADIS16405's Z gyro): r1 of the m-averages swings in sign
+    # (0.06, -0.18, 0.00, -0.05, 0.00 ...) and passes near 0 at m = 4 before it has
+    # settled; the corner lies above the last swing (m = 8), not at the first near-zero
+    from scipy import signal
+
+    from gyrolab.numerics.noise_terms import filter_corner_tau
+
+    rng = np.random.default_rng(1)
+    n, rho, period = 200_000, 0.97, 5.0
+    osc = signal.lfilter(
+        [1.0], [1.0, -2 * rho * np.cos(2 * np.pi / period), rho**2], rng.standard_normal(n)
+    )
+    y = rng.standard_normal(n) + 0.5 * osc / np.std(osc)
+    assert filter_corner_tau(y, 100.0) >= 0.16
 
 
 def test_fit_never_reports_b_above_its_identifiability_bound() -> None:

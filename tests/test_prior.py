@@ -170,3 +170,28 @@ def test_clusters_found_when_the_units_form_groups() -> None:
     cal, _ = _run("quick", p, c, seed=9)
     mem = fit_map(cal, prior).membership
     assert mem.belongs and "u0" in prior.clusters[mem.cluster].members
+
+
+def test_start_branch_is_carried_from_the_fleet_to_the_fit() -> None:
+    """Units whose models start on the heating branch (issue 23's power-on branch, s₀ = +1):
+    the cluster carries s₀, the MAP fit of a new unit of the part number runs its play
+    from it, and a prior saved before s₀ was carried reads as s₀ = 0."""
+    rng = np.random.default_rng(23)
+    units = []
+    for i in range(4):
+        p, c = _unit(rng)
+        p = CausalParams(p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, start_branch=1.0)
+        cal, _ = _run("paper", p, c, seed=60 + i)
+        units.append(UnitEntry(f"u{i}", p, _own_fit(cal, p)))
+    prior = learn_prior(units)
+    assert [cl.start_branch for cl in prior.clusters] == [1.0]
+    p, c = _unit(np.random.default_rng(24))
+    p = CausalParams(p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, start_branch=1.0)
+    cal, _ = _run("quick", p, c, seed=7)
+    got = fit_map(cal, prior)
+    assert got.model.params.start_branch == 1.0, got.log["features_from"]
+    assert got.log["features"]["start_branch"] == 1.0
+    d = prior.to_dict()
+    assert FleetPrior.from_dict(d).clusters[0].start_branch == 1.0
+    del d["clusters"][0]["start_branch"]
+    assert FleetPrior.from_dict(d).clusters[0].start_branch == 0.0

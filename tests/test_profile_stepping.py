@@ -78,7 +78,7 @@ def test_simulate_and_acquire_end_every_step_at_the_same_time(tmp_path: Path) ->
         thermometer=Replay(clock, srec.pt100_t, srec.pt100_c),
         chamber=Chamber(clock),
         gyro=Stream(clock),
-        adc=GyroAdcConfig(sample_rate_hz=100.0),
+        rate_stream=GyroAdcConfig(sample_rate_hz=100.0),
         limits=Limits(),
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,

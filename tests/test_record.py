@@ -170,13 +170,20 @@ def test_rewrite_transforms_adds_topics_and_keeps_times_and_sequences(tmp_path: 
 
 
 def test_one_module_writes_mcap() -> None:
-    """Every MCAP file gyrolab writes goes through gyrolab/record/writer.py."""
-    users = sorted(
-        str(p.relative_to(REPO))
-        for p in (REPO / "gyrolab").rglob("*.py")
-        if re.search(r"\bmcap\.writer\b", p.read_text())
-    )
-    assert users == ["gyrolab/record/writer.py"]
+    """Every MCAP file gyrolab writes goes through gyrolab/record/writer.py: its McapFile
+    builds the records (no module uses the mcap library's writer, the reference of
+    tests/test_mcap_file.py), and no other module packs an MCAP record."""
+    sources = {str(p.relative_to(REPO)): p.read_text() for p in (REPO / "gyrolab").rglob("*.py")}
+    assert [f for f, text in sorted(sources.items()) if re.search(r"\bmcap\.writer\b", text)] == []
+    packers = [  # a record packed for writing (a reader packs the footer only for its CRC)
+        f
+        for f, text in sorted(sources.items())
+        if any(
+            re.search(r"(pack|_record)\(OP_", line) and "crc" not in line
+            for line in text.splitlines()
+        )
+    ]
+    assert packers == ["gyrolab/record/writer.py"]
 
 
 def test_a_damaged_source_is_an_input_error(tmp_path: Path) -> None:

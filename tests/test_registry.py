@@ -45,17 +45,22 @@ def test_every_driver_follows_the_spec_pattern() -> None:
 
 
 def test_new_and_old_table_names_give_the_same_bench() -> None:
-    old = bench_from_dict({"multimeter": {"nplc": 1.0}, "oven": {"slave_address": 3}}, "old")
+    old = bench_from_dict(
+        {"multimeter": {"nplc": 1.0}, "oven": {"slave_address": 3}, "adc": {"block_s": 0.25}},
+        "old",
+    )
     new = bench_from_dict(
         {
             "thermometer": {"driver": "agilent34401a", "nplc": 1.0},
             "chamber": {"driver": "watlowf4", "slave_address": 3},
+            "rate_stream": {"driver": "gyroadc", "block_s": 0.25},
         },
         "new",
     )
     assert {**old.to_dict(), "name": ""} == {**new.to_dict(), "name": ""}
     assert isinstance(new.thermometer, Agilent34401AConfig) and new.thermometer.nplc == 1.0
     assert isinstance(new.chamber, WatlowF4Config) and new.chamber.slave_address == 3
+    assert new.rate_stream.block_s == 0.25 and "adc" not in new.to_dict()
 
 
 @pytest.mark.parametrize(
@@ -65,6 +70,8 @@ def test_new_and_old_table_names_give_the_same_bench() -> None:
         ({"chamber": {"driver": "agilent34401a"}}, "no chamber driver 'agilent34401a'"),
         ({"thermometer": {"nplcc": 1}}, r"\[thermometer\]: unknown key\(s\) \['nplcc'\]"),
         ({"thermometer": {}, "multimeter": {}}, "same role"),
+        ({"rate_stream": {}, "adc": {}}, r"\[rate_stream\] and \[adc\] are the same role: keep"),
+        ({"adc": {"bitz": 3}}, r"\[adc\]: unknown key\(s\) \['bitz'\]"),
     ],
 )
 def test_bad_role_tables_are_one_clear_error(d: dict, match: str) -> None:
@@ -74,7 +81,7 @@ def test_bad_role_tables_are_one_clear_error(d: dict, match: str) -> None:
 
 def test_example_bench_names_its_drivers() -> None:
     cfg = load_bench(REPO / "examples" / "lab.toml")
-    assert (cfg.thermometer.driver, cfg.chamber.driver, cfg.adc.driver) == (
+    assert (cfg.thermometer.driver, cfg.chamber.driver, cfg.rate_stream.driver) == (
         "agilent34401a",
         "watlowf4",
         "gyroadc",

@@ -1,4 +1,4 @@
-"""Spec limits (gyrolab/report/spec.py), the verdict and the sign-off block of a report."""
+"""Spec limits (gyrolab/report/spec_limits.py), the verdict and the sign-off block of a report."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from gyrolab.cli import main
 from gyrolab.errors import InputError
-from gyrolab.report.spec import evaluate, load_spec
+from gyrolab.report.spec_limits import evaluate, load_spec
 
 METRICS = {
     "raw": {

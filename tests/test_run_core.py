@@ -132,7 +132,7 @@ def _run(
         thermometer=Thermometer(clock, chamber, therm_faults),
         chamber=chamber,
         gyro=Stream(clock),
-        adc=GyroAdcConfig(sample_rate_hz=100.0),
+        rate_stream=GyroAdcConfig(sample_rate_hz=100.0),
         limits=Limits(comm_timeout_s=comm_timeout_s, pt100_max_c=75.0, watchdog_samples=3),
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,
@@ -223,3 +223,32 @@ def test_the_simulated_bench_s_silence_rule_needs_wall_time_too() -> None:
     lab_like = SimSilence(min_wall_s=0.0)
     lab_like.heard("oven")
     assert lab_like.lost("oven", 61.0, 60.0) and not lab_like.lost("oven", 59.0, 60.0)
+
+
+def test_a_stream_reader_reads_at_most_once_per_interval_and_loses_nothing() -> None:
+    """``StreamReader`` (a lab run's reader thread) on a stream that always has data: no
+    more reads than one per ``READ_MIN_INTERVAL_S`` of wall time, and every block read is
+    posted (what waits between reads stays in the port, none is dropped)."""
+    import threading
+    import time
+
+    from gyrolab.acquisition.pollers import READ_MIN_INTERVAL_S, StreamReader
+
+    class Busy:
+        name = "adc"
+        reads = 0
+
+        def read(self, timeout_s: float) -> AdcRead:
+            Busy.reads += 1
+            blk = AdcBlock(Busy.reads, 10 * Busy.reads, 0.1 * Busy.reads, 0.01, np.zeros(10))
+            return AdcRead(blocks=[blk])
+
+    posted: list[tuple] = []
+    stop = threading.Event()
+    reader = StreamReader(Busy(), posted.append, stop, FakeClock())  # type: ignore[arg-type]
+    reader.start()
+    time.sleep(0.3)
+    stop.set()
+    reader.join(1.0)
+    assert 3 <= Busy.reads <= 0.3 / READ_MIN_INTERVAL_S + 2
+    assert [p[3].blocks[0].first_seq for p in posted] == list(range(1, Busy.reads + 1))

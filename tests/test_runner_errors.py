@@ -93,7 +93,7 @@ def _run(tmp_path: Path, chamber: MemoryChamber, thermo: MemoryThermometer, dura
         thermometer=thermo,
         chamber=chamber,
         gyro=SilentStream(),
-        adc=GyroAdcConfig(),
+        rate_stream=GyroAdcConfig(),
         limits=Limits(comm_timeout_s=30.0),
         safe_state=SafeState(),
         pt100_period_s=0.05,

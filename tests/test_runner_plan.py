@@ -160,7 +160,7 @@ def test_example_bench_file_loads_and_round_trips() -> None:
     again = bench_from_dict({**cfg.to_dict()}, "again")
     assert again.to_dict() == cfg.to_dict()
     # 24-bit ADC, 2.5 V reference, 10 mV/(°/s): one count is about 30 µ°/s.
-    assert BenchConfig().adc.dps_per_count() == pytest.approx(2.5 / 2**23 / 0.01)
+    assert BenchConfig().rate_stream.dps_per_count() == pytest.approx(2.5 / 2**23 / 0.01)
 
 
 @pytest.mark.parametrize(
@@ -172,7 +172,7 @@ def test_example_bench_file_loads_and_round_trips() -> None:
         ("[safe_state]\nsetpoint_c = 200\n", "outside the setpoint limits"),
         ("[recorder]\nflush_every_s = 5\n", "flush_every_s"),
         ("[ovenz]\n", "unknown table"),
-        ("[adc]\nport = '/dev/x'\n", r"\[thermometer\] resource is required"),
+        ("[rate_stream]\nport = '/dev/x'\n", r"\[thermometer\] resource is required"),
     ],
 )
 def test_bad_bench_files_name_the_file_and_key(tmp_path: Path, text: str, match: str) -> None:

@@ -85,7 +85,7 @@ def _run(
         thermometer=Thermometer(clock, chamber, therm_faults),
         chamber=chamber,
         gyro=StallingStream(clock, stalls),
-        adc=GyroAdcConfig(sample_rate_hz=100.0),
+        rate_stream=GyroAdcConfig(sample_rate_hz=100.0),
         limits=Limits(comm_timeout_s=comm_timeout_s, pt100_max_c=75.0, watchdog_samples=3),
         safe_state=SafeState(setpoint_c=25.0),
         pt100_period_s=1.0,
@@ -325,3 +325,28 @@ def test_the_simulated_benchs_hold_rule_hears_what_its_watchdog_hears() -> None:
     assert handle.hold_silence is not None and not handle.hold_silence.lost(
         "multimeter", 100.0, 5.0
     )
+
+
+def test_the_flight_controller_bench_holds_before_it_gives_a_source_up(monkeypatch) -> None:
+    """The FC bench's two wall floors, like the ADC bench's: a source silent for 5-15 s of
+    wall time (and past its simulated limits) holds the run but is not lost; from 15 s it
+    is; both rules count from what the watchdog heard (one record)."""
+    import gyrolab.app.sim_bench as sim_bench
+    from gyrolab.app.fc_bench import FC_COMM_MIN_WALL_S, FC_HOLD_MIN_WALL_S, fc_silence
+
+    assert FC_HOLD_MIN_WALL_S < FC_COMM_MIN_WALL_S
+    now = [1000.0]
+
+    class WallClock:
+        @staticmethod
+        def monotonic() -> float:
+            return now[0]
+
+    monkeypatch.setattr(sim_bench, "time", WallClock)
+    watchdog, hold = fc_silence()
+    watchdog.heard("chamber")
+    for wall, held, lost in [(1.0, False, False), (6.0, True, False), (16.0, True, True)]:
+        now[0] = 1000.0 + wall
+        assert hold.lost("chamber", 500.0, 5.0) is held, wall
+        assert watchdog.lost("chamber", 500.0, 60.0) is lost, wall
+    assert not hold.lost("chamber", 4.0, 5.0)  # within its simulated limit: never held

@@ -6,8 +6,8 @@ ADC's conversion from counts to °/s, the recorder's crash-loss policy, and who 
 unit. ``docs/bench-config.md`` documents every key; ``examples/lab.toml`` is a complete
 example. Unknown keys are errors (a typo in a safety limit must not pass silently).
 
-Each instrument table (``[thermometer]``, ``[chamber]``, ``[adc]``) is the config dataclass
-of the driver its ``driver`` key names, declared in that driver's module and found through
+Each instrument table (``[thermometer]``, ``[chamber]``, ``[rate_stream]``) is the config
+dataclass of the driver its ``driver`` key names, declared in that driver's module and found through
 :mod:`gyrolab.instruments.registry`; this module holds only what is bench-wide (run, limits,
 safe state, recorder) and names no driver.
 
@@ -43,14 +43,15 @@ class RunInfo:
 @dataclass(frozen=True)
 class UnitConfig:
     """One unit of a multi-unit bench (``[[unit]]``, docs/bench-config.md): its ``serial``
-    (the recording's /unit/<serial>/… topics), its rate stream (``adc``: the rate-stream
-    driver's config, the bench's ``[adc]`` table with this unit's ``driver``, ``port`` and
-    overrides) and its temperature: ``temperature = "pt100"`` read by the scanner on
-    ``temperature_channel``, or ``"internal"``, the unit's own sensor in its rate stream
-    (``temperature_channel`` None; the stream config's ``internal_temperature`` set)."""
+    (the recording's /unit/<serial>/… topics), its rate stream (``rate_stream``: the
+    rate-stream driver's config, the bench's ``[rate_stream]`` table with this unit's
+    ``driver``, ``port`` and overrides) and its temperature: ``temperature = "pt100"``
+    read by the scanner on ``temperature_channel``, or ``"internal"``, the unit's own
+    sensor in its rate stream (``temperature_channel`` None; the stream config's
+    ``internal_temperature`` set)."""
 
     serial: str
-    adc: Any
+    rate_stream: Any
     temperature_channel: int | None
     temperature: str = "pt100"
 
@@ -112,12 +113,13 @@ class BenchConfig:
 
     name: str = "bench"
     run: RunInfo = field(default_factory=RunInfo)
-    # The three roles (``[thermometer]``, ``[chamber]``, ``[adc]``), each the config
+    # The three roles (``[thermometer]``, ``[chamber]``, ``[rate_stream]``), each the config
     # dataclass of the driver its table names (gyrolab.instruments.registry); each field
-    # is named as its table (the older tables [multimeter] and [oven] are still read).
+    # is named as its role and table (the older tables [multimeter], [oven] and [adc] are
+    # still read: _ROLE_TABLES).
     thermometer: Any = field(default_factory=lambda: registry.default_config("thermometer"))
     chamber: Any = field(default_factory=lambda: registry.default_config("chamber"))
-    adc: Any = field(default_factory=lambda: registry.default_config("rate_stream"))
+    rate_stream: Any = field(default_factory=lambda: registry.default_config("rate_stream"))
     limits: Limits = field(default_factory=Limits)
     safe_state: SafeState = field(default_factory=SafeState)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
@@ -194,25 +196,40 @@ def _section(cls: type, raw: Any, where: str, source: str) -> Any:
     return cls(**kw)
 
 
-# Role tables: (BenchConfig field, role, table names: the current one first, then the
-# older name still accepted).
+# Role tables: each role (a BenchConfig field of that name) and its table names, the
+# current one first, then the older name still read as the same table.
 _ROLE_TABLES = (
-    ("thermometer", "thermometer", ("thermometer", "multimeter")),
-    ("chamber", "chamber", ("chamber", "oven")),
-    ("adc", "rate_stream", ("adc",)),
+    ("thermometer", ("thermometer", "multimeter")),
+    ("chamber", ("chamber", "oven")),
+    ("rate_stream", ("rate_stream", "adc")),
 )
+# Every role's table names; a multi-unit bench's scanner is the table [scanner].
+_TABLE_NAMES = {**dict(_ROLE_TABLES), "multi_thermometer": ("scanner",)}
 
 
-def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source: str) -> Any:
-    """The driver config of one role: ``driver`` (default: the bench's original driver)
-    picks the dataclass the rest of the table is checked against."""
-    given = [t for t in tables if t in d]
+def _named(d: dict[str, Any], names: tuple[str, ...], source: str, both: str) -> str:
+    """Which of ``names`` (a current name, then its older one) ``d`` uses: the one given,
+    else the current one; both given is an error (``both`` formats the two)."""
+    given = [n for n in names if n in d]
     if len(given) > 1:
-        raise InputError(source, f"[{given[0]}] and [{given[1]}] are the same role: keep one")
-    where = given[0] if given else tables[0]
+        raise InputError(source, both.format(*given[:2]) + ": keep one")
+    return given[0] if given else names[0]
+
+
+def _role_table(d: dict[str, Any], role: str, source: str) -> tuple[str, dict[str, Any]]:
+    """The table of ``role`` as the file names it (its current or its older name; both is
+    an error) and its contents (empty when absent)."""
+    where = _named(d, _TABLE_NAMES[role], source, "[{}] and [{}] are the same role")
     raw = d.get(where, {})
     if not isinstance(raw, dict):
         raise InputError(source, f"[{where}] must be a table")
+    return where, raw
+
+
+def _role_section(d: dict[str, Any], role: str, source: str) -> Any:
+    """The driver config of one role: ``driver`` (default: the bench's original driver)
+    picks the dataclass the rest of the table is checked against."""
+    where, raw = _role_table(d, role, source)
     name = raw.get("driver", registry.DEFAULT_DRIVER[role])
     try:
         spec = registry.get(str(name), role)
@@ -223,15 +240,15 @@ def _role_section(d: dict[str, Any], role: str, tables: tuple[str, ...], source:
 
 def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     """Build and check a :class:`BenchConfig` from the TOML layout."""
-    tables = {t for _, _, names in _ROLE_TABLES for t in names}
+    tables = {t for _, names in _ROLE_TABLES for t in names}
     unknown = sorted(set(d) - set(_SECTIONS) - tables - {"name", "scanner", "unit"})
     if unknown:
         raise InputError(source, f"unknown table(s) or key(s) {unknown}")
     kw: dict[str, Any] = {
         name: _section(cls, d.get(name, {}), name, source) for name, cls in _SECTIONS.items()
     }
-    for fname, role, names in _ROLE_TABLES:
-        kw[fname] = _role_section(d, role, names, source)
+    for role, _ in _ROLE_TABLES:
+        kw[role] = _role_section(d, role, source)
     if "unit" in d or "scanner" in d:
         kw["units"], kw["scanner"] = _multi_unit(d, source)
     cfg = BenchConfig(name=str(d.get("name", Path(source).stem)), source=source, **kw)
@@ -239,7 +256,9 @@ def bench_from_dict(d: dict[str, Any], source: str = "<dict>") -> BenchConfig:
     return cfg
 
 
-_UNIT_KEYS = ("serial", "driver", "port", "temperature", "temperature_channel", "adc")
+# A unit's overrides of [rate_stream] keys: a table named as that table (or its older name).
+_UNIT_OVERRIDES = _TABLE_NAMES["rate_stream"]
+_UNIT_KEYS = ("serial", "driver", "port", "temperature", "temperature_channel", *_UNIT_OVERRIDES)
 # A unit's temperature (``[[unit]] temperature``): its PT100 on a scanner channel, or the
 # unit's own internal sensor, reported in its rate stream.
 TEMPERATURE_SOURCES = ("pt100", "internal")
@@ -247,7 +266,8 @@ TEMPERATURE_SOURCES = ("pt100", "internal")
 
 def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...], Any]:
     """``[[unit]]`` and ``[scanner]``: the units (each one's rate-stream config is the
-    ``[adc]`` table with the unit's ``driver``, ``port`` and ``adc`` overrides) and the
+    ``[rate_stream]`` table with the unit's ``driver``, ``port`` and ``rate_stream``
+    overrides) and the
     scanner's config, its channel list taken from the units read by PT100 (no scanner when
     every unit is on its internal sensor)."""
     from gyrolab.record.format import check_serial
@@ -257,7 +277,7 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
         raise InputError(source, "[scanner] needs the units it reads: one [[unit]] table each")
     if not all(isinstance(u, dict) for u in raw_units):
         raise InputError(source, "unit must be an array of tables ([[unit]])")
-    for t in ("thermometer", "multimeter"):
+    for t in _TABLE_NAMES["thermometer"]:
         if t in d:
             raise InputError(
                 source, f"[{t}]: a multi-unit bench reads each unit's PT100 with [scanner]"
@@ -267,7 +287,7 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
         raise InputError(source, "[scanner] must be a table")
     if raw_scanner is not None and "channels" in raw_scanner:
         raise InputError(source, "[scanner] channels: set by each [[unit]] temperature_channel")
-    adc_raw = d.get("adc", {})
+    shared_where, shared = _role_table(d, "rate_stream", source)
     units = []
     for i, u in enumerate(raw_units, start=1):
         where = f"[[unit]] {i}"
@@ -280,10 +300,11 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
             raise InputError(source, f"{where} serial: {e}") from None
         where = f"[[unit]] {serial}"
         temperature, ch = _unit_temperature(u, where, source)
-        over = u.get("adc", {})
+        key = _named(u, _UNIT_OVERRIDES, source, where + ": {} and {} are the same table")
+        over = u.get(key, {})
         if not isinstance(over, dict):
-            raise InputError(source, f"{where}: adc must be a table of [adc] keys")
-        raw = {**adc_raw, **over, **{k: u[k] for k in ("driver", "port") if k in u}}
+            raise InputError(source, f"{where}: {key} must be a table of [{shared_where}] keys")
+        raw = {**shared, **over, **{k: u[k] for k in ("driver", "port") if k in u}}
         name = raw.get("driver", registry.DEFAULT_DRIVER["rate_stream"])
         try:
             spec = registry.get(str(name), "rate_stream")
@@ -298,8 +319,8 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
                     "reports no internal temperature",
                 )
             raw["internal_temperature"] = True
-        adc = _section(spec.config, raw, f"{where} adc", source)
-        units.append(UnitConfig(serial, adc, ch, temperature))
+        stream = _section(spec.config, raw, f"{where} {key}", source)
+        units.append(UnitConfig(serial, stream, ch, temperature))
     channels = tuple(u.temperature_channel for u in units if not u.internal)
     if not channels:
         if raw_scanner is not None:
@@ -311,7 +332,7 @@ def _multi_unit(d: dict[str, Any], source: str) -> tuple[tuple[UnitConfig, ...],
         return tuple(units), None
     if raw_scanner is None:
         raise InputError(source, "[[unit]] needs [scanner], the multimeter reading their PT100s")
-    scanner = _role_section(d, "multi_thermometer", ("scanner",), source)
+    scanner = _role_section(d, "multi_thermometer", source)
     return tuple(units), replace(scanner, channels=channels)
 
 
@@ -384,8 +405,8 @@ def validate(cfg: BenchConfig) -> None:
         raise InputError(s, "[safe_state] setpoint_c is outside [limits] pt100_min_c..pt100_max_c")
     # The driver's own checks (its config's optional check(), registry.DriverSpec): each
     # role's, and on a multi-unit bench every unit's stream's and the scanner's too.
-    drivers = [(f"[{names[0]}]", getattr(cfg, fname)) for fname, _, names in _ROLE_TABLES]
-    drivers += [(f"[[unit]] {u.serial} adc", u.adc) for u in cfg.units]
+    drivers = [(f"[{role}]", getattr(cfg, role)) for role, _ in _ROLE_TABLES]
+    drivers += [(f"[[unit]] {u.serial} rate_stream", u.rate_stream) for u in cfg.units]
     if cfg.scanner is not None:
         drivers.append(("[scanner]", cfg.scanner))
     for where, sub in drivers:
@@ -401,7 +422,8 @@ def validate(cfg: BenchConfig) -> None:
     for name, period in periods:
         if not period > 0:
             raise InputError(s, f"[{name}] period_s must be > 0")
-    streams = [("[adc]", cfg.adc)] + [(f"[[unit]] {u.serial} adc", u.adc) for u in cfg.units]
+    streams = [("[rate_stream]", cfg.rate_stream)]
+    streams += [(f"[[unit]] {u.serial} rate_stream", u.rate_stream) for u in cfg.units]
     for where, a in streams:
         if not (a.sample_rate_hz > 0 and a.block_s > 0):
             raise InputError(s, f"{where} sample_rate_hz and block_s must be > 0")
@@ -414,7 +436,7 @@ def validate(cfg: BenchConfig) -> None:
         raise InputError(s, "[suspend] resoak_band_c must be > 0 °C")
     r = cfg.recorder
     if not (0 < r.flush_every_s <= 1.5):
-        # The 2 s crash-loss promise needs flush period + one ADC block below 2 s.
+        # The 2 s crash-loss promise needs flush period + one stream block below 2 s.
         raise InputError(s, "[recorder] flush_every_s must be in (0, 1.5] s")
     for where, a in streams:
         if r.flush_every_s + a.block_s > 2.0:
@@ -458,17 +480,16 @@ def load_bench(path: str | os.PathLike[str]) -> BenchConfig:
     d = read_toml(p, "bench file")
     cfg = bench_from_dict(d, str(p))
     # Where each instrument is: a multi-unit bench reaches the chamber, the scanner and
-    # every unit's rate stream (its [thermometer] and [adc] port are not used).
+    # every unit's rate stream (its [thermometer] and [rate_stream] port are not used).
     needed: list[tuple[str, str, Any]] = []
-    for fname, role, names in _ROLE_TABLES:
+    for role, _ in _ROLE_TABLES:
         if cfg.units and role != "chamber":
             continue
-        table = next((t for t in names if t in d), names[0])
-        needed.append((f"[{table}]", role, getattr(cfg, fname)))
+        needed.append((f"[{_role_table(d, role, str(p))[0]}]", role, getattr(cfg, role)))
     if cfg.scanner is not None:
         needed.append(("[scanner]", "multi_thermometer", cfg.scanner))
     if cfg.units:
-        needed += [(f"[[unit]] {u.serial}", "rate_stream", u.adc) for u in cfg.units]
+        needed += [(f"[[unit]] {u.serial}", "rate_stream", u.rate_stream) for u in cfg.units]
     for where, role, sub in needed:
         key = registry.get(sub.driver, role).address_key
         if not getattr(sub, key):

@@ -4,7 +4,7 @@ Each runs in its own thread during a lab run (``Acquisition(threaded=True)``), o
 stepped by the engine's own loop, one turn at a time, on any clock
 (``Acquisition(threaded=False)``: ``tests/test_run_core.py`` drives it with a fake clock).
 Neither interprets what it gets: every result or failure is posted to the engine's queue
-as ``(kind, source, clock time, payload)`` (kinds: ``reading``, ``command``, ``adc``,
+as ``(kind, source, clock time, payload)`` (kinds: ``reading``, ``command``, ``stream``,
 ``error`` — retried —, ``fatal``, ``report``), classified by
 :func:`gyrolab.instruments.roles.is_transient`.
 """
@@ -25,13 +25,13 @@ from gyrolab.instruments.roles import RateStream, is_transient
 @dataclass(frozen=True)
 class UnitDevices:
     """One unit of a multi-unit run: its ``serial``, its connected rate ``stream`` (whose
-    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``adc`` and the
+    ``name`` is its source in /log, ``unit/<serial>``), the stream's config ``rate_stream`` and the
     scanner ``channel`` of its PT100 — None for a unit read by its internal sensor, whose
     stream delivers its temperature (``AdcBlock.temperature_c``)."""
 
     serial: str
     stream: RateStream
-    adc: Any
+    rate_stream: Any
     channel: int | None
 
     @property
@@ -130,8 +130,18 @@ class Poller(threading.Thread):
             self.clock.sleep(min(dt, 0.5))
 
 
+# A stream reader's shortest wall time between the reads that bring data. A real stream
+# (an ADC's 10 frames/s, an IMU's 25 messages/s) sends less often than this, so each of its
+# frames is still read as it arrives; a simulated bench at 300x delivers a simulated
+# second every 3.3 ms, and a read per delivery (8 units: 2 400 reads, posts and recorded
+# blocks a wall second) was a large part of the run engine's CPU (docs/performance.md).
+# Data waits at most this long in the port's buffer, none is lost.
+READ_MIN_INTERVAL_S = 0.01
+
+
 class StreamReader(threading.Thread):
-    """Reads the ADC stream continuously and posts what arrives."""
+    """Reads the ADC stream continuously and posts what arrives (at most one read that
+    brings data per ``READ_MIN_INTERVAL_S`` of wall time)."""
 
     def __init__(
         self,
@@ -140,7 +150,7 @@ class StreamReader(threading.Thread):
         stop: threading.Event,
         clock: Clock,
     ) -> None:
-        super().__init__(name="adc", daemon=True)
+        super().__init__(name="rate_stream", daemon=True)
         self.dev, self.post, self.stop_ev, self.clock = dev, post, stop, clock
         self.failed = False
 
@@ -157,11 +167,17 @@ class StreamReader(threading.Thread):
             self.post(("error", self.dev.name, self.clock.now(), f"{type(e).__name__}: {e}"))
             return False
         if got.blocks or got.events or got.gaps:
-            self.post(("adc", self.dev.name, self.clock.now(), got))
+            self.post(("stream", self.dev.name, self.clock.now(), got))
         return True
 
     def run(self) -> None:
+        last = -READ_MIN_INTERVAL_S
         while not self.stop_ev.is_set() and not self.failed:
+            # after a read, the next no sooner than READ_MIN_INTERVAL_S after it
+            rest = last + READ_MIN_INTERVAL_S - time.monotonic()
+            if rest > 0:
+                time.sleep(rest)
+            last = time.monotonic()
             if not self.step() and not self.failed:
                 time.sleep(0.05)
 

@@ -68,10 +68,11 @@ class Acquisition:
     the recording closed. ``on_status`` is called (from the main thread) with a
     :class:`Status` at most every ``status_every_s`` wall seconds.
 
-    A single-unit bench gives ``thermometer``, ``gyro`` and ``adc``. A multi-unit bench
-    gives ``units`` (one :class:`UnitDevices` each) and, as ``thermometer``, the scanner
-    (a :class:`~gyrolab.instruments.roles.MultiThermometer`) that reads every unit's
-    PT100 — a unit read by its internal sensor (``UnitDevices.channel`` None) has it in its
+    A single-unit bench gives ``thermometer``, ``gyro`` and ``rate_stream`` (the gyro's
+    stream config). A multi-unit bench gives ``units`` (one :class:`UnitDevices` each)
+    and, as ``thermometer``, the scanner (a
+    :class:`~gyrolab.instruments.roles.MultiThermometer`) that reads every unit's PT100
+    — a unit read by its internal sensor (``UnitDevices.channel`` None) has it in its
     stream instead, and with every unit so ``thermometer`` is None; the writer must then be a
     multi-unit one (``RecordingWriter(units=…, internal_temperature=…)``). The profile's
     stability rule watches the first unit's temperature (as ``gyrolab simulate --units``
@@ -100,7 +101,7 @@ class Acquisition:
         thermometer: Thermometer | MultiThermometer | None,
         chamber: Chamber,
         gyro: RateStream | None = None,
-        adc: RateStreamConfig | None = None,
+        rate_stream: RateStreamConfig | None = None,
         limits: Limits,
         safe_state: SafeState,
         units: list[UnitDevices] | None = None,
@@ -117,8 +118,8 @@ class Acquisition:
         resume: ResumePoint | None = None,
     ) -> None:
         check_profile_limits(profile, limits)
-        if (units is None) == (gyro is None) or (units is None) == (adc is None):
-            raise ValueError("give gyro and adc (one unit) or units (several), not both")
+        if (units is None) == (gyro is None) or (units is None) == (rate_stream is None):
+            raise ValueError("give gyro and rate_stream (one unit) or units (several), not both")
         if thermometer is None and (units is None or not all(u.internal for u in units)):
             raise ValueError("a PT100 (a unit without its internal sensor) needs a thermometer")
         # threaded=False: no threads; every turn of the main loop polls the instruments
@@ -174,14 +175,14 @@ class Acquisition:
         self._setpoint_pending: float | None = None
         # One recorder per rate stream, by its source name in /log.
         if units is None:
-            assert gyro is not None and adc is not None
-            recs = [RateRecorder(gyro, adc, writer, self.log, on_samples=on_samples)]
+            assert gyro is not None and rate_stream is not None
+            recs = [RateRecorder(gyro, rate_stream, writer, self.log, on_samples=on_samples)]
             resume_index = [None if resume is None else resume.next_index.get(None, (0, 0.0))]
         else:
             recs = [
                 RateRecorder(
                     u.stream,
-                    u.adc,
+                    u.rate_stream,
                     writer,
                     self.log,
                     unit=u.serial,
@@ -317,7 +318,7 @@ class Acquisition:
                     outcome, reason = "fault", self.journal.reason
                     break
                 if self.plan.state == "done":
-                    self._drain_adc_to(self.plan.ended_at)
+                    self._drain_streams_to(self.plan.ended_at)
                     break
                 if self.on_status and time.monotonic() - last_status >= self.status_every_s:
                     last_status = time.monotonic()
@@ -336,10 +337,10 @@ class Acquisition:
         res.suspensions = self.suspend.count
         return res
 
-    def _drain_adc_to(self, t_end: float, wall_s: float = 1.0) -> None:
+    def _drain_streams_to(self, t_end: float, wall_s: float = 1.0) -> None:
         """A completed run records the gyro up to the profile's end: keep handling what
-        the device threads deliver until the ADC samples reach ``t_end`` (the stream lags
-        the clock by the frames in flight), for at most ``wall_s`` wall seconds (an ADC
+        the device threads deliver until the streams' samples reach ``t_end`` (a stream lags
+        the clock by the frames in flight), for at most ``wall_s`` wall seconds (a stream
         that went quiet at the very end must not hold the oven; its gap stays visible)."""
         deadline = time.monotonic() + wall_s
         while (
@@ -391,7 +392,7 @@ class Acquisition:
         if kind == "report":
             self._on_report(source, t, payload)
             return
-        if kind == "adc":
+        if kind == "stream":
             rec = self.streams[source]
 
             def ok() -> None:

@@ -35,14 +35,14 @@ LogFn = Callable[..., None]
 
 
 class RateRecorder:
-    """Records one rate stream (see module doc). ``adc`` is the stream's config (its
+    """Records one rate stream (see module doc). ``config`` is the stream's config (its
     ``block_s``, ``sample_rate_hz`` and counts → °/s conversion ``to_dps``); ``unit`` the
     serial of a multi-unit recording's unit (None: the single-unit layout)."""
 
     def __init__(
         self,
         device: RateStream,
-        adc: RateStreamConfig,
+        config: RateStreamConfig,
         writer: Any,
         log: LogFn,
         *,
@@ -51,7 +51,7 @@ class RateRecorder:
         internal: bool = False,
     ) -> None:
         self.dev = device
-        self.adc = adc
+        self.config = config
         self.w = writer
         self.log = log
         self.unit = unit
@@ -80,8 +80,8 @@ class RateRecorder:
         self._blk: list[np.ndarray] = []
         self._blk_first = 0
         self._blk_n = 0
-        self._block_len = max(1, int(round(adc.block_s * adc.sample_rate_hz)))
-        self.period = 1.0 / adc.sample_rate_hz
+        self._block_len = max(1, int(round(config.block_s * config.sample_rate_hz)))
+        self.period = 1.0 / config.sample_rate_hz
         self.samples = 0
         self.received_to = -math.inf  # run time up to which samples have arrived
         self.gaps = 0
@@ -294,11 +294,11 @@ class RateRecorder:
         t0 = self._blk_t0
         if self.unit is None:
             self.w.write_adc_block(t0, self.period, self._blk_first, counts)
-            self.w.write_rate_block(t0, self.period, self._blk_first, self.adc.to_dps(counts))
+            self.w.write_rate_block(t0, self.period, self._blk_first, self.config.to_dps(counts))
         else:
             u = self.unit
             self.w.write_adc_block(t0, self.period, self._blk_first, counts, unit=u)
-            dps = self.adc.to_dps(counts)
+            dps = self.config.to_dps(counts)
             self.w.write_rate_block(t0, self.period, self._blk_first, dps, unit=u)
         self.samples += len(counts)
         self._blk_first += len(counts)

@@ -93,12 +93,15 @@ def lab_addresses(cfg: BenchConfig) -> dict[str, str]:
         return {
             "chamber": registry.address(cfg.chamber, "chamber"),
             **scanner,
-            **{f"unit/{u.serial}": registry.address(u.adc, "rate_stream") for u in cfg.units},
+            **{
+                f"unit/{u.serial}": registry.address(u.rate_stream, "rate_stream")
+                for u in cfg.units
+            },
         }
     return {
         "thermometer": registry.address(cfg.thermometer, "thermometer"),
         "chamber": registry.address(cfg.chamber, "chamber"),
-        "rate_stream": registry.address(cfg.adc, "rate_stream"),
+        "rate_stream": registry.address(cfg.rate_stream, "rate_stream"),
     }
 
 
@@ -132,14 +135,14 @@ def connect_instruments(
                 ("scanner", "multi_thermometer", cfg.scanner, "multi_thermometer", "[scanner]")
             )
         opening += [
-            ("units", "rate_stream", u.adc, f"unit/{u.serial}", f"[[unit]] {u.serial}")
+            ("units", "rate_stream", u.rate_stream, f"unit/{u.serial}", f"[[unit]] {u.serial}")
             for u in cfg.units
         ]
     else:
         opening = [
             ("thermometer", "thermometer", cfg.thermometer, "thermometer", "[thermometer]"),
             ("chamber", "chamber", cfg.chamber, "chamber", "[chamber]"),
-            ("gyro", "rate_stream", cfg.adc, "rate_stream", "[adc]"),
+            ("gyro", "rate_stream", cfg.rate_stream, "rate_stream", "[rate_stream]"),
         ]
     try:
         for attr, role, sub, key, table in opening:
@@ -300,7 +303,7 @@ def run_acquisition(
             bench_name=cfg.name,
             seed=seed if sim is not None else None,
             speed=(sim.speed if sim.speed is not None else "max") if sim is not None else None,
-            axes=cfg.adc.axes,
+            axes=cfg.rate_stream.axes,
             run_id=uuid.uuid4().hex if resume is None else resume.run_id,
             segment=1 if resume is None else resume.segment,
             previous_segment=None if resume is None else resume.previous_segment,
@@ -353,7 +356,7 @@ def run_acquisition(
                     devices = {
                         "thermometer": inst.scanner,
                         "units": [
-                            UnitDevices(u.serial, stream, u.adc, u.temperature_channel)
+                            UnitDevices(u.serial, stream, u.rate_stream, u.temperature_channel)
                             for u, (_, stream) in zip(cfg.units, inst.units, strict=True)
                         ],
                     }
@@ -364,7 +367,7 @@ def run_acquisition(
                     devices = {
                         "thermometer": inst.thermometer,
                         "gyro": inst.gyro,
-                        "adc": cfg.adc,
+                        "rate_stream": cfg.rate_stream,
                         "pt100_period_s": cfg.thermometer.period_s,
                     }
                 acq = Acquisition(

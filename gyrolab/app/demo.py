@@ -45,7 +45,7 @@ from gyrolab.errors import GyrolabError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.profiles.profile import load_profile
 from gyrolab.progress import progress
-from gyrolab.report.spec import Line
+from gyrolab.report.spec_limits import Line
 from gyrolab.sampling import DEFAULT_RATE_HZ
 
 # The held-out run is paced: unpaced, the simulated bench runs as fast as the ADC reader

@@ -30,11 +30,20 @@ from gyrolab.instruments import registry
 FC_RATE_HZ = 25.0  # IMU message rate of the simulated controller (and its IMU rate)
 # Free-running, the bench covers a few hundred simulated seconds per wall second while the
 # MAVLink streams keep the process busy: on a loaded machine the chamber's poller may get
-# no reply for several wall seconds without the chamber being lost. The watchdog's wall
-# floor (SimSilence) is therefore longer than the ADC bench's (1 s to hold, 3 s to give a
-# source up), and the same rule holds the run (suspenders): a stall is held and given up
-# after the same wall silence.
+# no reply for several wall seconds without the chamber being lost. The wall floors
+# (SimSilence) are therefore longer than the ADC bench's (SIM_HOLD_MIN_WALL_S 1 s to hold,
+# SIM_COMM_MIN_WALL_S 3 s to give a source up), in the same order and ratio: a silence is
+# held (the milder answer) after 5 s of wall time and given up (or a hold past its limit
+# ends the run) after 15 s, so that a stall is held before anything is given up.
 FC_COMM_MIN_WALL_S = 15.0
+FC_HOLD_MIN_WALL_S = 5.0
+
+
+def fc_silence() -> tuple[SimSilence, SimSilence]:
+    """The flight-controller bench's two rules on one record of when each source was last
+    heard: the watchdog's (``FC_COMM_MIN_WALL_S``) and the holds' (``FC_HOLD_MIN_WALL_S``)."""
+    silence = SimSilence(min_wall_s=FC_COMM_MIN_WALL_S)
+    return silence, silence.sharing(FC_HOLD_MIN_WALL_S)
 
 
 def fc_serials(firmware: str, imus: int = 3) -> list[str]:
@@ -120,12 +129,12 @@ def start_fc_bench(
             for k, serial in enumerate(serials)
         }
     }
-    silence = SimSilence(min_wall_s=FC_COMM_MIN_WALL_S)
+    silence, hold_silence = fc_silence()
     return SimHandle(
         addresses={"chamber": bench.oven_port, **{f"unit/{s}": fc_port for s in serials}},
         clock=SimRunClock(bench.clock),
         silence=silence,
-        hold_silence=silence,  # the same rule (and floor) for holds
+        hold_silence=hold_silence,
         timeout=scaled_timeouts(speed),
         speed=speed,
         bench=bench,
@@ -139,7 +148,9 @@ def with_ports(cfg: BenchConfig, handle: SimHandle) -> BenchConfig:
     return replace(
         cfg,
         units=tuple(
-            replace(u, adc=replace(u.adc, port=handle.addresses[f"unit/{u.serial}"]))
+            replace(
+                u, rate_stream=replace(u.rate_stream, port=handle.addresses[f"unit/{u.serial}"])
+            )
             for u in cfg.units
         ),
     )

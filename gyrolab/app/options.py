@@ -146,7 +146,7 @@ class AcquireOptions:
             raise GyrolabError(f"--speed must be a positive number, not {self.speed}")
         only_sim = {  # option: (given, why a bench file does not take it)
             "--driver": (self.drivers, "a bench file names its drivers"),
-            "--axis-model": (self.axis_models, "a bench file sets [adc] axes"),
+            "--axis-model": (self.axis_models, "a bench file sets [rate_stream] axes"),
             "--units": (self.units, "a bench file lists [[unit]]s"),
             "--speed": (self.speed is not None, "real hardware runs in real time"),
             "--faults": (self.faults is not None, "it drives the simulator"),

@@ -11,7 +11,7 @@ from gyrolab.outputs import check_output
 from gyrolab.record.reader import select_unit
 from gyrolab.report.commands import write_report
 from gyrolab.report.fleet_record import write_fleet
-from gyrolab.report.spec import Line
+from gyrolab.report.spec_limits import Line
 
 
 def report(opts: ReportOptions) -> int:

@@ -57,7 +57,7 @@ def resume_settings(path: str | Path, force: bool = False) -> ResumeSettings:
     run, bench = point.run, point.bench
     settings: dict[str, Any] = {"point": point, "profile": run["profile"]}
     if not (bench.get("simulated") and bench.get("name") == "sim"):
-        # a lab bench's axes are its BENCH.toml's ([adc] axes), checked once connected
+        # a lab bench's axes are its BENCH.toml's ([rate_stream] axes), checked once connected
         return ResumeSettings(simulated=False, **settings)
     units = list(run.get("units") or [])
     per_unit = bench.get("units") or {}

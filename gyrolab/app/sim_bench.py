@@ -187,12 +187,12 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
     unit_cfgs = tuple(
         UnitConfig(
             unit_serial(seed, k),
-            replace(cfg.adc, internal_temperature=True),
+            replace(cfg.rate_stream, internal_temperature=True),
             None,
             "internal",
         )
         if k + 1 in internal
-        else UnitConfig(unit_serial(seed, k), cfg.adc, 101 + k)
+        else UnitConfig(unit_serial(seed, k), cfg.rate_stream, 101 + k)
         for k in range(units)
     )
     channels = tuple(u.temperature_channel for u in unit_cfgs if not u.internal)
@@ -205,7 +205,6 @@ def sim_bench_config(seed: int, units: int = 0, internal: tuple[int, ...] = ()) 
 def sim_drivers(cfg: BenchConfig, names: list[str] | tuple[str, ...]) -> BenchConfig:
     """``acquire --bench sim --driver NAME …``: the simulated bench with these drivers (each
     name picks its role; the driver's default settings)."""
-    fields = {"thermometer": "thermometer", "chamber": "chamber", "rate_stream": "adc"}
     for name in names:
         spec = next((s for s in registry.drivers() if s.name == name), None)
         if spec is None:
@@ -216,7 +215,7 @@ def sim_drivers(cfg: BenchConfig, names: list[str] | tuple[str, ...]) -> BenchCo
                 raise GyrolabError(f"--driver {name}: a scanner is for --units only")
             cfg = replace(cfg, scanner=replace(spec.config(), channels=cfg.scanner.channels))
             continue
-        cfg = replace(cfg, **{fields[spec.role]: spec.config()})
+        cfg = replace(cfg, **{spec.role: spec.config()})  # each role's field is named for it
     return cfg
 
 
@@ -274,14 +273,16 @@ def start_sim_bench(
     for role, spec in specs.items():
         if not spec.sim_backend:
             raise GyrolabError(f"{role} driver {spec.name!r} has no simulated back end")
-    rate_spec = registry.get(cfg.adc.driver, "rate_stream")
+    rate_spec = registry.get(cfg.rate_stream.driver, "rate_stream")
     device = _sim_device(cfg, rate_spec, axis_models)
     if cfg.units and axis_models:
         raise InputError("--axis-model", "multi-axis units are single-unit only (not --units)")
     model = model or nominal_model()
     if axis_models:
         try:  # checked here: the bench may be built in another process
-            axis_physics(model, list(axis_models), cfg.adc.sample_rate_hz, seed, profile.ambient_c)
+            axis_physics(
+                model, list(axis_models), cfg.rate_stream.sample_rate_hz, seed, profile.ambient_c
+            )
         except ValueError as e:
             raise InputError("--axis-model", str(e)) from None
     family = _sim_family(cfg, seed, model)
@@ -293,7 +294,7 @@ def start_sim_bench(
             oven_control_event=getattr(cfg.chamber, "control_event", 0) or None,
             oven_alarm_input=getattr(cfg.chamber, "alarm_input", 0) or None,
             unit_internal_temperature=[u.internal for u in cfg.units] if cfg.units else None,
-            samples_per_frame=getattr(cfg.adc, "samples_per_frame", 1),  # a VN-100: none
+            samples_per_frame=getattr(cfg.rate_stream, "samples_per_frame", 1),  # a VN-100: none
             workdir=workdir,
             faults=faults,
             keep_truth=keep_truth,
@@ -309,7 +310,7 @@ def start_sim_bench(
             # so that the change to ``speed`` (SimHandle.go) takes effect at once.
             speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
         ),
-        rate_hz=cfg.adc.sample_rate_hz,
+        rate_hz=cfg.rate_stream.sample_rate_hz,
         seed=seed,
         ambient_c=profile.ambient_c,
         model=model,
@@ -331,17 +332,23 @@ def start_sim_bench(
         bench.start()
         info = describe(bench)
 
-    def calibrated(a: Any, adc: dict[str, Any]) -> Any:  # the unit's calibration sheet
-        return replace(a, **adc)
+    def calibrated(a: Any, sheet: dict[str, Any]) -> Any:  # the unit's ADC calibration sheet
+        return replace(a, **sheet)
 
     axes = 1 + len(axis_models)
     if device is None:  # a device (VN-100) reports in its own units
-        cfg = replace(cfg, adc=replace(calibrated(cfg.adc, info["adc"]), axes=axes))
+        stream = replace(calibrated(cfg.rate_stream, info["adc"]), axes=axes)
+        cfg = replace(cfg, rate_stream=stream)
     if cfg.units:
         cfg = replace(
             cfg,
             units=tuple(
-                replace(u, adc=_with_die_sensor(calibrated(u.adc, d["adc"]), d, u.internal))
+                replace(
+                    u,
+                    rate_stream=_with_die_sensor(
+                        calibrated(u.rate_stream, d["adc"]), d, u.internal
+                    ),
+                )
                 for u, d in zip(cfg.units, info["units"], strict=True)
             ),
         )
@@ -398,12 +405,14 @@ def _sim_device(cfg: BenchConfig, spec: registry.DriverSpec, axis_models: Any) -
     return spec.sim_backend
 
 
-def _with_die_sensor(adc: Any, unit: dict[str, Any], internal: bool) -> Any:
+def _with_die_sensor(stream: Any, unit: dict[str, Any], internal: bool) -> Any:
     """A unit's stream config with its simulated internal sensor's register scale (the
     part's data sheet, as a lab takes it), for a unit read by that sensor."""
     if not internal:
-        return adc
-    return replace(adc, temperature_c_per_lsb=unit["c_per_lsb"], temperature_zero_c=unit["zero_c"])
+        return stream
+    return replace(
+        stream, temperature_c_per_lsb=unit["c_per_lsb"], temperature_zero_c=unit["zero_c"]
+    )
 
 
 def _sim_family(cfg: BenchConfig, seed: int, model: Any) -> list[Any]:

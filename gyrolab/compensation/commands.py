@@ -39,7 +39,7 @@ import numpy as np
 
 from gyrolab import __version__
 from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
-from gyrolab.compensation.axes import load_runs
+from gyrolab.compensation.axis_runs import load_runs
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
 from gyrolab.compensation.evaluate import add_firmware_metrics, evaluate
 from gyrolab.compensation.firmware import fit_poly3
@@ -205,7 +205,7 @@ def compensate(
     passes its own), its seed overridden by ``seed``. ``unit`` picks one unit of a
     multi-unit recording. A run with several axes (or a foreign log, :mod:`gyrolab.logs`,
     read with ``log_options``) gets one model per axis in one directory
-    (:mod:`gyrolab.compensation.axes`). The outputs name the runs as given, or by
+    (:mod:`gyrolab.compensation.axis_runs`). The outputs name the runs as given, or by
     ``run_label``/``validate_label`` (:mod:`gyrolab.app.demo`: paths relative to its
     output directory). ``prior``: a fleet prior
     (:class:`~gyrolab.compensation.prior.FleetPrior`) for the causal model's MAP fit

@@ -22,7 +22,9 @@ clusters (they differ in their means), shrunk halfway to its diagonal (a few doz
 cannot estimate ``P + 7`` dimensions' correlations), widened for the cluster mean's own
 uncertainty (n units), and a floor: no component is claimed known better than
 :data:`FLOOR_DPS` at its regressor's largest value (:data:`REGRESSOR_SCALE`). φ gets a
-mean and standard deviation per cluster (floor 0.1).
+mean and standard deviation per cluster (floor 0.1); the power-on hysteresis branch s₀
+(``start_branch``, 0 or +1: issue 23's ``structured_rate``) is not in φ but carried with
+it — each cluster fits and applies its members' median s₀.
 **Clusters**: k-means (k = 2, 3) on what the units' drift does (°/s: the polynomial at 11
 temperatures, each term at its largest regressor value), kept only when every cluster has
 ≥ :data:`MIN_CLUSTER` units and the mean silhouette is ≥ :data:`SILHOUETTE_MIN` (the
@@ -170,11 +172,16 @@ def phi_of(p: CausalParams) -> np.ndarray:
     return np.array([math.log(p.tau_s + TAU0_S), math.log(p.width_c), math.log(p.warmup_tau_s)])
 
 
-def params_of(phi: np.ndarray) -> CausalParams:
+def params_of(phi: np.ndarray, start_branch: float = 0.0) -> CausalParams:
+    """The feature parameters of φ, the play starting on hysteresis branch
+    ``start_branch`` s₀ (issue 23's power-on branch: not part of φ — it takes the values
+    0 and +1 only — but carried with it, so a unit or cluster whose models start on the
+    heating branch is fitted and applied on it)."""
     return CausalParams(
         tau_s=max(float(math.exp(phi[0]) - TAU0_S), 0.0),
         width_c=float(math.exp(phi[1])),
         warmup_tau_s=float(math.exp(phi[2])),
+        start_branch=float(start_branch),
     )
 
 
@@ -208,6 +215,13 @@ class Cluster:
     phi_mean: np.ndarray
     phi_sd: np.ndarray
     members: list[str]
+    #: the members' power-on hysteresis branch s₀ (their median: 0 or +1)
+    start_branch: float = 0.0
+
+    def params(self, phi: np.ndarray | None = None) -> CausalParams:
+        """The feature parameters at ``phi`` (default: the cluster's mean) on the
+        cluster's start branch."""
+        return params_of(self.phi_mean if phi is None else phi, self.start_branch)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -216,6 +230,7 @@ class Cluster:
             "phi_mean": self.phi_mean.tolist(),
             "phi_sd": self.phi_sd.tolist(),
             "members": list(self.members),
+            "start_branch": self.start_branch,
         }
 
     @classmethod
@@ -226,6 +241,7 @@ class Cluster:
             np.asarray(d["phi_mean"], float),
             np.asarray(d["phi_sd"], float),
             list(d["members"]),
+            float(d.get("start_branch", 0.0)),  # priors written before s₀ was carried
         )
 
 
@@ -269,7 +285,12 @@ class FleetPrior:
 
 
 def _cluster(
-    thetas: np.ndarray, phis: np.ndarray, names: list[str], S: np.ndarray, basis: Basis
+    thetas: np.ndarray,
+    phis: np.ndarray,
+    names: list[str],
+    S: np.ndarray,
+    basis: Basis,
+    s0: np.ndarray,
 ) -> Cluster:
     """A cluster's prior: its mean, and the pooled within-cluster covariance ``S`` shrunk
     halfway to its diagonal, floored, and widened by ``1 + 1/n`` (the mean itself is
@@ -278,7 +299,14 @@ def _cluster(
     cov = 0.5 * S + 0.5 * np.diag(np.diag(S))
     cov = (1.0 + 1.0 / n) * cov + np.diag((FLOOR_DPS / basis.scale()) ** 2)
     sd = phis.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
-    return Cluster(thetas.mean(axis=0), cov, phis.mean(axis=0), np.maximum(sd, PHI_SD_FLOOR), names)
+    return Cluster(
+        thetas.mean(axis=0),
+        cov,
+        phis.mean(axis=0),
+        np.maximum(sd, PHI_SD_FLOOR),
+        names,
+        float(np.median(s0)),
+    )
 
 
 def _silhouette(Z: np.ndarray, lab: np.ndarray) -> float:
@@ -334,6 +362,7 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
     basis = Basis(lo, hi, min(max(u.model.order for u in units), MAX_ORDER))
     thetas = np.array([unit_vector(u.model, basis) for u in units])
     phis = np.array([phi_of(u.params) for u in units])
+    s0 = np.array([u.params.start_branch for u in units])
     names = [u.name for u in units]
     labels = np.zeros(len(units), dtype=int)
     Z = _drift_space(thetas, basis)
@@ -358,6 +387,7 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
             [n for n, lab in zip(names, labels, strict=True) if lab == j],
             S,
             basis,
+            s0[labels == j],
         )
         for j in range(k)
     ]
@@ -476,39 +506,40 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
             sq += float(np.sum((p - y[held]) ** 2))
         return math.sqrt(sq / y.size)
 
-    def search(phi0: np.ndarray, grid: bool) -> tuple[float, np.ndarray, float, Cluster]:
-        """From ``phi0``: the noise scale and the cluster there, then (``grid``) φ on the
-        grid around the cluster's mean; the CV RMSE, φ, s², the cluster."""
-        A0 = b.design(_features(cal, params_of(phi0)))
+    def search(p0: CausalParams, grid: bool) -> tuple[float, CausalParams, float, Cluster]:
+        """From ``p0``: the noise scale and the cluster there, then (``grid``) φ on the
+        grid around the cluster's mean, on its start branch; the CV RMSE, the feature
+        parameters, s², the cluster."""
+        A0 = b.design(_features(cal, p0))
         s2 = _noise_scale(A0, y, prior.clusters[0], neff)
         c = prior.clusters[membership(A0, y, s2, prior).cluster]
         if not grid:
-            return cv_rmse(A0, s2, c), phi0, s2, c
+            return cv_rmse(A0, s2, c), p0, s2, c
         best: tuple[float, np.ndarray] | None = None
         for i in (0, 1, 2, 0):  # φ components one at a time, around the prior mean
             phi_c = c.phi_mean.copy() if best is None else best[1].copy()
             for step in PHI_STEPS:
                 phi = phi_c.copy()
                 phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
-                e = cv_rmse(b.design(_features(cal, params_of(phi))), s2, c)
+                e = cv_rmse(b.design(_features(cal, c.params(phi))), s2, c)
                 if best is None or e < best[0]:
                     best = (e, phi)
         assert best is not None
-        return best[0], best[1], s2, c
+        return best[0], c.params(best[1]), s2, c
 
     # the grid search is local (one component at a time, around the prior mean) and misses
-    # a unit whose lag or warm-up lies elsewhere: the φ the unit's own causal selection
-    # (no prior, OWN_FAMILIES) chooses on the run competes on the same CV, with the noise
-    # scale and cluster at that φ (a misfit φ inflates s² and hands the fit to the prior)
+    # a unit whose lag or warm-up lies elsewhere: the φ (and start branch) the unit's own
+    # causal selection (no prior, OWN_FAMILIES) chooses on the run competes on the same CV,
+    # with the noise scale and cluster there (a misfit φ inflates s² and hands the fit to
+    # the prior)
     starts = {
-        "prior": search(prior.clusters[0].phi_mean, True),
-        "own": search(phi_of(fit_causal(cal, families=OWN_FAMILIES).params), False),
+        "prior": search(prior.clusters[0].params(), True),
+        "own": search(fit_causal(cal, families=OWN_FAMILIES).params, False),
     }
     start = min(starts, key=lambda k: starts[k][0])  # a tie: the prior's
-    _, phi, s2, c = starts[start]
-    theta, _ = _map(b.design(_features(cal, params_of(phi))), y, s2, c)
-    params = params_of(phi)
+    _, params, s2, c = starts[start]
     A = b.design(_features(cal, params))
+    theta, _ = _map(A, y, s2, c)
     # the unit's membership at its own φ (the detector's number)
     mem = membership(A, y, _noise_scale(A, y, c, neff), prior)
     pred = np.empty_like(y)

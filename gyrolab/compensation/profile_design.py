@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
-from gyrolab.compensation.prior import Basis, FleetPrior, params_of
+from gyrolab.compensation.prior import Basis, FleetPrior
 from gyrolab.profiles.profile import BUILTIN, Profile, Step
 from gyrolab.sim.thermal import ThermalParams, kernel_params, thermal_kernel
 
@@ -97,7 +97,7 @@ class DesignBasis:
     def of(cls, prior: FleetPrior | None, lo: float, hi: float) -> DesignBasis:
         if prior is not None:
             big = max(prior.clusters, key=lambda c: len(c.members))
-            return cls(prior.basis, params_of(big.phi_mean), big.cov)
+            return cls(prior.basis, big.params(), big.cov)
         b = Basis(lo, hi, 4)
         return cls(b, CausalParams(tau_s=300.0), np.diag((DEFAULT_SD_DPS / b.scale()) ** 2))
 

@@ -173,7 +173,7 @@ def export(
     elif fmt == "ardupilot":
         texts = [ardupilot_parm(_polys(model), instance, header=_header(model, line))]
     elif fmt in ("c", "json"):
-        from gyrolab.export.spec import export_spec
+        from gyrolab.export.model_json import export_spec
 
         spec = export_spec(model, kind)
         if fmt == "json":

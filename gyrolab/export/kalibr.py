@@ -30,8 +30,11 @@ least-squares fit of the IEEE 952 terms gives it, on the same condition. Where n
 does, the file carries an upper bound the curve itself guarantees — every term's share of
 the Allan variance is non-negative, so σ(τ) ≥ N/√τ and σ(τ) ≥ K·√(τ/3) at every τ, hence
 N ≤ min σ(τ)·√τ and K ≤ min σ(τ)·√(3/τ) over τ ≤ T/10 — and its comment names it an upper
-bound with the reason. A record too short for any of that (no τ with ten independent
-averages) is refused in one line: kalibr never gets ``nan``.
+bound with the reason. All of it on τ at or above the sensor's own output-filter corner
+(:func:`gyrolab.numerics.noise_terms.filter_corner_tau`): below it the filter lowers σ, so
+a density read there comes out low and σ·√τ is no bound. A record too short for any of
+that (no τ with ten independent averages) is refused in one line: kalibr never gets
+``nan``.
 """
 
 from __future__ import annotations
@@ -54,9 +57,11 @@ UNITS = {
 _TERMS = (("N", 1.0, "noise_density"), ("K", 3.0, "random_walk"))
 
 
-def _bound(res: Any, name: str) -> float:
-    """The upper bound of term ``name`` over τ ≤ T/10 (module doc); NaN without such τ."""
+def _bound(res: Any, name: str, tau_min: float) -> float:
+    """The upper bound of term ``name`` over tau_min ≤ τ ≤ T/10 (module doc); NaN without
+    such τ."""
     usable = (res.taus <= 0.1 * res.duration_s) & (res.dev > 0)
+    usable &= res.taus >= tau_min * (1.0 - 1e-9)
     t, a = res.taus[usable], res.dev[usable]
     if t.size == 0:
         return float("nan")
@@ -67,14 +72,15 @@ def allan_densities(y: np.ndarray, rate_hz: float, scale: float = 1.0) -> dict[s
     """The white-noise density and the random walk of ``y`` (kalibr's units: the data's
     units × ``scale``), each with how it was read (module doc), and the Allan curve."""
     from gyrolab.numerics.allan import allan_deviation
-    from gyrolab.numerics.noise_terms import noise_terms
+    from gyrolab.numerics.noise_terms import filter_corner_tau, noise_terms
 
     y = np.asarray(y, dtype=float)
     res = allan_deviation(y, rate_hz, taus="octave", confidence=None)
     record = res.duration_s
     out: dict[str, Any] = {}
-    slope = noise_terms(res, method="slope")
-    fit = noise_terms(res, method="fit", terms=("N", "B", "K"))
+    corner = filter_corner_tau(y, rate_hz)  # the sensor's own filter lowers sigma below it
+    slope = noise_terms(res, method="slope", tau_min=corner)
+    fit = noise_terms(res, method="fit", terms=("N", "B", "K"), tau_min=corner)
     for name, tau_def, key in _TERMS:
         value, how = float("nan"), ""
         inside = tau_def <= record
@@ -93,13 +99,13 @@ def allan_densities(y: np.ndarray, rate_hz: float, scale: float = 1.0) -> dict[s
             )
             break
         if not np.isfinite(value):
-            value = _bound(res, name)
+            value = _bound(res, name, corner)
             if not inside:
                 why = f"tau = {tau_def:g} s lies beyond the {record:.3g} s record"
             else:
                 why = slope.reasons.get(name) or fit.reasons.get(name) or "not identified"
             what = "sigma(tau)*sqrt(tau)" if name == "N" else "sigma(tau)*sqrt(3/tau)"
-            how = f"upper bound min {what} over tau <= T/10 ({why})"
+            how = f"upper bound min {what} over {corner:.3g} s <= tau <= T/10 ({why})"
         if not (np.isfinite(value) and value > 0):
             raise InputError(
                 None,

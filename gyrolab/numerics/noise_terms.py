@@ -224,12 +224,13 @@ def filter_corner_tau(x: np.ndarray, rate_hz: float, max_octaves: int = 12) -> f
     line and an ARW read there comes out low (on a real ADIS16405 record at 100 Hz by
     15 %, issue 23). Rule: a record whose raw ``|r1(1)|`` is within
     max(:data:`FILTERED_R1`, 3/√n) of 0 is unfiltered (corner = one sample); otherwise the
-    corner is one octave above the first m at which ``|r1(m)|`` comes within its own
-    sampling scatter (3/√n) of its minimum over the octaves with ≥ 1000 averages — where
-    the filter's correlation has decayed and the coloured noise has not yet taken over
-    (a filter that rings makes ``r1`` negative at first: hence ``|r1|``) — so that the
-    ARW is read where σ·√τ has reached its white-noise plateau. Returns seconds. NaN
-    samples (gaps) are dropped."""
+    corner is one octave above the first m from which ``|r1(m)|`` stays within its own
+    sampling scatter (3/√n) of its minimum over the octaves with ≥ 1000 averages (and m = 1), up to
+    that minimum — where the filter's correlation has decayed and the coloured noise has
+    not yet taken over (a filter that rings makes ``r1`` swing in sign over the first
+    octaves and pass near 0 before it has settled: hence ``|r1|`` and "stays"; the
+    ADIS16405's Z gyro does so) — so that the ARW is read where σ·√τ has reached its
+    white-noise plateau. Returns seconds. NaN samples (gaps) are dropped."""
     y = np.asarray(x, dtype=float)
     y = y[np.isfinite(y)]
     dt = 1.0 / float(rate_hz)
@@ -241,16 +242,17 @@ def filter_corner_tau(x: np.ndarray, rate_hz: float, max_octaves: int = 12) -> f
     m = 1
     for _ in range(max_octaves):
         n = y.size // m
-        if n < 1000:
+        if n < 1000 and m > 1:  # the raw samples always count, however few
             break
         ms.append(m)
         r1.append(abs(_lag1(y[: n * m].reshape(n, m).mean(axis=1))))
         m *= 2
-    lo = min(r1)
-    for m, r in zip(ms, r1, strict=True):
-        if r <= lo + 3.0 / math.sqrt(y.size // m):
-            return 2.0 * m * dt
-    return 2.0 * ms[-1] * dt  # pragma: no cover - the minimum itself always qualifies
+    k_lo = int(np.argmin(r1))
+    near = [r1[k] <= r1[k_lo] + 3.0 / math.sqrt(y.size // ms[k]) for k in range(k_lo + 1)]
+    k = k_lo
+    while k > 0 and near[k - 1]:
+        k -= 1  # the first octave of the run of settled octaves that ends at the minimum
+    return 2.0 * ms[k] * dt
 
 
 def _fmt_tau(t: float) -> str:
@@ -348,9 +350,9 @@ def noise_terms(
             tol = float(slope_tol)
             how = "whose confidence intervals separate it from the neighbouring slopes"
             how = how if have_ci else ""
+            # every term is looked for (the joint fit below needs to know which the curve
+            # shows, whatever was asked); those not asked are dropped at the end
             for name in ("Q", "N", "B", "K", "R"):
-                if name not in terms:
-                    continue
                 slope, tau_read = (0.0, float("nan")) if name == "B" else _SLOPE_RULES[name]
                 kw: dict = {}
                 if name == "Q":
@@ -396,26 +398,50 @@ def noise_terms(
                 # neighbouring terms' share of it (K read next to a white-noise region
                 # comes out ~40 % high); B stays the IEEE sigma_min / 0.664. The fit starts
                 # at the first identified region: below it the curve is none of the five
-                # terms (a sensor filter's roll-off lowers sigma there, issue 23)
+                # terms (a sensor filter's roll-off lowers sigma there, issue 23). A term
+                # tested and found nowhere on the curve is left out of the fit (B, the
+                # floor's bend, stays): else it takes a share it does not have (a Q term
+                # took 7 % of N on a real ADIS16405 Z gyro whose filter rings)
                 first = min((r[0] for r in ranges.values()), default=float(taus[0]))
                 fit_at = taus >= first * (1.0 - 1e-9)
-                joint = _nnls_terms(taus[fit_at], adev[fit_at], edf[fit_at], "QNBKR")
+                model = "".join(t for t in "QNBKR" if t == "B" or t not in reasons)
+                joint = dict.fromkeys("QNBKR", 0.0)
+                joint.update(_nnls_terms(taus[fit_at], adev[fit_at], edf[fit_at], model))
                 for name in ("Q", "N", "K", "R"):
                     if np.isfinite(out[name]) and joint[name] > 0:
                         out[name] = float(math.sqrt(joint[name] / _FIT_SCALE[name]))
     elif method == "fit":
         # a flicker floor cannot lie above the curve's lowest point (its upper confidence
-        # bound where the curve has one: the point itself scatters)
+        # bound where the curve has one: the lowest of many scattered points is biased
+        # low, so the point alone would withhold a true floor)
         hi_b = float(np.asarray(result.dev_hi, dtype=float)[ok][usable][imin])
         b_limit = hi_b if np.isfinite(hi_b) and hi_b > 0 else float(adev[imin])
         names = [t for t in "QNBKR" if t in terms]
-        powers = np.array([_FIT_POWERS[t] for t in names], dtype=float)
-        fitted = _nnls_terms(taus, adev, edf, "".join(names))
-        c = np.array([fitted[t] for t in names])
-        model = taus[:, None] ** powers[None, :] * c[None, :]
-        share = model / np.maximum(model.sum(axis=1, keepdims=True), np.finfo(float).tiny)
+        model_names = list(names)
+        while True:
+            # a term never half of the fit anywhere is not in evidence: refit without it
+            # (B, the floor's bend, stays), else it takes a share from the terms that are
+            # (a Q term took 4 % of N on a real ADIS16405 Z gyro, issue 23)
+            fitted = dict.fromkeys(names, 0.0)
+            fitted.update(_nnls_terms(taus, adev, edf, "".join(model_names)))
+            c = np.array([fitted[t] for t in names])
+            powers = np.array([_FIT_POWERS[t] for t in names], dtype=float)
+            model = taus[:, None] ** powers[None, :] * c[None, :]
+            total = np.maximum(model.sum(axis=1, keepdims=True), np.finfo(float).tiny)
+            share = model / total
+            weak = [
+                t
+                for k, t in enumerate(names)
+                if t in model_names and t != "B" and c[k] > 0 and not (share[:, k] >= 0.5).any()
+            ]
+            if not weak or len(model_names) - len(weak) < 1:
+                break
+            model_names = [t for t in model_names if t not in weak]
         for k, (t, cp) in enumerate(zip(names, c, strict=True)):
             slopes[t] = _FIT_POWERS[t] / 2.0
+            if t not in model_names:
+                reasons[t] = f"never half of the fitted Allan variance at {few}: refitted without"
+                continue
             if not cp > 0:
                 reasons[t] = f"fitted to zero on {few}"
                 continue
@@ -436,6 +462,10 @@ def noise_terms(
             ranges[t] = (float(taus[dom][0]), float(taus[dom][-1]))
     else:
         raise InputError(None, f"unknown noise-term method {method!r} (slope or fit)")
+    for name in set("QNBKR") - set(terms):
+        out[name] = float("nan")
+        for d in (slopes, reasons, ranges, bounds):
+            d.pop(name, None)
     return NoiseTerms(
         **out,
         method=method,

@@ -11,7 +11,8 @@ already written reads in the documented shape:
 - ``run.profile`` as the profile's name with the table in ``run.profile_definition`` →
   ``run.profile`` = the table (a bare name → ``{"name": …}``);
 - ``bench.adc.rate_hz`` (and ``bench.units.<serial>.adc.rate_hz``) →
-  ``sample_rate_hz``, the BENCH.toml ``[adc]`` key the acquisition always wrote;
+  ``sample_rate_hz``, the BENCH.toml ``[rate_stream]`` (formerly ``[adc]``) key the acquisition
+  always wrote;
 - ``bench.bench`` (the simulator's bench name) → ``bench.name``, ``simulated`` true for
   ``"sim"``.
 

@@ -18,7 +18,7 @@ import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, BinaryIO, Literal
+from typing import Any, BinaryIO, Literal, NamedTuple
 
 from gyrolab.errors import InputError, existing_file
 from gyrolab.record.integrity import (
@@ -317,43 +317,53 @@ def opened(path: str | os.PathLike[str], hint: str = RECOVER_HINT) -> Iterator[S
         fh.close()
 
 
-#: Files whose data section's CRC this process has checked, by (device, inode, size,
-#: mtime, ctime): a command opens its recording several times (metadata, units, each pass),
-#: and reading one unit of a many-unit file would otherwise check every unit's bytes each
-#: time. Any write changes the ctime, which nobody can set back; a file changed within
-#: :data:`_SETTLE_NS` of the check is not remembered, as its stamps may not show a change
-#: that follows at once (file-system timestamps have a granularity).
-_CHECKED: set[tuple[int, ...]] = set()
+class FileIdentity(NamedTuple):
+    """An open file's identity, from one ``fstat``: which file (device, inode) and its
+    state (size, modification and status-change times, ns). Both caches below key on it."""
+
+    dev: int
+    ino: int
+    size: int
+    mtime_ns: int
+    ctime_ns: int
+
+    @classmethod
+    def of(cls, fh: BinaryIO) -> FileIdentity:
+        st = os.fstat(fh.fileno())
+        return cls(st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+#: Files whose data section's CRC this process has checked, by their whole identity: a
+#: command opens its recording several times (metadata, units, each pass), and reading one
+#: unit of a many-unit file would otherwise check every unit's bytes each time. Any write
+#: changes the ctime, which nobody can set back; a file changed within :data:`_SETTLE_NS`
+#: of the check is not remembered, as its stamps may not show a change that follows at
+#: once (file-system timestamps have a granularity).
+_CHECKED: set[FileIdentity] = set()
 _SETTLE_NS = 2_000_000_000
 _CHECKED_MAX = 4096
 
 
-def _file_key(fh: BinaryIO) -> tuple[int, ...]:
-    st = os.fstat(fh.fileno())
-    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-
-
-def _remember(key: tuple[int, ...]) -> None:
-    if time.time_ns() - max(key[3], key[4]) > _SETTLE_NS:
+def _remember(ident: FileIdentity) -> None:
+    if time.time_ns() - max(ident.mtime_ns, ident.ctime_ns) > _SETTLE_NS:
         if len(_CHECKED) >= _CHECKED_MAX:
             _CHECKED.clear()
-        _CHECKED.add(key)
+        _CHECKED.add(ident)
 
 
-#: The summary section last parsed, by (device, inode, size, summary offset, summary CRC):
-#: a command opens its recording several times (registration after ``acquire``: five
-#: times), and parsing a long multi-unit run's chunk indexes is most of an open's cost
-#: (0.45 s CPU for 8 units × 2 h, 35 000 chunks). ``check_layout`` has checked the
-#: summary's bytes against that CRC on this very open, so the parse is of the same bytes,
-#: however recently the file was written. One entry: a summary can be large.
+#: The summary section last parsed, by the file (device, inode) and its summary (size,
+#: summary offset, summary CRC): a command opens its recording several times (registration
+#: after ``acquire``: five times), and parsing a long multi-unit run's chunk indexes is most
+#: of an open's cost (0.45 s CPU for 8 units × 2 h, 35 000 chunks). ``check_layout`` has
+#: checked the summary's bytes against that CRC on this very open, so the parse is of the
+#: same bytes, however recently the file was written. One entry: a summary can be large.
 _SUMMARY: dict[tuple[int, ...], Any] = {}
 
 
-def _summary_key(fh: BinaryIO, layout: Layout) -> tuple[int, ...] | None:
+def _summary_key(ident: FileIdentity, layout: Layout) -> tuple[int, ...] | None:
     if not layout.summary_start or not layout.summary_crc:
         return None  # no summary, or one without a CRC to tell it is the same
-    st = os.fstat(fh.fileno())
-    return (st.st_dev, st.st_ino, layout.size, layout.summary_start, layout.summary_crc)
+    return (ident.dev, ident.ino, layout.size, layout.summary_start, layout.summary_crc)
 
 
 def _open(p: Path, fh: BinaryIO, hint: str) -> Source:
@@ -365,16 +375,16 @@ def _open(p: Path, fh: BinaryIO, hint: str) -> Source:
             raise InputError(p, "not an MCAP file")
         layout = check_layout(fh)
         fh.seek(0)
-        skey = _summary_key(fh, layout)
+        ident = FileIdentity.of(fh)
+        skey = _summary_key(ident, layout)
         src = Source(p, fh, make_reader(fh), layout, hint, _SUMMARY.get(skey) if skey else None)
         if skey is not None and skey not in _SUMMARY:
             _SUMMARY.clear()
             _SUMMARY[skey] = src.summary
         if layout.data_crc:
-            key = _file_key(fh)
-            if key not in _CHECKED:
+            if ident not in _CHECKED:
                 check_data_section(fh, layout, src.spans)
-                _remember(key)
+                _remember(ident)
             src.verified = True
         return src
     except InputError:

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 import time
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import IO, Any
@@ -37,9 +39,22 @@ from gyrolab.record.format import (
     recording_channels,
     unit_topic,
 )
+from gyrolab.record.integrity import (
+    MAGIC,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_METADATA,
+    OP_SCHEMA,
+)
 from gyrolab.record.metadata import BenchMetadata, RunMetadata
 
 LIBRARY = f"gyrolab {__version__}"  # the MCAP header's library string
+# json.dumps(msg, separators=(",", ":")) without a new encoder per message
+_COMPACT_JSON = json.JSONEncoder(separators=(",", ":"))
 
 
 def json_strings(values: Mapping[str, Any]) -> dict[str, str]:
@@ -51,9 +66,19 @@ def json_strings(values: Mapping[str, Any]) -> dict[str, str]:
 
 class McapFile:
     """An MCAP file written record by record: chunked (``chunk_size`` bytes), compressed
-    (``"zstd"``, ``"lz4"`` or ``"none"``), with message indexes and a summary, so seeking
-    readers open it directly, and with all three MCAP CRCs (chunks, data section, summary).
-    Schema and channel ids are this file's own (1, 2, …)."""
+    (``"zstd"``, ``"lz4"`` or ``"none"``), with message indexes and a summary (schemas,
+    channels, statistics, chunk and metadata indexes, summary offsets), so seeking readers
+    open it directly, and with all three MCAP CRCs (chunks, data section, summary).
+    Schema and channel ids are this file's own (1, 2, …).
+
+    The records are built here (https://mcap.dev/spec), byte for byte what the ``mcap``
+    library's ``Writer`` (1.x, ``enable_data_crcs=True``) writes for the same calls —
+    ``tests/test_mcap_file.py`` compares whole files — but each message record is one
+    ``struct`` call and every chunk is compressed by one reused zstd context: the library's
+    per-record Python and its new context per chunk were most of a multi-unit run's
+    recording CPU (docs/performance.md, ``benchmarks/bench_mcap_write.py``). As in the
+    library, schema and channel records go into the next chunk written (and always into
+    the summary), and a metadata record is written at once, outside any chunk."""
 
     def __init__(
         self,
@@ -64,23 +89,54 @@ class McapFile:
         chunk_size: int = 1 << 20,
         compression: str = "zstd",
     ) -> None:
-        from mcap.writer import CompressionType, Writer
+        if compression == "zstd":
+            import zstandard
 
-        comp = {
-            "zstd": CompressionType.ZSTD,
-            "lz4": CompressionType.LZ4,
-            "none": CompressionType.NONE,
-        }
-        # enable_data_crcs: the data section's CRC-32 in the DataEnd record, so that a reader
-        # can check the bytes no chunk CRC covers (metadata records, the header):
-        # gyrolab/record/integrity.py
-        self._w = Writer(
-            fh, chunk_size=chunk_size, compression=comp[compression], enable_data_crcs=True
-        )
-        self._w.start(profile=profile, library=library)
+            # level 3: zstandard.compress's (the library's) default, so the bytes match
+            self._compress: Callable[[bytes], bytes] = zstandard.ZstdCompressor(level=3).compress
+        elif compression == "lz4":
+            import lz4.frame
+
+            self._compress = lz4.frame.compress
+        elif compression == "none":
+            self._compress = bytes
+        else:
+            raise ValueError(f"compression must be zstd, lz4 or none, not {compression!r}")
+        self._fh = fh
+        self._compression = "" if compression == "none" else compression
+        self._comp_str = _string(self._compression)
+        self.chunk_size = chunk_size
+        self._pos = fh.tell()  # where the next record goes (offsets in indexes are absolute)
+        self._data_crc = 0  # the data section's CRC-32 (DataEnd): every byte before it
+        self._schemas: list[bytes] = []  # records, in id order (repeated in the summary)
+        self._channels: list[bytes] = []
+        self._chunk_indexes: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []
+        self._counts: dict[int, int] = {}  # messages per channel, in first-message order
+        self._messages = 0
+        self._t_min = self._t_max = 0
+        self._metadata = 0
+        # the open chunk: its records, per channel its (log time, offset) index entries
+        self._chunk = bytearray()
+        self._index: dict[int, list[int]] = {}
+        self._c_min = self._c_max = 0
+        self._c_messages = 0
+        self._write(MAGIC + _record(OP_HEADER, _string(profile) + _string(library)))
+
+    def _write(self, data: bytes) -> None:
+        """Data-section bytes: written, counted and added to the data CRC."""
+        self._fh.write(data)
+        self._pos += len(data)
+        self._data_crc = zlib.crc32(data, self._data_crc)
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        return int(self._w.register_schema(name, encoding, data))
+        sid = len(self._schemas) + 1
+        body = _H.pack(sid) + _string(name) + _string(encoding) + _I.pack(len(data)) + data
+        rec = _record(OP_SCHEMA, body)
+        self._schemas.append(rec)
+        self._chunk += rec
+        self._maybe_close()
+        return sid
 
     def register_channel(
         self,
@@ -89,27 +145,178 @@ class McapFile:
         schema_id: int,
         metadata: Mapping[str, str] | None = None,
     ) -> int:
-        return int(
-            self._w.register_channel(topic, message_encoding, schema_id, dict(metadata or {}))
-        )
+        cid = len(self._channels) + 1
+        body = _HH.pack(cid, schema_id) + _string(topic) + _string(message_encoding)
+        rec = _record(OP_CHANNEL, body + _string_map(metadata or {}))
+        self._channels.append(rec)
+        self._chunk += rec
+        self._maybe_close()
+        return cid
 
     def add_message(
         self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int
     ) -> None:
-        self._w.add_message(
-            channel_id, log_time=log_time, data=data, publish_time=publish_time, sequence=sequence
-        )
+        self.add_messages([(channel_id, log_time, data, sequence)], publish_time - log_time)
+
+    def add_messages(
+        self, messages: list[tuple[int, int, bytes, int]], publish_offset: int = 0
+    ) -> None:
+        """Messages ``(channel, log time, data, sequence)`` in this order into the open
+        chunk (each message's publish time is its log time + ``publish_offset``); the
+        chunk is closed whenever it passes ``chunk_size``, as after each single message."""
+        chunk, index, counts, head = self._chunk, self._index, self._counts, _MESSAGE_RECORD.pack
+        for chan, ts, data, seq in messages:
+            if self._c_messages:
+                if ts < self._c_min:
+                    self._c_min = ts
+                elif ts > self._c_max:
+                    self._c_max = ts
+            else:
+                self._c_min = self._c_max = ts
+            entries = index.get(chan)
+            if entries is None:
+                entries = index[chan] = []
+            entries += (ts, len(chunk))
+            counts[chan] = counts.get(chan, 0) + 1
+            chunk += head(OP_MESSAGE, 22 + len(data), chan, seq, ts, ts + publish_offset)
+            chunk += data
+            self._c_messages += 1
+            if len(chunk) > self.chunk_size:
+                self.close_chunk()
+                chunk, index = self._chunk, self._index
 
     def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
-        self._w.add_metadata(name, dict(values))
+        rec = _record(OP_METADATA, _string(name) + _string_map(values))
+        self._metadata_indexes.append(
+            _record(OP_METADATA_INDEX, _QQ.pack(self._pos, len(rec)) + _string(name))
+        )
+        self._metadata += 1
+        self._write(rec)
+
+    def _maybe_close(self) -> None:
+        if len(self._chunk) > self.chunk_size:
+            self.close_chunk()
+
+    def close_chunk(self) -> None:
+        """Write the open chunk (if it holds a message), its message indexes and keep its
+        chunk index; schema/channel records alone wait for the next chunk."""
+        if not self._c_messages:
+            return
+        raw = bytes(self._chunk)
+        packed = self._compress(raw)
+        start, end = self._c_min, self._c_max
+        rec = b"".join(
+            (
+                _CHUNK_HEAD.pack(OP_CHUNK, 36 + len(self._comp_str) + len(packed), start, end),
+                _QI.pack(len(raw), zlib.crc32(raw)),
+                self._comp_str,
+                _Q.pack(len(packed)),
+                packed,
+            )
+        )
+        at = self._pos + len(rec)
+        offsets, indexes = [], []
+        for chan, entries in self._index.items():
+            offsets.append(_HQ.pack(chan, at))
+            n = len(entries) // 2
+            mi = _MINDEX_HEAD.pack(OP_MESSAGE_INDEX, 6 + 16 * n, chan, 16 * n)
+            mi += struct.pack(f"<{2 * n}Q", *entries)
+            indexes.append(mi)
+            at += len(mi)
+        mindex = b"".join(indexes)
+        self._chunk_indexes.append(
+            _record(
+                OP_CHUNK_INDEX,
+                b"".join(
+                    (
+                        _QQQQ.pack(start, end, self._pos, len(rec)),
+                        _I.pack(10 * len(offsets)),
+                        *offsets,
+                        _Q.pack(len(mindex)),
+                        self._comp_str,
+                        _QQ.pack(len(packed), len(raw)),
+                    )
+                ),
+            )
+        )
+        if self._messages:
+            self._t_min = min(self._t_min, start)
+            self._t_max = max(self._t_max, end)
+        else:
+            self._t_min, self._t_max = start, end
+        self._messages += self._c_messages
+        self._write(rec + mindex)
+        self._chunk = bytearray()
+        self._index = {}
+        self._c_messages = 0
 
     def flush(self) -> None:
         """Close the open chunk (written to the file object, not yet to the OS)."""
-        self._w.flush()
+        self.close_chunk()
+        self._fh.flush()
 
     def finish(self) -> None:
         """Write the last chunk, the summary and the footer."""
-        self._w.finish()
+        self.close_chunk()
+        self._write(_record(OP_DATA_END, _I.pack(self._data_crc)))
+        summary_start = self._pos
+        counts = b"".join(_HQ.pack(c, n) for c, n in self._counts.items())
+        stats = _record(
+            OP_STATISTICS,
+            _Q.pack(self._messages)
+            + struct.pack(
+                "<HIIII",
+                len(self._schemas),
+                len(self._channels),
+                0,  # attachments: gyrolab writes none
+                self._metadata,
+                len(self._chunk_indexes),
+            )
+            + _QQ.pack(self._t_min, self._t_max)
+            + _I.pack(len(counts))
+            + counts,
+        )
+        groups = [
+            (OP_SCHEMA, b"".join(self._schemas)),
+            (OP_CHANNEL, b"".join(self._channels)),
+            (OP_STATISTICS, stats),
+            (OP_CHUNK_INDEX, b"".join(self._chunk_indexes)),
+            (OP_ATTACHMENT_INDEX, b""),
+            (OP_METADATA_INDEX, b"".join(self._metadata_indexes)),
+        ]
+        at, offsets = summary_start, []
+        for op, data in groups:
+            offsets.append(_record(OP_SUMMARY_OFFSET, _BQQ.pack(op, at, len(data))))
+            at += len(data)
+        summary = b"".join([g for _, g in groups] + offsets)
+        tail = _FOOTER_HEAD.pack(OP_FOOTER, 20, summary_start, at)
+        self._fh.write(summary + tail + _I.pack(zlib.crc32(tail, zlib.crc32(summary))) + MAGIC)
+
+
+_H, _I, _Q = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+_HH, _HQ, _QI = struct.Struct("<HH"), struct.Struct("<HQ"), struct.Struct("<QI")
+_QQ, _BQQ, _QQQQ = struct.Struct("<QQ"), struct.Struct("<BQQ"), struct.Struct("<QQQQ")
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, body length
+_MESSAGE_RECORD = struct.Struct("<BQHIQQ")  # head, channel, sequence, log and publish time
+_MINDEX_HEAD = struct.Struct("<BQHI")  # head, channel, entries' byte length
+_CHUNK_HEAD = struct.Struct("<BQQQ")  # head, message start and end time
+_FOOTER_HEAD = struct.Struct("<BQQQ")  # head, summary start, summary offset start
+OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_ATTACHMENT_INDEX = 0x07, 0x08, 0x0A
+OP_STATISTICS, OP_METADATA_INDEX, OP_SUMMARY_OFFSET = 0x0B, 0x0D, 0x0E
+
+
+def _record(op: int, body: bytes) -> bytes:
+    return _RECORD_HEAD.pack(op, len(body)) + body
+
+
+def _string(s: str) -> bytes:
+    b = s.encode()
+    return _I.pack(len(b)) + b
+
+
+def _string_map(values: Mapping[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in values.items())
+    return _I.pack(len(body)) + body
 
 
 class RecordingWriter:
@@ -169,6 +376,7 @@ class RecordingWriter:
         self.fsync_count = 0
         self._seq: dict[str, int] = {}
         self._chan: dict[str, int] = {}
+        self._names: dict[tuple[str, str | None], str] = {}  # (topic, unit) -> channel topic
         self.chunk_size = chunk_size
         # multi-unit chunk groups: topic -> group (a serial, or None for the shared topics);
         # per group the buffered (channel, log_time, data, sequence) and their record bytes
@@ -230,9 +438,10 @@ class RecordingWriter:
         else:
             g = self._group[topic]
             self._buf[g].append((self._chan[topic], ts, data, seq))
-            # a Message record: opcode 1 + length 8 + channel 2 + sequence 4 + 2 times 16
-            self._buf_bytes[g] += 31 + len(data)
-            if self._buf_bytes[g] > self.chunk_size:
+            # a Message record: opcode 1 + length 8 + channel 2 + sequence 4 + 2 times 8
+            size = self._buf_bytes[g] + 31 + len(data)
+            self._buf_bytes[g] = size
+            if size > self.chunk_size:
                 self._write_group(g)
         if self.tap is not None:
             try:
@@ -255,7 +464,7 @@ class RecordingWriter:
 
     def _json(self, topic: str, msg: Mapping[str, Any], t: float | None = None) -> None:
         t = float(msg["t"]) if t is None else t
-        self._put(topic, t, json.dumps(msg, separators=(",", ":")).encode())
+        self._put(topic, t, _COMPACT_JSON.encode(msg).encode())
 
     def stamp(self, t: float) -> dict[str, int]:
         """``{sec, nsec}`` Unix time of run time ``t`` (the viewers' time type)."""
@@ -267,9 +476,8 @@ class RecordingWriter:
         buf = self._buf[g]
         if not buf:
             return
-        for chan, ts, data, seq in buf:
-            self._w.add_message(chan, log_time=ts, data=data, publish_time=ts, sequence=seq)
-        self._w.flush()  # closes the chunk: it holds this group's messages only
+        self._w.add_messages(buf)
+        self._w.close_chunk()  # it holds this group's messages only
         self._buf[g], self._buf_bytes[g] = [], 0
 
     def flush(self) -> None:
@@ -300,9 +508,12 @@ class RecordingWriter:
                 if unit is None
                 else "unit= is for multi-unit recordings (RecordingWriter(units=...))"
             )
-        name = unit_topic(topic, unit)
-        if name not in self._chan:
-            raise ValueError(f"unit {unit!r} is not one of this recording's {self.units}")
+        name = self._names.get((topic, unit))
+        if name is None:
+            name = unit_topic(topic, unit)
+            if name not in self._chan:
+                raise ValueError(f"unit {unit!r} is not one of this recording's {self.units}")
+            self._names[(topic, unit)] = name  # checked once: every block asks again
         return name
 
     def write_adc_block(
@@ -336,6 +547,8 @@ class RecordingWriter:
             n = r.shape[0]
             tm = t0 + 0.5 * (n - 1) * period
             x = r if r.ndim == 1 else r[:, 0]  # the summary's own fields: axis x
+            # the ufuncs' reductions: x.mean(), x.min(), x.max() without numpy's wrappers
+            # (the same numbers; one summary per block and unit)
             summary = {
                 "header": {
                     "stamp": self.stamp(tm),
@@ -345,9 +558,9 @@ class RecordingWriter:
                 "t0": t0,
                 "first_index": int(first_index),
                 "n": int(n),
-                "mean_dps": float(x.mean()),
-                "min_dps": float(x.min()),
-                "max_dps": float(x.max()),
+                "mean_dps": float(np.add.reduce(x)) / n,
+                "min_dps": float(np.minimum.reduce(x)),
+                "max_dps": float(np.maximum.reduce(x)),
             }
             if r.ndim > 1:  # several axes: every axis too, x first
                 summary["axes_mean_dps"] = [float(v) for v in r.mean(axis=0)]

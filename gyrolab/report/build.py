@@ -50,7 +50,7 @@ def build_report(
     """The report document and ``metrics.json`` content of ``run_path`` (and the model).
 
     ``step(name)`` is called as each stage starts (progress display). ``spec`` (a spec
-    TOML, :mod:`gyrolab.report.spec`) adds the verdict; ``operator``/``serial`` override
+    TOML, :mod:`gyrolab.report.spec_limits`) adds the verdict; ``operator``/``serial`` override
     the recording's for the sign-off block; ``axis`` reports one axis of a multi-axis
     unit; ``rec`` is the recording already read (``run_path``'s, every axis); ``label``
     names the run in metrics.json (default: ``run_path`` as given).
@@ -58,7 +58,7 @@ def build_report(
     from gyrolab.outputs import json_safe
     from gyrolab.report.data import assemble, read_run
     from gyrolab.report.layout import document
-    from gyrolab.report.spec import load_spec
+    from gyrolab.report.spec_limits import load_spec
 
     t_start = time.perf_counter()
     spec_obj = load_spec(spec) if spec is not None else None
@@ -71,7 +71,7 @@ def build_report(
     step("read recording")
     if rec is None:
         rec = read_run(run_path, log_options, unit)  # unit: of a multi-unit recording
-    if axis is not None:  # one axis of a multi-axis unit (gyrolab.report.axes)
+    if axis is not None:  # one axis of a multi-axis unit (gyrolab.report.axes_report)
         rec = rec.axis(axis)
     data = assemble(rec, model_dir, model, step, spec_obj, operator, serial, unit, label)
     step("figures")

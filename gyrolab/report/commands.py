@@ -56,7 +56,7 @@ def write_report(
 ) -> dict[str, Any]:
     """Build and write the report of ``run`` into ``out``; returns the metrics.
 
-    ``spec`` (SPEC.toml, :mod:`gyrolab.report.spec`) adds per-limit pass/fail and the
+    ``spec`` (SPEC.toml, :mod:`gyrolab.report.spec_limits`) adds per-limit pass/fail and the
     verdict; ``operator``/``serial`` fill the sign-off block instead of the recording's;
     ``label``: how metrics.json names the run (default: ``run`` as given; the demo passes
     a path relative to its output directory); ``on_stage(name)``: told each stage of
@@ -81,7 +81,7 @@ def write_report(
 
     t0 = time.perf_counter()
     try:
-        from gyrolab.report.axes import build_axes_report, n_axes
+        from gyrolab.report.axes_report import build_axes_report, n_axes
 
         n, rec = (1, None) if unit is not None else n_axes(run, model, log_options)
         kw = {

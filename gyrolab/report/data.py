@@ -133,7 +133,7 @@ def assemble(
 ) -> ReportData:
     """:class:`ReportData` of ``rec`` (one axis), with ``model`` (loaded from
     ``model_dir``) applied or its results read, and ``spec`` (a loaded
-    :class:`~gyrolab.report.spec.Spec`) judged. ``step(name)`` marks each stage.
+    :class:`~gyrolab.report.spec_limits.Spec`) judged. ``step(name)`` marks each stage.
     ``label``: how metrics.json names the run (default: its path as given)."""
     mr: ModelRun | None = None
     if model is not None and model_dir is not None:
@@ -171,7 +171,7 @@ def assemble(
         model=mr,
     )
     if spec is not None:
-        from gyrolab.report.spec import evaluate
+        from gyrolab.report.spec_limits import evaluate
 
         data.verdict = evaluate(
             spec,

@@ -23,11 +23,11 @@ have it.
 Which units count (:func:`mark`): a unit whose metrics are in-sample (its model was fitted
 without ``--validate``) is marked "not validated", one whose model covers less than
 ``min_calibrated_span_c`` of temperature (default
-:data:`~gyrolab.report.spec.DEFAULT_MIN_CALIBRATED_SPAN_C`) "narrow range"; neither is
+:data:`~gyrolab.report.spec_limits.DEFAULT_MIN_CALIBRATED_SPAN_C`) "narrow range"; neither is
 counted in the yield unless the spec says so (``allow_in_sample = true``, a smaller
 ``min_calibrated_span_c``). Units are named by the serial their model records.
 
-Yield against ``--spec`` (:mod:`gyrolab.report.spec`): each counted unit's ``metrics.json``
+Yield against ``--spec`` (:mod:`gyrolab.report.spec_limits`): each counted unit's ``metrics.json``
 is checked against the spec's metric limits (by default on the causal output, the
 compensated output the gyro delivers); the yield is passed/counted with a Wilson 95 %
 interval. Run limits (temperature coverage, gaps, run complete, safe state) need the
@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrolab.report.spec import DEFAULT_MIN_CALIBRATED_SPAN_C, SERIES, load_spec
+from gyrolab.report.spec_limits import DEFAULT_MIN_CALIBRATED_SPAN_C, SERIES, load_spec
 
 MIN_UNITS_FOR_OUTLIERS = 5
 Z_LIMIT = 3.5
@@ -73,7 +73,7 @@ COEFFICIENTS: dict[str, tuple[str, str]] = {
 
 
 #: The outputs whose metrics the fleet tabulates (column prefix -> label), read from
-#: metrics.json as the spec reads them (:data:`gyrolab.report.spec.SERIES`): ``causal`` is
+#: metrics.json as the spec reads them (:data:`gyrolab.report.spec_limits.SERIES`): ``causal`` is
 #: the compensated output; ``offline`` the paper's low-passed reconstruction.
 OUTPUTS: dict[str, str] = {
     "raw": "raw",
@@ -269,7 +269,7 @@ def analyse(rows: list[UnitRow], spec_path: str | None = None) -> dict[str, Any]
     }
     result["counting"] = {"allow_in_sample": allow, "min_calibrated_span_c": min_span}
     if spec is not None:
-        from gyrolab.report.spec import FLAGS, METRIC_LIMITS, RUN_LIMITS, Spec, evaluate
+        from gyrolab.report.spec_limits import FLAGS, METRIC_LIMITS, RUN_LIMITS, Spec, evaluate
 
         metric_only = Spec(
             path=spec.path,

@@ -35,7 +35,7 @@ NAME = "gyro ADC"
 
 @dataclass(frozen=True)
 class GyroAdcConfig:
-    """``[adc] driver = "gyroadc"``: the gyro's ADC stream and its conversion to °/s
+    """``[rate_stream] driver = "gyroadc"``: the gyro's ADC stream and its conversion to °/s
     (``Ω = (V − offset)/gain``; docs/bench-config.md)."""
 
     driver: str = "gyroadc"

@@ -7,7 +7,7 @@ Writes ``DIR/discrepancy.json`` (``effects_found``, ``ambiguous``, ``gap_before`
 channels of the recording, never its metadata (where a simulator keeps its provenance).
 
 On a multi-axis recording (issue 15's layout) each axis is analysed with the thermal fits
-shared (:mod:`gyrolab.sim.discrepancy.axes`) and ``DIR`` holds ``discrepancy.json``
+shared (:mod:`gyrolab.sim.discrepancy.axes_workflow`) and ``DIR`` holds ``discrepancy.json``
 (``effects_shared`` once, ``effects_by_axis`` and one full single-axis document per axis
 under ``axes``), ``model_axis{K}.toml`` and ``index_axis{K}.html`` per axis, and an
 ``index.html`` that links them (docs/discrepancy.md, "Several axes").
@@ -24,7 +24,7 @@ from html import escape
 from typing import Any
 
 from gyrolab.outputs import atomic_dir, check_output
-from gyrolab.sim.discrepancy.axes import run_discrepancy_axes
+from gyrolab.sim.discrepancy.axes_workflow import run_discrepancy_axes
 from gyrolab.sim.discrepancy.data import load_recording_axes
 from gyrolab.sim.discrepancy.report import json_default, render
 from gyrolab.sim.discrepancy.workflow import Result, run_discrepancy

@@ -429,7 +429,7 @@ def load_recording_axes(
 ) -> list[BenchData]:
     """One :class:`BenchData` per gyro axis of a recording (one for a single-axis one),
     all with the same temperature channels, for
-    :func:`gyrolab.sim.discrepancy.axes.run_discrepancy_axes`."""
+    :func:`gyrolab.sim.discrepancy.axes_workflow.run_discrepancy_axes`."""
     bench = _read_bench(path, unit)
     cols = bench[2] if bench[2].ndim > 1 else bench[2][:, None]
     return [
