@@ -28,7 +28,13 @@ order). **Another part number**: every unit's quick run is also tested against t
 of all units of the *other* family (it should be refused).
 
 Scoring: bias stability (std of 3.6 s means, °/h) and 100 s p-p (breakfam.score, the
-break family's own scorer, for both families). Per-unit results are cached in
+break family's own scorer, for both families). **What the tool says of each held-out
+run** of the quick + prior model: gyrolab's range guard (a run beyond the quick run's
+case range by more than the margin is flagged: ``guards.outside_fraction``; how far beyond
+the quick and the 13 h run's ranges) and its graded expected error (the model's band:
+``band.band_metrics``; ``severe`` = more than 2× the calibrated error). A refused unit
+is reported as the lab runs it: recalibrated on the 13 h profile (ratio 1 by
+construction), its chamber hours counted. Per-unit results are cached in
 ``benchmarks/results/prior_suite/`` (``--tables-only`` re-renders them).
 """
 
@@ -185,8 +191,11 @@ def stage2(
 ) -> dict[str, Any]:
     """Unit ``u``: quick run with the leave-unit-out prior, alone, and the 13 h model, on
     the held-out runs; the quick run against the other family's prior."""
+    from gyrolab.compensation.band import band_metrics
     from gyrolab.compensation.causal_models import hysteresis_width
+    from gyrolab.compensation.guards import outside_fraction
     from gyrolab.compensation.prior import fit_map, learn_prior
+    from gyrolab.numerics.averaging import block_average
 
     t0 = time.perf_counter()
     mine = _entry("13h", next(o["model"] for o in others if o["unit"] == u))
@@ -215,6 +224,10 @@ def stage2(
         "hysteresis": {k: hysteresis_width(m.model) for k, m in models.items()},
         "runs": {},
     }
+    # the 13 h run again (same seed as stage 1): its case range, the 13 h model's
+    full = simulate(family, u, CAL[family], seed=1000 * u + 1)
+    res["cal_case_range_c"] = [float(full.pt_c.min()), float(full.pt_c.max())]
+    ranges = {"13h": res["cal_case_range_c"], "quick": res["quick_case_range_c"]}
     names = list(HELD[family])[:held]
     for i, name in enumerate(names):
         r = simulate(family, u, name, seed=1000 * u + 2 + i)
@@ -222,6 +235,24 @@ def stage2(
         for k, m in models.items():
             rr[k] = score(r.raw - _drift(m, r))
         rr["_case_range_c"] = [float(r.pt_c.min()), float(r.pt_c.max())]
+        # the quick + prior model's graded expected error on the run (its band's law:
+        # what `compensate --validate` / `apply` report beside the range flag)
+        tb, yb, _ = block_average(
+            r.t, r.raw - _drift(models["quick_prior"], r), BLOCK_S, 1.0 / RATE_HZ
+        )
+        rr["_expected_error"] = band_metrics(fit.model.band, tb, yb, r.pt_t, r.pt_c)[
+            "expected_error"
+        ]
+        # what gyrolab's range guard says of the run for each calibration: the fraction
+        # of PT100 readings beyond its case range by more than the margin (the flag),
+        # and how far beyond, °C
+        rr["_outside"] = {
+            k: {
+                "fraction": outside_fraction(r.pt_c, lo, hi)[0],
+                "beyond_c": max(lo - float(r.pt_c.min()), float(r.pt_c.max()) - hi, 0.0),
+            }
+            for k, (lo, hi) in ranges.items()
+        }
         res["runs"][name] = rr
     res["s"] = time.perf_counter() - t0
     print(
@@ -276,6 +307,42 @@ def family_table(family: str, results: list[dict[str, Any]]) -> tuple[list[str],
     )
     ratio = a["quick_prior"][BS] / base
     dcut = cut["13h"] - cut["quick_prior"]
+
+    def grid(get: Any) -> np.ndarray:
+        """``get`` of every held-out run, units × runs (keys absent in results written
+        before them: what ``get`` does with ``{}``)."""
+        return np.array([[get(r["runs"][n]) for n in names] for r in results])
+
+    def subset_row(label: str, mask: np.ndarray) -> None:
+        """The quick + prior row over the runs in ``mask``."""
+        if mask.any():
+            rows.append(
+                f"| {family} | 3.25 h `quick` + prior, held-out runs {label} "
+                f"({int(mask.sum())} of {mask.size}; refused units left out) | 3.25 | "
+                f"{np.median(ratio[mask]):.3f} | {ratio[mask].max():.3f} | "
+                f"{np.median((a['quick_prior'][BS] / a['oracle'][BS])[mask]):.3f} | "
+                f"{np.median(cut['quick_prior'][mask]):.1f} % | "
+                f"{np.median(dcut[mask]):+.1f} / {np.max(dcut[mask]):+.1f} |"
+            )
+
+    # gyrolab's range guard on the quick calibration: a held-out run reaching beyond the
+    # quick run's case range is flagged (extrapolated) when the model is applied
+    flag = grid(lambda rr: rr.get("_outside", {}).get("quick", {}).get("fraction", 0.0) > 0)
+    beyond = np.array(
+        [
+            grid(lambda rr, k=k: rr.get("_outside", {}).get(k, {}).get("beyond_c", 0.0))
+            for k in ("quick", "13h")
+        ]
+    )
+    severe = grid(lambda rr: rr.get("_expected_error", {}).get("grade") == "severe")
+    trusted = ~severe & ~refused[:, None]
+    if severe.any():
+        subset_row("whose expected error is not graded severe", trusted)
+    ws = np.unravel_index(np.argmax(np.where(severe, ratio, -np.inf)), ratio.shape)
+    inside = ~flag & ~refused[:, None]
+    subset_row("the range guard does not flag", inside)
+    fl = flag & ~refused[:, None]
+    wf = np.unravel_index(np.argmax(np.where(fl, ratio, -np.inf)), ratio.shape)
     stats = {
         "median": float(np.median(ratio)),
         "worst": float(ratio.max()),
@@ -286,6 +353,35 @@ def family_table(family: str, results: list[dict[str, Any]]) -> tuple[list[str],
         "sys_median": float(np.median(ratio_s)),
         "sys_worst": float(ratio_s.max()),
         "sys_hours": hours,
+        "sys_dcut_worst": float(np.max(cut["13h"] - sys_cut)),
+        "flag": flag,
+        "beyond": beyond,
+        "in_n": int(inside.sum()),
+        "in_worst": float(ratio[inside].max()) if inside.any() else float("nan"),
+        "in_dcut_worst": float(dcut[inside].max()) if inside.any() else float("nan"),
+        "flag_n": int(fl.sum()),
+        "trusted_n": int(trusted.sum()),
+        "n_runs": int(ratio.size),
+        "trusted_worst": float(ratio[trusted].max()),
+        "trusted_dcut_worst": float(dcut[trusted].max()),
+        "severe": [
+            (int(results[i]["unit"]), names[j], float(ratio[i, j]))
+            for i, j in zip(*np.nonzero(severe), strict=True)
+        ],
+        "severe_worst": (
+            (float(ratio[ws]), int(results[ws[0]]["unit"]), names[ws[1]]) if severe.any() else None
+        ),
+        "flag_worst": (
+            (
+                float(ratio[wf]),
+                int(results[wf[0]]["unit"]),
+                names[wf[1]],
+                float(beyond[0][wf]),
+                float(beyond[1][wf]),
+            )
+            if fl.any()
+            else None
+        ),
     }
     return rows, stats
 
@@ -297,9 +393,14 @@ def unit_rows(family: str, results: list[dict[str, Any]], stats: dict) -> list[s
         hw = r["hysteresis"]
         tr = r["truth"]["hysteresis_width_deg_per_h"]
         worst = int(np.argmax(stats["ratio"][i]))
+        ext = (
+            f", beyond the quick range by {stats['beyond'][0][i, worst]:.0f} °C"
+            if stats["flag"][i, worst]
+            else ""
+        )
         L.append(
             f"| {family} {r['unit']} | {np.median(stats['ratio'][i]):.3f} | "
-            f"{stats['ratio'][i].max():.3f} ({stats['names'][worst]}) | "
+            f"{stats['ratio'][i].max():.3f} ({stats['names'][worst]}{ext}) | "
             f"{m['mahalanobis_d2']:.1f} / {m['dof']} (p {m['p_value']:.2g}) "
             f"{'belongs' if m['belongs'] else '**refused**'} | "
             f"{f['mahalanobis_d2']:.0f} (p {f['p_value']:.1g}) "
@@ -313,7 +414,7 @@ def unit_rows(family: str, results: list[dict[str, Any]], stats: dict) -> list[s
 
 
 #: thresholds of the detector's p-value the rates are measured at
-P_LEVELS = (1e-2, 1e-3, 1e-4)
+P_LEVELS = (0.5, 0.1, 0.05, 1e-2, 1e-3, 1e-4)
 
 
 def detector_rows(data: dict[str, list[dict[str, Any]]]) -> list[str]:
@@ -329,10 +430,13 @@ def detector_rows(data: dict[str, list[dict[str, Any]]]) -> list[str]:
         ("other_part_membership", "another part number (slope, curvature reversed) refused"),
         ("foreign_membership", "units against the other family's prior refused"),
     )
-    head = "| p threshold | " + " | ".join(f"{lab} ({', '.join(fams)}; all)" for _, lab in kinds)
-    L = [head + " |", "| ---: |" + " ---: |" * len(kinds)]
+    head = "| p threshold | nominal false alarms (p × units) | " + " | ".join(
+        f"{lab} ({', '.join(fams)}; all)" for _, lab in kinds
+    )
+    L = [head + " |", "| ---: | ---: |" + " ---: |" * len(kinds)]
+    total = sum(len(data[f]) for f in fams)
     for lvl in sorted({*P_LEVELS, P_OUT}, reverse=True):
-        cells = []
+        cells = [f"{lvl * total:.2g} of {total}"]
         for key, _ in kinds:
             per = [sum(r[key]["p_value"] < lvl for r in data[f]) for f in fams]
             n = [len(data[f]) for f in fams]
@@ -343,6 +447,21 @@ def detector_rows(data: dict[str, list[dict[str, Any]]]) -> list[str]:
         mark = " (gyrolab's)" if lvl == P_OUT else ""
         L.append(f"| {lvl:g}{mark} | " + " | ".join(cells) + " |")
     return L
+
+
+def calibration_line(data: dict[str, list[dict[str, Any]]]) -> str:
+    """The in-family null against χ²: the median of d² / (χ² median) over own-family
+    units (1 when calibrated) and the median p-value (0.5)."""
+    from scipy import stats as st
+
+    m = [r["membership"] for f in data for r in data[f]]
+    ratio = [x["mahalanobis_d2"] / st.chi2.median(x["dof"]) for x in m if x["dof"]]
+    return (
+        f"Own-family units (leave-unit-out, both families, {len(m)}): d² ÷ the χ² median "
+        f"of its degrees of freedom, median {np.median(ratio):.2f} (1 when the null holds); "
+        f"median p-value {np.median([x['p_value'] for x in m]):.2f} (0.5); degrees of "
+        f"freedom {min(x['dof'] for x in m)} … {max(x['dof'] for x in m)}."
+    )
 
 
 def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
@@ -379,6 +498,43 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
             f"{_pass(s['sys_median'] <= 1.1)} / {_pass(s['sys_worst'] <= 1.3)} |"
         )
         L.append(
+            f"| {f}, refused units on 13 h: 100 s p-p cut within 5 points of the 13 h "
+            f"calibration (worst) | {s['sys_dcut_worst']:+.1f} points | "
+            f"{_pass(s['sys_dcut_worst'] <= 5)} |"
+        )
+        L.append(
+            f"| {f}: worst ≤ 1.3 × on the {s['in_n']} held-out runs inside the quick run's "
+            f"case range (gyrolab's range guard silent; refused units left out); their p-p "
+            f"cut (worst) | {s['in_worst']:.3f} ×; {s['in_dcut_worst']:+.1f} points | "
+            f"{_pass(s['in_worst'] <= 1.3)} / {_pass(s['in_dcut_worst'] <= 5)} |"
+        )
+        sv = np.array([w for *_, w in s["severe"]])
+        sev = (
+            f"{sv.size} of {s['n_runs']} runs; on them median {np.median(sv):.3f} ×, worst "
+            f"{s['severe_worst'][0]:.3f} × (unit {s['severe_worst'][1]}, "
+            f"{s['severe_worst'][2]})"
+            if sv.size
+            else "none"
+        )
+        L.append(
+            f"| {f}: worst ≤ 1.3 × on the {s['trusted_n']} held-out runs whose expected error "
+            f"gyrolab does not grade severe (refused units left out); their p-p cut (worst) "
+            f"| {s['trusted_worst']:.3f} ×; {s['trusted_dcut_worst']:+.1f} points | "
+            f"{_pass(s['trusted_worst'] <= 1.3)} / {_pass(s['trusted_dcut_worst'] <= 5)} |"
+        )
+        L.append(
+            f"| {f}: runs graded severe (the tool reports an expected error > 2× its "
+            f"calibrated one: recalibrate over the range) | {sev} | flagged |"
+        )
+        if s["flag_worst"]:
+            w, uu, rn, bq, b13 = s["flag_worst"]
+            L.append(
+                f"| {f}: the worst of the {s['flag_n']} runs the range guard flags "
+                f"(extrapolated: the tool warns) | {w:.3f} × (unit {uu}, {rn}: {bq:.0f} °C "
+                f"beyond the quick run's case range, {b13:.0f} °C beyond the 13 h run's) "
+                f"| flagged |"
+            )
+        L.append(
             f"| {f}: 100 s p-p cut within 5 points of the 13 h calibration (median / worst) "
             f"| {s['dcut_median']:+.1f} / {s['dcut_worst']:+.1f} points | "
             f"{_pass(s['dcut_median'] <= 5)} (median), {_pass(s['dcut_worst'] <= 5)} (worst) |"
@@ -406,10 +562,15 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
         )
     L += [
         "",
-        "The out-of-prior detector measured (the unit's quick run, its distance d² from the "
-        "prior against χ² — each count is of units whose p-value is below the threshold):",
+        "The out-of-prior detector measured (the unit's quick run: its own estimate's "
+        "distance d² from the prior, jackknife covariance, over the directions the run "
+        "informs, against χ² — each count is of units whose p-value is below the "
+        "threshold; under a calibrated null the own-family counts follow the nominal "
+        "column):",
         "",
         *detector_rows(data),
+        "",
+        calibration_line(data),
     ]
     L += [
         "",

@@ -195,3 +195,31 @@ def test_start_branch_is_carried_from_the_fleet_to_the_fit() -> None:
     assert FleetPrior.from_dict(d).clusters[0].start_branch == 1.0
     del d["clusters"][0]["start_branch"]
     assert FleetPrior.from_dict(d).clusters[0].start_branch == 0.0
+
+
+def test_own_covariance_holds_correlated_noise() -> None:
+    """The detector's jackknife covariance of a least-squares estimate under correlated
+    noise (AR(1), correlation time 10 samples, shorter than a jackknife block) matches the
+    estimate's spread over repeated runs; the white-noise formula ``s² (AᵀA)⁻¹`` claims
+    it 20× too small."""
+    from scipy.signal import lfilter
+
+    from gyrolab.compensation.prior import own_covariance
+
+    rng = np.random.default_rng(11)
+    n = 1200
+    x = np.linspace(-1.0, 1.0, n)
+    A = np.stack([np.ones(n), x, np.sin(3 * x)], axis=1)
+    est, jk, white = [], [], []
+    for _ in range(150):
+        e = lfilter([1.0], [1.0, -0.9], rng.standard_normal(n)) * 0.01
+        y = A @ np.array([1.0, 0.5, -0.2]) + e
+        th, res, *_ = np.linalg.lstsq(A, y, rcond=None)
+        est.append(th)
+        jk.append(np.diag(own_covariance(A, y)))
+        white.append(np.diag(res[0] / (n - 3) * np.linalg.inv(A.T @ A)))
+    spread = np.var(np.array(est), axis=0, ddof=1)
+    ratio_jk = np.mean(jk, axis=0) / spread
+    ratio_white = np.mean(white, axis=0) / spread
+    assert np.all((ratio_jk > 0.7) & (ratio_jk < 1.3)), ratio_jk
+    assert np.all(ratio_white < 0.1), ratio_white

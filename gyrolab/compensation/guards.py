@@ -104,7 +104,12 @@ def calibration_ranges(run: Any, window_s: float) -> dict[str, float]:
     }
 
 
-def _outside(x: np.ndarray, lo: float, hi: float, min_margin: float) -> tuple[float, float]:
+def outside_fraction(
+    x: np.ndarray, lo: float, hi: float, min_margin: float = TEMP_MARGIN_C
+) -> tuple[float, float]:
+    """The fraction of ``x`` beyond the calibrated ``[lo, hi]`` by more than the margin
+    ``max(min_margin, SPAN_MARGIN (hi − lo))`` (what sets ``outside_calibration_range``),
+    and that margin."""
     margin = max(min_margin, SPAN_MARGIN * (hi - lo))
     out = (x < lo - margin) | (x > hi + margin)
     return float(out.mean()), margin
@@ -174,7 +179,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     if lo is None or hi is None:
         return {**source_check(calibration, run), **unit_check(calibration, run)}
     strict = (run.temp < lo) | (run.temp > hi)
-    frac_t, margin_t = _outside(run.temp, lo, hi, TEMP_MARGIN_C)
+    frac_t, margin_t = outside_fraction(run.temp, lo, hi, TEMP_MARGIN_C)
     out: dict[str, Any] = {
         "min_c": float(run.temp.min()),
         "max_c": float(run.temp.max()),
@@ -192,7 +197,7 @@ def range_check(calibration: dict[str, Any], run: Any) -> dict[str, Any]:
     if rlo is not None and rhi is not None:
         w = float(calibration.get("temp_rate_window_s", 300.0))
         r = temperature_rate(run.t, run.pt_t, run.pt_c, w)
-        frac_r, margin_r = _outside(r, rlo, rhi, 0.0)
+        frac_r, margin_r = outside_fraction(r, rlo, rhi, 0.0)
         out.update(
             rate_min_c_per_min=float(r.min()),
             rate_max_c_per_min=float(r.max()),
