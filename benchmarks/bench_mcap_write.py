@@ -61,6 +61,37 @@ def record(units: int, seconds: int, seed: int = 0) -> tuple[float, bytes]:
     return time.process_time() - t0, fh.getvalue()
 
 
+class _Calls:
+    """An ``McapFile`` stand-in that only records the calls a ``RecordingWriter`` makes."""
+
+    def __init__(self, fh: io.BytesIO, **kw: object) -> None:
+        self.calls: list[tuple[str, tuple]] = [("__init__", (kw,))]
+        _Calls.last = self
+        self._ids = {"register_schema": 0, "register_channel": 0}
+
+    def __getattr__(self, name: str):
+        def call(*args: object) -> int:
+            self.calls.append((name, args))
+            if name in self._ids:
+                self._ids[name] += 1
+                return self._ids[name]
+            return 0
+
+        return call
+
+
+def replay(cls: type, calls: list[tuple[str, tuple]]) -> tuple[float, bytes]:
+    """CPU seconds of making ``calls`` on a ``cls`` writer alone (no recorder around it)."""
+    fh = io.BytesIO()
+    t0 = time.process_time()
+    w = cls(fh, **calls[0][1][0])
+    for name, args in calls[1:]:
+        if name == "add_messages":  # a group's messages: the list as it was then
+            args = (list(args[0]),)
+        getattr(w, name)(*args)
+    return time.process_time() - t0, fh.getvalue()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=8)
@@ -85,7 +116,24 @@ def main(argv: list[str] | None = None) -> int:
             f"{name:>13}: {per_s * 1e6:7.0f} µs CPU per simulated second of {a.units} units "
             f"(best of {a.repeat}), {per_s * 300:.3f} of a core at 300x"
         )
-    print(f"ratio (library / ours): {best['mcap library'] / best['ours']:.2f}x")
+    both = best["mcap library"] / best["ours"]
+    print(f"ratio (library / ours), the recorder and its writer: {both:.2f}x")
+    # the writer alone: the same McapFile calls, replayed on each
+    writer_mod.McapFile = _Calls
+    try:
+        record(a.units, a.seconds)
+    finally:
+        writer_mod.McapFile = ours_cls
+    calls = _Calls.last.calls
+    alone: dict[str, float] = {}
+    for _ in range(a.repeat):
+        for name, cls in (("ours", ours_cls), ("mcap library", LibraryMcapFile)):
+            cpu, data = replay(cls, calls)
+            alone[name] = min(cpu, alone.get(name, cpu))
+            assert data == files[name], "the replay wrote another file"
+    for name, cpu in alone.items():
+        print(f"{name:>13}, the writer alone: {cpu / a.seconds * 1e6:7.0f} µs per simulated second")
+    print(f"ratio (library / ours), the writer alone: {alone['mcap library'] / alone['ours']:.2f}x")
     print(f"same bytes: {files['ours'] == files['mcap library']} ({len(files['ours'])} bytes)")
     print(f"# load after {os.getloadavg()}")
     return 0

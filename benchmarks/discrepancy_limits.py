@@ -50,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from breakfam.realnoise import real_noise  # noqa: E402
 
 from gyrolab.profiles.profile import BUILTIN, Profile, Step, profile_from_dict  # noqa: E402
-from gyrolab.sim.discrepancy.identify import SEPARATION  # noqa: E402
+from gyrolab.sim.discrepancy.identify import SEPARATION as SEP  # noqa: E402
 from gyrolab.sim.discrepancy.reallike import RealLike, digital_output  # noqa: E402
 from gyrolab.sim.discrepancy.synth import simulate_bench  # noqa: E402
 from gyrolab.sim.discrepancy.workflow import run_discrepancy  # noqa: E402
@@ -369,7 +369,7 @@ def tables(rows: list[dict]) -> str:
             props = [a["proposed_profile"] for a in r["ambiguity"] if a.get("proposed_profile")]
             expect = [
                 ""
-                if min(p["expected_separation"].values()) >= SEPARATION
+                if p.get("expected_to_separate", min(p["expected_separation"].values()) >= SEP)
                 else ", not expected to separate"
                 for p in props
             ] + [""] * len(sep)

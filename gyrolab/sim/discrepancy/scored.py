@@ -19,7 +19,8 @@ class Scored:
     theta: float | None = None
     """Gyro terms: the shape value its own scan chose (added with it)."""
     form: dict[str, float] = field(default_factory=dict)
-    """Gyro terms: the wider forms' shape values of the candidate's fit."""
+    """Gyro terms: the other shape values of the candidate's fit, added with it: its wider
+    form's, and the model's own shapes where they were scanned again with it."""
     fit: Any = None
     """Gyro terms: the candidate's own fit (base + it), for the look-alike tests."""
 

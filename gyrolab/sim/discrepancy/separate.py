@@ -19,6 +19,7 @@ run's noise, and the report says so rather than promise it); it is an ordinary p
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -37,6 +38,8 @@ TARGET = 50.0
 """Smaller expected separation (ΔBIC) a proposed profile should reach: twice the
 look-alike threshold of a 2.5-σ test, so that the new run names one of the two."""
 RAMP_C_PER_MIN = 0.5
+MAX_CYCLES = 12
+"""Most full-range cycles a proposal repeats to reach :data:`TARGET` (38.5 h)."""
 
 
 @dataclass
@@ -47,15 +50,17 @@ class Proposal:
     separation: dict[str, float]
     """Expected ΔBIC of each explanation over the other, had it generated the new run."""
     considered: dict[str, float]
-    """Every library profile's smaller separation, by name."""
+    """Every library profile's deciding separation (:func:`deciding`), by name."""
+    decides: float = 0.0
+    """The proposed profile's deciding separation."""
     file: str = "separating_profile.toml"
     """Its name in the output directory."""
 
     @property
     def expected_to_separate(self) -> bool:
-        """Whether the new run is expected to tell them apart: both expected separations
-        reach the look-alike threshold."""
-        return min(self.separation.values()) >= SEPARATION
+        """Whether the new run is expected to tell them apart: the deciding separation
+        reaches the look-alike threshold."""
+        return self.decides >= SEPARATION
 
     def toml(self) -> str:
         """The profile as a PROFILE.toml (docs/profiles.md)."""
@@ -70,6 +75,7 @@ class Proposal:
             "description": self.profile.description,
             "duration_h": self.profile.duration_s / 3600.0,
             "expected_separation": self.separation,
+            "deciding_separation": self.decides,
             "expected_to_separate": self.expected_to_separate,
             "considered": self.considered,
             "profile": self.profile.to_dict(),
@@ -118,15 +124,7 @@ def library(d: BenchData) -> list[Profile]:
             ),
             description="up, down and up again over the whole range",
         ),
-        Profile(
-            "cycles",
-            tuple(
-                [Step(room, 3600.0, "power-on"), Step(lo, 5400.0, "cold")]
-                + [Step(sp, 5400.0, x) for _ in range(4) for sp, x in ((hi, "hot"), (lo, "cold"))]
-            ),
-            description="four full-range cycles, 1.5 h at each end: every branch change and "
-            "rate four times over",
-        ),
+        cycles(lo, hi, room, 4),
         Profile(
             "long-soak",
             (Step(room, 6 * 3600.0, "6 h at one temperature"),),
@@ -146,6 +144,30 @@ def library(d: BenchData) -> list[Profile]:
         ),
     ]
     return out
+
+
+def cycles(lo: float, hi: float, room: float, n: int) -> Profile:
+    """``n`` full-range cycles, 1.5 h at each end, after an hour at ``room``."""
+    words = {4: "four", 8: "eight"}
+    return Profile(
+        "cycles" if n == 4 else f"cycles-{n}",
+        tuple(
+            [Step(room, 3600.0, "power-on"), Step(lo, 5400.0, "cold")]
+            + [Step(sp, 5400.0, x) for _ in range(n) for sp, x in ((hi, "hot"), (lo, "cold"))]
+        ),
+        description=f"{words.get(n, n)} full-range cycles, 1.5 h at each end: every branch "
+        f"change and rate {n} times over",
+    )
+
+
+def deciding(look: LookAlike, s_ab: float, s_ba: float) -> float:
+    """The separation that decides between the two: the smaller one; but when the winner
+    is part of the other (``E`` against ``E + C``) only the larger explanation's, since
+    had the winner alone generated the run BIC prefers it by the other's extra parameters
+    on every profile (its separation is that penalty, whatever the profile)."""
+    if set(look.winner.members) < set(look.other.members):
+        return s_ba
+    return min(s_ab, s_ba)
 
 
 def thermal_context(model: SimModel, profile: Profile, poly_order: int) -> GyroContext:
@@ -193,14 +215,26 @@ def propose(
     """The profile that best separates ``look``'s two explanations (module docstring)."""
     deterministic = replace(model, effects=tuple(e for e in model.effects if e.name in THERMAL))
     a, b = look.winner, look.other
-    rows: list[tuple[float, float, float, float, Profile]] = []
-    for prof in library(d):
+
+    def evaluate(prof: Profile) -> tuple[float, float, float, float, Profile]:
         ctx = thermal_context(deterministic, prof, poly_order)
         w, s2 = _whitener(noise, ctx)
         s_ab, _ = separation(a, b, ctx, w, s2)
         s_ba, _ = separation(b, a, ctx, w, s2)
-        rows.append((min(s_ab, s_ba), prof.duration_s, s_ab, s_ba, prof))
+        return (deciding(look, s_ab, s_ba), prof.duration_s, s_ab, s_ba, prof)
+
+    rows = [evaluate(prof) for prof in library(d)]
     good = [r for r in rows if r[0] >= TARGET]
+    four = next(r for r in rows if r[4].name == "cycles")
+    if not good and four[0] > 0:
+        # the cycles repeated until they reach the target: each cycle adds about as
+        # much evidence (issue 26: four cycles expected 30 for a 120 s lag against a
+        # rate term under real noise, and did not separate them)
+        n = min(MAX_CYCLES, max(5, math.ceil(4 * 1.2 * TARGET / four[0])))
+        sps = [s.setpoint_c for s in d.steps] or [25.0]
+        more = evaluate(cycles(float(min(sps)), float(max(sps)), float(sps[0]), n))
+        rows.append(more)
+        good = [r for r in rows if r[0] >= TARGET]
     best = min(good, key=lambda r: r[1]) if good else max(rows, key=lambda r: r[0])
     sep, _, s_ab, s_ba, prof = best
     caveat = (
@@ -220,6 +254,7 @@ def propose(
         named,
         {f"{a.label} over {b.label}": s_ab, f"{b.label} over {a.label}": s_ba},
         {r[4].name: r[0] for r in rows},
+        sep,
     )
 
 

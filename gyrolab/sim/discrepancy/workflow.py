@@ -36,12 +36,14 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from gyrolab.sim.discrepancy import catalogue as cat
 from gyrolab.sim.discrepancy.channels import gyro, noise, sample, temperature
 from gyrolab.sim.discrepancy.data import BenchData
 from gyrolab.sim.discrepancy.fitting import Fitted, Fitter, Structure, ThermalFits
 from gyrolab.sim.discrepancy.gyro_fit import GyroStructure, fit_structure
-from gyrolab.sim.discrepancy.identify import LookAlike
+from gyrolab.sim.discrepancy.identify import Explanation, LookAlike, look_alike, of_fit
 from gyrolab.sim.discrepancy.limits import detection_limits
 from gyrolab.sim.discrepancy.localize import localize
 from gyrolab.sim.discrepancy.periodic import periodic_content
@@ -186,6 +188,12 @@ class Workflow:
                         log(f"iteration {it + 1}: revised {mv}")
             steps.append(entry)
         model = self.updated_model(cur)
+        ambiguity = [self.ambiguity(s, c, model, i + 1) for i, (s, c) in enumerate(looks)]
+        if accepted is None:  # the last iteration scored every candidate against ``cur``
+            for amb_set in self.absorbed(cur, cands, steps, found, ambiguous):
+                amb_set.k = len(ambiguity) + 1
+                ambiguity.append(self.with_proposal(amb_set, model))
+                ambiguous.append(amb_set.members)
         return Result(
             effects_found=found,
             ambiguous=ambiguous,
@@ -197,7 +205,7 @@ class Workflow:
             final=cur,
             detection_limits=detection_limits(self.fitter, cur),
             elapsed_s=time.perf_counter() - t_start,
-            ambiguity=[self.ambiguity(s, c, model, i + 1) for i, (s, c) in enumerate(looks)],
+            ambiguity=ambiguity,
             periodic_content=periodic_content(cur),
             temperature_source=self.d.temperature_source,
         )
@@ -216,6 +224,63 @@ class Workflow:
             proposal = propose(self.d, model, noise, c.look_alikes[0], self.fitter.poly_order)
             proposal.file = f"separating_profile_{k}.toml"
         return Ambiguity(members, evidence, [a.to_json() for a in c.look_alikes], proposal)
+
+    def absorbed(
+        self,
+        cur: Fitted,
+        cands: list[Scored],
+        steps: list[dict[str, Any]],
+        found: list[str],
+        sets: list[list[str]],
+    ) -> list[Ambiguity]:
+        """Sets for evidence a named term took (docs/discrepancy.md, "Look-alike effects"):
+        a gyro candidate C that was significant before a gyro term E was named, and still
+        has positive evidence with E in the model (0 < ΔBIC ≤ the naming rule), is a
+        member the data cannot exclude beside E: the set ``[E, C]`` (E alone, or E and
+        C), with each one's evidence. Not when a set already holds both."""
+        out: list[Ambiguity] = []
+        scores = [{c["effect"]: c["score"] for c in st["candidates"]} for st in steps]
+        _, w, sigma2, _ = gyro.judge(self.fitter, cur)
+        for c in cands:
+            if c.channel != "gyro" or c.fit is None or not 0.0 < c.score <= gyro.GYRO_SIG:
+                continue
+            took: tuple[float, int, str] | None = None  # (evidence taken, step, by whom)
+            for i, st in enumerate(steps[:-1]):
+                e = st.get("added")
+                before = scores[i].get(c.effect, 0.0)
+                after = scores[i + 1].get(c.effect, before)
+                if e in found and cat.is_gyro_term(e) and before > gyro.GYRO_SIG:
+                    if took is None or before - after > took[0]:
+                        took = (before - after, i, e)
+            if took is None or any({took[2], c.effect} <= set(s) for s in sets):
+                continue
+            _, i, e = took
+            shaped = (e,) if cat.shape_of(e) else ()
+            winner = Explanation(e, [e], cur.gyro.struct, np.asarray(cur.gyro.gls.beta), shaped)
+            other = of_fit(f"{e} + {c.effect}", [e, c.effect], c.fit, delta_bic=c.score)
+            look = look_alike(winner, other, -c.score, cur.ctx, w, sigma2, near=True)
+            assert look is not None  # near: kept whatever the separations
+            evidence = {
+                e: {"delta_bic": scores[i][e], "params": gyro.params(self.fitter, cur).get(e)},
+                c.effect: {
+                    "delta_bic": c.score,
+                    "delta_bic_before": scores[i][c.effect],
+                    "params": c.evidence.get("params"),
+                    "below_naming_rule": True,
+                },
+            }
+            out.append(
+                Ambiguity([e, c.effect], evidence, [look.to_json()], None, look=look, before=cur)
+            )
+        return out
+
+    def with_proposal(self, a: Ambiguity, model: SimModel) -> Ambiguity:
+        """``a`` with the profile proposed to separate its look-alike."""
+        if a.look is not None and a.before is not None:
+            noise = gyro.judge(self.fitter, a.before)[3]
+            a.proposal = propose(self.d, model, noise, a.look, self.fitter.poly_order)
+            a.proposal.file = f"separating_profile_{a.k}.toml"
+        return a
 
     # ------------------------------------------------------------- revisiting
     def _struct_bic(self, cur: Fitted, names: list[str], scan: tuple[str, ...]) -> tuple:
@@ -297,6 +362,12 @@ class Ambiguity:
     evidence: dict[str, Any]
     look_alikes: list[dict[str, Any]]
     proposal: Proposal | None
+    look: LookAlike | None = None
+    """The look-alike a proposal is still to be made for (:meth:`Workflow.absorbed`)."""
+    before: Fitted | None = None
+    """The model its noise was judged on."""
+    k: int = 0
+    """Its number among the run's sets."""
 
     def to_json(self) -> dict[str, Any]:
         return {
