@@ -54,7 +54,7 @@ the warm-up, the hysteresis).
 **Does the unit belong?** (:class:`Membership`): the unit's own least-squares estimate
 θ̂ (same φ) against the prior, on the components some unit of the fleet uses: its
 covariance ``C`` by the delete-a-block jackknife over the run (:func:`own_covariance`:
-the white-noise ``s² (AᵀA)⁻¹`` was 1.3 … 16× too small on the suites' quick runs), and
+the white-noise ``s² (AᵀA)⁻¹`` was a median 2.9× too small on the suites' quick runs), and
 the Mahalanobis distance ``d²`` of θ̂ − μ under ``Σ + C`` over the directions where the
 run says more than the prior (:func:`informative_distance`), χ² with that many degrees of
 freedom. Over all directions the statistic was not calibrated — in-family units had a
@@ -477,7 +477,7 @@ def own_covariance(A: np.ndarray, y: np.ndarray, blocks: int = JACKKNIFE_BLOCKS)
 
     — unlike ``s² (AᵀA)⁻¹`` it holds the flicker's correlation and the model's misfit,
     and a direction only one excursion of the run shows gets the spread that excursion
-    leaves (on the suites' quick runs 1.3 … 16× the white-noise trace)."""
+    leaves (on the suites' quick runs a median 2.9× the white-noise trace)."""
     n = y.size
     m = min(blocks, n)
     blk = np.minimum((np.arange(n) * m) // n, m - 1)
