@@ -292,3 +292,25 @@ def test_real_adc_stream() -> None:
             got += rd.read(0.1).samples
     assert got > 0.5 * rate  # at least a second's worth in two seconds
     assert rd.decoder.stats.frames_ok > 0
+
+
+@pytest.mark.parametrize("axes", [1, 3])
+@pytest.mark.parametrize("temperature", [False, True])
+def test_a_run_of_frames_is_encode_frame_s_bytes(axes: int, temperature: bool) -> None:
+    """The simulated ADC frames a block at once (``encode_frame_run``): the same bytes as
+    one ``encode_frame`` per frame, sequence numbers wrapping at 2**32 included."""
+    from gyrolab.framing import encode_frame, encode_frame_run
+
+    rng = np.random.default_rng(axes + 2 * temperature)
+    k, n = 9, 10
+    counts = rng.integers(-(1 << 23), 1 << 23, (k, n) if axes == 1 else (k, n, axes))
+    stamps = rng.integers(0, 1 << 40, k)
+    words = rng.integers(-(1 << 15), 1 << 15, k) if temperature else None
+    seq0 = (1 << 32) - 4
+    want = [
+        encode_frame(seq0 + j, int(stamps[j]), counts[j], None if words is None else int(words[j]))
+        for j in range(k)
+    ]
+    assert encode_frame_run(seq0, stamps, counts, words) == want
+    with pytest.raises(ValueError):
+        encode_frame_run(0, stamps[:1], np.full((1, n), 1 << 23))
