@@ -125,6 +125,15 @@ def score(fx: Fitter, cur: Fitted) -> list[Scored]:
             g, form = widen_form(g, cur.ctx, name, lambda s: best_bic(s)[0])
         cand_bic, cand_noise = best_bic(g.struct)
         dbic = base_bic - cand_bic
+        moved = {k: v for k, v in g.struct.theta.items() if cur.gyro.struct.theta.get(k, v) != v}
+        if moved:
+            # the current terms alone at the shapes the candidate's fit moved them to: what
+            # moving them gains is not the candidate's evidence (a warm-up of two
+            # opposite-sign exponentials taken at τ 1833 s and moved to 200 s beside any
+            # candidate: every one scored 60–170 against the model at 1833 s, and a false
+            # aging ramp was named)
+            at = GyroStructure(cur.gyro.struct.names, {**cur.gyro.struct.theta, **moved})
+            dbic = min(base_bic, best_bic(at)[0]) - cand_bic
         params = effect_params(g).get(name, {})
         out.append(
             Scored(
