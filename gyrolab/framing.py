@@ -74,19 +74,8 @@ def encode_frame(
     """One frame; ``counts`` are signed 24-bit values (−8388608 … 8388607), ``(n,)`` for one
     axis or ``(n, axes)`` for several (sent interleaved, sample by sample);
     ``temperature_code``, when given, the int16 internal-temperature word."""
-    c = np.asarray(counts, dtype=np.int64).ravel()
-    n = c.size
-    if not 1 <= n <= MAX_SAMPLES:
-        raise ValueError(f"a frame holds 1..{MAX_SAMPLES} samples, not {n}")
-    if c.min() < -(1 << 23) or c.max() >= 1 << 23:
-        raise ValueError("sample outside the signed 24-bit range")
-    raw = (c & 0xFFFFFF).astype("<u4").view(np.uint8).reshape(n, 4)[:, :3].tobytes()
-    if temperature_code is not None:
-        if not -(1 << 15) <= int(temperature_code) < 1 << 15:
-            raise ValueError("temperature word outside the int16 range")
-        raw += int(temperature_code).to_bytes(2, "little", signed=True)
-    body = _HEAD.pack(SYNC, 12 + len(raw), seq % SEQ_MOD, int(timestamp_us)) + raw
-    return body + crc_hqx(memoryview(body)[2:], 0xFFFF).to_bytes(2, "big")
+    words = None if temperature_code is None else [int(temperature_code)]
+    return encode_frame_run(seq, [int(timestamp_us)], np.asarray(counts)[None], words)[0]
 
 
 _HEAD_DTYPE = np.dtype([("sync", "S2"), ("length", "<u2"), ("seq", "<u4"), ("ts", "<u8")])
@@ -129,10 +118,7 @@ def encode_frame_run(
 
 def encode_frames(seq0: int, timestamps_us: np.ndarray, counts: np.ndarray) -> list[bytes]:
     """Frames ``seq0, seq0+1, …`` from a (frames × samples) array of counts."""
-    counts = np.atleast_2d(counts)
-    return [
-        encode_frame(seq0 + k, int(timestamps_us[k]), counts[k]) for k in range(counts.shape[0])
-    ]
+    return encode_frame_run(seq0, timestamps_us, np.atleast_2d(counts))
 
 
 def decode_int24(raw: bytes | bytearray | memoryview) -> np.ndarray:
