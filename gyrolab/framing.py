@@ -74,27 +74,51 @@ def encode_frame(
     """One frame; ``counts`` are signed 24-bit values (−8388608 … 8388607), ``(n,)`` for one
     axis or ``(n, axes)`` for several (sent interleaved, sample by sample);
     ``temperature_code``, when given, the int16 internal-temperature word."""
-    c = np.asarray(counts, dtype=np.int64).ravel()
-    n = c.size
+    words = None if temperature_code is None else [int(temperature_code)]
+    return encode_frame_run(seq, [int(timestamp_us)], np.asarray(counts)[None], words)[0]
+
+
+_HEAD_DTYPE = np.dtype([("sync", "S2"), ("length", "<u2"), ("seq", "<u4"), ("ts", "<u8")])
+
+
+def encode_frame_run(
+    seq0: int,
+    timestamps_us: np.ndarray,
+    counts: np.ndarray,
+    temperature_codes: np.ndarray | None = None,
+) -> list[bytes]:
+    """Frames ``seq0, seq0+1, …`` at once, byte for byte :func:`encode_frame`'s:
+    ``counts`` is ``(frames, n)`` for one axis or ``(frames, n, axes)``,
+    ``temperature_codes`` one int16 word per frame or None. The fields of every frame are
+    laid out with numpy in one pass; only the CRC is computed frame by frame (in C)."""
+    c = np.asarray(counts, dtype=np.int64)
+    k = c.shape[0]
+    c = c.reshape(k, -1)
+    n = c.shape[1]
     if not 1 <= n <= MAX_SAMPLES:
         raise ValueError(f"a frame holds 1..{MAX_SAMPLES} samples, not {n}")
-    if c.min() < -(1 << 23) or c.max() >= 1 << 23:
+    if k and (c.min() < -(1 << 23) or c.max() >= 1 << 23):
         raise ValueError("sample outside the signed 24-bit range")
-    raw = (c & 0xFFFFFF).astype("<u4").view(np.uint8).reshape(n, 4)[:, :3].tobytes()
-    if temperature_code is not None:
-        if not -(1 << 15) <= int(temperature_code) < 1 << 15:
+    payload = (c & 0xFFFFFF).astype("<u4").view(np.uint8).reshape(k, n, 4)[:, :, :3]
+    parts = [np.zeros((k, HEADER_SIZE), np.uint8), payload.reshape(k, 3 * n)]
+    if temperature_codes is not None:
+        t = np.asarray(temperature_codes, dtype=np.int64)
+        if t.size and (t.min() < -(1 << 15) or t.max() >= 1 << 15):
             raise ValueError("temperature word outside the int16 range")
-        raw += int(temperature_code).to_bytes(2, "little", signed=True)
-    body = _HEAD.pack(SYNC, 12 + len(raw), seq % SEQ_MOD, int(timestamp_us)) + raw
-    return body + crc_hqx(memoryview(body)[2:], 0xFFFF).to_bytes(2, "big")
+        parts.append(t.astype("<i2").view(np.uint8).reshape(k, 2))
+    body = np.concatenate(parts, axis=1)
+    head = body[:, :HEADER_SIZE].view(_HEAD_DTYPE).reshape(k)
+    head["sync"] = SYNC
+    head["length"] = body.shape[1] - 4
+    head["seq"] = (seq0 + np.arange(k, dtype=np.int64)) % SEQ_MOD
+    head["ts"] = np.asarray(timestamps_us, dtype=np.int64)
+    rows = [r.tobytes() for r in body]
+    return [r + crc_hqx(memoryview(r)[2:], 0xFFFF).to_bytes(2, "big") for r in rows]
 
 
 def encode_frames(seq0: int, timestamps_us: np.ndarray, counts: np.ndarray) -> list[bytes]:
     """Frames ``seq0, seq0+1, …`` from a (frames × samples) array of counts."""
-    counts = np.atleast_2d(counts)
-    return [
-        encode_frame(seq0 + k, int(timestamps_us[k]), counts[k]) for k in range(counts.shape[0])
-    ]
+    return encode_frame_run(seq0, timestamps_us, np.atleast_2d(counts))
 
 
 def decode_int24(raw: bytes | bytearray | memoryview) -> np.ndarray:

@@ -292,3 +292,48 @@ def test_real_adc_stream() -> None:
             got += rd.read(0.1).samples
     assert got > 0.5 * rate  # at least a second's worth in two seconds
     assert rd.decoder.stats.frames_ok > 0
+
+
+def _frame_by_the_book(seq: int, ts_us: int, values: list[int], word: int | None) -> bytes:
+    """One frame laid out field by field as gyrolab/framing.py's docstring says."""
+    import struct
+    from binascii import crc_hqx
+
+    raw = b"".join(int(v).to_bytes(3, "little", signed=True) for v in values)
+    if word is not None:
+        raw += int(word).to_bytes(2, "little", signed=True)
+    body = b"\xa5\x5a" + struct.pack("<HIQ", 12 + len(raw), seq % (1 << 32), ts_us) + raw
+    return body + crc_hqx(body[2:], 0xFFFF).to_bytes(2, "big")
+
+
+@pytest.mark.parametrize("axes", [1, 3])
+@pytest.mark.parametrize("temperature", [False, True])
+def test_a_run_of_frames_is_the_documented_layout(axes: int, temperature: bool) -> None:
+    """The ADC frames of a block, made at once (``encode_frame_run``, what the simulated
+    ADC sends) and one by one (``encode_frame``): the documented layout byte for byte,
+    samples interleaved sample by sample, sequence numbers wrapping at 2**32."""
+    from gyrolab.framing import encode_frame, encode_frame_run
+
+    rng = np.random.default_rng(axes + 2 * temperature)
+    k, n = 9, 10
+    counts = rng.integers(-(1 << 23), 1 << 23, (k, n) if axes == 1 else (k, n, axes))
+    stamps = rng.integers(0, 1 << 40, k)
+    words = rng.integers(-(1 << 15), 1 << 15, k) if temperature else None
+    seq0 = (1 << 32) - 4
+    want = [
+        _frame_by_the_book(
+            seq0 + j,
+            int(stamps[j]),
+            counts[j].ravel().tolist(),
+            None if words is None else int(words[j]),
+        )
+        for j in range(k)
+    ]
+    assert encode_frame_run(seq0, stamps, counts, words) == want
+    one = [
+        encode_frame(seq0 + j, int(stamps[j]), counts[j], None if words is None else int(words[j]))
+        for j in range(k)
+    ]
+    assert one == want
+    with pytest.raises(ValueError):
+        encode_frame_run(0, stamps[:1], np.full((1, n), 1 << 23))
