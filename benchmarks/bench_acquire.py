@@ -102,6 +102,23 @@ def _children(pid: int) -> list[int]:
         return []
 
 
+def _pace(received: list[tuple[float, float]]) -> dict[str, float]:
+    """Run seconds per wall second from the first received sample to the last, and the
+    slowest pace over any 10 % of the run (a stall the clock never makes up)."""
+    if len(received) < 2:
+        return {}
+    wall = np.array([w for w, _ in received])
+    run = np.array([t for _, t in received])
+    k = max(1, len(run) // 10)
+    paces = (run[k:] - run[:-k]) / np.maximum(wall[k:] - wall[:-k], 1e-9)
+    return {
+        "run_s": round(float(run[-1] - run[0]), 1),
+        "wall_s": round(float(wall[-1] - wall[0]), 1),
+        "speedup": round(float((run[-1] - run[0]) / (wall[-1] - wall[0])), 1),
+        "slowest_tenth_speedup": round(float(paces.min()), 1),
+    }
+
+
 def units_run(
     out: Path, units: int = 8, profile: str = "paper", speed: float | None = 300.0, seed: int = 0
 ) -> dict[str, Any]:
@@ -109,11 +126,25 @@ def units_run(
     and run hour (``RUSAGE_CHILDREN``: the whole acquire process, simulated instruments
     included), and every unit's stream checked for gaps by its sample indices."""
     cmd = _acquire_cmd(out, profile, speed, seed) + ["--units", str(units)]
-    env = {**os.environ, "GYROLAB_NO_PROGRESS": "1"}
+    # the first unit's samples, as the run engine receives them (GYROLAB_TRACE_FD): the
+    # pace kept in the run itself, apart from the bench's start, the connect phase (at
+    # the bench's connect speed) and the shutdown, which the overall figure includes
+    r, w = os.pipe()
+    env = {**os.environ, "GYROLAB_NO_PROGRESS": "1", "GYROLAB_TRACE_FD": str(w)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     load_before = os.getloadavg()[0]
     t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True, pass_fds=(w,))
+    os.close(w)
+    received: list[tuple[float, float]] = []  # (wall s, run s received to)
+
+    def trace() -> None:
+        with os.fdopen(r) as f:
+            for line in f:
+                received.append((time.monotonic(), float(line)))
+
+    tracer = threading.Thread(target=trace, daemon=True)
+    tracer.start()
     # The run engine's and the simulated bench's process (its child, when it has one):
     # each one's CPU seconds, sampled from /proc until they end (the last sample counts).
     per_process: dict[str, float] = {}
@@ -136,6 +167,7 @@ def units_run(
             )
         time.sleep(0.5)
     drainer.join()
+    tracer.join()
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     stderr = "".join(err)
@@ -168,6 +200,7 @@ def units_run(
         "wall_s": round(wall, 1),
         "run_s": round(run_s, 1),
         "speedup": round(run_s / wall, 1),
+        "in_run": _pace(received),
         "cpu_s": round(cpu, 1),
         # each process's CPU against the wall time the asked speed allows: below 1, the
         # process needs less than a core to keep up
