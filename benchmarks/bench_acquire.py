@@ -336,7 +336,9 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--seed", type=int, default=0)
     k.add_argument("--max-delay", type=float, default=6.0)
     a = ap.parse_args(argv)
-    print(f"# {time.strftime('%Y-%m-%d %H:%M')} {os.cpu_count()} CPUs, load {os.getloadavg()}")
+    from machine import stamp  # here: tests load this file by path, without benchmarks/ on sys.path
+
+    print(stamp())
     if a.cmd == "speed":
         with tempfile.TemporaryDirectory() as tmp:
             if a.units:

@@ -26,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from machine import stamp  # noqa: E402
 from mcap_peer import LibraryMcapFile  # noqa: E402
 
 import gyrolab.record.writer as writer_mod  # noqa: E402
@@ -98,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=int, default=600)
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args(argv)
-    print(f"# {time.strftime('%Y-%m-%d %H:%M')} {os.cpu_count()} CPUs, load {os.getloadavg()}")
+    print(stamp())
     ours_cls = writer_mod.McapFile
     best: dict[str, float] = {}
     files: dict[str, bytes] = {}

@@ -23,6 +23,7 @@ import time
 import tty
 
 import numpy as np
+from machine import stamp
 
 from gyrolab.acquisition.streams import RateRecorder
 from gyrolab.framing import encode_frame
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=int, default=600)
     ap.add_argument("--ticks", type=int, default=3)
     a = ap.parse_args(argv)
-    print(f"# {time.strftime('%Y-%m-%d %H:%M')} {os.cpu_count()} CPUs, load {os.getloadavg()}")
+    print(stamp())
     total = {}
     for k in (1, a.ticks):
         cpu_read, cpu_record, samples = run(a.units, a.seconds, k)
