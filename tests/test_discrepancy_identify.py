@@ -23,7 +23,7 @@ from gyrolab.sim.discrepancy.identify import SEPARATION
 from gyrolab.sim.discrepancy.periodic import FAP, spectral_peaks
 from gyrolab.sim.discrepancy.separate import TARGET
 from gyrolab.sim.discrepancy.synth import simulate_bench
-from gyrolab.sim.discrepancy.workflow import run_discrepancy
+from gyrolab.sim.discrepancy.workflow import Workflow, run_discrepancy
 from gyrolab.sim.model import nominal_model
 from gyrolab.sim.physics import Physics
 
@@ -163,7 +163,7 @@ def test_evidence_a_named_term_took_is_reported_as_a_set() -> None:
     keeps positive evidence beside it (at its true size) but below the naming rule. The
     run reports the set [warmup, aging_ramp] with both one's evidence (not the warm-up
     alone), and proposes the profile that would name the ramp: its deciding separation
-    (the warm-up + ramp over the warm-up alone) reaches the target."""
+    (the warm-up + ramp over the warm-up alone, in either of its forms) reaches the target."""
     d = _short28_real_noise({"warmup": {"A": 6e-3, "tau_s": 900.0}, "aging_ramp": {"r": 8e-4}}, 400)
     res = run_discrepancy(d)
     assert res.effects_found == ["warmup"]
@@ -174,3 +174,30 @@ def test_evidence_a_named_term_took_is_reported_as_a_set() -> None:
     assert ev["params"]["r"] == pytest.approx(8e-4, rel=0.35)
     assert amb.proposal is not None and amb.proposal.expected_to_separate
     assert amb.proposal.decides >= TARGET
+    # a 2 h soak at the end would separate the ramp from a warm-up of one exponential,
+    # but not from one of two, which the new run's analysis tries: its run named the
+    # warm-up alone (issue 26), so it is not proposed
+    assert amb.proposal.considered["soak-at-end"] < TARGET
+
+
+def test_a_term_whose_gap_grows_is_added_with_the_term_it_needs() -> None:
+    """A 400 s die lag + a hysteresis step on the heating staircase that a 2.8 h run
+    proposed for them (issue 26): on that profile the two signatures cancel — the lag
+    alone scores nothing, the hysteresis alone is significant at a fraction of its size
+    and its own gap grows, so it was rejected and the run came out as `rate_random_walk`.
+    The rejected candidate is tried with each other candidate: the pair is added, each
+    member significant beside the other, and together they shrink the gap."""
+    heat = [(25.0, 3600.0), (-40.0, 7200.0), (-6.7, 3600.0), (26.7, 3600.0), (60.0, 5400.0)]
+    prof = Profile("heating-staircase", tuple(Step(s, d) for s, d in heat + [(25.0, 3600.0)]))
+    m = nominal_model().with_effect("thermal_lag", tau_s=400.0)
+    m = m.with_effect("hysteresis", h=2e-3, width_c=1.0)
+    wf = Workflow(simulate_bench(m, prof, 1.0, 1401), nominal_model())
+    cur = wf.fitter.fit(wf.start())
+    _, accepted, rejected = wf.choose(cur)
+    assert [r["effect"] for r in rejected] == ["hysteresis"]
+    assert rejected[0]["added_with"] == "thermal_lag"
+    assert accepted is not None
+    assert (accepted.best.effect, accepted.partner) == ("hysteresis", "thermal_lag")
+    assert min(accepted.best.evidence["delta_bic_beside_other"].values()) > 10
+    key = "lf_residual_rms_dps"
+    assert accepted.fit.gaps[key] < cur.gaps[key] < rejected[0]["gap_metric_before_after"][1]

@@ -129,13 +129,60 @@ def min_rss(
 
 
 def separation(
-    e1: Explanation, e2: Explanation, ctx: GyroContext, w: CovWhitener, sigma2: float
+    e1: Explanation,
+    e2: Explanation,
+    ctx: GyroContext,
+    w: CovWhitener,
+    sigma2: float,
+    wider: bool = False,
 ) -> tuple[float, float]:
     """Expected ΔBIC of ``e1`` over ``e2`` on data ``e1`` generated (module docstring),
-    and the non-centrality λ it comes from."""
+    and the non-centrality λ it comes from. With ``wider``, ``e2`` may also take the wider
+    forms of its scanned terms (:func:`wider_forms`), as the analysis of a new run would
+    try them: the smallest separation of its forms (each one's parameters counted)."""
     y = e1.prediction(ctx)
+    ln_n = math.log(ctx.y.size)
     lam = float(min_rss(y, e2.struct, e2.scan, ctx, w) / sigma2)
-    return lam - (e1.k(ctx) - e2.k(ctx)) * math.log(ctx.y.size), lam
+    best = (lam - (e1.k(ctx) - e2.k(ctx)) * ln_n, lam)
+    for s2 in wider_forms(y, e2, ctx, w) if wider else []:
+        lam_w = float(min_rss(y, s2, e2.scan, ctx, w) / sigma2)
+        k2 = design(s2, ctx)[0].shape[1] + n_nonlinear(s2)
+        best = min(best, (lam_w - (e1.k(ctx) - k2) * ln_n, lam_w))
+    return best
+
+
+def wider_forms(
+    y: np.ndarray, e: Explanation, ctx: GyroContext, w: CovWhitener
+) -> list[GyroStructure]:
+    """``e``'s structure in the wider form of each of its scanned terms that it does not
+    use (the term's declared ``wider``): a second component with its shape at the best of
+    :data:`SCAN_POINTS` grid values for ``y`` (the first then re-scanned by
+    :func:`min_rss`), or each declared slope. A separating profile sized for the plain form
+    alone can be one the wider form fits (issue 26: a warm-up of two exponentials took the
+    aging ramp of a 4.8 h run proposed to separate the two, expected ΔBIC 71)."""
+    out = []
+    for name in e.scan:
+        wf, key = cat.terms(name).wider, cat.form_key(name)
+        if wf is None or key is None or key in e.struct.theta or name not in e.struct.theta:
+            continue
+        t1 = e.struct.theta[name]
+        if wf.kind == "second":
+
+            def rss(v: float, name: str = name, key: str = key) -> float:
+                s2 = GyroStructure(e.struct.names, {**e.struct.theta, key: v})
+                return gls_cov(y, design(s2, ctx)[0], w).rss
+
+            grid = nonlinear_grid(name, ctx)
+            grid = grid[:: max(1, grid.size // SCAN_POINTS)]
+            cands = [float(v) for v in grid if abs(math.log(v / t1)) > 0.3]
+            if cands:
+                t2 = min(cands, key=rss)
+                out.append(GyroStructure(e.struct.names, {**e.struct.theta, key: t2}))
+        elif wf.kind == "slope":
+            out += [
+                GyroStructure(e.struct.names, {**e.struct.theta, key: rel * t1}) for rel in wf.tries
+            ]
+    return out
 
 
 def plausible(margin: float, sep: float, lam: float) -> bool:

@@ -219,8 +219,8 @@ def propose(
     def evaluate(prof: Profile) -> tuple[float, float, float, float, Profile]:
         ctx = thermal_context(deterministic, prof, poly_order)
         w, s2 = _whitener(noise, ctx)
-        s_ab, _ = separation(a, b, ctx, w, s2)
-        s_ba, _ = separation(b, a, ctx, w, s2)
+        s_ab, _ = separation(a, b, ctx, w, s2, wider=True)
+        s_ba, _ = separation(b, a, ctx, w, s2, wider=True)
         return (deciding(look, s_ab, s_ba), prof.duration_s, s_ab, s_ba, prof)
 
     rows = [evaluate(prof) for prof in library(d)]

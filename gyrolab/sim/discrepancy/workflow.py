@@ -123,8 +123,28 @@ class Workflow:
                         "gap_metric_before_after": [cur.gaps[key], nxt.gaps[key]],
                     }
                 )
+                pair = self.with_partner(cur, best, key)
+                if pair is not None:
+                    rejected[-1]["added_with"] = pair.partner
+                    return cands, pair, rejected
                 sig = [c for c in sig if c is not best]
         return cands, None, rejected
+
+    def with_partner(self, cur: Fitted, c: Scored, key: str) -> Choice | None:
+        """A gyro candidate whose own gap grew, added with the candidate it needs
+        (:func:`~.channels.gyro.partner`) when the pair shrinks that gap."""
+        if c.channel != "gyro":
+            return None
+        found = gyro.partner(self.fitter, cur, c)
+        if found is None:
+            return None
+        pair, d = found
+        new = cur.structure.plus(c.effect).plus(d)
+        new.theta.update(pair.form)
+        nxt = self.fitter.fit(new)
+        if nxt.gaps[key] >= cur.gaps[key]:
+            return None
+        return Choice(pair, [c.effect], nxt, [], cur, partner=d)
 
     def run(self, log: Any = None) -> Result:
         t_start = time.perf_counter()
@@ -156,12 +176,16 @@ class Workflow:
             for a in accepted.look_alikes:  # look-alikes the data cannot exclude
                 amb += [m for m in a.other.members if m not in amb and m != best.effect]
             entry["added"] = best.effect
+            if accepted.partner:
+                entry["added_with"] = accepted.partner
             entry["ambiguous_with"] = amb[:2]
             if accepted.look_alikes:
                 entry["look_alikes"] = [a.to_json() for a in accepted.look_alikes]
             entry["gap_metric"] = key
             entry["gap_metric_before_after"] = [cur.gaps[key], nxt.gaps[key]]
             found.append(best.effect)
+            if accepted.partner:
+                found.append(accepted.partner)
             amb = [best.effect] + entry["ambiguous_with"]
             if len(amb) > 1:
                 ambiguous.append(amb)
@@ -173,7 +197,7 @@ class Workflow:
                 )
             cur = nxt
             # revisit earlier choices: drop-one and swap moves among the gyro terms
-            revised = self.revisit(cur, found, best.effect)
+            revised = self.revisit(cur, found, best.effect, accepted.partner)
             if revised is not None:
                 cur, moves = revised
                 entry["revisions"] = moves
@@ -291,14 +315,14 @@ class Workflow:
         return self.fitter.cov_fit(g.struct, cur.ctx, cur.whitener).bic, g.struct.theta
 
     def revisit(
-        self, cur: Fitted, found: list[str], newest: str
+        self, cur: Fitted, found: list[str], newest: str, partner: str | None = None
     ) -> tuple[Fitted, list[dict[str, Any]]] | None:
         """After an addition, test each earlier-added gyro term: **drop** it when the model
         without it is within :data:`~.channels.gyro.GYRO_SIG` of the model with it (the
         newer terms explain what it did), **swap** it for another gyro term not in the
         model when that scores better by more than that. One move (the best) per call; the
         refit model and the moves, or None."""
-        earlier = [e for e in found if cat.is_gyro_term(e) and e != newest]
+        earlier = [e for e in found if cat.is_gyro_term(e) and e not in (newest, partner)]
         if not earlier:
             return None
         sig = gyro.GYRO_SIG
@@ -348,6 +372,8 @@ class Choice:
     fit: Fitted
     look_alikes: list[LookAlike]
     before: Fitted
+    partner: str | None = None
+    """The gyro term added with ``best`` (a pair whose signatures cancel alone)."""
 
     @property
     def candidates(self) -> list[Scored]:

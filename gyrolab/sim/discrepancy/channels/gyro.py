@@ -165,6 +165,69 @@ def score(fx: Fitter, cur: Fitted) -> list[Scored]:
     return out
 
 
+def partner(fx: Fitter, cur: Fitted, c: Scored) -> tuple[Scored, str] | None:
+    """A significant candidate ``c`` whose own gap grew when added alone, with the other
+    gyro candidate it needs: two terms whose signatures cancel on this profile score little
+    alone, and the one that scores fits only part of its signature (issue 26: a 400 s die
+    lag + a hysteresis step on a heating staircase, ΔBIC −3 and +18 alone, the hysteresis
+    at half its size and its gap growing; +79 together). Each other candidate ``d`` is
+    fitted beside ``c`` (both shapes scanned, the judging noise); the best pair by BIC is
+    returned, as ``c``'s :class:`Scored` (its score the pair's ΔBIC over the current model,
+    its ``fit`` the pair's) and ``d``, when each member is significant beside the other
+    (ΔBIC of the pair over the pair less it > :data:`GYRO_SIG`); else None."""
+    fits, _ = judging_noises(fx, cur)
+    if c.fit is None or c.effect not in fits:
+        return None
+    base = cur.gyro.struct
+    base_bic = _best_bic(fx, cur, base)[0]
+    best: tuple[float, GyroFit, str, dict[str, float]] | None = None
+    for d in fits:
+        if d == c.effect or (
+            cat.terms(d).temperature is not None and cat.terms(c.effect).temperature is not None
+        ):
+            continue
+        theta = {**base.theta, **c.fit.struct.theta}
+        if d in fits[d].struct.theta:
+            theta[d] = fits[d].struct.theta[d]
+        scan = tuple(n for n in (c.effect, d) if cat.shape_of(n))
+        s2 = GyroStructure(base.names + [c.effect, d], theta)
+        g = fit_structure(s2, cur.ctx, scan=scan, whitener=cur.whitener)
+        b = _best_bic(fx, cur, g.struct)[0]
+        cond = {
+            n: _best_bic(
+                fx, cur, GyroStructure([m for m in g.struct.names if m != n], g.struct.theta)
+            )[0]
+            - b
+            for n in (c.effect, d)
+        }
+        if min(cond.values()) > GYRO_SIG and (best is None or b < best[0]):
+            best = (b, g, d, cond)
+    if best is None:
+        return None
+    b, g, d, cond = best
+    dbic = base_bic - b
+    prm = effect_params(g)
+    scored = Scored(
+        c.effect,
+        "gyro",
+        float(dbic),
+        True,
+        {
+            **c.evidence,
+            "delta_bic": float(dbic),
+            "delta_bic_alone": c.score,
+            "params": prm.get(c.effect, {}),
+            "with": d,
+            "with_params": prm.get(d, {}),
+            "delta_bic_beside_other": cond,
+        },
+        theta=g.struct.theta.get(c.effect),
+        form={k: v for k, v in g.struct.theta.items() if base.theta.get(k) != v},
+        fit=g,
+    )
+    return scored, d
+
+
 def _best_bic(fx: Fitter, cur: Fitted, struct: GyroStructure) -> tuple[float, int]:
     """BIC of a structure under the better of the judging noise models (its parameters
     counted), and which."""
