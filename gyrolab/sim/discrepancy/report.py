@@ -167,7 +167,7 @@ def render(res: Result, source: str) -> str:
         step_rows.append(
             [
                 s["iteration"] + 1,
-                s.get("added") or "—",
+                " + ".join(x for x in (s.get("added"), s.get("added_with")) if x) or "—",
                 ", ".join(s.get("ambiguous_with", [])) or "—",
                 "; ".join(sig) or "none",
                 worst,
@@ -182,10 +182,12 @@ def render(res: Result, source: str) -> str:
                 f"{m['move']} {m['effect']}" + (f" → {m['to']}" if "to" in m else "")
                 for m in s.get("revisions", [])
             )
-            added_rows.append([s["added"], s["gap_metric"], b, a, moves or "—"])
+            pair = f" + {s['added_with']}" if s.get("added_with") else ""
+            added_rows.append([s["added"] + pair, s["gap_metric"], b, a, moves or "—"])
         for r in s.get("rejected_gap_grew", []):
             b, a = r["gap_metric_before_after"]
-            added_rows.append([r["effect"] + " (rejected)", r["gap_metric"], b, a, "gap grew"])
+            why = "gap grew" + (f"; added with {r['added_with']}" if r.get("added_with") else "")
+            added_rows.append([r["effect"] + " (rejected)", r["gap_metric"], b, a, why])
     limit_rows = [
         [
             name,
