@@ -211,12 +211,20 @@ def _fit_poly(ctx: FitContext) -> Candidate:
     return Candidate(model, err, {"order": o0}, pred)
 
 
+def lag_criterion(ctx: FitContext) -> str:
+    """How the structured families choose the lag: ``PipelineConfig.causal_lag_criterion``
+    (``"cv"`` without a configuration)."""
+    return str(getattr(ctx.config, "causal_lag_criterion", "cv"))
+
+
 def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
     """The structured model's grid choice ``(params, order, terms, cv_rmse, log)`` and the
     block features at its params, once per selection (the networks reuse them)."""
 
     def make() -> tuple[Any, ...]:
-        ps, order, terms, err, log = select_structured(ctx.cal, ctx.folds)
+        ps, order, terms, err, log = select_structured(
+            ctx.cal, ctx.folds, lag_criterion=lag_criterion(ctx)
+        )
         return ps, order, terms, err, log, block_features(ctx.cal, ps)
 
     return ctx.shared("structured", make)
@@ -239,7 +247,9 @@ def _fit_structured_rate(ctx: FitContext) -> Candidate:
     RMSE is the ridge-stabilised one it was selected by (:data:`.structured.CV_RIDGE`):
     without the ridge, the fold that holds out a cooling staircase's one heating step
     fits the heating-only term to noise and extrapolates it."""
-    ps, order, terms, _err, log = select_structured(ctx.cal, ctx.folds, extended=True)
+    ps, order, terms, _err, log = select_structured(
+        ctx.cal, ctx.folds, extended=True, lag_criterion=lag_criterion(ctx)
+    )
     Xs = block_features(ctx.cal, ps)
     y = ctx.cal.rate
     pred = np.empty_like(y)
