@@ -211,12 +211,20 @@ def _fit_poly(ctx: FitContext) -> Candidate:
     return Candidate(model, err, {"order": o0}, pred)
 
 
+def lag_criterion(ctx: FitContext) -> str:
+    """How the structured families choose the lag: ``PipelineConfig.causal_lag_criterion``
+    (``"cv"`` without a configuration)."""
+    return str(getattr(ctx.config, "causal_lag_criterion", "cv"))
+
+
 def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
     """The structured model's grid choice ``(params, order, terms, cv_rmse, log)`` and the
     block features at its params, once per selection (the networks reuse them)."""
 
     def make() -> tuple[Any, ...]:
-        ps, order, terms, err, log = select_structured(ctx.cal, ctx.folds)
+        ps, order, terms, err, log = select_structured(
+            ctx.cal, ctx.folds, lag_criterion=lag_criterion(ctx)
+        )
         return ps, order, terms, err, log, block_features(ctx.cal, ps)
 
     return ctx.shared("structured", make)
@@ -236,9 +244,13 @@ def _fit_structured(ctx: FitContext) -> Candidate:
 def extended_choice(ctx: FitContext) -> tuple[Any, ...]:
     """The extended structured search's choice ``(params, order, terms, cv_rmse, log)``
     (:func:`.structured.select_structured`, ``extended``), once per selection
-    (``structured_rate`` and ``structured_pi`` of :mod:`.pi_models` share it)."""
+    (``structured_rate`` and ``structured_pi`` of :mod:`.pi_models` share it), the lag
+    by :func:`lag_criterion`."""
     return ctx.shared(
-        "structured_rate", lambda: select_structured(ctx.cal, ctx.folds, extended=True)
+        "structured_rate",
+        lambda: select_structured(
+            ctx.cal, ctx.folds, extended=True, lag_criterion=lag_criterion(ctx)
+        ),
     )
 
 

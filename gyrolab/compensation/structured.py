@@ -23,6 +23,7 @@ this model (poly: τ = 0, no term).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -53,6 +54,11 @@ TAU_GRID_S = (0.0, 60.0, 150.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 WIDTH_GRID_C = (0.25, 0.5, 1.0, 2.0, 4.0)
 WARMUP_GRID_S = (200.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 ORDERS = range(1, 7)
+#: how the structured families choose the lag (``PipelineConfig.causal_lag_criterion``):
+#: by the blocked CV with the other parameters (``cv``), or then again by profile least
+#: squares with the order, terms and other parameters the CV chose (``profile``,
+#: :func:`_profile_lag`)
+LAG_CRITERIA = ("cv", "profile")
 #: the hysteresis branch at power-on (:class:`CausalParams` ``start_branch``) searched
 #: with the lag by the extended family (``structured_rate``) only: 0 (the play starts
 #: where the PT100 reads) or +1 (on its heating branch: the die's self-heating at
@@ -424,13 +430,77 @@ def _select_terms_backward(
     return terms, err, log
 
 
+def _refine_tau(f: Callable[[float], float], tau: float, err: float) -> tuple[float, float]:
+    """Refine the lag ``tau`` (a point of :data:`TAU_GRID_S` with criterion ``err``)
+    between its grid neighbours: golden section on ``f(τ)``, 8 steps. Returns the best τ
+    seen and its criterion."""
+    g = list(TAU_GRID_S)
+    i = g.index(tau)
+    a, b = g[max(i - 1, 0)], g[min(i + 1, len(g) - 1)]
+    phi = 0.5 * (np.sqrt(5.0) - 1.0)
+    c, d = b - phi * (b - a), a + phi * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(8):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - phi * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + phi * (b - a)
+            fd = f(d)
+    for t, e in ((c, fc), (d, fd)):
+        if e < err:
+            err, tau = e, float(t)
+    return tau, err
+
+
+def _profile_lag(
+    feature: Callable[[CausalParams], np.ndarray],
+    y: np.ndarray,
+    p: CausalParams,
+    order: int,
+    terms: tuple[str, ...],
+) -> tuple[CausalParams, dict[str, Any]]:
+    """The lag by profile least squares: the in-sample RMS residual of the whole run's
+    fit (order, terms on and the other parameters as the CV chose them, ``p``) minimised
+    over τ on :data:`TAU_GRID_S`, refined between grid neighbours. τ is one nonlinear
+    parameter of a model linear in the rest, so its least-squares estimate (Ljung,
+    *System Identification*, 2nd ed., §7.3, the prediction-error method; Golub & Pereyra,
+    SIAM J. Numer. Anal. 10, 1973, variable projection) does not overfit; it varies far
+    less than the blocked CV's, whose fold fits of the rate and warm-up columns under
+    flicker noise leave it flat or jagged in τ (the break family, docs/results.md).
+    The blocked CV keeps the discrete choices (order, terms, family). Returns the
+    parameters with that τ and a log (the criterion on the grid, °/s)."""
+
+    def crit(tau: float) -> float:
+        X = feature(replace(p, tau_s=float(tau)))
+        A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
+        r = y - A @ lstsq(A, y)
+        return float(np.sqrt(float(r @ r) / r.size))
+
+    grid = {tau: crit(tau) for tau in TAU_GRID_S}
+    tau0 = min(grid, key=lambda t: grid[t])
+    tau, _ = _refine_tau(crit, tau0, grid[tau0])
+    log = {
+        "tau_plain_cv_s": p.tau_s,
+        "tau_s": tau,
+        "criterion_by_tau": {str(k): v for k, v in grid.items()},
+    }
+    return replace(p, tau_s=tau), log
+
+
 def select_structured(
-    cal: CausalCalibration, folds: list[np.ndarray], extended: bool = False
+    cal: CausalCalibration,
+    folds: list[np.ndarray],
+    extended: bool = False,
+    lag_criterion: str = "cv",
 ) -> tuple[CausalParams, int, tuple[str, ...], float, dict[str, Any]]:
     """Choose (τ, τ_w, order, s₀) on the joint grid with every original term on
     (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
     between its grid neighbours (golden section), then w and τ_w again on their grids;
-    finally the terms (:func:`_select_terms`; ``extended``:
+    with ``lag_criterion="profile"`` τ is then chosen again by profile least squares
+    (:func:`_profile_lag`); finally the terms (:func:`_select_terms`; ``extended``:
     :func:`_select_terms_backward`). The lag, the warm-up and (``extended`` only) the
     start branch (:data:`START_BRANCHES`) are searched together because all three shape
     the first hours of a run. Returns the choice and a log."""
@@ -439,10 +509,13 @@ def select_structured(
     feats: dict[CausalParams, np.ndarray] = {}
     on, ridge = (GRID_TERMS, CV_RIDGE) if extended else (TERMS, 0.0)
 
-    def cv(p: CausalParams, order: int) -> float:
+    def feature(p: CausalParams) -> np.ndarray:
         if p not in feats:
             feats[p] = block_features(cal, p)
-        return cv_linear(feats[p], y, order, on, folds, ridge=ridge)
+        return feats[p]
+
+    def cv(p: CausalParams, order: int) -> float:
+        return cv_linear(feature(p), y, order, on, folds, ridge=ridge)
 
     bests: dict[float, tuple[float, CausalParams, int]] = {}
     for s0 in START_BRANCHES if extended else (0.0,):
@@ -459,34 +532,24 @@ def select_structured(
     for s0 in list(bests)[1:]:  # a start branch must beat starting at 0 by TIE
         if bests[s0][0] < err * (1.0 - TIE):
             err, p, order = bests[s0]
-    # refine τ between its grid neighbours (golden-section on the CV error, 8 steps)
-    g = list(TAU_GRID_S)
-    i = g.index(p.tau_s)
-    a, b = g[max(i - 1, 0)], g[min(i + 1, len(g) - 1)]
-    phi = 0.5 * (np.sqrt(5.0) - 1.0)
-    c, d = b - phi * (b - a), a + phi * (b - a)
-    fc, fd = cv(replace(p, tau_s=c), order), cv(replace(p, tau_s=d), order)
-    for _ in range(8):
-        if fc < fd:
-            b, d, fd = d, c, fc
-            c = b - phi * (b - a)
-            fc = cv(replace(p, tau_s=c), order)
-        else:
-            a, c, fc = c, d, fd
-            d = a + phi * (b - a)
-            fd = cv(replace(p, tau_s=d), order)
-    for tau, e in ((c, fc), (d, fd)):
-        if e < err:
-            err, p = e, replace(p, tau_s=float(tau))
+    tau, err = _refine_tau(lambda t: cv(replace(p, tau_s=t), order), p.tau_s, err)
+    p = replace(p, tau_s=tau)
     for name, grid in (("width_c", WIDTH_GRID_C), ("warmup_tau_s", WARMUP_GRID_S)):
         for v in grid:
             q = replace(p, **{name: v})
             e = cv(q, order)
             if e < err:
                 err, p = e, q
+    wlog: dict[str, Any] = {}
+    if lag_criterion == "profile":
+        p, wlog = _profile_lag(feature, y, p, order, on)
+    elif lag_criterion != "cv":
+        raise ValueError(f"lag_criterion must be one of {LAG_CRITERIA}, not {lag_criterion!r}")
     select = _select_terms_backward if extended else _select_terms
-    terms, err, log = select(feats[p] if p in feats else block_features(cal, p), y, order, folds)
+    terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
+    if wlog:
+        log["lag_profile"] = wlog
     log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
     return p, order, terms, err, log
 
@@ -494,6 +557,7 @@ def select_structured(
 __all__ = [
     "ALL_TERMS",
     "EXTRA_TERMS",
+    "LAG_CRITERIA",
     "ORDERS",
     "START_BRANCHES",
     "TERMS",
