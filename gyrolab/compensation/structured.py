@@ -190,7 +190,9 @@ def _term_column(X: np.ndarray, name: str, u: np.ndarray) -> np.ndarray:
     return cols[name]()
 
 
-def _design(X: np.ndarray, order: int, terms: tuple[str, ...], lo: float, hi: float):
+def design(X: np.ndarray, order: int, terms: tuple[str, ...], lo: float, hi: float):
+    """The structured model's design matrix on feature rows ``X``: ``L_0..L_P`` of
+    ``u(F)`` clipped to [−1, 1], then one column per term of ``terms``."""
     u = np.clip((2.0 * X[:, 0] - (lo + hi)) / (hi - lo), -1.0, 1.0)
     cols = [legendre.legvander(u, order)]
     for t in terms:
@@ -217,7 +219,7 @@ def _solve(
     return c
 
 
-def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     return _solve(A.T @ A, A.T @ y)
 
 
@@ -228,8 +230,17 @@ def fit_structured(
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
     if not hi > lo:
         raise ValueError("temperature does not vary: a temperature model cannot be fitted")
-    c = _lstsq(_design(X, order, terms, lo, hi), y)
-    extra = dict(zip(terms, c[order + 1 :], strict=True))
+    c = lstsq(design(X, order, terms, lo, hi), y)
+    return model_from_coef(c, X, order, terms)
+
+
+def model_from_coef(
+    c: np.ndarray, X: np.ndarray, order: int, terms: tuple[str, ...]
+) -> StructuredModel:
+    """The model of coefficients ``c`` (Legendre ``c_0..c_P``, then one per term of
+    ``terms``; any further ones are not the model's) fitted on feature rows ``X``."""
+    lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
+    extra = dict(zip(terms, c[order + 1 : order + 1 + len(terms)], strict=True))
     return StructuredModel(
         coef=c[: order + 1],
         lo=lo,
@@ -269,7 +280,19 @@ def cv_linear(
     blocks where the regressor is not zero (which made the CV reject terms that hold on
     other trajectories)."""
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
-    A = _design(X, order, terms, lo, hi)
+    return cv_design(design(X, order, terms, lo, hi), y, folds, pred, ridge)
+
+
+def cv_design(
+    A: np.ndarray,
+    y: np.ndarray,
+    folds: list[np.ndarray],
+    pred: np.ndarray | None = None,
+    ridge: float = 0.0,
+) -> float:
+    """Blocked-CV RMSE (°/s) of least squares on the design matrix ``A`` (one row per
+    block; :func:`cv_linear` with its own design, e.g. the Prandtl–Ishlinskii columns
+    of :mod:`.pi_models`); ``pred`` and ``ridge`` as there."""
     G, b = A.T @ A, A.T @ y
     d = np.sqrt(np.diag(G)) if ridge else None
     sq, n = 0.0, 0
@@ -314,8 +337,8 @@ def _t_stats(
     ``σ² (AᵀA)⁻¹`` inflated by ``n / n_eff`` (:func:`effective_samples` of the residual),
     and ``n_eff``."""
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
-    A = _design(X, order, terms, lo, hi)
-    c = _lstsq(A, y)
+    A = design(X, order, terms, lo, hi)
+    c = lstsq(A, y)
     r = y - A @ c
     n_eff = effective_samples(r)
     s2 = float(r @ r) / max(r.size - A.shape[1], 1) * (r.size / max(n_eff, 1.0))
@@ -452,8 +475,8 @@ def _profile_lag(
 
     def crit(tau: float) -> float:
         X = feature(replace(p, tau_s=float(tau)))
-        A = _design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
-        r = y - A @ _lstsq(A, y)
+        A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
+        r = y - A @ lstsq(A, y)
         return float(np.sqrt(float(r @ r) / r.size))
 
     grid = {tau: crit(tau) for tau in TAU_GRID_S}
@@ -540,7 +563,11 @@ __all__ = [
     "effective_samples",
     "StructuredModel",
     "block_features",
+    "cv_design",
     "cv_linear",
+    "design",
+    "lstsq",
+    "model_from_coef",
     "fit_structured",
     "select_structured",
 ]
