@@ -1,8 +1,8 @@
 """The die lag by profile least squares (``PipelineConfig.causal_lag_criterion =
 "profile"``, issue 23): the lag chosen again by the in-sample residual of the whole
 run's fit finds the die's lag under a wandering bias; the option moves the lag only
-(the CV's order, warm-up and play width stay), is recorded in the selection log, and is
-a checked configuration key whose default leaves the selection as it was."""
+(the CV's order, terms, warm-up and play width stay), is recorded in the selection log,
+and is a checked configuration key whose default leaves the selection as it was."""
 
 from __future__ import annotations
 
@@ -40,10 +40,10 @@ def test_profile_lag_finds_the_die_lag_under_a_wandering_bias() -> None:
     # refinement started, and the refined lag is no worse than it
     crit = {float(k): v for k, v in prof["criterion_by_tau"].items()}
     assert min(crit, key=crit.get) in (150.0, 300.0)
-    # only the lag moves: the CV's other choices are kept
-    q, order_cv, _, _, log_cv = select_structured(cal, folds)
+    # only the lag moves: the CV's other choices — order, terms, warm-up, play — are kept
+    q, order_cv, terms_cv, _, log_cv = select_structured(cal, folds)
     assert "lag_profile" not in log_cv
-    assert order == order_cv and prof["tau_plain_cv_s"] == q.tau_s
+    assert order == order_cv and terms == terms_cv and prof["tau_plain_cv_s"] == q.tau_s
     assert (p.warmup_tau_s, p.width_c) == (q.warmup_tau_s, q.width_c)
     with pytest.raises(ValueError, match="lag_criterion"):
         select_structured(cal, folds, lag_criterion="whitened")

@@ -59,7 +59,7 @@ WARMUP_GRID_S = (200.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 ORDERS = range(1, 7)
 #: how the structured families choose the lag (``PipelineConfig.causal_lag_criterion``):
 #: by the blocked CV with the other parameters (``cv``), or then again by profile least
-#: squares with the order, terms and other parameters the CV chose (``profile``,
+#: squares for the order, terms and other parameters the CV chose (``profile``,
 #: :func:`_profile_lag`)
 LAG_CRITERIA = ("cv", "profile")
 #: the hysteresis branch at power-on (:class:`CausalParams` ``start_branch``) searched
@@ -508,15 +508,15 @@ def _profile_lag(
     terms: tuple[str, ...],
 ) -> tuple[CausalParams, dict[str, Any]]:
     """The lag by profile least squares: the in-sample RMS residual of the whole run's
-    fit (order, terms on and the other parameters as the CV chose them, ``p``) minimised
-    over τ on :data:`TAU_GRID_S`, refined between grid neighbours. τ is one nonlinear
-    parameter of a model linear in the rest, so its least-squares estimate (Ljung,
-    *System Identification*, 2nd ed., §7.3, the prediction-error method; Golub & Pereyra,
-    SIAM J. Numer. Anal. 10, 1973, variable projection) does not overfit; it varies far
-    less than the blocked CV's, whose fold fits of the rate and warm-up columns under
-    flicker noise leave it flat or jagged in τ (the break family, docs/results.md).
-    The blocked CV keeps the discrete choices (order, terms, family). Returns the
-    parameters with that τ and a log (the criterion on the grid, °/s)."""
+    fit of the model the CV chose (``p``'s other parameters, ``order``, the ``terms`` it
+    kept) minimised over τ on :data:`TAU_GRID_S`, refined between grid neighbours. τ is
+    one nonlinear parameter of a model linear in the rest, so its least-squares estimate
+    (Ljung, *System Identification*, 2nd ed., §7.3, the prediction-error method; Golub &
+    Pereyra, SIAM J. Numer. Anal. 10, 1973, variable projection) does not overfit; it
+    varies far less than the blocked CV's, whose fold fits of the rate and warm-up
+    columns under flicker noise leave it flat or jagged in τ (the break family,
+    docs/results.md). The blocked CV keeps the discrete choices (order, terms, family).
+    Returns the parameters with that τ and a log (the criterion on the grid, °/s)."""
 
     def crit(tau: float) -> float:
         X = feature(replace(p, tau_s=float(tau)))
@@ -544,11 +544,12 @@ def select_structured(
     """Choose (τ, τ_w, order, s₀) on the joint grid with every original term on
     (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
     between its grid neighbours (golden section), then w and τ_w again on their grids;
-    with ``lag_criterion="profile"`` τ is then chosen again by profile least squares
-    (:func:`_profile_lag`); finally the terms (:func:`_select_terms`; ``extended``:
-    :func:`_select_terms_backward`). The lag, the warm-up and (``extended`` only) the
-    start branch (:data:`START_BRANCHES`) are searched together because all three shape
-    the first hours of a run. Returns the choice and a log."""
+    then the terms (:func:`_select_terms`; ``extended``:
+    :func:`_select_terms_backward`); with ``lag_criterion="profile"`` τ is finally chosen
+    again, for the terms kept, by profile least squares (:func:`_profile_lag`). The lag,
+    the warm-up and (``extended`` only) the start branch (:data:`START_BRANCHES`) are
+    searched together because all three shape the first hours of a run. Returns the
+    choice and a log."""
     y = cal.rate
     base = CausalParams()
     feats: dict[CausalParams, np.ndarray] = {}
@@ -585,16 +586,13 @@ def select_structured(
             e = cv(q, order)
             if e < err:
                 err, p = e, q
-    wlog: dict[str, Any] = {}
-    if lag_criterion == "profile":
-        p, wlog = _profile_lag(feature, y, p, order, on)
-    elif lag_criterion != "cv":
+    if lag_criterion not in LAG_CRITERIA:
         raise ValueError(f"lag_criterion must be one of {LAG_CRITERIA}, not {lag_criterion!r}")
     select = _select_terms_backward if extended else _select_terms
     terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
-    if wlog:
-        log["lag_profile"] = wlog
+    if lag_criterion == "profile":
+        p, log["lag_profile"] = _profile_lag(feature, y, p, order, terms)
     log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
     return p, order, terms, err, log
 
