@@ -37,6 +37,7 @@ import os
 import platform
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -59,7 +60,12 @@ BLOCK_S = 3.6
 
 
 def fit_and_apply(
-    cal, runs: dict[str, Any], families: tuple[str, ...], seed: int, quick: bool
+    cal,
+    runs: dict[str, Any],
+    families: tuple[str, ...],
+    seed: int,
+    quick: bool,
+    lag_criterion: str = "cv",
 ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any]]:
     """gyrolab's causal selection fitted on ``cal``; every family's 10 Hz output (and its
     band, where the model states one) on every run of ``runs``."""
@@ -71,9 +77,9 @@ def fit_and_apply(
 
     torch.set_num_threads(1)
     tb, xb, _ = block_average(cal.t, cal.raw, BLOCK_S, 1.0 / RATE_HZ)
-    cfg = PipelineConfig()
+    cfg = PipelineConfig(causal_lag_criterion=lag_criterion)
     if quick:
-        cfg = PipelineConfig(bp_max_iter=60, ga_population=12, ga_generations=6)
+        cfg = replace(cfg, bp_max_iter=60, ga_population=12, ga_generations=6)
     t0 = time.perf_counter()
     cm = fit_causal(
         CausalCalibration(t=tb, rate=xb, pt_t=cal.pt_t, pt_c=cal.pt_c),
@@ -103,7 +109,9 @@ def fit_and_apply(
     return out, info
 
 
-def run_unit(u: int, protocol: str, families: tuple[str, ...], noise: str, quick: bool):
+def run_unit(
+    u: int, protocol: str, families: tuple[str, ...], noise: str, quick: bool, lag: str = "cv"
+):
     """Simulate unit ``u`` on every trajectory, calibrate on ``protocol``, score the rest."""
     t0 = time.perf_counter()
     unit = units(u + 1)[u]
@@ -114,7 +122,9 @@ def run_unit(u: int, protocol: str, families: tuple[str, ...], noise: str, quick
     }
     t_sim = time.perf_counter() - t0
     held = [n for n in names if n != protocol]
-    outs, info = fit_and_apply(runs[protocol], {n: runs[n] for n in held}, families, u, quick)
+    outs, info = fit_and_apply(
+        runs[protocol], {n: runs[n] for n in held}, families, u, quick, lag
+    )
     res: dict[str, Any] = {
         "unit": u,
         "protocol": protocol,
@@ -190,9 +200,11 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     ocut = 1.0 - a["oracle"][PP] / a["raw"][PP]
     gap = 100.0 * (ocut - cut)
     worse = int(np.sum((a["causal"][BS] >= a["raw"][BS]) | (a["causal"][PP] >= a["raw"][PP])))
+    crit = meta.get("lag_criterion", "cv")
+    lag = f" --lag-criterion {crit}" if crit != "cv" else ""
     L = [
         f"`python benchmarks/break_suite.py --protocol {proto} --families "
-        f"{','.join(meta['families'])}` — {meta['date']}, "
+        f"{','.join(meta['families'])}{lag}` — {meta['date']}, "
         f"{meta['machine']}, {len(results)} units × {len(held)} held-out trajectories "
         f"({sum(r['real_noise'] for r in results)} units with real ADIS16405 noise), "
         f"families {', '.join(meta['families'])}; wall clock {meta['wall_s']:.0f} s, "
@@ -362,6 +374,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tables-only", action="store_true")
     ap.add_argument("--before", default="", help="cache tag of an earlier run to pair with")
     ap.add_argument("--quick", action="store_true", help="tiny network settings")
+    ap.add_argument(
+        "--lag-criterion",
+        default="cv",
+        choices=("cv", "profile"),
+        help="PipelineConfig.causal_lag_criterion of the causal selection",
+    )
     args = ap.parse_args(argv)
     fams = tuple(args.families.split(","))
     name = f"{args.protocol}{('-' + args.tag) if args.tag else ''}"
@@ -374,7 +392,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
         t0 = time.perf_counter()
         la = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
-        job = (args.protocol, fams, args.noise, args.quick)
+        job = (args.protocol, fams, args.noise, args.quick, args.lag_criterion)
         us = list(range(args.first_unit, args.first_unit + args.units))
         if args.workers > 1:
             from concurrent.futures import ProcessPoolExecutor
@@ -391,6 +409,7 @@ def main(argv: list[str] | None = None) -> int:
             "wall_s": time.perf_counter() - t0,
             "load": f"{la} before, " + "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) + " after",
             "quick": args.quick,
+            "lag_criterion": args.lag_criterion,
         }
         CACHE.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"meta": meta, "units": results}, indent=1, default=float))

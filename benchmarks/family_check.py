@@ -1,7 +1,7 @@
 """A causal family set on gyrolab's own validation family, the causal selection alone.
 
     python benchmarks/family_check.py [--families poly,structured] [--units 12]
-                                      [--workers 2]
+                                      [--workers 2] [--lag-criterion cv]
 
 The units, trajectories and seeds of ``benchmarks/validation_suite.py`` (each unit
 calibrated on its ``paper`` run, evaluated on the five others), but only the causal
@@ -30,12 +30,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from breakfam.score import score  # noqa: E402
 
 
-def run_unit(u: int, families: tuple[str, ...]) -> tuple[str, list[tuple[float, float]]]:
+def run_unit(
+    u: int, families: tuple[str, ...], lag: str = "cv"
+) -> tuple[str, list[tuple[float, float]]]:
     """Simulate unit ``u`` (the suite's seeds), calibrate on ``paper``, score the rest:
     a line and the (causal ÷ oracle, cut gap points) of each held-out run."""
     import validation_suite as vs
 
     from gyrolab.compensation.causal import CausalCalibration, fit_causal
+    from gyrolab.compensation.config import PipelineConfig
     from gyrolab.numerics.averaging import block_average
 
     model, _ = vs.unit_model(u)
@@ -46,7 +49,9 @@ def run_unit(u: int, families: tuple[str, ...]) -> tuple[str, list[tuple[float, 
     c = runs[vs.CALIBRATION]
     tb, xb, _ = block_average(c["t"], c["raw"], 3.6, 0.1)
     cm = fit_causal(
-        CausalCalibration(t=tb, rate=xb, pt_t=c["pt_t"], pt_c=c["pt_c"]), families=families
+        CausalCalibration(t=tb, rate=xb, pt_t=c["pt_t"], pt_c=c["pt_c"]),
+        families=families,
+        config=PipelineConfig(causal_lag_criterion=lag),
     )
     out = []
     for n, r in runs.items():
@@ -71,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--families", default="poly,structured")
     ap.add_argument("--units", type=int, default=12)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--lag-criterion", default="cv", help="PipelineConfig.causal_lag_criterion")
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     fams = tuple(args.families.split(","))
@@ -79,14 +85,15 @@ def main(argv: list[str] | None = None) -> int:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(args.workers) as ex:
-            res = list(ex.map(run_unit, us, [fams] * len(us)))
+            res = list(ex.map(run_unit, us, [fams] * len(us), [args.lag_criterion] * len(us)))
     else:
-        res = [run_unit(u, fams) for u in us]
+        res = [run_unit(u, fams, args.lag_criterion) for u in us]
     for line, _ in res:
         print(line)
     a = np.array([x for _, o in res for x in o])
     print(
-        f"families {','.join(fams)}: causal ÷ oracle median {np.median(a[:, 0]):.3f}, "
+        f"families {','.join(fams)} (lag criterion {args.lag_criterion}): causal ÷ oracle "
+        f"median {np.median(a[:, 0]):.3f}, "
         f"worst {a[:, 0].max():.2f}; 100 s p-p cut gap median {np.median(a[:, 1]):.1f}, "
         f"worst {a[:, 1].max():.1f} points ({a.shape[0]} held-out runs)"
     )

@@ -402,15 +402,50 @@ def unit_rows(family: str, results: list[dict[str, Any]], stats: dict) -> list[s
             f"| {family} {r['unit']} | {np.median(stats['ratio'][i]):.3f} | "
             f"{stats['ratio'][i].max():.3f} ({stats['names'][worst]}{ext}) | "
             f"{m['mahalanobis_d2']:.1f} / {m['dof']} (p {m['p_value']:.2g}) "
-            f"{'belongs' if m['belongs'] else '**refused**'} | "
+            f"{'belongs' if m['belongs'] else '**refused**'}{_wants(m)} | "
             f"{f['mahalanobis_d2']:.0f} (p {f['p_value']:.1g}) "
-            f"{'**refused**' if not f['belongs'] else 'accepted'} | "
+            f"{'**refused**' if not f['belongs'] else 'accepted'}{_wants(f)} | "
             f"{tr:.2f} | {hw['13h']['at_mid_deg_per_h']:.2f} | "
             f"{hw['quick_prior']['at_mid_deg_per_h']:.2f} "
             f"({hw['quick_prior']['at_low_deg_per_h']:.2f} … "
             f"{hw['quick_prior']['at_high_deg_per_h']:.2f}) |"
         )
     return L
+
+
+def _wants(m: dict[str, Any]) -> str:
+    """The rare terms a unit's run wants (prior.wanted_terms), as a table cell's tail."""
+    w = m.get("wanted_terms") or {}
+    return "".join(f", wants {k} (log odds {v:.2g})" for k, v in w.items())
+
+
+def wanted_line(data: dict[str, list[dict[str, Any]]]) -> str:
+    """How often the rare-term test (prior.wanted_terms) fires, beside the p-value."""
+    fams = list(data)
+    kinds = (
+        ("membership", "own-family units"),
+        ("other_part_membership", "another part number"),
+        ("foreign_membership", "units against the other family's prior"),
+    )
+    parts = []
+    for key, lab in kinds:
+        per = [sum(bool(r[key].get("wanted_terms")) for r in data[f]) for f in fams]
+        only = [
+            sum(
+                bool(r[key].get("wanted_terms")) and r[key]["p_value"] >= r[key]["threshold_p"]
+                for r in data[f]
+            )
+            for f in fams
+        ]
+        parts.append(
+            f"{lab} {' / '.join(str(x) for x in per)} ({' / '.join(str(x) for x in only)} "
+            "of them not refused by the p-value)"
+        )
+    return (
+        "The rare-term test (a term fewer than half the fleet uses, which the run's data "
+        "wants: posterior odds of the term's slab against the prior > 1; "
+        f"docs/compensation.md) fires on ({', '.join(fams)}): " + "; ".join(parts) + "."
+    )
 
 
 #: thresholds of the detector's p-value the rates are measured at
@@ -571,6 +606,8 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
         *detector_rows(data),
         "",
         calibration_line(data),
+        "",
+        wanted_line(data),
     ]
     L += [
         "",

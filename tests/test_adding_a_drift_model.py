@@ -172,7 +172,7 @@ def test_a_family_needs_its_module_and_the_list_of_modules() -> None:
     family's module is added to) and nothing else registers one."""
     assert len(FAMILY_FILES) <= 2
     declared = {f.name for m in families.MODULES for f in getattr(m, "FAMILIES", ())}
-    builtin = {"poly", "structured", "structured_rate", "bp", "gabp"}
+    builtin = {"poly", "structured", "structured_rate", "structured_pi", "bp", "gabp"}
     assert set(families.names()) == declared == builtin
     root = Path(__file__).resolve().parents[1]
     assert (root / FAMILY_FILES[1]).is_file()

@@ -223,3 +223,48 @@ def test_own_covariance_holds_correlated_noise() -> None:
     ratio_white = np.mean(white, axis=0) / spread
     assert np.all((ratio_jk > 0.7) & (ratio_jk < 1.3)), ratio_jk
     assert np.all(ratio_white < 0.1), ratio_white
+
+
+def test_log_evidence_is_the_marginal_likelihood() -> None:
+    """Woodbury's form against the dense Gaussian ``y ~ N(A μ, s² I + A Σ Aᵀ)``: equal up
+    to the constant common to every prior, so differences between priors agree."""
+    from scipy.stats import multivariate_normal
+
+    from gyrolab.compensation.prior import log_evidence
+
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((40, 3))
+    y = A @ np.array([0.3, -1.0, 0.5]) + 0.2 * rng.standard_normal(40)
+    s2 = 0.04
+    got, dense = [], []
+    for mu, sd in (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]), ([0.3, -1.0, 0.0], [0.1, 0.1, 3.0])):
+        cov = np.diag(np.square(sd))
+        got.append(log_evidence(A, y, s2, np.array(mu), cov))
+        dense.append(multivariate_normal(A @ mu, s2 * np.eye(40) + A @ cov @ A.T).logpdf(y))
+    assert got[1] - got[0] == pytest.approx(dense[1] - dense[0], rel=1e-9)
+
+
+def test_a_term_the_fleet_mostly_lacks_is_not_shrunk_away() -> None:
+    """A fleet where one unit in six has a warm-up: the Gaussian prior of the warm-up is
+    the others' near-zero spike. A new unit whose quick run shows a strong warm-up is sent
+    to the full profile (the rare-term test); one without it belongs."""
+    rng = np.random.default_rng(31)
+    units = []
+    for i in range(6):
+        p, c = _unit(rng)
+        c[5] = c[5] if i == 0 else 0.0
+        cal, _ = _run("paper", p, c, seed=80 + i)
+        terms = ("rate", "hyst", "warmup") if i == 0 else ("rate", "hyst")
+        X = hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
+        units.append(UnitEntry(f"u{i}", p, fit_structured(X, cal.rate, 3, terms)))
+    prior = learn_prior(units)
+    assert [prior.basis.names()[j] for j, _, _ in prior.slabs] == ["warmup"]
+    p, c = _unit(np.random.default_rng(32))
+    c[5] = 4e-3
+    mem = fit_map(_run("quick", p, c, seed=11)[0], prior).membership
+    assert not mem.belongs and "warmup" in mem.wanted, mem.to_dict()
+    assert "full profile" in mem.message()
+    c[5] = 0.0
+    mem = fit_map(_run("quick", p, c, seed=12)[0], prior).membership
+    assert mem.belongs and not mem.wanted, mem.to_dict()
+    assert FleetPrior.from_dict(prior.to_dict()).slabs == prior.slabs

@@ -211,12 +211,20 @@ def _fit_poly(ctx: FitContext) -> Candidate:
     return Candidate(model, err, {"order": o0}, pred)
 
 
+def lag_criterion(ctx: FitContext) -> str:
+    """How the structured families choose the lag: ``PipelineConfig.causal_lag_criterion``
+    (``"cv"`` without a configuration)."""
+    return str(getattr(ctx.config, "causal_lag_criterion", "cv"))
+
+
 def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
     """The structured model's grid choice ``(params, order, terms, cv_rmse, log)`` and the
     block features at its params, once per selection (the networks reuse them)."""
 
     def make() -> tuple[Any, ...]:
-        ps, order, terms, err, log = select_structured(ctx.cal, ctx.folds)
+        ps, order, terms, err, log = select_structured(
+            ctx.cal, ctx.folds, lag_criterion=lag_criterion(ctx)
+        )
         return ps, order, terms, err, log, block_features(ctx.cal, ps)
 
     return ctx.shared("structured", make)
@@ -233,13 +241,26 @@ def _fit_structured(ctx: FitContext) -> Candidate:
     return Candidate(model, err, {**log, "features": ps.to_dict()}, pred)
 
 
+def extended_choice(ctx: FitContext) -> tuple[Any, ...]:
+    """The extended structured search's choice ``(params, order, terms, cv_rmse, log)``
+    (:func:`.structured.select_structured`, ``extended``), once per selection
+    (``structured_rate`` and ``structured_pi`` of :mod:`.pi_models` share it), the lag
+    by :func:`lag_criterion`."""
+    return ctx.shared(
+        "structured_rate",
+        lambda: select_structured(
+            ctx.cal, ctx.folds, extended=True, lag_criterion=lag_criterion(ctx)
+        ),
+    )
+
+
 def _fit_structured_rate(ctx: FitContext) -> Candidate:
     """The structured model with the rate sensitivity's sign asymmetry and growth
     searched with the lag (:func:`.structured.select_structured`, ``extended``). Its CV
     RMSE is the ridge-stabilised one it was selected by (:data:`.structured.CV_RIDGE`):
     without the ridge, the fold that holds out a cooling staircase's one heating step
     fits the heating-only term to noise and extrapolates it."""
-    ps, order, terms, _err, log = select_structured(ctx.cal, ctx.folds, extended=True)
+    ps, order, terms, _err, log = extended_choice(ctx)
     Xs = block_features(ctx.cal, ps)
     y = ctx.cal.rate
     pred = np.empty_like(y)
@@ -397,5 +418,6 @@ __all__ = [
     "StructuredCausalModel",
     "causal_readings",
     "evaluate_causal",
+    "extended_choice",
     "structured_choice",
 ]

@@ -30,6 +30,7 @@ from typing import Any
 from gyrolab.compensation import families
 from gyrolab.compensation.fitness import CRITERIA
 from gyrolab.compensation.gabp import OPTIMIZERS, BPConfig, GAConfig
+from gyrolab.compensation.structured import LAG_CRITERIA
 from gyrolab.compensation.temperature_model import FITS
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import PAPER_BLOCK_S
@@ -72,6 +73,9 @@ class PipelineConfig:
     baselines: tuple[str, ...] = ("poly", "bp")
     # causal drift-model families compared by CV inside the calibration run (causal.py)
     causal_families: tuple[str, ...] = ("poly", "structured", "bp", "gabp")
+    # how the structured families choose the die lag: "cv" (the blocked CV) or
+    # "profile" (then profile least squares: structured.LAG_CRITERIA)
+    causal_lag_criterion: str = "cv"
 
     def ga(self) -> GAConfig:
         return GAConfig(population=self.ga_population, generations=self.ga_generations)
@@ -114,6 +118,7 @@ CHOICES: dict[str, Callable[[], tuple[str, ...]]] = {
     "flp_criterion": lambda: ("aic", "mdl"),
     "baselines": lambda: ("poly", "bp"),  # each element
     "causal_families": families.names,  # each element
+    "causal_lag_criterion": lambda: LAG_CRITERIA,
 }
 
 

@@ -18,11 +18,11 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from gyrolab.compensation import causal_models, temperature_model
+from gyrolab.compensation import causal_models, pi_models, temperature_model
 from gyrolab.compensation.drift_model import Family, SpecKind
 
 #: The built-in family modules: each declares FAMILIES and KINDS.
-MODULES = (causal_models, temperature_model)
+MODULES = (causal_models, pi_models, temperature_model)
 
 _FAMILIES: dict[str, Family] = {}
 _KINDS: dict[str, SpecKind] = {}

@@ -64,6 +64,12 @@ extrapolation: noise and bias, no power (docs/results.md, "Chamber time", measur
 unit whose p-value is below :data:`P_OUT` (in every cluster) does not belong: another
 part number, a defective unit — it must be calibrated on the full profile.
 The cluster of a unit is the one of largest p-value.
+**A term the fleet mostly lacks** (:func:`wanted_terms`): a term fewer than half the
+fleet's units use has the absent units' near-zero spike for a Gaussian prior, and the
+distance above, over the directions the run informs, may not see a unit that has it. A
+spike-and-slab test per such term — the run's marginal likelihood with the term's prior
+replaced by a wide slab against the cluster's prior, times the fleet's prior odds of the
+term — refuses the unit the same way when the odds favour the term.
 """
 
 from __future__ import annotations
@@ -111,6 +117,11 @@ INFORMATIVE = 1.0
 MAX_ORDER = 6
 #: the families whose causal selection gives the unit's own φ, the MAP fit's second start
 OWN_FAMILIES = ("poly", "structured")
+#: a rare term's slab: N(0, (SLAB_WIDEN × the RMS of the fleet's nonzero values)²)
+SLAB_WIDEN = 3.0
+#: a term fewer than this fraction of the fleet uses is *rare*: its Gaussian prior is the
+#: absent units' near-zero spike, and a run that wants the term is tested for it
+RARE = 0.5
 #: φ grid of the MAP fit: the prior mean plus these multiples of its sd
 PHI_STEPS = (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
 
@@ -265,6 +276,9 @@ class FleetPrior:
     skipped: dict[str, str] = field(default_factory=dict)  # unit → why it was not used
     #: the components some unit of the fleet uses (the detector's parameters)
     active: np.ndarray | None = None
+    #: per rare term (some units use it, fewer than :data:`RARE` of them): (index in θ,
+    #: its prior probability of presence, the slab's sd) — :func:`wanted_terms`
+    slabs: list[tuple[int, float, float]] = field(default_factory=list)
 
     def active_mask(self) -> np.ndarray:
         if self.active is None:
@@ -282,6 +296,7 @@ class FleetPrior:
             "clusters": [c.to_dict() for c in self.clusters],
             "skipped": dict(self.skipped),
             "active": self.active_mask().tolist(),
+            "slabs": [list(x) for x in self.slabs],
         }
 
     @classmethod
@@ -292,6 +307,8 @@ class FleetPrior:
             [Cluster.from_dict(c) for c in d["clusters"]],
             dict(d.get("skipped", {})),
             np.asarray(d["active"], dtype=bool) if "active" in d else None,
+            # priors written before the rare-term test have no slabs: not tested
+            [(int(j), float(f), float(sd)) for j, f, sd in d.get("slabs", [])],
         )
 
 
@@ -403,7 +420,14 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
         for j in range(k)
     ]
     active = np.any(thetas != 0.0, axis=0)
-    return FleetPrior(basis, clusters, dict(skipped or {}), active)
+    P = basis.order + 1
+    slabs = []
+    for j in range(P, basis.size):
+        on = thetas[:, j] != 0.0
+        if 0 < on.sum() < RARE * len(units):
+            rms = float(np.sqrt(np.mean(thetas[on, j] ** 2)))
+            slabs.append((j, (on.sum() + 1.0) / (len(units) + 2.0), SLAB_WIDEN * rms))
+    return FleetPrior(basis, clusters, dict(skipped or {}), active, slabs)
 
 
 # ----------------------------------------------------------------------------- MAP fit
@@ -419,6 +443,8 @@ class Membership:
     p_value: float
     belongs: bool
     d2_all: list[float]
+    #: rare terms the run wants (:func:`wanted_terms`): name → log posterior odds
+    wanted: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -429,9 +455,17 @@ class Membership:
             "belongs": self.belongs,
             "d2_per_cluster": self.d2_all,
             "threshold_p": P_OUT,
+            "wanted_terms": dict(self.wanted),
         }
 
     def message(self) -> str:
+        if self.wanted:
+            terms = ", ".join(f"{k} (log odds {v:.2g})" for k, v in self.wanted.items())
+            return (
+                f"the unit's run wants terms most of the fleet lacks: {terms}; the fleet "
+                "prior would shrink them away: calibrate it on the full profile "
+                "(--profile paper, 13 h)"
+            )
         return (
             f"the unit does not belong to the fleet prior (Mahalanobis d² = {self.d2:.1f} on "
             f"{self.dof} parameters, p = {self.p_value:.1e} < {P_OUT:g}; another part number "
@@ -451,6 +485,56 @@ def _map(A: np.ndarray, y: np.ndarray, s2: float, c: Cluster) -> tuple[np.ndarra
     r = y - A @ theta
     d = theta - c.mean
     return theta, float(r @ r / s2 + d @ P @ d)
+
+
+def log_evidence(
+    A: np.ndarray, y: np.ndarray, s2: float, mean: np.ndarray, cov: np.ndarray
+) -> float:
+    """The log marginal likelihood of the run under the prior N(mean, cov), up to a
+    constant common to every prior: ``y ~ N(A μ, s² I + A Σ Aᵀ)``, by Woodbury
+
+        ln p(y) = −½ (J_min + ln det Σ + ln det H) + const,   H = AᵀA / s² + Σ⁻¹
+
+    (J_min the MAP criterion's least value; Bishop 2006, §3.5.1)."""
+    Pm = np.linalg.inv(cov)
+    H = A.T @ A / s2 + Pm
+    theta = np.linalg.solve(H, A.T @ y / s2 + Pm @ mean)
+    r, d = y - A @ theta, theta - mean
+    J = float(r @ r / s2 + d @ Pm @ d)
+    return -0.5 * (J + np.linalg.slogdet(cov)[1] + np.linalg.slogdet(H)[1])
+
+
+def wanted_terms(
+    A: np.ndarray, y: np.ndarray, s2: float, c: Cluster, slabs: list[tuple[int, float, float]]
+) -> dict[int, float]:
+    """The rare terms the run's data wants: a spike-and-slab test per term fewer than
+    :data:`RARE` of the fleet use. Their Gaussian prior is the fleet's compromise — with
+    10 of 11 units at 0 a near-zero variance that crushes a unit whose run shows the term
+    (break unit 4's warm-up: 8.3 prior sd out, the MAP shrank it to an eighth, and the
+    Mahalanobis detector, over the directions the run informs, did not see it). For each
+    such term j, the log posterior odds of *present* — the term's prior replaced by its
+    slab ``N(0, sd²)`` (``sd``: :data:`SLAB_WIDEN` × the RMS of the fleet's nonzero
+    values, uncorrelated with the rest) — against the cluster's prior:
+
+        ln O_j = ln p(y | slab_j) − ln p(y | prior) + ln(π_j / (1 − π_j))
+
+    (:func:`log_evidence`: the marginal likelihood pays for the slab's width;
+    π_j = (n_on + 1)/(n + 2) the fleet's rate of the term). Returns ``{j: ln O_j}`` of
+    the terms with ``ln O_j > 0``: the run says the unit has a term its prior says it
+    lacks, so the prior cannot be trusted for it (releasing the term instead was tried:
+    docs/results.md, "Chamber time")."""
+    base = log_evidence(A, y, s2, c.mean, c.cov)
+    out = {}
+    for j, frac, sd in slabs:
+        mean, cov = c.mean.copy(), c.cov.copy()
+        mean[j] = 0.0
+        cov[j, :] = 0.0
+        cov[:, j] = 0.0
+        cov[j, j] = sd**2
+        lo = log_evidence(A, y, s2, mean, cov) - base + math.log(frac / (1.0 - frac))
+        if lo > 0.0:
+            out[j] = lo
+    return out
 
 
 def _noise_scale(A: np.ndarray, y: np.ndarray, c: Cluster, neff: bool = True) -> float:
@@ -587,6 +671,10 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
     theta, _ = _map(A, y, s2, c)
     # the unit's membership at its own φ (the detector's number)
     mem = membership(A, y, prior)
+    wanted = wanted_terms(A, y, s2, c, prior.slabs)
+    if wanted:
+        mem.wanted = {b.names()[j]: v for j, v in wanted.items()}
+        mem.belongs = False
     pred = np.empty_like(y)
     cv = cv_rmse(A, s2, c, pred)
     r = y - A @ theta

@@ -23,6 +23,7 @@ this model (poly: τ = 0, no term).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -53,6 +54,11 @@ TAU_GRID_S = (0.0, 60.0, 150.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 WIDTH_GRID_C = (0.25, 0.5, 1.0, 2.0, 4.0)
 WARMUP_GRID_S = (200.0, 300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0)
 ORDERS = range(1, 7)
+#: how the structured families choose the lag (``PipelineConfig.causal_lag_criterion``):
+#: by the blocked CV with the other parameters (``cv``), or then again by profile least
+#: squares for the order, terms and other parameters the CV chose (``profile``,
+#: :func:`_profile_lag`)
+LAG_CRITERIA = ("cv", "profile")
 #: the hysteresis branch at power-on (:class:`CausalParams` ``start_branch``) searched
 #: with the lag by the extended family (``structured_rate``) only: 0 (the play starts
 #: where the PT100 reads) or +1 (on its heating branch: the die's self-heating at
@@ -184,7 +190,9 @@ def _term_column(X: np.ndarray, name: str, u: np.ndarray) -> np.ndarray:
     return cols[name]()
 
 
-def _design(X: np.ndarray, order: int, terms: tuple[str, ...], lo: float, hi: float):
+def design(X: np.ndarray, order: int, terms: tuple[str, ...], lo: float, hi: float):
+    """The structured model's design matrix on feature rows ``X``: ``L_0..L_P`` of
+    ``u(F)`` clipped to [−1, 1], then one column per term of ``terms``."""
     u = np.clip((2.0 * X[:, 0] - (lo + hi)) / (hi - lo), -1.0, 1.0)
     cols = [legendre.legvander(u, order)]
     for t in terms:
@@ -211,7 +219,7 @@ def _solve(
     return c
 
 
-def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     return _solve(A.T @ A, A.T @ y)
 
 
@@ -222,8 +230,17 @@ def fit_structured(
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
     if not hi > lo:
         raise ValueError("temperature does not vary: a temperature model cannot be fitted")
-    c = _lstsq(_design(X, order, terms, lo, hi), y)
-    extra = dict(zip(terms, c[order + 1 :], strict=True))
+    c = lstsq(design(X, order, terms, lo, hi), y)
+    return model_from_coef(c, X, order, terms)
+
+
+def model_from_coef(
+    c: np.ndarray, X: np.ndarray, order: int, terms: tuple[str, ...]
+) -> StructuredModel:
+    """The model of coefficients ``c`` (Legendre ``c_0..c_P``, then one per term of
+    ``terms``; any further ones are not the model's) fitted on feature rows ``X``."""
+    lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
+    extra = dict(zip(terms, c[order + 1 : order + 1 + len(terms)], strict=True))
     return StructuredModel(
         coef=c[: order + 1],
         lo=lo,
@@ -263,7 +280,19 @@ def cv_linear(
     blocks where the regressor is not zero (which made the CV reject terms that hold on
     other trajectories)."""
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
-    A = _design(X, order, terms, lo, hi)
+    return cv_design(design(X, order, terms, lo, hi), y, folds, pred, ridge)
+
+
+def cv_design(
+    A: np.ndarray,
+    y: np.ndarray,
+    folds: list[np.ndarray],
+    pred: np.ndarray | None = None,
+    ridge: float = 0.0,
+) -> float:
+    """Blocked-CV RMSE (°/s) of least squares on the design matrix ``A`` (one row per
+    block; :func:`cv_linear` with its own design, e.g. the Prandtl–Ishlinskii columns
+    of :mod:`.pi_models`); ``pred`` and ``ridge`` as there."""
     G, b = A.T @ A, A.T @ y
     d = np.sqrt(np.diag(G)) if ridge else None
     sq, n = 0.0, 0
@@ -308,8 +337,8 @@ def _t_stats(
     ``σ² (AᵀA)⁻¹`` inflated by ``n / n_eff`` (:func:`effective_samples` of the residual),
     and ``n_eff``."""
     lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
-    A = _design(X, order, terms, lo, hi)
-    c = _lstsq(A, y)
+    A = design(X, order, terms, lo, hi)
+    c = lstsq(A, y)
     r = y - A @ c
     n_eff = effective_samples(r)
     s2 = float(r @ r) / max(r.size - A.shape[1], 1) * (r.size / max(n_eff, 1.0))
@@ -401,25 +430,93 @@ def _select_terms_backward(
     return terms, err, log
 
 
+def _refine_tau(f: Callable[[float], float], tau: float, err: float) -> tuple[float, float]:
+    """Refine the lag ``tau`` (a point of :data:`TAU_GRID_S` with criterion ``err``)
+    between its grid neighbours: golden section on ``f(τ)``, 8 steps. Returns the best τ
+    seen and its criterion."""
+    g = list(TAU_GRID_S)
+    i = g.index(tau)
+    a, b = g[max(i - 1, 0)], g[min(i + 1, len(g) - 1)]
+    phi = 0.5 * (np.sqrt(5.0) - 1.0)
+    c, d = b - phi * (b - a), a + phi * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(8):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - phi * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + phi * (b - a)
+            fd = f(d)
+    for t, e in ((c, fc), (d, fd)):
+        if e < err:
+            err, tau = e, float(t)
+    return tau, err
+
+
+def _profile_lag(
+    feature: Callable[[CausalParams], np.ndarray],
+    y: np.ndarray,
+    p: CausalParams,
+    order: int,
+    terms: tuple[str, ...],
+) -> tuple[CausalParams, dict[str, Any]]:
+    """The lag by profile least squares: the in-sample RMS residual of the whole run's
+    fit of the model the CV chose (``p``'s other parameters, ``order``, the ``terms`` it
+    kept) minimised over τ on :data:`TAU_GRID_S`, refined between grid neighbours. τ is
+    one nonlinear parameter of a model linear in the rest, so its least-squares estimate
+    (Ljung, *System Identification*, 2nd ed., §7.3, the prediction-error method; Golub &
+    Pereyra, SIAM J. Numer. Anal. 10, 1973, variable projection) does not overfit; it
+    varies far less than the blocked CV's, whose fold fits of the rate and warm-up
+    columns under flicker noise leave it flat or jagged in τ (the break family,
+    docs/results.md). The blocked CV keeps the discrete choices (order, terms, family).
+    Returns the parameters with that τ and a log (the criterion on the grid, °/s)."""
+
+    def crit(tau: float) -> float:
+        X = feature(replace(p, tau_s=float(tau)))
+        A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
+        r = y - A @ lstsq(A, y)
+        return float(np.sqrt(float(r @ r) / r.size))
+
+    grid = {tau: crit(tau) for tau in TAU_GRID_S}
+    tau0 = min(grid, key=lambda t: grid[t])
+    tau, _ = _refine_tau(crit, tau0, grid[tau0])
+    log = {
+        "tau_plain_cv_s": p.tau_s,
+        "tau_s": tau,
+        "criterion_by_tau": {str(k): v for k, v in grid.items()},
+    }
+    return replace(p, tau_s=tau), log
+
+
 def select_structured(
-    cal: CausalCalibration, folds: list[np.ndarray], extended: bool = False
+    cal: CausalCalibration,
+    folds: list[np.ndarray],
+    extended: bool = False,
+    lag_criterion: str = "cv",
 ) -> tuple[CausalParams, int, tuple[str, ...], float, dict[str, Any]]:
     """Choose (τ, τ_w, order, s₀) on the joint grid with every original term on
     (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
     between its grid neighbours (golden section), then w and τ_w again on their grids;
-    finally the terms (:func:`_select_terms`; ``extended``:
-    :func:`_select_terms_backward`). The lag, the warm-up and (``extended`` only) the
-    start branch (:data:`START_BRANCHES`) are searched together because all three shape
-    the first hours of a run. Returns the choice and a log."""
+    then the terms (:func:`_select_terms`; ``extended``:
+    :func:`_select_terms_backward`); with ``lag_criterion="profile"`` τ is finally chosen
+    again, for the terms kept, by profile least squares (:func:`_profile_lag`). The lag,
+    the warm-up and (``extended`` only) the start branch (:data:`START_BRANCHES`) are
+    searched together because all three shape the first hours of a run. Returns the
+    choice and a log."""
     y = cal.rate
     base = CausalParams()
     feats: dict[CausalParams, np.ndarray] = {}
     on, ridge = (GRID_TERMS, CV_RIDGE) if extended else (TERMS, 0.0)
 
-    def cv(p: CausalParams, order: int) -> float:
+    def feature(p: CausalParams) -> np.ndarray:
         if p not in feats:
             feats[p] = block_features(cal, p)
-        return cv_linear(feats[p], y, order, on, folds, ridge=ridge)
+        return feats[p]
+
+    def cv(p: CausalParams, order: int) -> float:
+        return cv_linear(feature(p), y, order, on, folds, ridge=ridge)
 
     bests: dict[float, tuple[float, CausalParams, int]] = {}
     for s0 in START_BRANCHES if extended else (0.0,):
@@ -436,34 +533,21 @@ def select_structured(
     for s0 in list(bests)[1:]:  # a start branch must beat starting at 0 by TIE
         if bests[s0][0] < err * (1.0 - TIE):
             err, p, order = bests[s0]
-    # refine τ between its grid neighbours (golden-section on the CV error, 8 steps)
-    g = list(TAU_GRID_S)
-    i = g.index(p.tau_s)
-    a, b = g[max(i - 1, 0)], g[min(i + 1, len(g) - 1)]
-    phi = 0.5 * (np.sqrt(5.0) - 1.0)
-    c, d = b - phi * (b - a), a + phi * (b - a)
-    fc, fd = cv(replace(p, tau_s=c), order), cv(replace(p, tau_s=d), order)
-    for _ in range(8):
-        if fc < fd:
-            b, d, fd = d, c, fc
-            c = b - phi * (b - a)
-            fc = cv(replace(p, tau_s=c), order)
-        else:
-            a, c, fc = c, d, fd
-            d = a + phi * (b - a)
-            fd = cv(replace(p, tau_s=d), order)
-    for tau, e in ((c, fc), (d, fd)):
-        if e < err:
-            err, p = e, replace(p, tau_s=float(tau))
+    tau, err = _refine_tau(lambda t: cv(replace(p, tau_s=t), order), p.tau_s, err)
+    p = replace(p, tau_s=tau)
     for name, grid in (("width_c", WIDTH_GRID_C), ("warmup_tau_s", WARMUP_GRID_S)):
         for v in grid:
             q = replace(p, **{name: v})
             e = cv(q, order)
             if e < err:
                 err, p = e, q
+    if lag_criterion not in LAG_CRITERIA:
+        raise ValueError(f"lag_criterion must be one of {LAG_CRITERIA}, not {lag_criterion!r}")
     select = _select_terms_backward if extended else _select_terms
-    terms, err, log = select(feats[p] if p in feats else block_features(cal, p), y, order, folds)
+    terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
+    if lag_criterion == "profile":
+        p, log["lag_profile"] = _profile_lag(feature, y, p, order, terms)
     log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
     return p, order, terms, err, log
 
@@ -471,6 +555,7 @@ def select_structured(
 __all__ = [
     "ALL_TERMS",
     "EXTRA_TERMS",
+    "LAG_CRITERIA",
     "ORDERS",
     "START_BRANCHES",
     "TERMS",
@@ -478,7 +563,11 @@ __all__ = [
     "effective_samples",
     "StructuredModel",
     "block_features",
+    "cv_design",
     "cv_linear",
+    "design",
+    "lstsq",
+    "model_from_coef",
     "fit_structured",
     "select_structured",
 ]

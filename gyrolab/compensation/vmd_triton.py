@@ -116,25 +116,28 @@ def admm_step(
         W = tl.where(upd, num / tl.where(upd, den, 1.0), w_old)
         tl.store(omega_ptr + (wr * B + b) * KMAX + kk, W, mask=kk < tl.where(j == 0, K, 0))
         dsum = tl.zeros([BLOCK], dtype=tl.float64)
-        for k in range(0, K):
-            w = tl.reduce(tl.where(kk == k, W, 0.0), 0, _ADD)
-            # the Wiener update of mode k on this tile (eq. 5)
-            uk = u_ptr + (row0 + k) * M + offs
-            old = tl.load(uk, mask=m, other=0.0)
-            d = fr - w
-            oth = S - old
-            if USE_LAM:
-                new = (fd - oth - 0.5 * lam) / (1.0 + alpha * d * d)
-            else:
-                new = (fd - oth) / (1.0 + alpha * d * d)
-            tl.store(uk, new, mask=m)
-            S = oth + new
-            p = new * new
-            e = new - old
-            dsum += e * e
-            pw = ((wr * B + b) * KMAX + k) * NB + j
-            tl.store(pnum_ptr + pw, tl.reduce(fr * p, 0, _ADD), mask=go)
-            tl.store(pden_ptr + pw, tl.reduce(p, 0, _ADD), mask=go)
+        # a constexpr bound, modes past K skipped: Triton 3.6's interpreter cannot iterate
+        # to a loaded K under NumPy 2.5 (int() of a 1-element array); on the GPU it is a branch
+        for k in range(0, KMAX):
+            if k < K:
+                w = tl.reduce(tl.where(kk == k, W, 0.0), 0, _ADD)
+                # the Wiener update of mode k on this tile (eq. 5)
+                uk = u_ptr + (row0 + k) * M + offs
+                old = tl.load(uk, mask=m, other=0.0)
+                d = fr - w
+                oth = S - old
+                if USE_LAM:
+                    new = (fd - oth - 0.5 * lam) / (1.0 + alpha * d * d)
+                else:
+                    new = (fd - oth) / (1.0 + alpha * d * d)
+                tl.store(uk, new, mask=m)
+                S = oth + new
+                p = new * new
+                e = new - old
+                dsum += e * e
+                pw = ((wr * B + b) * KMAX + k) * NB + j
+                tl.store(pnum_ptr + pw, tl.reduce(fr * p, 0, _ADD), mask=go)
+                tl.store(pden_ptr + pw, tl.reduce(p, 0, _ADD), mask=go)
         tl.store(s_ptr + b * M + offs, S, mask=m)
         if USE_LAM:
             tl.store(lam_ptr + b * M + offs, lam + tau * (S - fd), mask=m)
