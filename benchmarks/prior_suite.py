@@ -216,6 +216,9 @@ def stage2(
         "unit": u,
         "truth": truth(family, u),
         "membership": fit.membership.to_dict(),
+        # the terms of the unit's own 13 h model (is a term the rare-term test says the
+        # run wants one the unit's full calibration has?)
+        "terms_13h": list(mine.model.terms),
         "foreign_membership": foreign_mem.to_dict(),
         "other_part_membership": other_mem.to_dict(),
         "prior_clusters": len(prior.clusters),
@@ -441,10 +444,22 @@ def wanted_line(data: dict[str, list[dict[str, Any]]]) -> str:
             f"{lab} {' / '.join(str(x) for x in per)} ({' / '.join(str(x) for x in only)} "
             "of them not refused by the p-value)"
         )
+    # own-family units: does the unit's own 13 h model have the term its quick run wants?
+    hits = [
+        (f, r["unit"], k, k in r.get("terms_13h", []))
+        for f in fams
+        for r in data[f]
+        for k in (r["membership"].get("wanted_terms") or {})
+    ]
+    has = "; ".join(
+        f"{f} {u} {k}: {'in' if ok else 'not in'} its 13 h model" for f, u, k, ok in hits
+    )
     return (
         "The rare-term test (a term fewer than half the fleet uses, which the run's data "
         "wants: posterior odds of the term's slab against the prior > 1; "
-        f"docs/compensation.md) fires on ({', '.join(fams)}): " + "; ".join(parts) + "."
+        f"docs/compensation.md) fires on ({', '.join(fams)}): "
+        + "; ".join(parts)
+        + (f". The term wanted by an own-family unit — {has}." if hits else ".")
     )
 
 

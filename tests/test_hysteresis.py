@@ -1,6 +1,7 @@
 """The Prandtl–Ishlinskii hysteresis operator (a sum of plays) against a play sequence
 worked by hand, and the ``structured_pi`` family built on it: reading by reading equals
-vectorised, it saves and loads, and it says it has no firmware form (issue 23)."""
+vectorised, it saves and loads, and it says it has no firmware form; the jackknife test
+that keeps the hysteresis term only where there is some (issue 23)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,12 @@ import numpy as np
 import pytest
 from test_causal import _staircase_run
 
+from gyrolab.compensation.baselines import blocked_folds
 from gyrolab.compensation.causal import causal_from_state, causal_state, fit_causal
+from gyrolab.compensation.causal_features import CausalParams
 from gyrolab.compensation.drift_model import NotExportable, drift_sample_by_sample
 from gyrolab.compensation.hysteresis import pi_branches, pi_start, pi_step
+from gyrolab.compensation.structured import T_JACK, block_features, jackknife_t, segments
 
 F = np.array([0.0, 1.0, 3.0, 2.0, 0.5, 2.5])
 WIDTHS = (1.0, 4.0)
@@ -62,3 +66,13 @@ def test_structured_pi_replaces_the_play_and_runs_like_firmware(pi_model) -> Non
     assert type(back) is type(m) and np.array_equal(back.drift_at(t, pt_t, pt_c), vec)
     with pytest.raises(NotExportable, match="structured_pi"):
         m.spec()
+
+
+@pytest.mark.parametrize(("hyst", "kept"), [(0.0, False), (2e-3, True)])
+def test_the_jackknife_keeps_hysteresis_only_where_there_is_some(hyst, kept) -> None:
+    cal = _staircase_run(tau_die=300.0, hyst=hyst, seed=7, hours=3.0)
+    X = block_features(cal, CausalParams(tau_s=300.0))
+    folds = blocked_folds(cal.rate.size, 5, 10)
+    assert len(segments(folds)) == 10
+    t = jackknife_t(X, cal.rate, 2, ("rate", "hyst"), folds)
+    assert (t["hyst"] >= T_JACK) is kept

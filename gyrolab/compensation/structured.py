@@ -42,6 +42,9 @@ EXTRA_TERMS = ("rate_pos", "rate_sq", "hyst_T")
 ALL_TERMS = TERMS + EXTRA_TERMS
 #: |coefficient / standard error| (with the effective sample size) a term needs to be kept
 T_KEEP = 3.0
+#: |coefficient / jackknife standard error| (:func:`jackknife_t`) the hysteresis term
+#: needs to stay in the extended family (:func:`_select_terms_backward`)
+T_JACK = 2.0
 #: the terms on while (τ, τ_w, w, order) are searched, and from which backward
 #: elimination starts (:func:`_select_terms`): the rate sensitivity's sign asymmetry and
 #: its growth are searched with the lag, not after it — a lag chosen without them
@@ -396,10 +399,14 @@ def _select_terms_backward(
     X: np.ndarray, y: np.ndarray, order: int, folds: list[np.ndarray]
 ) -> tuple[tuple[str, ...], float, dict[str, Any]]:
     """The extended family's term selection (ridge-stabilised CV, :data:`CV_RIDGE`), in
-    two stages. (1) Backward elimination from :data:`GRID_TERMS` (the terms the grid
+    three stages. (1) Backward elimination from :data:`GRID_TERMS` (the terms the grid
     search had on): the term whose removal costs least CV RMSE is dropped while that cost
     is < 1 % (:data:`~gyrolab.compensation.drift_model.TIE`), so a term stays only if the
-    held-out stretches need it. (2) ``hyst_T`` is added only if it passes both tests: its
+    held-out stretches need it. (2) The hysteresis term, if kept, is dropped when its
+    coefficient is below :data:`T_JACK` jackknife standard errors (:func:`jackknife_t`):
+    the CV kept it on a break-family unit without hysteresis (|t| 0.8; 2.7–37 on the
+    nine with it), and the same test on the rate terms removed heating-only terms the
+    fast ramps need (docs/results.md). (3) ``hyst_T`` is added only if it passes both tests: its
     coefficient is significant with the *effective* number of samples (``|c/se| ≥``
     :data:`T_KEEP`, :func:`_t_stats`: 3.6 s residuals of a flicker-dominated gyro are
     far from independent) and it lowers the CV RMSE by ≥ 1 %. Measured on the break
@@ -418,6 +425,13 @@ def _select_terms_backward(
         terms = _without(terms, t)
         err = min(err, e)
         dropped.append({"dropped": t, "cv_rmse": e})
+    jack: dict[str, float] = {}
+    if "hyst" in terms:  # (2) the hysteresis the CV kept must stand its jackknife test
+        jack = jackknife_t(X, y, order, terms, folds)
+        if jack["hyst"] < T_JACK:
+            terms = _without(terms, "hyst")
+            err = cv_linear(X, y, order, terms, folds, ridge=CV_RIDGE)
+            dropped.append({"dropped": "hyst", "jackknife_t": jack["hyst"], "cv_rmse": err})
     added: list[dict[str, Any]] = []
     for t in (x for x in ALL_TERMS if x not in GRID_TERMS):
         more = terms + (t,)
@@ -426,8 +440,39 @@ def _select_terms_backward(
         if tstat[-1] >= T_KEEP and e < err * (1.0 - TIE):
             err, terms = e, more
             added.append({"added": t, "t": float(tstat[-1]), "n_eff": n_eff, "cv_rmse": e})
-    log = {"dropped": dropped, "terms": list(terms), "added": added}
+    log = {"dropped": dropped, "terms": list(terms), "added": added, "jackknife_t": jack}
     return terms, err, log
+
+
+def segments(folds: list[np.ndarray]) -> list[np.ndarray]:
+    """The blocked CV's segments: the contiguous stretches of the folds' held-out masks,
+    as boolean masks."""
+    out = []
+    for held in folds:
+        idx = np.flatnonzero(held)
+        for run in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
+            m = np.zeros(held.size, dtype=bool)
+            m[run] = True
+            out.append(m)
+    return out
+
+
+def jackknife_t(
+    X: np.ndarray, y: np.ndarray, order: int, terms: tuple[str, ...], folds: list[np.ndarray]
+) -> dict[str, float]:
+    """``|c / se|`` of each term's least-squares coefficient, ``se`` its delete-one-segment
+    jackknife standard error over the K CV segments (:func:`segments`; Efron & Stein,
+    *Ann. Statist.* 9 (1981) 586): ``se² = (K−1)/K Σ_k (c_k − c̄)²``. Leaving out a whole
+    1.3 h segment carries the residuals' correlation (flicker noise, a wrong lag) that a
+    per-sample standard error misses."""
+    segs = segments(folds)
+    K = len(segs)
+    A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
+    c = lstsq(A, y)
+    cs = np.array([lstsq(A[~m], y[~m]) for m in segs])
+    se = np.sqrt((K - 1) / K * np.sum((cs - cs.mean(axis=0)) ** 2, axis=0))
+    t = np.abs(c) / np.where(se > 0, se, np.inf)
+    return {n: float(t[order + 1 + i]) for i, n in enumerate(terms)}
 
 
 def _refine_tau(f: Callable[[float], float], tau: float, err: float) -> tuple[float, float]:
