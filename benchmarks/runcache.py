@@ -4,13 +4,15 @@
 same run always gives the same bytes and git stores it once), atomically through
 :func:`gyrolab.outputs.atomic_file`; ``load(stem)`` reads ``<stem>.json.gz`` or, for runs
 cached before, the plain ``<stem>.json``. The break suite's 38 cached runs took 14.7 MB as
-pretty-printed JSON and take 2.5 MB so (17 %), every one loading equal to its original.
+pretty-printed JSON and take 2.5 MB so (17 %), the prior suite's tables 231 kB → 37 kB,
+every one loading equal to its original (``break_suite.py``, ``prior_suite.py``).
 """
 
 from __future__ import annotations
 
 import gzip
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,17 +34,18 @@ def load(stem: Path) -> Any:
     return json.loads(p.read_text(encoding="utf-8"))
 
 
-def encode(obj: Any) -> bytes:
-    """``obj`` as compact JSON (numpy scalars through ``float``), gzip level 9, mtime 0."""
-    text = json.dumps(obj, separators=(",", ":"), ensure_ascii=False, default=float)
+def encode(obj: Any, default: Callable[[Any], Any] = float) -> bytes:
+    """``obj`` as compact JSON (what JSON lacks through ``default``: numpy scalars through
+    ``float``), gzip level 9, mtime 0."""
+    text = json.dumps(obj, separators=(",", ":"), ensure_ascii=False, default=default)
     return gzip.compress(text.encode("utf-8"), compresslevel=9, mtime=0)
 
 
-def save(stem: Path, obj: Any) -> Path:
+def save(stem: Path, obj: Any, default: Callable[[Any], Any] = float) -> Path:
     """Write ``obj`` to ``<stem>.json.gz`` atomically (replacing an earlier run); a plain
     ``<stem>.json`` beside it is left alone and no longer read."""
     out = stem.with_name(stem.name + ".json.gz")
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_file(out, force=True) as tmp:
-        tmp.write_bytes(encode(obj))
+        tmp.write_bytes(encode(obj, default))
     return out
