@@ -26,13 +26,13 @@ causal output is ``raw(t) − d(t)`` at 10 Hz.
 **Scoring** (:mod:`breakfam.score`, not gyrolab's metrics): bias stability (std of 3.6 s
 means, °/h), 100 s p-p, residual mean bias (°/h) and, where the model states one, the
 coverage of its 90 % band by the 100 s means. Per-unit results are cached in
-``benchmarks/results/break_suite/`` (``--tables-only`` re-renders them).
+``benchmarks/results/break_suite/<protocol>[-<tag>].json.gz`` (:mod:`runcache`; runs cached
+before as plain ``.json`` still read); ``--tables-only`` re-renders them.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -52,6 +52,7 @@ from breakfam.realnoise import DATA  # noqa: E402
 from breakfam.score import coverage, score, window_means  # noqa: E402
 from breakfam.trajectories import NAMES  # noqa: E402
 from docsections import write_section  # noqa: E402
+from runcache import load, save  # noqa: E402
 
 from gyrolab.compensation.band import grade  # noqa: E402
 
@@ -383,9 +384,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     fams = tuple(args.families.split(","))
     name = f"{args.protocol}{('-' + args.tag) if args.tag else ''}"
-    path = CACHE / f"{name}.json"
     if args.tables_only:
-        d = json.loads(path.read_text())
+        d = load(CACHE / name)
         results, meta = d["units"], d["meta"]
     else:
         os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -411,11 +411,10 @@ def main(argv: list[str] | None = None) -> int:
             "quick": args.quick,
             "lag_criterion": args.lag_criterion,
         }
-        CACHE.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"meta": meta, "units": results}, indent=1, default=float))
+        save(CACHE / name, {"meta": meta, "units": results})
     body = tables(results, meta)
     if args.before:
-        prev = json.loads((CACHE / f"{args.protocol}-{args.before}.json").read_text())["units"]
+        prev = load(CACHE / f"{args.protocol}-{args.before}")["units"]
         body += "\n\n" + paired_table(results, prev, args.before)
     print(body)
     if args.out:

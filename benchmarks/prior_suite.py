@@ -35,7 +35,8 @@ the quick and the 13 h run's ranges) and its graded expected error (the model's 
 ``band.band_metrics``; ``severe`` = more than 2× the calibrated error). A refused unit
 is reported as the lab runs it: recalibrated on the 13 h profile (ratio 1 by
 construction), its chamber hours counted. Per-unit results are cached in
-``benchmarks/results/prior_suite/`` (``--tables-only`` re-renders them).
+``benchmarks/results/prior_suite/`` (the tables' data in ``results.json.gz``,
+:mod:`runcache`; ``--tables-only`` re-renders them).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from breakfam.family import RATE_HZ  # noqa: E402  (both families run at the break family's rate)
 from breakfam.score import score  # noqa: E402
 from docsections import write_section  # noqa: E402
+from runcache import load, save  # noqa: E402
 
 CACHE = REPO / "benchmarks" / "results" / "prior_suite"
 BLOCK_S = 3.6
@@ -657,9 +659,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = ap.parse_args(argv)
     fams = args.families.split(",")
-    path = CACHE / ("results-white.json" if args.white else "results.json")
+    stem = CACHE / ("results-white" if args.white else "results")
     if args.tables_only:
-        d = json.loads(path.read_text())
+        d = load(stem)
         body = tables(d["data"], d["meta"])
     else:
         os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -696,8 +698,7 @@ def main(argv: list[str] | None = None) -> int:
             "load_before": load_before,
             "load_after": "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()),
         }
-        CACHE.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"meta": meta, "data": data}, indent=1, default=str))
+        save(stem, {"meta": meta, "data": data}, default=str)
         body = tables(data, meta)
     print(body)
     if args.out:

@@ -21,7 +21,9 @@ import json
 import math
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -126,25 +128,82 @@ def _probe(parent: Path, p: Path) -> None:
     """Create and remove a file where the output will be built (its temporary sibling):
     a place that refuses files although it looks writable (``/proc``, ``/sys``, a read-only
     mount, root's view of either) is found before any work starts, not at its end."""
+    held = _StopSignalsHeld()
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=parent)
-    except OSError as e:
-        raise InputError(p, f"cannot be written in {parent} ({e.strerror})") from None
-    os.close(fd)
-    os.unlink(tmp)
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=parent)
+        except OSError as e:
+            raise InputError(p, f"cannot be written in {parent} ({e.strerror})") from None
+        os.close(fd)
+        os.unlink(tmp)
+    finally:
+        held.release()
 
 
-def _temporary(final: Path, make: Any) -> Path:
-    """``make(prefix=…, suffix=".part", dir=…)`` (mkstemp or mkdtemp) beside ``final``; a
-    refusal of the file system is the output's one-line error."""
+class _StopSignalsHeld:
+    """SIGINT, SIGTERM and SIGHUP held from now until :meth:`release`: one that comes
+    meanwhile is noted, then handed to the handler it was meant for (``KeyboardInterrupt``
+    under gyrolab/cli.py) by ``release``. A temporary is made and its clean-up armed in
+    between: raised inside ``mkstemp``, after the file system made the ``.part`` but before
+    its name came back, the interrupt left the ``.part`` behind. Only handlers set from
+    Python, in the main thread (where Python runs them); an ignored or default signal is
+    left as it is."""
+
+    def __init__(self) -> None:
+        self._noted: list[tuple[int, Any]] = []
+        self._handlers: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():
+            for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+                sig = getattr(signal, name, None)
+                if sig is not None and callable(signal.getsignal(sig)):
+                    self._handlers[sig] = signal.signal(sig, self._note)
+        self._held = dict(self._handlers)
+
+    def _note(self, signum: int, frame: Any) -> None:
+        self._noted.append((signum, frame))
+
+    def release(self) -> None:
+        """Put the handlers back, then hand them the first signal noted (if any). May be
+        called again (a signal during the first call raised there): no-op after."""
+        while self._held:
+            sig, handler = self._held.popitem()
+            signal.signal(sig, handler)
+        if self._noted:
+            signum, frame = self._noted[0]
+            self._noted.clear()
+            self._handlers[signum](signum, frame)
+
+
+@contextlib.contextmanager
+def _temporary(final: Path, make: Any, mode: int) -> Iterator[Path]:
+    """``make(prefix=…, suffix=".part", dir=…)`` (mkstemp or mkdtemp) beside ``final``, with
+    ``mode & ~umask``; removed if anything is raised before the caller renamed it — a stop
+    signal that came while it was being made included. A refusal of the file system is the
+    output's one-line error."""
+    held = _StopSignalsHeld()
+    tmp: Path | None = None
     try:
-        made = make(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
-    except OSError as e:
-        raise InputError(final, f"cannot be written in {final.parent} ({e.strerror})") from None
-    if isinstance(made, tuple):  # mkstemp: (fd, path)
-        os.close(made[0])
-        made = made[1]
-    return Path(made)
+        try:
+            made = make(prefix=f".{final.name}.", suffix=".part", dir=final.parent)
+        except OSError as e:
+            raise InputError(final, f"cannot be written in {final.parent} ({e.strerror})") from None
+        if isinstance(made, tuple):  # mkstemp: (fd, path)
+            os.close(made[0])
+            made = made[1]
+        tmp = Path(made)
+        held.release()  # a signal noted above is raised here, where the clean-up is armed
+        # mkstemp/mkdtemp make it 0600/0700; an output gets the usual umask-based mode
+        os.chmod(tmp, mode & ~umask())
+        yield tmp
+    except BaseException:
+        if tmp is not None:
+            if tmp.is_dir() and not tmp.is_symlink():
+                shutil.rmtree(tmp, ignore_errors=True)
+            else:
+                with contextlib.suppress(FileNotFoundError):
+                    tmp.unlink()
+        held.release()
+        raise
 
 
 @contextlib.contextmanager
@@ -153,18 +212,11 @@ def atomic_file(
 ) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success fsync and rename it into place."""
     final = check_output(path, force, inputs=inputs, kind="file")
-    tmp_path = _temporary(final, tempfile.mkstemp)
-    # mkstemp makes the file 0600; an output gets the usual umask-based mode
-    os.chmod(tmp_path, 0o666 & ~umask())
-    try:
+    with _temporary(final, tempfile.mkstemp, 0o666) as tmp_path:
         yield tmp_path
         with open(tmp_path, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp_path, final)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
-        raise
 
 
 def write_marker(directory: PathLike, command: str) -> None:
@@ -193,24 +245,23 @@ def atomic_dir(
     An existing ``path`` is replaced only under the rules of :func:`check_output`.
     """
     final = check_output(path, force, inputs=inputs, kind="dir")
-    tmp = _temporary(final, tempfile.mkdtemp)
-    os.chmod(tmp, 0o777 & ~umask())
-    try:
+    with _temporary(final, tempfile.mkdtemp, 0o777) as tmp:
         yield tmp
         write_marker(tmp, command)
         if final.exists():
             # Checked again now (the work may have taken minutes): still ours to replace.
             check_output(final, force, inputs=inputs, kind="dir")
-            # A fresh, unique name: never a path that might hold someone else's files.
-            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
-            os.replace(final, old)
-            os.replace(tmp, final)
-            shutil.rmtree(old, ignore_errors=True)
+            held = _StopSignalsHeld()  # the swap is one step: no .old left, no final missing
+            try:
+                # A fresh, unique name: never a path that might hold someone else's files.
+                old = tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent)
+                os.replace(final, old)
+                os.replace(tmp, final)
+                shutil.rmtree(old, ignore_errors=True)
+            finally:
+                held.release()
         else:
             os.replace(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def json_safe(x: Any) -> Any:

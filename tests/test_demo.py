@@ -23,11 +23,23 @@ MODEL_FIGURES = ("causal-headline", "gpso", "vmd-modes", "mpe", "drift-fit", "co
 
 def make_demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One small demo (short profile, 10 Hz) per session, shared by the tests (the browser
-    test too) that need a model: made on first use, found in the session's temp dir after."""
+    test too) that need a model: made on first use, found in the session's temp dir after.
+
+    It registers in a catalogue of its own (:func:`demo_catalogue_file`), which only it
+    writes: the session's catalogue is every test's, and one that registers a copy of the
+    demo's model there (test_doc_examples exports one) moves the model's row to the copy,
+    as the catalogue does for a moved file — what the demo registered then depended on
+    which tests ran first."""
     out = tmp_path_factory.getbasetemp() / "demo"
     if not (out / "report" / "index.html").is_file():
-        run_demo(out, profile="short", seed=1, rate_hz=10.0)
+        cat = str(demo_catalogue_file(out))
+        run_demo(out, profile="short", seed=1, rate_hz=10.0, catalogue=cat)
     return out
+
+
+def demo_catalogue_file(demo: Path) -> Path:
+    """The catalogue the session's demo registered itself in (beside it, not in it)."""
+    return demo.parent / "demo-catalogue.sqlite"
 
 
 @pytest.fixture(scope="session")

@@ -93,12 +93,14 @@ def test_classification_noise_mixed_drift() -> None:
 
 
 def test_speed_paper_size() -> None:
-    """11 modes x 11 000 samples x 12 scales (the paper's run) well under a second."""
+    """11 modes x 11 000 samples x 12 scales (the paper's run) well under a second of CPU
+    (the process's CPU time, all its threads: other work on a loaded machine stretches the
+    wall time, not this)."""
     modes = np.random.default_rng(5).standard_normal((11, 11_000))
     mean_mpe(modes[:1, :500])  # numba compile (cached)
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     v = mean_mpe(modes)
-    dt = time.perf_counter() - t0
+    dt = time.process_time() - t0
     assert v.shape == (11,) and np.all(v > 0.99)
     assert dt < 0.5, dt
 

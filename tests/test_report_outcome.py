@@ -51,10 +51,10 @@ def _acquire_cmd(prof: Path, out: Path) -> list[str]:
 
 
 def _start_and_wait(prof: Path, out: Path) -> subprocess.Popen[str]:
-    """Start an acquisition; return once it has flushed data (the file grows by chunks)."""
+    """Start an acquisition; return once it has flushed data (the file grows by chunks).
+    No wall-clock limit: the run is long, so it either gets there or ends (asserted)."""
     p = subprocess.Popen(_acquire_cmd(prof, out), env=ENV, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and (not out.exists() or out.stat().st_size < 30_000):
+    while not out.exists() or out.stat().st_size < 30_000:
         assert p.poll() is None, p.stderr.read() if p.stderr else ""
         time.sleep(0.05)
     return p
@@ -182,10 +182,9 @@ def test_sigterm_while_the_bench_starts_still_removes_the_scratch_directory(
     p = subprocess.Popen(
         _acquire_cmd(prof, tmp_path / "t.mcap"), env=ENV, stderr=subprocess.PIPE, text=True
     )
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and not _scratch_dirs(p.pid):
+    while not _scratch_dirs(p.pid):  # it makes it, or ends without it (asserted)
+        assert p.poll() is None, f"ended before its scratch directory: {p.communicate()[1]}"
         time.sleep(0.01)
-    assert _scratch_dirs(p.pid), "the acquisition never made its scratch directory"
     p.send_signal(signal.SIGTERM)
     p.communicate(timeout=60)
     assert p.returncode == 130 and _scratch_dirs(p.pid) == []
@@ -212,8 +211,10 @@ def test_sigterm_at_any_moment_of_an_acquisition_ends_with_exit_130(tmp_path: Pa
     ]
     t_dir: dict[int, float] = {}
     sent: set[int] = set()
-    deadline = time.monotonic() + 60
-    while len(sent) < len(procs) and time.monotonic() < deadline:
+    # No wall-clock limit on the start-ups (eight at once on two cores: a loaded machine
+    # stretches them past any fixed one): each is signalled after its directory appeared,
+    # or has ended (asserted).
+    while len(sent) < len(procs):
         for i, p in enumerate(procs):
             if i in sent:
                 continue
@@ -224,7 +225,6 @@ def test_sigterm_at_any_moment_of_an_acquisition_ends_with_exit_130(tmp_path: Pa
                 p.send_signal(signal.SIGTERM)
                 sent.add(i)
         time.sleep(0.005)
-    assert len(sent) == len(procs), "an acquisition never made its scratch directory"
     for d, p in zip(delays, procs, strict=True):
         _, err = p.communicate(timeout=60)
         assert p.returncode == 130, f"delay {d} s: exit {p.returncode}: {err}"
