@@ -258,7 +258,7 @@ def test_a_term_the_fleet_mostly_lacks_is_not_shrunk_away() -> None:
         X = hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
         units.append(UnitEntry(f"u{i}", p, fit_structured(X, cal.rate, 3, terms)))
     prior = learn_prior(units)
-    assert [prior.basis.names()[j] for j, _, _ in prior.slabs] == ["warmup"]
+    assert [prior.basis.names()[j] for j, *_ in prior.slabs] == ["warmup"]
     p, c = _unit(np.random.default_rng(32))
     c[5] = 4e-3
     mem = fit_map(_run("quick", p, c, seed=11)[0], prior).membership
@@ -268,3 +268,13 @@ def test_a_term_the_fleet_mostly_lacks_is_not_shrunk_away() -> None:
     mem = fit_map(_run("quick", p, c, seed=12)[0], prior).membership
     assert mem.belongs and not mem.wanted, mem.to_dict()
     assert FleetPrior.from_dict(prior.to_dict()).slabs == prior.slabs
+    # the fleet's one warm-up is positive: the slab is its half on that side, and a run
+    # whose warm-up has the other sign does not want the fleet's term
+    assert prior.slabs[0][3] == 1
+    c[5] = -4e-3
+    mem = fit_map(_run("quick", p, c, seed=11)[0], prior).membership
+    assert "warmup" not in mem.wanted, mem.to_dict()
+    # a prior saved before the sign (three numbers a slab) gets the symmetric slab
+    old = prior.to_dict()
+    old["slabs"] = [x[:3] for x in old["slabs"]]
+    assert [x[3] for x in FleetPrior.from_dict(old).slabs] == [0]

@@ -68,8 +68,9 @@ The cluster of a unit is the one of largest p-value.
 fleet's units use has the absent units' near-zero spike for a Gaussian prior, and the
 distance above, over the directions the run informs, may not see a unit that has it. A
 spike-and-slab test per such term — the run's marginal likelihood with the term's prior
-replaced by a wide slab against the cluster's prior, times the fleet's prior odds of the
-term — refuses the unit the same way when the odds favour the term.
+replaced by a wide slab (on the fleet's side of zero where its units agree on the sign)
+against the cluster's prior, times the fleet's prior odds of the term — refuses the unit
+the same way when the odds favour the term.
 """
 
 from __future__ import annotations
@@ -117,8 +118,9 @@ INFORMATIVE = 1.0
 MAX_ORDER = 6
 #: the families whose causal selection gives the unit's own φ, the MAP fit's second start
 OWN_FAMILIES = ("poly", "structured")
-#: a rare term's slab: N(0, (SLAB_WIDEN × the RMS of the fleet's nonzero values)²)
-SLAB_WIDEN = 3.0
+#: a rare term's slab: N(0, (SLAB_WIDEN × the RMS of the fleet's nonzero values)²), or its
+#: half on the fleet's side (docs/results.md, "Chamber time": the widths measured)
+SLAB_WIDEN = 5.0
 #: a term fewer than this fraction of the fleet uses is *rare*: its Gaussian prior is the
 #: absent units' near-zero spike, and a run that wants the term is tested for it
 RARE = 0.5
@@ -277,8 +279,9 @@ class FleetPrior:
     #: the components some unit of the fleet uses (the detector's parameters)
     active: np.ndarray | None = None
     #: per rare term (some units use it, fewer than :data:`RARE` of them): (index in θ,
-    #: its prior probability of presence, the slab's sd) — :func:`wanted_terms`
-    slabs: list[tuple[int, float, float]] = field(default_factory=list)
+    #: its prior probability of presence, the slab's sd, the sign every unit that has
+    #: it shares: +1 / −1, 0 when their signs differ) — :func:`wanted_terms`
+    slabs: list[tuple[int, float, float, int]] = field(default_factory=list)
 
     def active_mask(self) -> np.ndarray:
         if self.active is None:
@@ -307,8 +310,12 @@ class FleetPrior:
             [Cluster.from_dict(c) for c in d["clusters"]],
             dict(d.get("skipped", {})),
             np.asarray(d["active"], dtype=bool) if "active" in d else None,
-            # priors written before the rare-term test have no slabs: not tested
-            [(int(j), float(f), float(sd)) for j, f, sd in d.get("slabs", [])],
+            # priors written before the rare-term test have no slabs: not tested; before
+            # the slab's sign, three numbers: a symmetric slab, as they were tested
+            [
+                (int(x[0]), float(x[1]), float(x[2]), int(x[3]) if len(x) > 3 else 0)
+                for x in d.get("slabs", [])
+            ],
         )
 
 
@@ -426,7 +433,15 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
         on = thetas[:, j] != 0.0
         if 0 < on.sum() < RARE * len(units):
             rms = float(np.sqrt(np.mean(thetas[on, j] ** 2)))
-            slabs.append((j, (on.sum() + 1.0) / (len(units) + 2.0), SLAB_WIDEN * rms))
+            sign = np.sign(thetas[on, j])
+            slabs.append(
+                (
+                    j,
+                    (on.sum() + 1.0) / (len(units) + 2.0),
+                    SLAB_WIDEN * rms,
+                    int(sign[0]) if np.all(sign == sign[0]) else 0,
+                )
+            )
     return FleetPrior(basis, clusters, dict(skipped or {}), active, slabs)
 
 
@@ -496,16 +511,27 @@ def log_evidence(
         ln p(y) = −½ (J_min + ln det Σ + ln det H) + const,   H = AᵀA / s² + Σ⁻¹
 
     (J_min the MAP criterion's least value; Bishop 2006, §3.5.1)."""
+    return _evidence_posterior(A, y, s2, mean, cov)[0]
+
+
+def _evidence_posterior(
+    A: np.ndarray, y: np.ndarray, s2: float, mean: np.ndarray, cov: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """:func:`log_evidence`, the posterior mean of θ and its precision ``H``."""
     Pm = np.linalg.inv(cov)
     H = A.T @ A / s2 + Pm
     theta = np.linalg.solve(H, A.T @ y / s2 + Pm @ mean)
     r, d = y - A @ theta, theta - mean
     J = float(r @ r / s2 + d @ Pm @ d)
-    return -0.5 * (J + np.linalg.slogdet(cov)[1] + np.linalg.slogdet(H)[1])
+    return -0.5 * (J + np.linalg.slogdet(cov)[1] + np.linalg.slogdet(H)[1]), theta, H
 
 
 def wanted_terms(
-    A: np.ndarray, y: np.ndarray, s2: float, c: Cluster, slabs: list[tuple[int, float, float]]
+    A: np.ndarray,
+    y: np.ndarray,
+    s2: float,
+    c: Cluster,
+    slabs: list[tuple[int, float, float, int]],
 ) -> dict[int, float]:
     """The rare terms the run's data wants: a spike-and-slab test per term fewer than
     :data:`RARE` of the fleet use. Their Gaussian prior is the fleet's compromise — with
@@ -519,19 +545,32 @@ def wanted_terms(
         ln O_j = ln p(y | slab_j) − ln p(y | prior) + ln(π_j / (1 − π_j))
 
     (:func:`log_evidence`: the marginal likelihood pays for the slab's width;
-    π_j = (n_on + 1)/(n + 2) the fleet's rate of the term). Returns ``{j: ln O_j}`` of
+    π_j = (n_on + 1)/(n + 2) the fleet's rate of the term). When every fleet unit that
+    has the term has it with one sign, the slab is the half-normal on that side
+    (``2 N(0, sd²)`` on ``sign·θ_j > 0``; evidence ``2 p(y | slab) P(sign·θ_j > 0 | y,
+    slab)``, the posterior under the full slab Gaussian): a run that wants the term with
+    the opposite sign wants something else the term's shape absorbs (break unit 11's
+    quick run: −3.9e-3 °/s against the fleet's +6e-4 and +1.9e-3; its 13 h model has no
+    warm-up), not the fleet's term. Returns ``{j: ln O_j}`` of
     the terms with ``ln O_j > 0``: the run says the unit has a term its prior says it
     lacks, so the prior cannot be trusted for it (releasing the term instead was tried:
     docs/results.md, "Chamber time")."""
     base = log_evidence(A, y, s2, c.mean, c.cov)
     out = {}
-    for j, frac, sd in slabs:
+    for j, frac, sd, sign in slabs:
         mean, cov = c.mean.copy(), c.cov.copy()
         mean[j] = 0.0
         cov[j, :] = 0.0
         cov[:, j] = 0.0
         cov[j, j] = sd**2
-        lo = log_evidence(A, y, s2, mean, cov) - base + math.log(frac / (1.0 - frac))
+        ev, theta, H = _evidence_posterior(A, y, s2, mean, cov)
+        lo = ev - base + math.log(frac / (1.0 - frac))
+        if sign:
+            # the half-normal slab on the fleet's side: 2 N(0, sd²) on sign·θ_j > 0 has
+            # the evidence 2 p(y | slab) P(sign·θ_j > 0 | y, slab) — the posterior
+            # under the full slab is Gaussian
+            z = sign * theta[j] / math.sqrt(np.linalg.inv(H)[j, j])
+            lo += math.log(2.0) + float(stats.norm.logcdf(z))
         if lo > 0.0:
             out[j] = lo
     return out
