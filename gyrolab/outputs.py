@@ -120,24 +120,16 @@ def check_output(
         raise InputError(p, f"directory {parent} does not exist")
     if not os.access(parent, os.W_OK):
         raise InputError(p, f"directory {parent} is not writable")
-    _probe(parent, p)
+    _probe(p)
     return p
 
 
-def _probe(parent: Path, p: Path) -> None:
+def _probe(p: Path) -> None:
     """Create and remove a file where the output will be built (its temporary sibling):
     a place that refuses files although it looks writable (``/proc``, ``/sys``, a read-only
     mount, root's view of either) is found before any work starts, not at its end."""
-    held = _StopSignalsHeld()
-    try:
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=parent)
-        except OSError as e:
-            raise InputError(p, f"cannot be written in {parent} ({e.strerror})") from None
-        os.close(fd)
-        os.unlink(tmp)
-    finally:
-        held.release()
+    with _temporary(p, tempfile.mkstemp) as tmp:
+        tmp.unlink()
 
 
 class _StopSignalsHeld:
@@ -159,6 +151,12 @@ class _StopSignalsHeld:
                     self._handlers[sig] = signal.signal(sig, self._note)
         self._held = dict(self._handlers)
 
+    def __enter__(self) -> _StopSignalsHeld:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
     def _note(self, signum: int, frame: Any) -> None:
         self._noted.append((signum, frame))
 
@@ -175,11 +173,11 @@ class _StopSignalsHeld:
 
 
 @contextlib.contextmanager
-def _temporary(final: Path, make: Any, mode: int) -> Iterator[Path]:
+def _temporary(final: Path, make: Any, mode: int | None = None) -> Iterator[Path]:
     """``make(prefix=…, suffix=".part", dir=…)`` (mkstemp or mkdtemp) beside ``final``, with
-    ``mode & ~umask``; removed if anything is raised before the caller renamed it — a stop
-    signal that came while it was being made included. A refusal of the file system is the
-    output's one-line error."""
+    ``mode & ~umask`` (``None``: as made, for the output check's probe); removed if
+    anything is raised before the caller renamed it — a stop signal that came while it was
+    being made included. A refusal of the file system is the output's one-line error."""
     held = _StopSignalsHeld()
     tmp: Path | None = None
     try:
@@ -192,8 +190,8 @@ def _temporary(final: Path, make: Any, mode: int) -> Iterator[Path]:
             made = made[1]
         tmp = Path(made)
         held.release()  # a signal noted above is raised here, where the clean-up is armed
-        # mkstemp/mkdtemp make it 0600/0700; an output gets the usual umask-based mode
-        os.chmod(tmp, mode & ~umask())
+        if mode is not None:  # mkstemp/mkdtemp make it 0600/0700; an output gets the umask's
+            os.chmod(tmp, mode & ~umask())
         yield tmp
     except BaseException:
         if tmp is not None:
@@ -251,15 +249,12 @@ def atomic_dir(
         if final.exists():
             # Checked again now (the work may have taken minutes): still ours to replace.
             check_output(final, force, inputs=inputs, kind="dir")
-            held = _StopSignalsHeld()  # the swap is one step: no .old left, no final missing
-            try:
+            with _StopSignalsHeld():  # the swap is one step: no .old left, no final missing
                 # A fresh, unique name: never a path that might hold someone else's files.
                 old = tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent)
                 os.replace(final, old)
                 os.replace(tmp, final)
                 shutil.rmtree(old, ignore_errors=True)
-            finally:
-                held.release()
         else:
             os.replace(tmp, final)
 
