@@ -492,14 +492,24 @@ def _features(cal: CausalCalibration, p: CausalParams) -> np.ndarray:
     return hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
 
 
+def _posterior(
+    A: np.ndarray, y: np.ndarray, s2: float, mean: np.ndarray, cov: np.ndarray
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """The MAP θ on design ``A`` under the prior N(mean, cov) at noise variance ``s2``, its
+    criterion ``J = |y − Aθ|²/s² + (θ − mean)ᵀ cov⁻¹ (θ − mean)`` and the posterior
+    precision ``H = AᵀA/s² + cov⁻¹``."""
+    P = np.linalg.inv(cov)
+    H = A.T @ A / s2 + P
+    theta = np.linalg.solve(H, A.T @ y / s2 + P @ mean)
+    r = y - A @ theta
+    d = theta - mean
+    return theta, float(r @ r / s2 + d @ P @ d), H
+
+
 def _map(A: np.ndarray, y: np.ndarray, s2: float, c: Cluster) -> tuple[np.ndarray, float]:
     """θ of least J for fixed φ and its J without the φ term."""
-    P = np.linalg.inv(c.cov)
-    H = A.T @ A / s2 + P
-    theta = np.linalg.solve(H, A.T @ y / s2 + P @ c.mean)
-    r = y - A @ theta
-    d = theta - c.mean
-    return theta, float(r @ r / s2 + d @ P @ d)
+    theta, J, _ = _posterior(A, y, s2, c.mean, c.cov)
+    return theta, J
 
 
 def log_evidence(
@@ -518,11 +528,7 @@ def _evidence_posterior(
     A: np.ndarray, y: np.ndarray, s2: float, mean: np.ndarray, cov: np.ndarray
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """:func:`log_evidence`, the posterior mean of θ and its precision ``H``."""
-    Pm = np.linalg.inv(cov)
-    H = A.T @ A / s2 + Pm
-    theta = np.linalg.solve(H, A.T @ y / s2 + Pm @ mean)
-    r, d = y - A @ theta, theta - mean
-    J = float(r @ r / s2 + d @ Pm @ d)
+    theta, J, H = _posterior(A, y, s2, mean, cov)
     return -0.5 * (J + np.linalg.slogdet(cov)[1] + np.linalg.slogdet(H)[1]), theta, H
 
 
