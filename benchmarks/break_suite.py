@@ -55,6 +55,7 @@ from docsections import write_section  # noqa: E402
 from runcache import load, save  # noqa: E402
 
 from gyrolab.compensation.band import grade  # noqa: E402
+from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 
 CACHE = REPO / "benchmarks" / "results" / "break_suite"
 BLOCK_S = 3.6
@@ -378,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--lag-criterion",
         default="cv",
-        choices=("cv", "profile"),
+        choices=LAG_CRITERIA,
         help="PipelineConfig.causal_lag_criterion of the causal selection",
     )
     args = ap.parse_args(argv)

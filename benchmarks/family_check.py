@@ -29,6 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from breakfam.score import score  # noqa: E402
 
+from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
+
 
 def run_unit(
     u: int, families: tuple[str, ...], lag: str = "cv"
@@ -76,7 +78,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--families", default="poly,structured")
     ap.add_argument("--units", type=int, default=12)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--lag-criterion", default="cv", help="PipelineConfig.causal_lag_criterion")
+    ap.add_argument(
+        "--lag-criterion",
+        default="cv",
+        choices=LAG_CRITERIA,
+        help="PipelineConfig.causal_lag_criterion",
+    )
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     fams = tuple(args.families.split(","))

@@ -550,6 +550,8 @@ def select_structured(
     the warm-up and (``extended`` only) the start branch (:data:`START_BRANCHES`) are
     searched together because all three shape the first hours of a run. Returns the
     choice and a log."""
+    if lag_criterion not in LAG_CRITERIA:
+        raise ValueError(f"lag_criterion must be one of {LAG_CRITERIA}, not {lag_criterion!r}")
     y = cal.rate
     base = CausalParams()
     feats: dict[CausalParams, np.ndarray] = {}
@@ -586,8 +588,6 @@ def select_structured(
             e = cv(q, order)
             if e < err:
                 err, p = e, q
-    if lag_criterion not in LAG_CRITERIA:
-        raise ValueError(f"lag_criterion must be one of {LAG_CRITERIA}, not {lag_criterion!r}")
     select = _select_terms_backward if extended else _select_terms
     terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
