@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -55,6 +54,8 @@ from breakfam.realnoise import DATA  # noqa: E402
 from breakfam.score import coverage, score, window_means  # noqa: E402
 from breakfam.trajectories import CALIBRATIONS, NAMES  # noqa: E402
 from docsections import write_section  # noqa: E402
+from machine import load as load_now  # noqa: E402
+from machine import run_meta  # noqa: E402
 from runcache import load, path_of, save  # noqa: E402
 
 from gyrolab.compensation.band import grade  # noqa: E402
@@ -408,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
         t0 = time.perf_counter()
-        la = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
+        la = load_now()
         job = (args.protocol, fams, args.noise, args.quick, args.lag_criterion)
         us = list(range(args.first_unit, args.first_unit + args.units))
         if args.workers > 1:
@@ -419,12 +420,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             results = [run_unit(u, *job) for u in us]
         meta = {
-            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python "
-            f"{platform.python_version()}",
+            **run_meta(t0, la),
             "families": list(fams),
-            "wall_s": time.perf_counter() - t0,
-            "load": f"{la} before, " + "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) + " after",
             "quick": args.quick,
             "lag_criterion": args.lag_criterion,
         }

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -50,6 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from breakfam.score import score  # noqa: E402
 from docsections import write_section  # noqa: E402
+from machine import load as load_now  # noqa: E402
+from machine import run_meta  # noqa: E402
 from runcache import load, save  # noqa: E402
 
 from gyrolab.compensation.baselines import blocked_folds  # noqa: E402
@@ -193,15 +194,16 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     held = list(rs[0]["runs"])
     a = {v: np.array([[r["runs"][n][v] for n in held] for r in rs]) for v in VARIANTS}
     crit = meta["lag_criterion"]
+    proto = f" --protocol {meta['protocol']}" if meta["family"] == "break" else ""
     L = [
-        f"`python benchmarks/rate_extrapolation.py --family {meta['family']} --protocol "
-        f"{meta['protocol']} --lag-criterion {crit}` (families {','.join(meta['families'])}) — "
+        f"`python benchmarks/rate_extrapolation.py --family {meta['family']}{proto} "
+        f"--lag-criterion {crit}` (families {','.join(meta['families'])}) — "
         f"{meta['date']}, {meta['machine']}, {len(rs)} of {len(results)} units with a "
         f"structured model × {len(held)} held-out runs; wall clock {meta['wall_s']:.0f} s, "
         f"load average {meta['load']}.",
         "",
-        "| variant | causal ÷ oracle median, worst | worst run | per unit Δ (variant − as "
-        "fitted, mean over its runs) | units better / worse |",
+        "| variant | causal ÷ oracle median, worst | worst run | per unit Δ causal ÷ oracle "
+        "(variant − as fitted, mean over its runs) | units better / worse |",
         "| --- | ---: | --- | ---: | ---: |",
     ]
     for v in VARIANTS:
@@ -249,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
 
         torch.set_num_threads(1)
         t0 = time.perf_counter()
-        la = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
+        la = load_now()
         fams = tuple(args.families.split(","))
         results = [
             run_unit(u, args.family, proto, fams, args.lag_criterion) for u in range(args.units)
@@ -259,11 +261,7 @@ def main(argv: list[str] | None = None) -> int:
             "protocol": proto,
             "families": list(fams),
             "lag_criterion": args.lag_criterion,
-            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python "
-            f"{platform.python_version()}",
-            "wall_s": time.perf_counter() - t0,
-            "load": f"{la} before, " + "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) + " after",
+            **run_meta(t0, la),
         }
         save(CACHE / name, {"meta": meta, "units": results})
     body = tables(results, meta)
