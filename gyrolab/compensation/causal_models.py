@@ -454,6 +454,7 @@ __all__ = [
     "NetworkCausalModel",
     "StructuredCausalModel",
     "causal_readings",
+    "cv_lag_params",
     "evaluate_causal",
     "extended_choice",
     "structured_choice",
