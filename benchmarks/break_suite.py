@@ -55,9 +55,11 @@ from docsections import write_section  # noqa: E402
 from runcache import load, save  # noqa: E402
 
 from gyrolab.compensation.band import grade  # noqa: E402
+from gyrolab.compensation.config import DEFAULT_CONFIG  # noqa: E402
 from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 
 CACHE = REPO / "benchmarks" / "results" / "break_suite"
+DEFAULT_LAG = DEFAULT_CONFIG.causal_lag_criterion
 BLOCK_S = 3.6
 
 
@@ -67,7 +69,7 @@ def fit_and_apply(
     families: tuple[str, ...],
     seed: int,
     quick: bool,
-    lag_criterion: str = "cv",
+    lag_criterion: str = DEFAULT_LAG,
 ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any]]:
     """gyrolab's causal selection fitted on ``cal``; every family's 10 Hz output (and its
     band, where the model states one) on every run of ``runs``."""
@@ -112,7 +114,12 @@ def fit_and_apply(
 
 
 def run_unit(
-    u: int, protocol: str, families: tuple[str, ...], noise: str, quick: bool, lag: str = "cv"
+    u: int,
+    protocol: str,
+    families: tuple[str, ...],
+    noise: str,
+    quick: bool,
+    lag: str = DEFAULT_LAG,
 ):
     """Simulate unit ``u`` on every trajectory, calibrate on ``protocol``, score the rest."""
     t0 = time.perf_counter()
@@ -202,8 +209,8 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     ocut = 1.0 - a["oracle"][PP] / a["raw"][PP]
     gap = 100.0 * (ocut - cut)
     worse = int(np.sum((a["causal"][BS] >= a["raw"][BS]) | (a["causal"][PP] >= a["raw"][PP])))
-    crit = meta.get("lag_criterion", "cv")
-    lag = f" --lag-criterion {crit}" if crit != "cv" else ""
+    crit = meta.get("lag_criterion", "cv")  # runs cached before the option: the CV's
+    lag = f" --lag-criterion {crit}" if crit != DEFAULT_LAG else ""
     L = [
         f"`python benchmarks/break_suite.py --protocol {proto} --families "
         f"{','.join(meta['families'])}{lag}` — {meta['date']}, "
@@ -378,7 +385,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny network settings")
     ap.add_argument(
         "--lag-criterion",
-        default="cv",
+        default=DEFAULT_LAG,
         choices=LAG_CRITERIA,
         help="PipelineConfig.causal_lag_criterion of the causal selection",
     )
