@@ -18,8 +18,12 @@ the unit's ARW; odd ones synthetic white + flicker + random walk + Gauss–Marko
 random steps, fast ramps (±3 °C/min), a cold start and a slow ramp; ``random`` —
 calibrate on random steps, evaluate on the others (the staircase included);
 ``staircase_ramps`` — calibrate on the staircase followed by one ±3 °C/min cycle
-(:data:`breakfam.trajectories.CALIBRATIONS`), evaluate on the staircase protocol's five
-runs (``--before staircase-TAG`` pairs it with a staircase run).
+(:data:`breakfam.trajectories.CALIBRATIONS`; its variants ``staircase_upramp``,
+``staircase_midcycle``, ``staircase_centrecycle``, ``staircase_ramps15`` and
+``staircase_ramps3c`` move the cycle or change its rates), evaluate on the staircase
+protocol's five runs (``--before staircase-TAG`` pairs it with a staircase run).
+``--first-unit 12 --units 8`` runs the development units 12–19 (never in the tables of
+units 0–11).
 
 **Methods**: gyrolab's selected causal model (``fit_causal`` on the calibration run's
 3.6 s means, the PT100 readings, every family of ``--families``), each family alone, the

@@ -8,7 +8,14 @@ import numpy as np
 NAMES = ("staircase", "heating", "random", "fastramp", "coldstart", "slowramp")
 #: calibration-only trajectories (never held out) and the trajectory of NAMES each
 #: extends (that one is not held out either)
-CALIBRATIONS = {"staircase_ramps": "staircase", "staircase_upramp": "staircase"}
+CALIBRATIONS = {
+    "staircase_ramps": "staircase",
+    "staircase_upramp": "staircase",
+    "staircase_midcycle": "staircase",
+    "staircase_centrecycle": "staircase",
+    "staircase_ramps15": "staircase",
+    "staircase_ramps3c": "staircase",
+}
 
 
 def _steps(parts: list[tuple[float, float]]) -> np.ndarray:
@@ -37,7 +44,19 @@ def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
       −40 → 60 at 3 °C/min, 30 min, 60 → −40, 30 min (≈ 14 h): the rates a fast ramp
       needs, which the staircase's one heating step does not show;
     * ``staircase_upramp`` (calibration only) — the staircase, then its first half-cycle:
-      −40 → 60 at 3 °C/min, 30 min (≈ 13 h).
+      −40 → 60 at 3 °C/min, 30 min (≈ 13 h);
+    * ``staircase_midcycle`` (calibration only) — the same cycle and chamber time as
+      ``staircase_ramps``, inside the staircase after its hour at 60 °C: 60 → −40 at
+      3 °C/min, 30 min, −40 → 60, 30 min, then the steps 50 … −40 (≈ 14 h): the cold end
+      and the fast heating then each lie in more than one of the blocked CV's segments;
+    * ``staircase_centrecycle`` (calibration only) — the staircase with a cycle after its
+      20 °C hour, past the warm-up and away from the cold end: 20 → 60 at 3 °C/min,
+      30 min, 60 → −40, 30 min, −40 → 10, then the steps 10 … −40 (≈ 14 h);
+    * ``staircase_ramps15`` (calibration only) — ``staircase_ramps`` at 1.5 °C/min, the
+      rate the chamber can cool at (≈ 15 h);
+    * ``staircase_ramps3c`` (calibration only) — the staircase, then −40 → 60 at 3 °C/min,
+      30 min, 60 → −40 at 1.5 °C/min (what the chamber can cool at), 30 min (≈ 14.7 h):
+      the fast heating, and the cold end in a second CV segment.
     """
     if name == "staircase":
         sp = [(25.0, 3600.0), (60.0, 3600.0)] + [(60.0 - 10.0 * i, 3600.0) for i in range(1, 11)]
@@ -65,6 +84,23 @@ def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
         if name == "staircase_ramps":
             cyc += [_ramp(60.0, -40.0, 3.0), np.full(1800, -40.0)]
         return np.concatenate([sp, *cyc]), rest
+    if name == "staircase_midcycle":
+        head = _steps([(25.0, 3600.0), (60.0, 3600.0)])
+        cyc = [_ramp(60.0, -40.0, 3.0), np.full(1800, -40.0), _ramp(-40.0, 60.0, 3.0)]
+        cyc += [np.full(1800, 60.0)]
+        tail = _steps([(60.0 - 10.0 * i, 3600.0) for i in range(1, 11)])
+        return np.concatenate([head, *cyc, tail]), 25.0
+    if name == "staircase_centrecycle":
+        head = _steps([(25.0, 3600.0)] + [(60.0 - 10.0 * i, 3600.0) for i in range(0, 5)])
+        cyc = [_ramp(20.0, 60.0, 3.0), np.full(1800, 60.0), _ramp(60.0, -40.0, 3.0)]
+        cyc += [np.full(1800, -40.0), _ramp(-40.0, 10.0, 3.0)]
+        tail = _steps([(10.0 - 10.0 * i, 3600.0) for i in range(0, 6)])
+        return np.concatenate([head, *cyc, tail]), 25.0
+    if name in ("staircase_ramps15", "staircase_ramps3c"):
+        sp, rest = trajectory("staircase")
+        up = 1.5 if name == "staircase_ramps15" else 3.0
+        cyc = [_ramp(-40.0, 60.0, up), np.full(1800, 60.0), _ramp(60.0, -40.0, 1.5)]
+        return np.concatenate([sp, *cyc, np.full(1800, -40.0)]), rest
     if name == "coldstart":
         seg = [np.full(3600, -35.0), _ramp(-35.0, 50.0, 1.0), np.full(7200, 50.0)]
         seg += [_steps([(20.0, 3600.0), (-10.0, 3600.0), (40.0, 3600.0)])]
