@@ -223,3 +223,27 @@ def test_no_issue_23_term_is_kept_for_a_unit_without_it_and_the_band_round_trips
     back = causal_from_state(meta, {}, "causal.")
     assert back.band == b
     np.testing.assert_array_equal(back.reading_drift(t, cal.pt_c), m.reading_drift(t, cal.pt_c))
+
+
+@pytest.mark.parametrize("warm, kept", [(4e-4, True), (0.0, False)])
+def test_the_warmup_is_kept_by_its_t_as_the_cv_cannot_see_it(warm: float, kept: bool) -> None:
+    """Its column lives in the first CV segment (held out, the ridge fold fit gives it
+    ~0), so the CV cannot judge it — here the CV's 1 % tie would drop a real warm-up;
+    the effective-sample t keeps a real warm-up and drops an absent one."""
+    from gyrolab.compensation.baselines import blocked_folds
+    from gyrolab.compensation.drift_model import TIE
+    from gyrolab.compensation.structured import CV_RIDGE, T_KEEP, _select_terms_backward, cv_linear
+
+    rng = np.random.default_rng(11)
+    t = np.arange(4000) * 3.6
+    F = 20.0 + 30.0 * np.sin(2 * np.pi * t / 20000.0)
+    R = np.gradient(F, t)
+    X = np.column_stack([F, R, np.sign(R), np.exp(-t / 900.0)])
+    y = 2e-5 * F + 0.3 * R + 1e-4 * X[:, 2] + warm * X[:, 3] + rng.normal(0, 5e-5, t.size)
+    folds = blocked_folds(t.size, 5, 10)
+    terms, _, log = _select_terms_backward(X, y, 2, folds)
+    assert ("warmup" in terms) is kept
+    assert (log["warmup_t"] >= T_KEEP) is kept
+    with_w = cv_linear(X, y, 2, ("rate", "hyst", "warmup"), folds, ridge=CV_RIDGE)
+    without = cv_linear(X, y, 2, ("rate", "hyst"), folds, ridge=CV_RIDGE)
+    assert without <= with_w * (1.0 + TIE)  # the CV's tie alone would drop it either way

@@ -405,26 +405,34 @@ def _select_terms_backward(
     X: np.ndarray, y: np.ndarray, order: int, folds: list[np.ndarray]
 ) -> tuple[tuple[str, ...], float, dict[str, Any]]:
     """The extended family's term selection (ridge-stabilised CV, :data:`CV_RIDGE`), in
-    three stages. (1) Backward elimination from :data:`GRID_TERMS` (the terms the grid
-    search had on): the term whose removal costs least CV RMSE is dropped while that cost
-    is < 1 % (:data:`~gyrolab.compensation.drift_model.TIE`), so a term stays only if the
-    held-out stretches need it. (2) The hysteresis term, if kept, is dropped when its
-    coefficient is below :data:`T_JACK` jackknife standard errors (:func:`jackknife_t`):
-    the CV kept it on a break-family unit without hysteresis (|t| 0.8; 2.7–37 on the
-    nine with it), and the same test on the rate terms removed heating-only terms the
-    fast ramps need (docs/results.md). (3) ``hyst_T`` is added only if it passes both tests: its
-    coefficient is significant with the *effective* number of samples (``|c/se| ≥``
-    :data:`T_KEEP`, :func:`_t_stats`: 3.6 s residuals of a flicker-dominated gyro are
-    far from independent) and it lowers the CV RMSE by ≥ 1 %. Measured on the break
-    family (docs/results.md) against adding the rate asymmetry and R|R| one at a time
-    after the original terms (:func:`_select_terms`): they were then rejected on units
-    that have them (the lag, searched without them, had absorbed part of them)."""
+    four stages. (1) Backward elimination from :data:`GRID_TERMS` (the terms the grid
+    search had on), the warm-up excepted: the term whose removal costs least CV RMSE is
+    dropped while that cost is < 1 % (:data:`~gyrolab.compensation.drift_model.TIE`), so
+    a term stays only if the held-out stretches need it. (2) The hysteresis term, if
+    kept, is dropped when its coefficient is below :data:`T_JACK` jackknife standard
+    errors (:func:`jackknife_t`): the CV kept it on a break-family unit without
+    hysteresis (|t| 0.8; 2.7–37 on the nine with it), and the same test on the rate
+    terms removed heating-only terms the fast ramps need (docs/results.md). (3) The
+    warm-up stays only if its coefficient is significant with the *effective* number of
+    samples (``|c/se| ≥`` :data:`T_KEEP`, :func:`_t_stats`): its column lives in the
+    first CV segment, and when that segment is held out the ridge fit gives it ≈ 0, so
+    the CV has no power on it (on the break staircase plus a ramp cycle, dropping it
+    changed the held-out RMSE of its own segment by < 1e-9 relative on 5 of 12 units)
+    and the 1 % tie dropped it by chance — unit 2's self-heating warm-up there, whose
+    100 s p-p gap then reached 12 points (docs/results.md, "The ramp cycle's side
+    effects"). (4) ``hyst_T`` is added only if it passes both tests: its coefficient is
+    significant with the effective number of samples (:func:`_t_stats`: 3.6 s residuals
+    of a flicker-dominated gyro are far from independent) and it lowers the CV RMSE by
+    ≥ 1 %. Measured on the break family (docs/results.md) against adding the rate
+    asymmetry and R|R| one at a time after the original terms (:func:`_select_terms`):
+    they were then rejected on units that have them (the lag, searched without them,
+    had absorbed part of them)."""
     terms = GRID_TERMS
     err = cv_linear(X, y, order, terms, folds, ridge=CV_RIDGE)
     dropped: list[dict[str, Any]] = []
-    while terms:
+    while cand := [t for t in terms if t != "warmup"]:
         e, t = min(
-            (cv_linear(X, y, order, _without(terms, t), folds, ridge=CV_RIDGE), t) for t in terms
+            (cv_linear(X, y, order, _without(terms, t), folds, ridge=CV_RIDGE), t) for t in cand
         )
         if e > err * (1.0 + TIE):
             break
@@ -438,6 +446,13 @@ def _select_terms_backward(
             terms = _without(terms, "hyst")
             err = cv_linear(X, y, order, terms, folds, ridge=CV_RIDGE)
             dropped.append({"dropped": "hyst", "jackknife_t": jack["hyst"], "cv_rmse": err})
+    warm_t: float | None = None
+    if "warmup" in terms:  # (3) the CV cannot test it: its effective-sample t decides
+        warm_t = float(_t_stats(X, y, order, _without(terms, "warmup") + ("warmup",))[0][-1])
+        if warm_t < T_KEEP:
+            terms = _without(terms, "warmup")
+            err = cv_linear(X, y, order, terms, folds, ridge=CV_RIDGE)
+            dropped.append({"dropped": "warmup", "t": warm_t, "cv_rmse": err})
     added: list[dict[str, Any]] = []
     for t in (x for x in ALL_TERMS if x not in GRID_TERMS):
         more = terms + (t,)
@@ -446,7 +461,13 @@ def _select_terms_backward(
         if tstat[-1] >= T_KEEP and e < err * (1.0 - TIE):
             err, terms = e, more
             added.append({"added": t, "t": float(tstat[-1]), "n_eff": n_eff, "cv_rmse": e})
-    log = {"dropped": dropped, "terms": list(terms), "added": added, "jackknife_t": jack}
+    log = {
+        "dropped": dropped,
+        "terms": list(terms),
+        "added": added,
+        "jackknife_t": jack,
+        "warmup_t": warm_t,
+    }
     return terms, err, log
 
 
