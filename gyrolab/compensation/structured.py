@@ -32,6 +32,7 @@ from numpy.polynomial import legendre
 
 from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
 from gyrolab.compensation.drift_model import TIE, CausalCalibration
+from gyrolab.numerics.jackknife import jackknife_covariance
 
 TERMS = ("rate", "hyst", "warmup")  # optional terms of the structured model (original)
 #: terms added for gyros outside the original class (issue 23), each a function of the
@@ -467,15 +468,15 @@ def jackknife_t(
 ) -> dict[str, float]:
     """``|c / se|`` of each term's least-squares coefficient, ``se`` its delete-one-segment
     jackknife standard error over the K CV segments (:func:`segments`; Efron & Stein,
-    *Ann. Statist.* 9 (1981) 586): ``se² = (K−1)/K Σ_k (c_k − c̄)²``. Leaving out a whole
+    *Ann. Statist.* 9 (1981) 586): ``se² = (K−1)/K Σ_k (c_k − c̄)²``, the diagonal of
+    :func:`gyrolab.numerics.jackknife.jackknife_covariance`. Leaving out a whole
     1.3 h segment carries the residuals' correlation (flicker noise, a wrong lag) that a
     per-sample standard error misses."""
     segs = segments(folds)
-    K = len(segs)
     A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
     c = lstsq(A, y)
     cs = np.array([lstsq(A[~m], y[~m]) for m in segs])
-    se = np.sqrt((K - 1) / K * np.sum((cs - cs.mean(axis=0)) ** 2, axis=0))
+    se = np.sqrt(np.diag(jackknife_covariance(cs)))
     t = np.abs(c) / np.where(se > 0, se, np.inf)
     return {n: float(t[order + 1 + i]) for i, n in enumerate(terms)}
 
