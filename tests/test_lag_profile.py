@@ -73,7 +73,7 @@ def test_the_families_are_compared_at_the_cv_lag_and_the_winner_ships_the_profil
 
 def test_the_lag_criterion_is_a_checked_configuration_key() -> None:
     assert PipelineConfig().causal_lag_criterion == "profile"  # the default (issue 23)
-    assert LAG_CRITERIA == ("cv", "profile")
+    assert LAG_CRITERIA == ("cv", "profile", "profile_warmup")
     cfg, _ = config_from_dict({"causal_lag_criterion": "profile"}, path="c.toml")
     assert cfg.causal_lag_criterion == "profile"
     with pytest.raises(InputError, match="causal_lag_criterion"):
