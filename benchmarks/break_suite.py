@@ -16,7 +16,10 @@ the unit's ARW; odd ones synthetic white + flicker + random walk + Gauss–Marko
 
 **Protocols**: ``staircase`` — calibrate on the cooling staircase, evaluate on heating,
 random steps, fast ramps (±3 °C/min), a cold start and a slow ramp; ``random`` —
-calibrate on random steps, evaluate on the others (the staircase included).
+calibrate on random steps, evaluate on the others (the staircase included);
+``staircase_ramps`` — calibrate on the staircase followed by one ±3 °C/min cycle
+(:data:`breakfam.trajectories.CALIBRATIONS`), evaluate on the staircase protocol's five
+runs (``--before staircase-TAG`` pairs it with a staircase run).
 
 **Methods**: gyrolab's selected causal model (``fit_causal`` on the calibration run's
 3.6 s means, the PT100 readings, every family of ``--families``), each family alone, the
@@ -34,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -50,14 +52,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from breakfam.family import RATE_HZ, simulate_run, units  # noqa: E402
 from breakfam.realnoise import DATA  # noqa: E402
 from breakfam.score import coverage, score, window_means  # noqa: E402
-from breakfam.trajectories import NAMES  # noqa: E402
+from breakfam.trajectories import CALIBRATIONS, NAMES  # noqa: E402
 from docsections import write_section  # noqa: E402
-from runcache import load, save  # noqa: E402
+from machine import load as load_now  # noqa: E402
+from machine import run_meta  # noqa: E402
+from runcache import load, path_of, save  # noqa: E402
 
 from gyrolab.compensation.band import grade  # noqa: E402
+from gyrolab.compensation.config import DEFAULT_CONFIG  # noqa: E402
 from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 
 CACHE = REPO / "benchmarks" / "results" / "break_suite"
+DEFAULT_LAG = DEFAULT_CONFIG.causal_lag_criterion
 BLOCK_S = 3.6
 
 
@@ -67,7 +73,7 @@ def fit_and_apply(
     families: tuple[str, ...],
     seed: int,
     quick: bool,
-    lag_criterion: str = "cv",
+    lag_criterion: str = DEFAULT_LAG,
 ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any]]:
     """gyrolab's causal selection fitted on ``cal``; every family's 10 Hz output (and its
     band, where the model states one) on every run of ``runs``."""
@@ -112,7 +118,12 @@ def fit_and_apply(
 
 
 def run_unit(
-    u: int, protocol: str, families: tuple[str, ...], noise: str, quick: bool, lag: str = "cv"
+    u: int,
+    protocol: str,
+    families: tuple[str, ...],
+    noise: str,
+    quick: bool,
+    lag: str = DEFAULT_LAG,
 ):
     """Simulate unit ``u`` on every trajectory, calibrate on ``protocol``, score the rest."""
     t0 = time.perf_counter()
@@ -122,8 +133,12 @@ def run_unit(
         n: simulate_run(unit, n, seed=100 * u + i + 1, noise_path=noise)
         for i, n in enumerate(names)
     }
+    base = CALIBRATIONS.get(protocol, protocol)
+    if protocol in CALIBRATIONS:  # a calibration-only run, seeded as the run it extends
+        seed = 100 * u + names.index(base) + 1
+        runs[protocol] = simulate_run(unit, protocol, seed=seed, noise_path=noise)
     t_sim = time.perf_counter() - t0
-    held = [n for n in names if n != protocol]
+    held = [n for n in names if n != base]
     outs, info = fit_and_apply(
         runs[protocol], {n: runs[n] for n in held}, families, u, quick, lag
     )
@@ -202,8 +217,8 @@ def tables(results: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     ocut = 1.0 - a["oracle"][PP] / a["raw"][PP]
     gap = 100.0 * (ocut - cut)
     worse = int(np.sum((a["causal"][BS] >= a["raw"][BS]) | (a["causal"][PP] >= a["raw"][PP])))
-    crit = meta.get("lag_criterion", "cv")
-    lag = f" --lag-criterion {crit}" if crit != "cv" else ""
+    crit = meta.get("lag_criterion", "cv")  # runs cached before the option: the CV's
+    lag = f" --lag-criterion {crit}" if crit != DEFAULT_LAG else ""
     L = [
         f"`python benchmarks/break_suite.py --protocol {proto} --families "
         f"{','.join(meta['families'])}{lag}` — {meta['date']}, "
@@ -368,7 +383,9 @@ def main(argv: list[str] | None = None) -> int:
         "--first-unit", type=int, default=0, help="development units: 12 and up (never scored)"
     )
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--protocol", default="staircase", choices=("staircase", "random"))
+    ap.add_argument(
+        "--protocol", default="staircase", choices=("staircase", "random", *CALIBRATIONS)
+    )
     ap.add_argument("--families", default="poly,structured,bp,gabp")
     ap.add_argument("--noise", default=str(DATA), help="real static records (.npz)")
     ap.add_argument("--out", default="", help="docs page to write the section into")
@@ -378,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny network settings")
     ap.add_argument(
         "--lag-criterion",
-        default="cv",
+        default=DEFAULT_LAG,
         choices=LAG_CRITERIA,
         help="PipelineConfig.causal_lag_criterion of the causal selection",
     )
@@ -392,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
         t0 = time.perf_counter()
-        la = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
+        la = load_now()
         job = (args.protocol, fams, args.noise, args.quick, args.lag_criterion)
         us = list(range(args.first_unit, args.first_unit + args.units))
         if args.workers > 1:
@@ -403,19 +420,17 @@ def main(argv: list[str] | None = None) -> int:
         else:
             results = [run_unit(u, *job) for u in us]
         meta = {
-            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python "
-            f"{platform.python_version()}",
+            **run_meta(t0, la),
             "families": list(fams),
-            "wall_s": time.perf_counter() - t0,
-            "load": f"{la} before, " + "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) + " after",
             "quick": args.quick,
             "lag_criterion": args.lag_criterion,
         }
         save(CACHE / name, {"meta": meta, "units": results})
     body = tables(results, meta)
     if args.before:
-        prev = load(CACHE / f"{args.protocol}-{args.before}")["units"]
+        # a tag of this protocol, or a whole cache name (another protocol, same held-out runs)
+        stem = CACHE / f"{args.protocol}-{args.before}"
+        prev = load(stem if path_of(stem).exists() else CACHE / args.before)["units"]
         body += "\n\n" + paired_table(results, prev, args.before)
     print(body)
     if args.out:

@@ -1,7 +1,7 @@
 """A causal family set on gyrolab's own validation family, the causal selection alone.
 
     python benchmarks/family_check.py [--families poly,structured] [--units 12]
-                                      [--workers 2] [--lag-criterion cv]
+                                      [--workers 2] [--lag-criterion profile]
 
 The units, trajectories and seeds of ``benchmarks/validation_suite.py`` (each unit
 calibrated on its ``paper`` run, evaluated on the five others), but only the causal
@@ -29,11 +29,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from breakfam.score import score  # noqa: E402
 
+from gyrolab.compensation.config import DEFAULT_CONFIG  # noqa: E402
 from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 
 
 def run_unit(
-    u: int, families: tuple[str, ...], lag: str = "cv"
+    u: int, families: tuple[str, ...], lag: str = DEFAULT_CONFIG.causal_lag_criterion
 ) -> tuple[str, list[tuple[float, float]]]:
     """Simulate unit ``u`` (the suite's seeds), calibrate on ``paper``, score the rest:
     a line and the (causal ÷ oracle, cut gap points) of each held-out run."""
@@ -80,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument(
         "--lag-criterion",
-        default="cv",
+        default=DEFAULT_CONFIG.causal_lag_criterion,
         choices=LAG_CRITERIA,
         help="PipelineConfig.causal_lag_criterion",
     )

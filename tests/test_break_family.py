@@ -18,7 +18,7 @@ from breakfam import physics as P  # noqa: E402
 from breakfam.family import simulate_run, units  # noqa: E402
 from breakfam.realnoise import real_noise, records  # noqa: E402
 from breakfam.score import means, score, window_means  # noqa: E402
-from breakfam.trajectories import NAMES, trajectory  # noqa: E402
+from breakfam.trajectories import CALIBRATIONS, NAMES, trajectory  # noqa: E402
 
 
 def test_family_shares_no_code_with_gyrolab() -> None:
@@ -76,6 +76,13 @@ def test_trajectories_are_defined() -> None:
     for name in NAMES:
         sp, rest = trajectory(name, 1)
         assert sp.size > 5 * 3600 and -40.0 <= sp.min() and sp.max() <= 60.0
+    for name, base in CALIBRATIONS.items():  # the run it extends, then more
+        sp, rest = trajectory(name, 1)
+        sb, rb = trajectory(base, 1)
+        assert rest == rb and np.array_equal(sp[: sb.size], sb) and sp.size > sb.size
+        assert -40.0 <= sp.min() and sp.max() <= 60.0
+        # what it adds: ramps of 3 °C/min at most, from where the staircase ends
+        assert np.abs(np.diff(sp[sb.size - 1 :])).max() <= 3.01 / 60.0
 
 
 def test_one_round_through_gyrolab_causal_model() -> None:

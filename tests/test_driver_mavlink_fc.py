@@ -7,6 +7,7 @@ transaction, an injected PARAM_SET failure leaving the previous parameters, repo
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +81,36 @@ def test_every_imu_recorded_in_the_sensor_frame_and_the_parameters_put_back(
         for a in range(3):
             want = _bias_dps(k, a, temp - h.bench.device.imus[k][0].die_sensor_offset_c)
             assert abs(np.mean(rec.rate.values[:, a] - want)) < 0.06, (s, a)
+
+
+def test_a_reader_starved_for_less_than_the_hold_floor_loses_no_sample() -> None:
+    """Free-running, the controller's stream waits for its reader (back-pressure) as long as
+    the run calls a silence a hiccup (the 5 s hold floor): the driver's threads starved for
+    a second while the bench's tick thread runs on — a loaded machine — lose no sample.
+    (With the 50 ms wait of the connect speed kept for the run, 0.1 s lost a tick.)"""
+    h = _handle("px4")
+    try:
+        link = MavlinkLink(h.addresses["unit/PX4-IMU1"], timeout_s=h.timeout(1.0))
+        link.connect(10.0)
+        link.set_imu_rate(0, RATE)
+        h.go()  # free-running, as a run is once connected
+
+        def drain(wall_s: float) -> None:
+            end = time.monotonic() + wall_s
+            while time.monotonic() < end:
+                link.pump(0.01)
+
+        drain(0.3)
+        t_stall = h.bench.clock.now()
+        time.sleep(1.0)  # nobody reads: the port fills and the controller waits
+        assert h.bench.clock.now() - t_stall < 100.0  # held back, not running free
+        drain(0.3)
+        link.close()
+        idx = np.rint(np.array([s.t for s in link.imu[0]]) * RATE)
+        assert idx.size > 200 and np.all(np.diff(idx) == 1)
+        assert h.bench.device.stats.write_overruns == 0
+    finally:
+        h.stop()
 
 
 def test_a_refused_write_at_set_up_leaves_the_vehicle_as_it_was() -> None:

@@ -6,6 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 NAMES = ("staircase", "heating", "random", "fastramp", "coldstart", "slowramp")
+#: calibration-only trajectories (never held out) and the trajectory of NAMES each
+#: extends (that one is not held out either)
+CALIBRATIONS = {"staircase_ramps": "staircase", "staircase_upramp": "staircase"}
 
 
 def _steps(parts: list[tuple[float, float]]) -> np.ndarray:
@@ -29,7 +32,12 @@ def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
       1.5 °C/min) with 30 min soaks (≈ 7 h);
     * ``coldstart`` — rests at −35 °C unpowered, powered on cold: 1 h at −35, 1 °C/min to
       50, 2 h, then steps 20, −10, 40 of 1 h (≈ 7 h);
-    * ``slowramp`` — a 0.3 °C/min triangle 25 → 60 → −40 → 25 (≈ 12 h).
+    * ``slowramp`` — a 0.3 °C/min triangle 25 → 60 → −40 → 25 (≈ 12 h);
+    * ``staircase_ramps`` (calibration only) — the staircase, then one fast-ramp cycle:
+      −40 → 60 at 3 °C/min, 30 min, 60 → −40, 30 min (≈ 14 h): the rates a fast ramp
+      needs, which the staircase's one heating step does not show;
+    * ``staircase_upramp`` (calibration only) — the staircase, then its first half-cycle:
+      −40 → 60 at 3 °C/min, 30 min (≈ 13 h).
     """
     if name == "staircase":
         sp = [(25.0, 3600.0), (60.0, 3600.0)] + [(60.0 - 10.0 * i, 3600.0) for i in range(1, 11)]
@@ -51,6 +59,12 @@ def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
         seg += [np.full(1800, 60.0), _ramp(60.0, -40.0, 3.0), np.full(1800, -40.0)]
         seg += [_ramp(-40.0, 25.0, 3.0), np.full(3600, 25.0)]
         return np.concatenate(seg), 25.0
+    if name in ("staircase_ramps", "staircase_upramp"):
+        sp, rest = trajectory("staircase")
+        cyc = [_ramp(-40.0, 60.0, 3.0), np.full(1800, 60.0)]
+        if name == "staircase_ramps":
+            cyc += [_ramp(60.0, -40.0, 3.0), np.full(1800, -40.0)]
+        return np.concatenate([sp, *cyc]), rest
     if name == "coldstart":
         seg = [np.full(3600, -35.0), _ramp(-35.0, 50.0, 1.0), np.full(7200, 50.0)]
         seg += [_steps([(20.0, 3600.0), (-10.0, 3600.0), (40.0, 3600.0)])]

@@ -114,6 +114,10 @@ def start_fc_bench(
         tcp=False,
         tick_s=sim_tick_s(speed),
         speed=min(speed or CONNECT_SPEED, CONNECT_SPEED),
+        # Free-running, the controller waits for its reader as long as the run calls a
+        # silence a hiccup (the hold floor): a stall of the driver's threads that the run
+        # does not hold for loses no sample either.
+        device_backpressure_s=FC_HOLD_MIN_WALL_S,
     )
     bench.start()
     fc_port = bench.device_port

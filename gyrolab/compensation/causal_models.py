@@ -31,7 +31,7 @@ form of :mod:`gyrolab.compensation.regressors` (inputs ``["F", "R", "S", "E"]``)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -58,6 +58,7 @@ from gyrolab.compensation.gabp import BPConfig, GAConfig, MLPDriftModel, fit_mlp
 from gyrolab.compensation.regressors import RANGE_RULES, c_function, evaluate_inputs
 from gyrolab.compensation.structured import (
     CV_RIDGE,
+    DEFAULT_LAG_CRITERION,
     ORDERS,
     StructuredModel,
     block_features,
@@ -213,8 +214,8 @@ def _fit_poly(ctx: FitContext) -> Candidate:
 
 def lag_criterion(ctx: FitContext) -> str:
     """How the structured families choose the lag: ``PipelineConfig.causal_lag_criterion``
-    (``"cv"`` without a configuration)."""
-    return str(getattr(ctx.config, "causal_lag_criterion", "cv"))
+    (:data:`.structured.DEFAULT_LAG_CRITERION`, its default, without a configuration)."""
+    return str(getattr(ctx.config, "causal_lag_criterion", DEFAULT_LAG_CRITERION))
 
 
 def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
@@ -230,14 +231,45 @@ def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
     return ctx.shared("structured", make)
 
 
+def _scored(
+    ctx: FitContext,
+    ps: CausalParams,
+    Xs: np.ndarray,
+    order: int,
+    terms: tuple[str, ...],
+    log: dict[str, Any],
+    ridge: float = 0.0,
+) -> tuple[float, np.ndarray, dict[str, Any]]:
+    """A structured family's score for the family comparison, its held-out prediction of
+    every block (for the band) and its log. The score is the blocked-CV RMSE of the terms
+    kept (the term search's running error may be that of a set within the tie margin)
+    *at the lag the CV chose*: a profile lag (``lag_criterion = "profile"``,
+    :func:`.structured._profile_lag`) re-chooses τ of the model the CV chose but never
+    changes which family wins — the CV at the profile lag can be jagged from the fold
+    fits of the warm-up column, and scored there the polynomial won gyrolab's validation
+    unit 5 (1.58–3.16× the oracle, docs/results.md). The held-out predictions are the
+    shipped model's own, at its lag; their RMSE is logged as ``cv_rmse_at_profile_lag``."""
+    y = ctx.cal.rate
+    pred = np.empty_like(y)
+    err = cv_linear(Xs, y, order, terms, ctx.folds, pred, ridge=ridge)
+    pc = cv_lag_params(ps, log)
+    if pc == ps:
+        return err, pred, log
+    score = cv_linear(block_features(ctx.cal, pc), y, order, terms, ctx.folds, ridge=ridge)
+    return score, pred, {**log, "cv_rmse_at_profile_lag": err}
+
+
+def cv_lag_params(ps: CausalParams, log: dict[str, Any]) -> CausalParams:
+    """The feature parameters at the lag the blocked CV chose: ``ps`` itself, or with the
+    τ before the profile lag (:func:`.structured._profile_lag`) where that moved it."""
+    prof = log.get("lag_profile")
+    return ps if prof is None else replace(ps, tau_s=float(prof["tau_plain_cv_s"]))
+
+
 def _fit_structured(ctx: FitContext) -> Candidate:
     ps, order, terms, _err, log, Xs = structured_choice(ctx)
-    y = ctx.cal.rate
-    # the CV RMSE of the terms kept (the term search's running error may be that of a
-    # set within the tie margin), with every block's held-out prediction
-    pred = np.empty_like(y)
-    err = cv_linear(Xs, y, order, terms, ctx.folds, pred)
-    model = StructuredCausalModel("structured", ps, fit_structured(Xs, y, order, terms))
+    err, pred, log = _scored(ctx, ps, Xs, order, terms, log)
+    model = StructuredCausalModel("structured", ps, fit_structured(Xs, ctx.cal.rate, order, terms))
     return Candidate(model, err, {**log, "features": ps.to_dict()}, pred)
 
 
@@ -262,17 +294,22 @@ def _fit_structured_rate(ctx: FitContext) -> Candidate:
     fits the heating-only term to noise and extrapolates it."""
     ps, order, terms, _err, log = extended_choice(ctx)
     Xs = block_features(ctx.cal, ps)
-    y = ctx.cal.rate
-    pred = np.empty_like(y)
-    err = cv_linear(Xs, y, order, terms, ctx.folds, pred, ridge=CV_RIDGE)
-    model = StructuredCausalModel("structured_rate", ps, fit_structured(Xs, y, order, terms))
+    err, pred, log = _scored(ctx, ps, Xs, order, terms, log, ridge=CV_RIDGE)
+    model = StructuredCausalModel(
+        "structured_rate", ps, fit_structured(Xs, ctx.cal.rate, order, terms)
+    )
     return Candidate(model, err, {**log, "features": ps.to_dict()}, pred)
 
 
 def _fit_network(ctx: FitContext, name: str, init: str) -> Candidate:
-    """The network on the structured model's features, blocked CV by refitting it on
-    every fold's training blocks."""
-    ps, *_, Xs = structured_choice(ctx)
+    """The network on the structured model's features at the lag the CV chose
+    (:func:`cv_lag_params`: a profile lag is the linear model's own least-squares
+    estimate, not the network's), blocked CV by refitting it on every fold's training
+    blocks."""
+    ps, _order, _terms, _err, log, Xs = structured_choice(ctx)
+    pc = cv_lag_params(ps, log)
+    if pc != ps:
+        ps, Xs = pc, ctx.shared("network_features", lambda: block_features(ctx.cal, pc))
     cfg = ctx.config
     bp = cfg.bp() if cfg is not None else BPConfig()
     ga = cfg.ga() if cfg is not None else GAConfig()
@@ -417,6 +454,7 @@ __all__ = [
     "NetworkCausalModel",
     "StructuredCausalModel",
     "causal_readings",
+    "cv_lag_params",
     "evaluate_causal",
     "extended_choice",
     "structured_choice",

@@ -30,7 +30,7 @@ from typing import Any
 from gyrolab.compensation import families
 from gyrolab.compensation.fitness import CRITERIA
 from gyrolab.compensation.gabp import OPTIMIZERS, BPConfig, GAConfig
-from gyrolab.compensation.structured import LAG_CRITERIA
+from gyrolab.compensation.structured import DEFAULT_LAG_CRITERION, LAG_CRITERIA
 from gyrolab.compensation.temperature_model import FITS
 from gyrolab.errors import InputError
 from gyrolab.numerics.averaging import PAPER_BLOCK_S
@@ -73,9 +73,10 @@ class PipelineConfig:
     baselines: tuple[str, ...] = ("poly", "bp")
     # causal drift-model families compared by CV inside the calibration run (causal.py)
     causal_families: tuple[str, ...] = ("poly", "structured", "bp", "gabp")
-    # how the structured families choose the die lag: "cv" (the blocked CV) or
-    # "profile" (then profile least squares: structured.LAG_CRITERIA)
-    causal_lag_criterion: str = "cv"
+    # how the structured families choose the die lag: "profile" (the blocked CV, then
+    # profile least squares for the model the CV chose; the families are compared at
+    # the CV's lag) or "cv" (the blocked CV only): structured.LAG_CRITERIA
+    causal_lag_criterion: str = DEFAULT_LAG_CRITERION
 
     def ga(self) -> GAConfig:
         return GAConfig(population=self.ga_population, generations=self.ga_generations)

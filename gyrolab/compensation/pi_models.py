@@ -36,7 +36,12 @@ from gyrolab.compensation.causal_features import (
     reading_features,
     step,
 )
-from gyrolab.compensation.causal_models import CausalDriftModel, CausalState, extended_choice
+from gyrolab.compensation.causal_models import (
+    CausalDriftModel,
+    CausalState,
+    cv_lag_params,
+    extended_choice,
+)
 from gyrolab.compensation.drift_model import Candidate, Family, FitContext, NotExportable
 from gyrolab.compensation.hysteresis import PI_WIDTHS_C, pi_branches, pi_start, pi_step
 from gyrolab.compensation.structured import (
@@ -149,24 +154,29 @@ def _load(meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str) -> P
 
 
 def _fit(ctx: FitContext) -> Candidate:
-    """``structured_rate``'s choice, its single play replaced by the plays (docstring)."""
+    """``structured_rate``'s choice, its single play replaced by the plays (docstring).
+    The offset δ and the score are the CV's at the lag the CV chose
+    (:func:`~gyrolab.compensation.causal_models.cv_lag_params`), as every family's: a
+    profile lag moves τ only; the held-out predictions (the band) are the model's own."""
     ps, order, terms, _err, log = extended_choice(ctx)
     cal, y = ctx.cal, ctx.cal.rate
     widths = PI_WIDTHS_C if "hyst" in terms else ()
     base_terms = tuple(t for t in terms if t not in PLAY_TERMS) if widths else terms
-    best: tuple[float, float, np.ndarray, np.ndarray, np.ndarray] | None = None
-    cvs: dict[str, float] = {}
-    for off in OFFSET_GRID_C if widths else (0.0,):
-        X = hold(cal.t, cal.pt_t, pi_features(cal.pt_t, cal.pt_c, ps, widths, off))
+
+    def columns(p: CausalParams, off: float) -> tuple[np.ndarray, np.ndarray]:
+        X = hold(cal.t, cal.pt_t, pi_features(cal.pt_t, cal.pt_c, p, widths, off))
         lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
-        A = np.hstack([design(X[:, :4], order, base_terms, lo, hi), X[:, 4:]])
-        pred = np.empty_like(y)
-        err = cv_design(A, y, ctx.folds, pred, ridge=CV_RIDGE)
-        cvs[str(off)] = err
-        if best is None or err < best[0]:
-            best = (err, off, X, A, pred)
-    assert best is not None
-    err, off, X, A, pred = best
+        return X, np.hstack([design(X[:, :4], order, base_terms, lo, hi), X[:, 4:]])
+
+    pc = cv_lag_params(ps, log)
+    cvs = {
+        off: cv_design(columns(pc, off)[1], y, ctx.folds, ridge=CV_RIDGE)
+        for off in (OFFSET_GRID_C if widths else (0.0,))
+    }
+    off = min(cvs, key=lambda o: cvs[o])
+    X, A = columns(ps, off)
+    pred = np.empty_like(y)
+    own = cv_design(A, y, ctx.folds, pred, ridge=CV_RIDGE)
     c = lstsq(A, y)
     model = PIModel(
         model_from_coef(c, X[:, :4], order, base_terms),
@@ -179,9 +189,10 @@ def _fit(ctx: FitContext) -> Candidate:
         "features": ps.to_dict(),
         "terms": list(base_terms),
         "pi_widths_c": list(widths),
-        "cv_rmse_by_offset": cvs,
+        "cv_rmse_by_offset": {str(k): v for k, v in cvs.items()},
+        **({"cv_rmse_at_profile_lag": own} if pc != ps else {}),
     }
-    return Candidate(PICausalModel("structured_pi", ps, model), err, info, pred)
+    return Candidate(PICausalModel("structured_pi", ps, model), cvs[off], info, pred)
 
 
 FAMILIES = (

@@ -90,6 +90,7 @@ from gyrolab.compensation.causal_features import CausalParams, hold, reading_fea
 from gyrolab.compensation.causal_models import StructuredCausalModel, hysteresis_width
 from gyrolab.compensation.drift_model import CausalCalibration
 from gyrolab.compensation.structured import StructuredModel, effective_samples
+from gyrolab.numerics.jackknife import jackknife_covariance
 
 #: the six terms after the Legendre columns, in θ order
 TERMS = ("rate", "hyst", "warmup", "rate_pos", "rate_sq", "hyst_T")
@@ -599,8 +600,9 @@ def _noise_scale(A: np.ndarray, y: np.ndarray, c: Cluster, neff: bool = True) ->
 
 def own_covariance(A: np.ndarray, y: np.ndarray, blocks: int = JACKKNIFE_BLOCKS) -> np.ndarray:
     """The covariance of the unit's own least-squares estimate on design ``A``, by the
-    delete-a-block jackknife over ``blocks`` contiguous stretches of the run (Künsch 1989;
-    Efron & Stein 1981):
+    delete-a-block jackknife over ``blocks`` contiguous stretches of the run
+    (:func:`gyrolab.numerics.jackknife.jackknife_covariance`; Künsch 1989; Efron & Stein
+    1981):
 
         C = (m − 1)/m Σ_k (θ̂₋ₖ − θ̄)(θ̂₋ₖ − θ̄)ᵀ
 
@@ -611,8 +613,7 @@ def own_covariance(A: np.ndarray, y: np.ndarray, blocks: int = JACKKNIFE_BLOCKS)
     m = min(blocks, n)
     blk = np.minimum((np.arange(n) * m) // n, m - 1)
     th = np.array([np.linalg.lstsq(A[blk != k], y[blk != k], rcond=None)[0] for k in range(m)])
-    d = th - th.mean(axis=0)
-    return (m - 1) / m * (d.T @ d)
+    return jackknife_covariance(th)
 
 
 def informative_distance(d: np.ndarray, S: np.ndarray, C: np.ndarray) -> tuple[float, int]:

@@ -18,7 +18,7 @@ import numpy as np
 
 from gyrolab.framing import encode_frame_run, frame_size
 from gyrolab.sim.bench.faults import ByteFaults
-from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
+from gyrolab.sim.bench.serial_pty import CONGESTED_WAIT_S, PortClosed, PtyPort
 
 # What happened to a frame on its way out
 SENT = "sent"  # written intact
@@ -161,7 +161,11 @@ class AdcSource:
             # While nobody drains the port (no reader, or it stopped), wait at most 50 ms
             # per write: a UART transmits regardless and the receiver overruns. A reader
             # that comes back drains the pty, a write completes, and the wait is restored.
-            timeout = min(self.write_timeout_s, 0.05) if self._congested else self.write_timeout_s
+            timeout = (
+                min(self.write_timeout_s, CONGESTED_WAIT_S)
+                if self._congested
+                else self.write_timeout_s
+            )
             done = self.port.write(data, timeout)
         except PortClosed:
             self.stats.unplugged += len(frames)

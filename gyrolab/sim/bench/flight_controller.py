@@ -279,9 +279,10 @@ class SimFlightController(PtyDevice):
             self._next_heartbeat_s += HEARTBEAT_PERIOD_S
         return b"".join(chunks)
 
-    def send(self, data: bytes) -> None:
-        """Write ``data`` to the port (back-pressure or overrun as a UART; see PtyPort)."""
-        self._send(data)
+    def send(self, data: bytes, timeout_s: float | None = None) -> None:
+        """Write ``data`` to the port, waiting up to ``timeout_s`` for room (back-pressure
+        or overrun as a UART; see :meth:`PtyDevice.write`)."""
+        self._send(data, timeout_s)
 
     def _run_firmware(self, t: np.ndarray, raw: list[np.ndarray], temps: list[np.ndarray]) -> list:
         """Each IMU's corrected output, float32 rad/s, as the firmware computes it."""
@@ -352,10 +353,10 @@ class SimFlightController(PtyDevice):
         )
         return msg.pack(self._mav)
 
-    def _send(self, data: bytes) -> None:
+    def _send(self, data: bytes, timeout_s: float | None = None) -> None:
         if not data:
             return
-        done = self.write(data)
+        done = self.write(data, timeout_s)
         if done is None:
             return
         self.stats.messages_out += 1

@@ -15,8 +15,17 @@ import errno
 import os
 import select
 import threading
+import time
 import tty
 from pathlib import Path
+
+# How often a write waiting for room looks at its ``cancel`` event (wall s).
+CANCEL_POLL_S = 0.05
+
+# A device whose last write was cut short (nobody drains its port) waits at most this long
+# per write until one completes again: a UART transmits regardless, so a port nobody reads
+# costs the tick thread 50 ms a write, not its whole back-pressure wait.
+CONGESTED_WAIT_S = 0.05
 
 
 class PortClosed(Exception):
@@ -77,18 +86,24 @@ class PtyPort:
 
     close = disconnect
 
-    def write(self, data: bytes, timeout_s: float = 0.5) -> int:
+    def write(
+        self, data: bytes, timeout_s: float = 0.5, cancel: threading.Event | None = None
+    ) -> int:
         """Write ``data``; waits up to ``timeout_s`` while the pty buffer is full
-        (back-pressure from a slow reader), then gives up on the rest (a UART would
-        overrun). Returns bytes written; raises :class:`PortClosed` when unplugged."""
+        (back-pressure from a slow reader; every byte the reader takes starts the wait
+        again), then gives up on the rest (a UART would overrun). ``cancel`` set ends the
+        wait at once (it is looked at every ``CANCEL_POLL_S``). Returns bytes written;
+        raises :class:`PortClosed` when unplugged."""
         mv = memoryview(data)
         done = 0
+        give_up = None  # monotonic time at which the current wait for room ends
         while done < len(mv):
             fd = self._master
             if fd is None:
                 raise PortClosed(self.path)
             try:
                 done += os.write(fd, mv[done:])
+                give_up = None
                 continue
             except BlockingIOError:
                 pass
@@ -96,12 +111,15 @@ class PtyPort:
                 if e.errno in (errno.EIO, errno.EBADF):
                     raise PortClosed(self.path) from e
                 raise
+            now = time.monotonic()
+            give_up = now + timeout_s if give_up is None else give_up
+            left = give_up - now
+            if left <= 0 or (cancel is not None and cancel.is_set()):
+                break
             try:
-                _, w, _ = select.select([], [fd], [], timeout_s)
+                select.select([], [fd], [], left if cancel is None else min(left, CANCEL_POLL_S))
             except (OSError, ValueError) as e:
                 raise PortClosed(self.path) from e
-            if not w:
-                break
         return done
 
     def read(self, timeout_s: float = 0.05, max_bytes: int = 65536) -> bytes:
@@ -141,6 +159,7 @@ class PtyDevice:
         self.port = port
         self.write_timeout_s = write_timeout_s
         self._write_lock = threading.Lock()
+        self._congested = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -149,14 +168,21 @@ class PtyDevice:
         """What the driver sent (the serving thread)."""
         raise NotImplementedError
 
-    def write(self, data: bytes) -> int | None:
-        """Write ``data`` (back-pressure or overrun as :meth:`PtyPort.write`): the bytes
-        written, None while unplugged."""
+    def write(self, data: bytes, timeout_s: float | None = None) -> int | None:
+        """Write ``data`` (back-pressure or overrun as :meth:`PtyPort.write`), waiting for
+        room up to ``timeout_s`` (None: ``write_timeout_s``; ``CONGESTED_WAIT_S`` while
+        the port is congested, i.e. since a write was cut short, until one completes);
+        :meth:`stop` ends a wait. The bytes written, None while unplugged."""
+        wait = self.write_timeout_s if timeout_s is None else timeout_s
         with self._write_lock:
+            if self._congested:
+                wait = min(wait, CONGESTED_WAIT_S)
             try:
-                return self.port.write(data, timeout_s=self.write_timeout_s)
+                done = self.port.write(data, timeout_s=wait, cancel=self._stop)
             except PortClosed:
                 return None
+            self._congested = done < len(data)
+            return done
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._serve, name=self.thread_name, daemon=True)

@@ -56,6 +56,10 @@ from gyrolab.sim.bench.serial_pty import PtyPort
 PREFETCH_LEAD_S = 3600.0
 PREFETCH_POLL_S = 0.05
 
+# Paced, how long a tick's write waits for a full port before the rest is lost (wall s): a
+# UART transmits on its schedule and a receiver nobody drains overruns.
+PACED_WRITE_WAIT_S = 0.05
+
 
 class SimBench:
     """Simulated multimeter, oven and gyro ADC (see module doc).
@@ -92,6 +96,7 @@ class SimBench:
         unit_physics: list[Any] | None = None,
         unit_internal_temperature: list[bool] | None = None,
         device: Any | None = None,
+        device_backpressure_s: float = 0.5,
     ) -> None:
         # dmm_model: "34401A" | "34465A"; chamber_model: "F4" (Modbus RTU on a pty, always
         # served) | "P300" (an ESPEC P-300 on TCP as well). The driver registry names the
@@ -178,10 +183,13 @@ class SimBench:
         self.device: Any = None
         self.device_pty: PtyPort | None = None
         self.device_kind = ""
+        # device_backpressure_s: free-running, how long the device's stream waits (wall s)
+        # for its reader to drain the port before data are lost; see _device_wait_s.
+        self.device_backpressure_s = float(device_backpressure_s)
         if device is not None:
             self.device_kind = device.port_name
             self.device_pty = PtyPort(self.workdir / device.port_name)
-            self.device = device.build(self.device_pty, 0.5 if speed is None else 0.05)
+            self.device = device.build(self.device_pty, self._device_wait_s())
         self.oven = WatlowF4Slave(
             OvenHooks(self._chamber_c, self._setpoint_c, self._set_setpoint, ambient_c),
             control_event=oven_control_event,
@@ -435,6 +443,16 @@ class SimBench:
             self.error = e
             raise
 
+    def _device_wait_s(self) -> float:
+        """How long the device's next stream write waits for room in its port (wall s),
+        from the clock's speed NOW: free-running, the reader is the bench's only pace
+        (back-pressure, ``device_backpressure_s``); paced, ``PACED_WRITE_WAIT_S`` (a UART
+        overruns). Asked at every tick, because a bench is built at its connect speed and
+        set free-running afterwards (``gyrolab.app.sim_bench.SimHandle.go``): a wait fixed
+        at construction was the paced 50 ms for the whole free-running run, and a reader
+        starved for 0.1 s on a loaded machine lost a tick of samples."""
+        return self.device_backpressure_s if self.clock.speed is None else PACED_WRITE_WAIT_S
+
     def _run(self) -> None:
         n = self.frames_per_tick * self.samples_per_frame
         try:
@@ -445,7 +463,7 @@ class SimBench:
                 if self.device is not None:
                     with self.lock:
                         data = self.device.advance(n)
-                    self.device.send(data)
+                    self.device.send(data, self._device_wait_s())
                     self._fire_due()
                     continue
                 with self.lock:
@@ -476,13 +494,14 @@ class SimBench:
         """Stop the tick thread and servers, unplug every port, remove the links."""
         self._stop.set()
         self.clock.stop()
+        if self.device is not None:
+            self.device.stop()  # first: it ends a tick's wait for room in the device's port
         for th in (self._thread, self._prefetcher):
             if th is not None:
                 th.join(timeout=5.0)
         for s in self._servers:
             s.stop()
         if self.device is not None:
-            self.device.stop()
             assert self.device_pty is not None
             self.device_pty.disconnect()
         for p in (*self.unit_ptys, self.oven_pty, self.dmm_pty):

@@ -195,9 +195,9 @@ class SimVectorNav(PtyDevice):
                 self.stats.ascii_lines += 1
         return b"".join(out)
 
-    def send(self, data: bytes) -> None:
+    def send(self, data: bytes, timeout_s: float | None = None) -> None:
         if data:
-            self.write(data)
+            self.write(data, timeout_s)
 
     # ------------------------------------------------------------------ commands
     def on_bytes(self, data: bytes) -> None:
