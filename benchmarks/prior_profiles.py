@@ -3,7 +3,7 @@ family calibrated on each candidate short profile with its leave-unit-out fleet 
 for several noise seeds of the short run, scored on the same held-out runs against the
 same 13 h calibration as ``benchmarks/prior_suite.py``.
 
-    python benchmarks/prior_profiles.py --profiles quick,design:limits,P.toml
+    python benchmarks/prior_profiles.py --profiles quick,design:soaks,P.toml
                                         [--seeds 6] [--units 12] [--families validation,break]
 
 ``prior_suite.py`` runs each unit's short run once (seed ``1000 u + 99``): its worst case
@@ -102,7 +102,7 @@ def report(fam: str, res: dict[str, dict[str, np.ndarray]]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--profiles", default="quick,design:limits")
+    ap.add_argument("--profiles", default="quick,design:soaks")
     ap.add_argument("--seeds", type=int, default=6)
     ap.add_argument("--units", type=int, default=12)
     ap.add_argument("--families", default="validation,break")

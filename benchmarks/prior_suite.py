@@ -684,8 +684,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--quick",
         default="quick",
-        help="the short profile: quick, a TOML, or design[:WEIGHT] (per unit, from its "
-        "leave-unit-out prior); other than quick its results go to results-quick-<tag>",
+        help="the short profile: quick, a TOML, or design[:WEIGHT[:SETPOINT_MAX]] (per unit, "
+        "from its leave-unit-out prior); other than quick its results go to "
+        "results-quick-<tag>",
     )
     args = ap.parse_args(argv)
     fams = args.families.split(",")
