@@ -4,6 +4,7 @@ validation families, held out on the same trajectories.
 
     python benchmarks/prior_suite.py [--units 8] [--workers 2] [--families validation,break]
                                      [--held N] [--out docs/results.md] [--tables-only]
+                                     [--quick quick|P.toml|design[:WEIGHT[:SETPOINT_MAX]]]
 
 **Families.** ``validation``: gyrolab's own Monte-Carlo family
 (benchmarks/validation_suite.py: ``unit_model``, simulated by gyrolab's simulator, 13 h
@@ -81,12 +82,17 @@ class _Run:
         self.t, self.raw, self.drift, self.pt_t, self.pt_c = t, raw, drift, pt_t, pt_c
 
 
-def simulate(family: str, u: int, name: str, seed: int, other: bool = False) -> _Run:
+def simulate(
+    family: str, u: int, name: str, seed: int, other: bool = False, quick: Any = None
+) -> _Run:
     """Run ``name`` (a trajectory of the family, or ``quick``) of unit ``u``; ``other``:
-    the unit as *another part number* — its temperature slope and curvature reversed."""
+    the unit as *another part number* — its temperature slope and curvature reversed;
+    ``quick``: the short profile run as ``quick`` (default the built-in one)."""
     from dataclasses import replace
 
     from gyrolab.profiles.profile import BUILTIN
+
+    q = quick or BUILTIN["quick"]
 
     if family == "validation":
         import validation_suite as vs
@@ -95,7 +101,7 @@ def simulate(family: str, u: int, name: str, seed: int, other: bool = False) -> 
         if other:
             c = {k: p.get(k, v) for k, v in (("c0", 0.0), ("c1", 3.84e-4), ("c2", 3.4e-6))}
             model = model.with_effect("bias_poly", c0=c["c0"], c1=-c["c1"], c2=-c["c2"])
-        prof = BUILTIN["quick"] if name == "quick" else vs.trajectory(name, u)
+        prof = q if name == "quick" else vs.trajectory(name, u)
         r = vs.simulate(model, prof, RATE_HZ, seed)
         return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], r["pt_c"])
     from breakfam.family import simulate_run, units
@@ -105,7 +111,6 @@ def simulate(family: str, u: int, name: str, seed: int, other: bool = False) -> 
         unit = replace(unit, c=(unit.c[0], -unit.c[1], -unit.c[2], *unit.c[3:]))
     sp = None
     if name == "quick":
-        q = BUILTIN["quick"]
         sp = np.concatenate([np.full(int(s.duration_s), s.setpoint_c) for s in q.steps])
     r = simulate_run(unit, name, seed, setpoints=sp)
     return _Run(r.t, r.raw, r.drift, r.pt_t, r.pt_c)
@@ -169,6 +174,22 @@ def _drift(e, run: _Run) -> np.ndarray:  # noqa: ANN001
 # ------------------------------------------------------------------------ stage 1, 2
 
 
+def quick_profile(spec: str, prior: Any):  # noqa: ANN201
+    """The short profile a unit is run on: ``quick`` (built in), a profile TOML, or
+    ``design[:WEIGHT[:SETPOINT_MAX]]`` — ``gyrolab profile design --hours 3.25`` with the
+    unit's leave-unit-out ``prior`` (WEIGHT: the design's ``weight``, default ``paper``;
+    the setpoint limit, default 60 °C)."""
+    from gyrolab.compensation.profile_design import design_profile
+    from gyrolab.profiles.profile import load_profile
+
+    kind, *opt = spec.split(":")
+    if kind == "design":  # design[:WEIGHT[:SETPOINT_MAX]]
+        weight = opt[0] if opt else "paper"
+        top = float(opt[1]) if len(opt) > 1 else 60.0
+        return design_profile(3.25, prior=prior, weight=weight, setpoint_max_c=top)[0]
+    return load_profile(spec)
+
+
 def stage1(family: str, u: int) -> dict[str, Any]:
     """Unit ``u``'s 13 h model and timing (cached: it does not depend on the prior)."""
     cached = CACHE / f"stage1-{family}-{u}.json"
@@ -190,6 +211,7 @@ def stage2(
     foreign: list[dict[str, Any]],
     held: int,
     neff: bool = True,
+    quick_spec: str = "quick",
 ) -> dict[str, Any]:
     """Unit ``u``: quick run with the leave-unit-out prior, alone, and the 13 h model, on
     the held-out runs; the quick run against the other family's prior."""
@@ -204,14 +226,15 @@ def stage2(
     prior = learn_prior(
         [_entry(f"{family}{o['unit']}", o["model"]) for o in others if o["unit"] != u]
     )
-    quick = simulate(family, u, "quick", seed=1000 * u + 99)
+    qp = quick_profile(quick_spec, prior)
+    quick = simulate(family, u, "quick", seed=1000 * u + 99, quick=qp)
     cal = calibration(quick)
     fit = fit_map(cal, prior, neff=neff)
     alone = _entry("alone", _pair(select(quick)))
     foreign_mem = fit_map(
         cal, learn_prior([_entry(f"x{o['unit']}", o["model"]) for o in foreign])
     ).membership
-    other = simulate(family, u, "quick", seed=1000 * u + 98, other=True)
+    other = simulate(family, u, "quick", seed=1000 * u + 98, other=True, quick=qp)
     other_mem = fit_map(calibration(other), prior, neff=neff).membership
     models = {"13h": mine, "quick_prior": _entry("prior", _pair(fit.model)), "quick_alone": alone}
     res: dict[str, Any] = {
@@ -225,6 +248,7 @@ def stage2(
         "other_part_membership": other_mem.to_dict(),
         "prior_clusters": len(prior.clusters),
         "quick_case_range_c": [float(quick.pt_c.min()), float(quick.pt_c.max())],
+        "quick_profile": [[s.setpoint_c, s.duration_s] for s in qp.steps],
         "features": {k: m.params.to_dict() for k, m in models.items()},
         "hysteresis": {k: hysteresis_width(m.model) for k, m in models.items()},
         "runs": {},
@@ -657,9 +681,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--white", action="store_true", help="MAP data weight without the n_eff inflation"
     )
+    ap.add_argument(
+        "--quick",
+        default="quick",
+        help="the short profile: quick, a TOML, or design[:WEIGHT[:SETPOINT_MAX]] (per unit, "
+        "from its leave-unit-out prior); other than quick its results go to "
+        "results-quick-<tag>",
+    )
     args = ap.parse_args(argv)
     fams = args.families.split(",")
     stem = CACHE / ("results-white" if args.white else "results")
+    if args.quick != "quick":
+        stem = CACHE / ("results-quick-" + Path(args.quick).stem.replace(":", "-"))
     if args.tables_only:
         d = load(stem)
         body = tables(d["data"], d["meta"])
@@ -683,6 +716,7 @@ def main(argv: list[str] | None = None) -> int:
                         s1[[g for g in fams if g != f][0]] if len(fams) > 1 else s1[f],
                         args.held,
                         not args.white,
+                        args.quick,
                     )
                     for u in units
                 ]

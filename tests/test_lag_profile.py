@@ -1,9 +1,10 @@
 """The die lag by profile least squares (``PipelineConfig.causal_lag_criterion =
 "profile"``, issue 23): the lag chosen again by the in-sample residual of the whole
-run's fit finds the die's lag under a wandering bias; the option moves the lag only
-(the CV's order, terms, warm-up and play width stay, and the families are compared at
-the CV's lag), is recorded in the selection log, and is a checked configuration key (the
-default; ``"cv"`` selects as before)."""
+run's fit finds the die's lag under a wandering bias; the option moves the lag (and
+the warm-up's time constant where that term is kept) only (the CV's order, terms and
+play width stay, and the families are compared at the CV's parameters), is recorded
+in the selection log, and is a checked configuration key (the default; ``"cv"``
+selects as before)."""
 
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ def test_profile_lag_finds_the_die_lag_under_a_wandering_bias() -> None:
     # refinement started, and the refined lag is no worse than it
     crit = {float(k): v for k, v in prof["criterion_by_tau"].items()}
     assert min(crit, key=crit.get) in (150.0, 300.0)
-    # only the lag moves: the CV's other choices — order, terms, warm-up, play — are kept
+    # only the lag moves: the CV's other choices — order, terms, play, and the warm-up's
+    # time constant where (as here) the warm-up term is not kept — stay
     q, order_cv, terms_cv, _, log_cv = select_structured(cal, folds)
     assert "lag_profile" not in log_cv
     assert order == order_cv and terms == terms_cv and prof["tau_plain_cv_s"] == q.tau_s
@@ -71,7 +73,7 @@ def test_the_families_are_compared_at_the_cv_lag_and_the_winner_ships_the_profil
 
 def test_the_lag_criterion_is_a_checked_configuration_key() -> None:
     assert PipelineConfig().causal_lag_criterion == "profile"  # the default (issue 23)
-    assert LAG_CRITERIA == ("cv", "profile")
+    assert LAG_CRITERIA == ("cv", "profile", "profile_warmup")
     cfg, _ = config_from_dict({"causal_lag_criterion": "profile"}, path="c.toml")
     assert cfg.causal_lag_criterion == "profile"
     with pytest.raises(InputError, match="causal_lag_criterion"):

@@ -108,6 +108,18 @@ def test_quick_is_what_the_design_chooses() -> None:
     assert -19 < lo < -17 and 45 < hi < 47
 
 
+def test_design_weighted_to_the_soaks_holds_the_hot_end_longer() -> None:
+    from gyrolab.compensation.profile_design import design_profile
+
+    p, rec = design_profile(3.25, weight="soaks")
+    # the drift wanted at the settled 60 °C soak too: a longer hot leg, a hotter case
+    assert rec["weight"] == "soaks" and p.steps[1].setpoint_c == 60.0
+    assert p.steps[1].duration_s > BUILTIN["quick"].steps[1].duration_s
+    assert rec["case_range_c"][1] > 47
+    with pytest.raises(ValueError, match="weight"):
+        design_profile(3.25, weight="hot")
+
+
 def test_prior_one_cluster_and_in_prior_unit_borrows_strength(fleet: FleetPrior) -> None:
     assert len(fleet.clusters) == 1 and len(fleet.units) == 8
     p, c = _unit(np.random.default_rng(1234))

@@ -260,10 +260,13 @@ def _scored(
 
 
 def cv_lag_params(ps: CausalParams, log: dict[str, Any]) -> CausalParams:
-    """The feature parameters at the lag the blocked CV chose: ``ps`` itself, or with the
-    τ before the profile lag (:func:`.structured._profile_lag`) where that moved it."""
+    """The feature parameters the blocked CV chose: ``ps`` itself, or with the τ and τ_w
+    before the profile lag (:func:`.structured._profile_lag`) where that moved them."""
     prof = log.get("lag_profile")
-    return ps if prof is None else replace(ps, tau_s=float(prof["tau_plain_cv_s"]))
+    if prof is None:
+        return ps
+    tw = float(prof.get("warmup_plain_cv_s", ps.warmup_tau_s))
+    return replace(ps, tau_s=float(prof["tau_plain_cv_s"]), warmup_tau_s=tw)
 
 
 def _fit_structured(ctx: FitContext) -> Candidate:

@@ -61,8 +61,9 @@ ORDERS = range(1, 7)
 #: how the structured families choose the lag (``PipelineConfig.causal_lag_criterion``):
 #: by the blocked CV with the other parameters (``cv``), or then again by profile least
 #: squares for the order, terms and other parameters the CV chose (``profile``,
-#: :func:`_profile_lag`)
-LAG_CRITERIA = ("cv", "profile")
+#: :func:`_profile_lag`), with the warm-up's time constant chosen jointly with it where
+#: that term is kept (``profile_warmup``, opt-in: docs/results.md)
+LAG_CRITERIA = ("cv", "profile", "profile_warmup")
 #: the pipeline's default (``PipelineConfig.causal_lag_criterion``): the families are
 #: compared at the CV's lag and the winner's τ re-chosen by profile least squares
 #: (docs/results.md, issue 23: the break staircase's median 1.162 → 1.112× the oracle,
@@ -533,33 +534,46 @@ def _profile_lag(
     p: CausalParams,
     order: int,
     terms: tuple[str, ...],
+    warmup: bool = False,
 ) -> tuple[CausalParams, dict[str, Any]]:
     """The lag by profile least squares: the in-sample RMS residual of the whole run's
     fit of the model the CV chose (``p``'s other parameters, ``order``, the ``terms`` it
-    kept) minimised over τ on :data:`TAU_GRID_S`, refined between grid neighbours. τ is
-    one nonlinear parameter of a model linear in the rest, so its least-squares estimate
+    kept) minimised over τ on :data:`TAU_GRID_S`, refined between grid neighbours; with
+    ``warmup`` and the warm-up term kept, over (τ_w, τ) on :data:`WARMUP_GRID_S` × the τ
+    grid, since both shape the first hours of a run (with τ_w held at the CV's, the lag
+    moved away from the die's on gyrolab's validation units 6 and 10, but the fleet
+    prior's quick calibrations got worse with it: docs/results.md). τ is one
+    nonlinear parameter of a model linear in the rest, so its least-squares estimate
     (Ljung, *System Identification*, 2nd ed., §7.3, the prediction-error method; Golub &
     Pereyra, SIAM J. Numer. Anal. 10, 1973, variable projection) does not overfit; it
     varies far less than the blocked CV's, whose fold fits of the rate and warm-up
     columns under flicker noise leave it flat or jagged in τ (the break family,
-    docs/results.md). The blocked CV keeps the discrete choices (order, terms, family).
-    Returns the parameters with that τ and a log (the criterion on the grid, °/s)."""
+    docs/results.md). The blocked CV keeps the discrete choices (order, terms, family:
+    the families are compared at the CV's parameters, ``tau_plain_cv_s`` and
+    ``warmup_plain_cv_s`` of the log). Returns the parameters with that τ (and τ_w) and
+    a log (the criterion on the τ grid at the chosen τ_w, °/s)."""
 
-    def crit(tau: float) -> float:
-        X = feature(replace(p, tau_s=float(tau)))
+    def crit(q: CausalParams) -> float:
+        X = feature(q)
         A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
         r = y - A @ lstsq(A, y)
         return float(np.sqrt(float(r @ r) / r.size))
 
-    grid = {tau: crit(tau) for tau in TAU_GRID_S}
-    tau0 = min(grid, key=lambda t: grid[t])
-    tau, _ = _refine_tau(crit, tau0, grid[tau0])
+    tws = WARMUP_GRID_S if warmup and "warmup" in terms else (p.warmup_tau_s,)
+    grid = {
+        (tw, tau): crit(replace(p, warmup_tau_s=tw, tau_s=tau)) for tw in tws for tau in TAU_GRID_S
+    }
+    tw, tau0 = min(grid, key=lambda k: grid[k])
+    q = replace(p, warmup_tau_s=tw)
+    tau, _ = _refine_tau(lambda t: crit(replace(q, tau_s=float(t))), tau0, grid[(tw, tau0)])
     log = {
         "tau_plain_cv_s": p.tau_s,
+        "warmup_plain_cv_s": p.warmup_tau_s,
         "tau_s": tau,
-        "criterion_by_tau": {str(k): v for k, v in grid.items()},
+        "warmup_tau_s": tw,
+        "criterion_by_tau": {str(t): grid[(tw, t)] for t in TAU_GRID_S},
     }
-    return replace(p, tau_s=tau), log
+    return replace(q, tau_s=tau), log
 
 
 def select_structured(
@@ -573,7 +587,8 @@ def select_structured(
     between its grid neighbours (golden section), then w and τ_w again on their grids;
     then the terms (:func:`_select_terms`; ``extended``:
     :func:`_select_terms_backward`); with ``lag_criterion="profile"`` τ is finally chosen
-    again, for the terms kept, by profile least squares (:func:`_profile_lag`). The lag,
+    again, for the terms kept, by profile least squares (``"profile_warmup"``: with τ_w
+    where the warm-up term is kept) (:func:`_profile_lag`). The lag,
     the warm-up and (``extended`` only) the start branch (:data:`START_BRANCHES`) are
     searched together because all three shape the first hours of a run. Returns the
     choice and a log."""
@@ -618,8 +633,9 @@ def select_structured(
     select = _select_terms_backward if extended else _select_terms
     terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
-    if lag_criterion == "profile":
-        p, log["lag_profile"] = _profile_lag(feature, y, p, order, terms)
+    if lag_criterion != "cv":
+        warm = lag_criterion == "profile_warmup"
+        p, log["lag_profile"] = _profile_lag(feature, y, p, order, terms, warm)
     log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
     return p, order, terms, err, log
 
