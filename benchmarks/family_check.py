@@ -2,10 +2,12 @@
 
     python benchmarks/family_check.py [--families poly,structured] [--units 12]
                                       [--workers 2] [--lag-criterion profile]
+                                      [--calibration paper[,paper_ramps]]
 
 The units, trajectories and seeds of ``benchmarks/validation_suite.py`` (each unit
-calibrated on its ``paper`` run, evaluated on the five others), but only the causal
-selection (``fit_causal`` on the calibration run's 3.6 s means and PT100 readings, the
+calibrated on its ``paper`` run, evaluated on the five others; ``--calibration`` names
+other built-in profiles to calibrate on instead, scored on the same five runs), but only
+the causal selection (``fit_causal`` on the calibration run's 3.6 s means and PT100 readings, the
 families of ``--families``) against the oracle — no GPSO-VMD, GA-BP or baselines, so a
 family set is compared on the 60 held-out runs in minutes instead of the suite's
 ≈ 45 min. Scored with ``breakfam.score`` (bias stability of 3.6 s means, 100 s p-p).
@@ -33,45 +35,68 @@ from gyrolab.compensation.config import DEFAULT_CONFIG  # noqa: E402
 from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 
 
+def _case_rates(r: dict[str, np.ndarray]) -> tuple[float, float]:
+    """Most negative and most positive case (PT100) rate of a run, °C/min, as 300 s
+    differences of 300 s means of the 1 Hz readings."""
+    k = 300
+    c = np.convolve(r["pt_c"], np.ones(k) / k, mode="valid")
+    d = (c[k:] - c[:-k]) / k * 60.0
+    return float(d.min()), float(d.max())
+
+
 def run_unit(
-    u: int, families: tuple[str, ...], lag: str = DEFAULT_CONFIG.causal_lag_criterion
-) -> tuple[str, list[tuple[float, float]]]:
-    """Simulate unit ``u`` (the suite's seeds), calibrate on ``paper``, score the rest:
-    a line and the (causal ÷ oracle, cut gap points) of each held-out run."""
+    u: int,
+    families: tuple[str, ...],
+    lag: str = DEFAULT_CONFIG.causal_lag_criterion,
+    calibrations: tuple[str, ...] = ("paper",),
+) -> dict[str, tuple[str, list[tuple[float, float]], tuple[float, float]]]:
+    """Simulate unit ``u`` (the suite's seeds), calibrate on each built-in profile of
+    ``calibrations`` (``paper``: the suite's own run; another, e.g. ``paper_ramps``: run
+    with the ``paper`` run's seed), score the five held-out runs (never ``paper``): per
+    calibration a line, the (causal ÷ oracle, cut gap points) of each held-out run and the
+    calibration run's case-rate range (°C/min); under ``"held-out"`` the held-out runs'
+    case-rate range."""
     import validation_suite as vs
 
     from gyrolab.compensation.causal import CausalCalibration, fit_causal
     from gyrolab.compensation.config import PipelineConfig
     from gyrolab.numerics.averaging import block_average
+    from gyrolab.profiles.profile import BUILTIN
 
     model, _ = vs.unit_model(u)
     runs = {
         n: vs.simulate(model, vs.trajectory(n, u), 10.0, seed=1000 * u + i + 1)
         for i, n in enumerate(vs.TRAJECTORIES)
     }
-    c = runs[vs.CALIBRATION]
-    tb, xb, _ = block_average(c["t"], c["raw"], 3.6, 0.1)
-    cm = fit_causal(
-        CausalCalibration(t=tb, rate=xb, pt_t=c["pt_t"], pt_c=c["pt_c"]),
-        families=families,
-        config=PipelineConfig(causal_lag_criterion=lag),
-    )
-    out = []
-    for n, r in runs.items():
-        if n == vs.CALIBRATION:
-            continue
-        y = r["raw"] - cm.drift_at(r["t"], r["pt_t"], r["pt_c"])
-        s, o, raw = score(y), score(r["raw"] - r["drift"]), score(r["raw"])
-        bs = "bias_stability_deg_per_h"
-        pp = "pp_100s_deg_per_s"
-        gap = 100.0 * (s[pp] - o[pp]) / raw[pp]
-        out.append((s[bs] / o[bs], gap))
-    terms = getattr(cm.model, "terms", ())
-    line = (
-        f"unit {u:2d}: {cm.family:<16} τ={cm.params.tau_s:5.0f} s {','.join(terms):<40} "
-        + " ".join(f"{a:.3f}" for a, _ in out)
-    )
-    return line, out
+    cal_seed = 1000 * u + vs.TRAJECTORIES.index(vs.CALIBRATION) + 1
+    res = {}
+    for cal in calibrations:
+        c = runs[cal] if cal == vs.CALIBRATION else vs.simulate(model, BUILTIN[cal], 10.0, cal_seed)
+        tb, xb, _ = block_average(c["t"], c["raw"], 3.6, 0.1)
+        cm = fit_causal(
+            CausalCalibration(t=tb, rate=xb, pt_t=c["pt_t"], pt_c=c["pt_c"]),
+            families=families,
+            config=PipelineConfig(causal_lag_criterion=lag),
+        )
+        out = []
+        for n, r in runs.items():
+            if n == vs.CALIBRATION:
+                continue
+            y = r["raw"] - cm.drift_at(r["t"], r["pt_t"], r["pt_c"])
+            s, o, raw = score(y), score(r["raw"] - r["drift"]), score(r["raw"])
+            bs = "bias_stability_deg_per_h"
+            pp = "pp_100s_deg_per_s"
+            gap = 100.0 * (s[pp] - o[pp]) / raw[pp]
+            out.append((s[bs] / o[bs], gap))
+        terms = getattr(cm.model, "terms", ())
+        line = (
+            f"unit {u:2d} [{cal}]: {cm.family:<16} τ={cm.params.tau_s:5.0f} s "
+            f"{','.join(terms):<40} " + " ".join(f"{a:.3f}" for a, _ in out)
+        )
+        res[cal] = (line, out, _case_rates(c))
+    held = [_case_rates(r) for n, r in runs.items() if n != vs.CALIBRATION]
+    res["held-out"] = ("", [], (min(a for a, _ in held), max(b for _, b in held)))
+    return res
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -85,25 +110,57 @@ def main(argv: list[str] | None = None) -> int:
         choices=LAG_CRITERIA,
         help="PipelineConfig.causal_lag_criterion",
     )
+    ap.add_argument(
+        "--calibration",
+        default="paper",
+        help="built-in profile(s) to calibrate on, comma-separated (default paper; e.g. "
+        "paper,paper_ramps: the same held-out runs scored after each)",
+    )
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     fams = tuple(args.families.split(","))
+    cals = tuple(args.calibration.split(","))
     us = list(range(args.units))
+    n = len(us)
     if args.workers > 1:
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(args.workers) as ex:
-            res = list(ex.map(run_unit, us, [fams] * len(us), [args.lag_criterion] * len(us)))
+            res = list(ex.map(run_unit, us, [fams] * n, [args.lag_criterion] * n, [cals] * n))
     else:
-        res = [run_unit(u, fams, args.lag_criterion) for u in us]
-    for line, _ in res:
-        print(line)
-    a = np.array([x for _, o in res for x in o])
+        res = [run_unit(u, fams, args.lag_criterion, cals) for u in us]
+    for cal in cals:
+        for r in res:
+            print(r[cal][0])
+    first = np.array([x for r in res for x in r[cals[0]][1]])
+    for cal in cals:
+        a = np.array([x for r in res for x in r[cal][1]])
+        lo = min(r[cal][2][0] for r in res)
+        hi = max(r[cal][2][1] for r in res)
+        per_unit = np.array([np.mean([x for x, _ in r[cal][1]]) for r in res])
+        base = np.array([np.mean([x for x, _ in r[cals[0]][1]]) for r in res])
+        d = per_unit - base
+        print(
+            f"calibrated on {cal} (case rate {lo:+.2f} … {hi:+.2f} °C/min), families "
+            f"{','.join(fams)} (lag criterion {args.lag_criterion}): causal ÷ oracle "
+            f"median {np.median(a[:, 0]):.3f}, "
+            f"worst {a[:, 0].max():.2f}; 100 s p-p cut gap median {np.median(a[:, 1]):.1f}, "
+            f"worst {a[:, 1].max():.1f} points ({a.shape[0]} held-out runs)"
+            + (
+                f"; per unit Δ vs {cals[0]} {d.mean():+.4f} ± {d.std(ddof=1):.4f}, "
+                f"better / worse {(d < -0.01).sum()} / {(d > 0.01).sum()}"
+                if cal != cals[0] and len(res) > 1
+                else ""
+            )
+        )
+    import validation_suite as vs
+
+    held = [n for n in vs.TRAJECTORIES if n != vs.CALIBRATION]
+    lo = min(r["held-out"][2][0] for r in res)
+    hi = max(r["held-out"][2][1] for r in res)
     print(
-        f"families {','.join(fams)} (lag criterion {args.lag_criterion}): causal ÷ oracle "
-        f"median {np.median(a[:, 0]):.3f}, "
-        f"worst {a[:, 0].max():.2f}; 100 s p-p cut gap median {np.median(a[:, 1]):.1f}, "
-        f"worst {a[:, 1].max():.1f} points ({a.shape[0]} held-out runs)"
+        f"held-out runs per unit: {', '.join(held)} ({first.shape[0] // len(res)}); "
+        f"their case rate {lo:+.2f} … {hi:+.2f} °C/min"
     )
     return 0
 

@@ -108,6 +108,9 @@ def _positive_float(text: str) -> float:
 
 
 UNIT_HELP = "the unit of a multi-unit run (required when the run holds several)"
+# The built-in profiles (gyrolab/profiles/profile.py BUILTIN, docs/profiles.md); not
+# imported from there so that --help needs no library import.
+_PROFILES = "paper | short | quick | paper_ramps | FILE.toml"
 
 
 def _log_options(sp: argparse.ArgumentParser) -> None:
@@ -133,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = cmd("simulate", "simulate an oven run of the gyro and record it to MCAP")
     s.add_argument("--out", required=True, help="output RUN.mcap")
-    s.add_argument("--profile", default="paper", help="paper | short | FILE.toml (default paper)")
+    s.add_argument("--profile", default="paper", help=f"{_PROFILES} (default paper)")
     s.add_argument("--model", help="SIM_MODEL.toml (default: the nominal model)")
     s.add_argument(
         "--axis-model",
@@ -179,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="continue this interrupted run (its last segment, or the file a kill left) from "
         "its last completed step, in a new segment (docs/reliability.md)",
     )
-    a.add_argument("--profile", default=None, help="paper | short | FILE.toml (default: bench's)")
+    a.add_argument("--profile", default=None, help=f"{_PROFILES} (default: bench's)")
     a.add_argument(
         "--speed",
         type=_positive_float,
@@ -336,7 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a simulated flight controller through the loop: calibration run, compensate, "
         "export, flash, verification run (docs/instruments.md)",
     )
-    dm.add_argument("--profile", default="paper", help="paper | short | FILE.toml")
+    dm.add_argument("--profile", default="paper", help=_PROFILES)
     dm.add_argument("--seed", type=_seed, default=1, help="seed of the calibration run (default 1)")
     dm.add_argument(
         "--catalogue",

@@ -131,3 +131,17 @@ def test_no_citation_of_the_design_notes_outside_docs(tmp_path: Path) -> None:
         )
         assert r.returncode == 0 and name not in r.stdout, sub
     assert (REPO / "docs" / "cli.md").is_file() and (REPO / "docs" / "profiles.md").is_file()
+
+
+def test_paper_ramps_is_the_staircase_then_one_cycle_and_listed() -> None:
+    """``paper_ramps`` (docs/profiles.md) is ``paper`` unchanged plus one heating and one
+    cooling step at the extremes, and every built-in profile is named in the CLI's help."""
+    import gyrolab.cli as cli
+
+    paper, ramps = BUILTIN["paper"].steps, BUILTIN["paper_ramps"].steps
+    assert ramps[: len(paper)] == paper
+    assert [(s.setpoint_c, s.duration_s) for s in ramps[len(paper) :]] == [
+        (60.0, 3600.0),
+        (-40.0, 7200.0),
+    ]
+    assert set(BUILTIN) <= {n.strip() for n in cli._PROFILES.split("|")}

@@ -205,7 +205,32 @@ def _quick() -> Profile:
     )
 
 
-BUILTIN: dict[str, Profile] = {"paper": _paper(), "short": _short(), "quick": _quick()}
+def _paper_ramps() -> Profile:
+    """The ``paper`` staircase, then one heating/cooling cycle at the chamber's fastest
+    rates (issue 23; docs/profiles.md, "paper_ramps"): from the staircase's −40 °C, 1 h
+    towards 60 °C, then 2 h towards −40 °C — 16 h in all. A profile has setpoints, not
+    ramp rates: the ramps are the chamber's own limits (the simulator's nominal air heats
+    at most 3 °C/min and cools at most 1.5 °C/min, slower below 40 °C), so the heating
+    and cooling rates the calibration sees are the fastest a held-out run can reach."""
+    steps = _paper().steps + (
+        Step(60.0, 3600.0, "ramp up to 60 C"),
+        Step(-40.0, 7200.0, "ramp down to -40 C"),
+    )
+    return Profile(
+        name="paper_ramps",
+        steps=steps,
+        ambient_c=25.0,
+        description="paper staircase + one ramp cycle at the chamber's limits: 1 h towards "
+        "60 °C, 2 h towards -40 °C (16 h; calibrates the heating/cooling-rate terms)",
+    )
+
+
+BUILTIN: dict[str, Profile] = {
+    "paper": _paper(),
+    "short": _short(),
+    "quick": _quick(),
+    "paper_ramps": _paper_ramps(),
+}
 
 
 # Top-level keys of a profile TOML (docs/profiles.md); ``step`` is the [[step]] list.
@@ -275,7 +300,7 @@ def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
 
 
 def load_profile(spec: str | os.PathLike[str]) -> Profile:
-    """``paper`` / ``short`` / ``quick`` (built in) or a path to a profile TOML file."""
+    """A built-in profile (``BUILTIN``: paper, short, quick, paper_ramps) or a profile TOML."""
     s = str(spec)
     if s in BUILTIN:
         return BUILTIN[s]
