@@ -1,6 +1,6 @@
 """A causal family set on gyrolab's own validation family, the causal selection alone.
 
-    python benchmarks/family_check.py [--families poly,structured] [--units 12]
+    python benchmarks/family_check.py [--families poly,structured] [--units 12] [--first-unit 0]
                                       [--workers 2] [--lag-criterion profile]
                                       [--calibration paper[,paper_ramps]]
 
@@ -103,6 +103,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--families", default="poly,structured")
     ap.add_argument("--units", type=int, default=12)
+    ap.add_argument(
+        "--first-unit",
+        type=int,
+        default=0,
+        help="first unit (default 0; 12 with --units 12: units the family was not tuned on)",
+    )
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument(
         "--lag-criterion",
@@ -120,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     fams = tuple(args.families.split(","))
     cals = tuple(args.calibration.split(","))
-    us = list(range(args.units))
+    us = list(range(args.first_unit, args.first_unit + args.units))
     n = len(us)
     if args.workers > 1:
         from concurrent.futures import ProcessPoolExecutor
@@ -132,6 +138,13 @@ def main(argv: list[str] | None = None) -> int:
     for cal in cals:
         for r in res:
             print(r[cal][0])
+    import validation_suite as vs
+
+    held = [t for t in vs.TRAJECTORIES if t != vs.CALIBRATION]
+
+    def where(i: int) -> str:
+        return f"unit {us[i // len(held)]} {held[i % len(held)]}"
+
     first = np.array([x for r in res for x in r[cals[0]][1]])
     for cal in cals:
         a = np.array([x for r in res for x in r[cal][1]])
@@ -144,8 +157,10 @@ def main(argv: list[str] | None = None) -> int:
             f"calibrated on {cal} (case rate {lo:+.2f} … {hi:+.2f} °C/min), families "
             f"{','.join(fams)} (lag criterion {args.lag_criterion}): causal ÷ oracle "
             f"median {np.median(a[:, 0]):.3f}, "
-            f"worst {a[:, 0].max():.2f}; 100 s p-p cut gap median {np.median(a[:, 1]):.1f}, "
-            f"worst {a[:, 1].max():.1f} points ({a.shape[0]} held-out runs)"
+            f"worst {a[:, 0].max():.2f} ({where(int(a[:, 0].argmax()))}); 100 s p-p cut gap "
+            f"median {np.median(a[:, 1]):.1f}, "
+            f"worst {a[:, 1].max():.1f} points ({where(int(a[:, 1].argmax()))}) "
+            f"({a.shape[0]} held-out runs)"
             + (
                 f"; per unit Δ vs {cals[0]} {d.mean():+.4f} ± {d.std(ddof=1):.4f}, "
                 f"better / worse {(d < -0.01).sum()} / {(d > 0.01).sum()}"
@@ -153,9 +168,6 @@ def main(argv: list[str] | None = None) -> int:
                 else ""
             )
         )
-    import validation_suite as vs
-
-    held = [n for n in vs.TRAJECTORIES if n != vs.CALIBRATION]
     lo = min(r["held-out"][2][0] for r in res)
     hi = max(r["held-out"][2][1] for r in res)
     print(

@@ -141,7 +141,7 @@ def test_paper_ramps_is_the_staircase_then_one_cycle_and_listed() -> None:
     paper, ramps = BUILTIN["paper"].steps, BUILTIN["paper_ramps"].steps
     assert ramps[: len(paper)] == paper
     assert [(s.setpoint_c, s.duration_s) for s in ramps[len(paper) :]] == [
-        (60.0, 3600.0),
+        (60.0, 7200.0),
         (-40.0, 7200.0),
     ]
     assert set(BUILTIN) <= {n.strip() for n in cli._PROFILES.split("|")}

@@ -207,21 +207,23 @@ def _quick() -> Profile:
 
 def _paper_ramps() -> Profile:
     """The ``paper`` staircase, then one heating/cooling cycle at the chamber's fastest
-    rates (issue 23; docs/profiles.md, "paper_ramps"): from the staircase's −40 °C, 1 h
-    towards 60 °C, then 2 h towards −40 °C — 16 h in all. A profile has setpoints, not
+    rates (issue 23; docs/profiles.md, "paper_ramps"): from the staircase's −40 °C, 2 h
+    towards 60 °C, then 2 h towards −40 °C — 17 h in all. A profile has setpoints, not
     ramp rates: the ramps are the chamber's own limits (the simulator's nominal air heats
     at most 3 °C/min and cools at most 1.5 °C/min, slower below 40 °C), so the heating
-    and cooling rates the calibration sees are the fastest a held-out run can reach."""
+    and cooling rates the calibration sees are the fastest a held-out run can reach. The
+    heating step is 2 h, not 1, so that the case nears 60 °C again (docs/results.md, "A
+    ramp cycle in gyrolab's calibration profile")."""
     steps = _paper().steps + (
-        Step(60.0, 3600.0, "ramp up to 60 C"),
+        Step(60.0, 7200.0, "ramp up to 60 C"),
         Step(-40.0, 7200.0, "ramp down to -40 C"),
     )
     return Profile(
         name="paper_ramps",
         steps=steps,
         ambient_c=25.0,
-        description="paper staircase + one ramp cycle at the chamber's limits: 1 h towards "
-        "60 °C, 2 h towards -40 °C (16 h; calibrates the heating/cooling-rate terms)",
+        description="paper staircase + one ramp cycle at the chamber's limits: 2 h towards "
+        "60 °C, 2 h towards -40 °C (17 h; calibrates the heating/cooling-rate terms)",
     )
 
 
