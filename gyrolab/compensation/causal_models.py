@@ -233,6 +233,7 @@ def structured_choice(ctx: FitContext) -> tuple[Any, ...]:
 
 def _scored(
     ctx: FitContext,
+    key: str,
     ps: CausalParams,
     Xs: np.ndarray,
     order: int,
@@ -252,10 +253,10 @@ def _scored(
     y = ctx.cal.rate
     pred = np.empty_like(y)
     err = cv_linear(Xs, y, order, terms, ctx.folds, pred, ridge=ridge)
-    pc = cv_lag_params(ps, log)
+    pc, Xc = cv_lag_features(ctx, key, ps, log)
     if pc == ps:
         return err, pred, log
-    score = cv_linear(block_features(ctx.cal, pc), y, order, terms, ctx.folds, ridge=ridge)
+    score = cv_linear(Xc, y, order, terms, ctx.folds, ridge=ridge)
     return score, pred, {**log, "cv_rmse_at_profile_lag": err}
 
 
@@ -269,9 +270,21 @@ def cv_lag_params(ps: CausalParams, log: dict[str, Any]) -> CausalParams:
     return replace(ps, tau_s=float(prof["tau_plain_cv_s"]), warmup_tau_s=tw)
 
 
+def cv_lag_features(
+    ctx: FitContext, key: str, ps: CausalParams, log: dict[str, Any]
+) -> tuple[CausalParams, np.ndarray | None]:
+    """:func:`cv_lag_params` of the choice ``key`` (``ctx.shared``'s) and its block
+    features, once per selection (the family's score and the networks both need them);
+    the features are ``None`` where the profile lag did not move the parameters."""
+    pc = cv_lag_params(ps, log)
+    if pc == ps:
+        return pc, None
+    return pc, ctx.shared(f"{key}:cv_lag_features", lambda: block_features(ctx.cal, pc))
+
+
 def _fit_structured(ctx: FitContext) -> Candidate:
     ps, order, terms, _err, log, Xs = structured_choice(ctx)
-    err, pred, log = _scored(ctx, ps, Xs, order, terms, log)
+    err, pred, log = _scored(ctx, "structured", ps, Xs, order, terms, log)
     model = StructuredCausalModel("structured", ps, fit_structured(Xs, ctx.cal.rate, order, terms))
     return Candidate(model, err, {**log, "features": ps.to_dict()}, pred)
 
@@ -297,7 +310,7 @@ def _fit_structured_rate(ctx: FitContext) -> Candidate:
     fits the heating-only term to noise and extrapolates it."""
     ps, order, terms, _err, log = extended_choice(ctx)
     Xs = block_features(ctx.cal, ps)
-    err, pred, log = _scored(ctx, ps, Xs, order, terms, log, ridge=CV_RIDGE)
+    err, pred, log = _scored(ctx, "structured_rate", ps, Xs, order, terms, log, ridge=CV_RIDGE)
     model = StructuredCausalModel(
         "structured_rate", ps, fit_structured(Xs, ctx.cal.rate, order, terms)
     )
@@ -310,9 +323,9 @@ def _fit_network(ctx: FitContext, name: str, init: str) -> Candidate:
     estimate, not the network's), blocked CV by refitting it on every fold's training
     blocks."""
     ps, _order, _terms, _err, log, Xs = structured_choice(ctx)
-    pc = cv_lag_params(ps, log)
-    if pc != ps:
-        ps, Xs = pc, ctx.shared("network_features", lambda: block_features(ctx.cal, pc))
+    pc, Xc = cv_lag_features(ctx, "structured", ps, log)
+    if Xc is not None:
+        ps, Xs = pc, Xc
     cfg = ctx.config
     bp = cfg.bp() if cfg is not None else BPConfig()
     ga = cfg.ga() if cfg is not None else GAConfig()
@@ -346,8 +359,7 @@ FAMILIES = (
         _fit_structured_rate,
         _load_structured,
         2.5,
-        "the structured model with heating/cooling rate asymmetry and R|R| searched with "
-        "the lag",
+        "the structured model with heating/cooling rate asymmetry and R|R| searched with the lag",
     ),
     Family(
         "bp",
@@ -457,6 +469,7 @@ __all__ = [
     "NetworkCausalModel",
     "StructuredCausalModel",
     "causal_readings",
+    "cv_lag_features",
     "cv_lag_params",
     "evaluate_causal",
     "extended_choice",
