@@ -20,13 +20,15 @@ play is then on its heating branch, a wide one part of the way (the single play'
 branch ``s₀`` of :class:`~gyrolab.compensation.causal_features.CausalParams` is the case
 ``δ = s₀ w/2`` of one play).
 The same operations as the single play, in the same order: :func:`pi_step` (pure Python
-floats, one reading) and :func:`pi_branches` (a numba loop over a run) agree bit for bit.
+floats, one reading) and :func:`pi_branches` (each play over a run by the play kernel
+shared with the simulator, :func:`gyrolab.numerics.play.play`) agree bit for bit.
 """
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from gyrolab.numerics.play import play
 
 #: the play widths of the operator, °C: spanning the single play's width grid
 #: (:data:`gyrolab.compensation.structured.WIDTH_GRID_C`, 0.25–4 °C). Measured on the
@@ -57,23 +59,6 @@ def pi_step(p: np.ndarray, F: float, widths: tuple[float, ...]) -> list[float]:
     return out
 
 
-@numba.njit(cache=True, nogil=True)
-def _pi_kernel(
-    F: np.ndarray, half: np.ndarray, p: np.ndarray, out: np.ndarray
-) -> None:  # pragma: no cover - compiled; same operations as pi_step()
-    for i in range(F.size):
-        f = F[i]
-        for j in range(half.size):
-            h = half[j]
-            pj = p[j]
-            if pj < f - h:
-                pj = f - h
-            elif pj > f + h:
-                pj = f + h
-            p[j] = pj
-            out[i, j] = (f - pj) / h
-
-
 def pi_branches(
     F: np.ndarray, widths: tuple[float, ...], p: np.ndarray | None = None
 ) -> np.ndarray:
@@ -83,9 +68,9 @@ def pi_branches(
     F = np.ascontiguousarray(F, dtype=np.float64)
     if p is None:
         p = pi_start(float(F[0]) if F.size else 0.0, widths)
-    half = 0.5 * np.asarray(widths, dtype=np.float64)
-    out = np.empty((F.size, half.size))
-    _pi_kernel(F, half, p, out)
+    out = np.empty((F.size, len(widths)))
+    for j, w in enumerate(widths):  # the plays are independent: one pass each
+        p[j] = play(F, float(p[j]), 0.5 * float(w), out[:, j])
     return out
 
 

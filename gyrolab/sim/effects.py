@@ -28,9 +28,9 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
-import numba
 import numpy as np
 
+from gyrolab.numerics.play import play, play_var
 from gyrolab.pt100 import R0_OHM, cvd_resistance
 from gyrolab.sim.candidate import (
     GAP_ALLAN,
@@ -228,37 +228,6 @@ def _die(case_c: np.ndarray, tau_s: float) -> tuple[np.ndarray, np.ndarray]:
     the case), and its rate (°C, °C/s)."""
     die = lowpass(case_c, 1.0 - math.exp(-1.0 / tau_s), float(case_c[0]))
     return die, (case_c - die) / tau_s
-
-
-@numba.njit(cache=True, nogil=True)
-def play(temp: np.ndarray, p0: float, half: float, out: np.ndarray) -> float:  # pragma: no cover
-    """Play (backlash) operator of half-width ``half``: out_i = (T_i − p_i)/half ∈ [−1, 1]."""
-    p = p0
-    for i in range(temp.size):
-        x = temp[i]
-        if p < x - half:
-            p = x - half
-        elif p > x + half:
-            p = x + half
-        out[i] = (x - p) / half
-    return p
-
-
-@numba.njit(cache=True, nogil=True)
-def play_var(
-    temp: np.ndarray, p0: float, half: np.ndarray, out: np.ndarray
-) -> float:  # pragma: no cover
-    """Play operator whose half-width varies per sample (``half[i]`` > 0), as :func:`play`."""
-    p = p0
-    for i in range(temp.size):
-        x = temp[i]
-        h = half[i]
-        if p < x - h:
-            p = x - h
-        elif p > x + h:
-            p = x + h
-        out[i] = (x - p) / h
-    return p
 
 
 HYST_MIN_WIDTH_C = 0.01
