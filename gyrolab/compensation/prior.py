@@ -86,10 +86,10 @@ from scipy import stats
 from gyrolab.compensation.band import fit_band
 from gyrolab.compensation.baselines import blocked_folds
 from gyrolab.compensation.causal import CV_FOLDS, CV_SEGMENTS, fit_causal
-from gyrolab.compensation.causal_features import CausalParams, hold, reading_features
+from gyrolab.compensation.causal_features import CausalParams
 from gyrolab.compensation.causal_models import StructuredCausalModel, hysteresis_width
 from gyrolab.compensation.drift_model import CausalCalibration
-from gyrolab.compensation.structured import StructuredModel, effective_samples
+from gyrolab.compensation.structured import StructuredModel, block_features, effective_samples
 from gyrolab.numerics.jackknife import jackknife_covariance
 
 #: the six terms after the Legendre columns, in θ order
@@ -489,10 +489,6 @@ class Membership:
         )
 
 
-def _features(cal: CausalCalibration, p: CausalParams) -> np.ndarray:
-    return hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, p))
-
-
 def _posterior(
     A: np.ndarray, y: np.ndarray, s2: float, mean: np.ndarray, cov: np.ndarray
 ) -> tuple[np.ndarray, float, np.ndarray]:
@@ -685,7 +681,7 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
         """From ``p0``: the noise scale and the cluster there, then (``grid``) φ on the
         grid around the cluster's mean, on its start branch; the CV RMSE, the feature
         parameters, s², the cluster."""
-        A0 = b.design(_features(cal, p0))
+        A0 = b.design(block_features(cal, p0))
         s2 = _noise_scale(A0, y, prior.clusters[0], neff)
         c = prior.clusters[membership(A0, y, prior).cluster]
         if not grid:
@@ -696,7 +692,7 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
             for step in PHI_STEPS:
                 phi = phi_c.copy()
                 phi[i] = c.phi_mean[i] + step * c.phi_sd[i]
-                e = cv_rmse(b.design(_features(cal, c.params(phi))), s2, c)
+                e = cv_rmse(b.design(block_features(cal, c.params(phi))), s2, c)
                 if best is None or e < best[0]:
                     best = (e, phi)
         assert best is not None
@@ -713,7 +709,7 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
     }
     start = min(starts, key=lambda k: starts[k][0])  # a tie: the prior's
     _, params, s2, c = starts[start]
-    A = b.design(_features(cal, params))
+    A = b.design(block_features(cal, params))
     theta, _ = _map(A, y, s2, c)
     # the unit's membership at its own φ (the detector's number)
     mem = membership(A, y, prior)
