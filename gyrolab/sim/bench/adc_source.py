@@ -18,7 +18,7 @@ import numpy as np
 
 from gyrolab.framing import encode_frame_run, frame_size
 from gyrolab.sim.bench.faults import ByteFaults
-from gyrolab.sim.bench.serial_pty import CONGESTED_WAIT_S, PortClosed, PtyPort
+from gyrolab.sim.bench.serial_pty import PortClosed, PtyPort
 
 # What happened to a frame on its way out
 SENT = "sent"  # written intact
@@ -82,7 +82,6 @@ class AdcSource:
         self.axes = int(axes)
         self.temperature = bool(temperature)  # frames carry the internal-temperature word
         self._frame_bytes = frame_size(self.n, self.axes, self.temperature)
-        self._congested = False
 
     # ----------------------------------------------------------------- faults
     def start_stall(self) -> None:
@@ -158,21 +157,13 @@ class AdcSource:
             self._mark(slots, UNPLUGGED)
             return
         try:
-            # While nobody drains the port (no reader, or it stopped), wait at most 50 ms
-            # per write: a UART transmits regardless and the receiver overruns. A reader
-            # that comes back drains the pty, a write completes, and the wait is restored.
-            timeout = (
-                min(self.write_timeout_s, CONGESTED_WAIT_S)
-                if self._congested
-                else self.write_timeout_s
-            )
-            done = self.port.write(data, timeout)
+            # a UART transmits regardless: while nobody drains the port the wait is capped
+            done = self.port.write_capped(data, self.write_timeout_s)
         except PortClosed:
             self.stats.unplugged += len(frames)
             self._mark(slots, UNPLUGGED)
             return
         self.stats.bytes_written += done
-        self._congested = done < len(data)
         if done < len(data):
             # Frames from the one cut short onward never made it out whole.
             pos = 0

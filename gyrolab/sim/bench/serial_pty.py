@@ -42,6 +42,8 @@ class PtyPort:
         self.slave_name = ""
         self._lock = threading.Lock()
         self.generation = 0  # +1 per (re)connect
+        # since a :meth:`write_capped` was cut short, until one completes
+        self.congested = False
 
     @property
     def path(self) -> str:
@@ -122,6 +124,20 @@ class PtyPort:
                 raise PortClosed(self.path) from e
         return done
 
+    def write_capped(
+        self, data: bytes, timeout_s: float, cancel: threading.Event | None = None
+    ) -> int:
+        """:meth:`write` for a device that transmits on its own clock (a sensor's stream,
+        a device's replies): while the port is :attr:`congested` — since a write was cut
+        short, until one completes — the wait is at most ``CONGESTED_WAIT_S``, so a port
+        nobody drains costs the device 50 ms a write, not its whole back-pressure wait;
+        a reader that comes back drains the pty, a write completes, the wait is restored."""
+        if self.congested:
+            timeout_s = min(timeout_s, CONGESTED_WAIT_S)
+        done = self.write(data, timeout_s, cancel)
+        self.congested = done < len(data)
+        return done
+
     def read(self, timeout_s: float = 0.05, max_bytes: int = 65536) -> bytes:
         """Bytes the driver sent, waiting up to ``timeout_s``; b"" if none."""
         fd = self._master
@@ -159,7 +175,6 @@ class PtyDevice:
         self.port = port
         self.write_timeout_s = write_timeout_s
         self._write_lock = threading.Lock()
-        self._congested = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -175,14 +190,10 @@ class PtyDevice:
         :meth:`stop` ends a wait. The bytes written, None while unplugged."""
         wait = self.write_timeout_s if timeout_s is None else timeout_s
         with self._write_lock:
-            if self._congested:
-                wait = min(wait, CONGESTED_WAIT_S)
             try:
-                done = self.port.write(data, timeout_s=wait, cancel=self._stop)
+                return self.port.write_capped(data, wait, cancel=self._stop)
             except PortClosed:
                 return None
-            self._congested = done < len(data)
-            return done
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._serve, name=self.thread_name, daemon=True)
