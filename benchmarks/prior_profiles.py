@@ -5,6 +5,7 @@ same 13 h calibration as ``benchmarks/prior_suite.py``.
 
     python benchmarks/prior_profiles.py --profiles quick,design:soaks,P.toml
                                         [--seeds 6] [--units 12] [--families validation,break]
+                                        [--fleet 12]
 
 ``prior_suite.py`` runs each unit's short run once (seed ``1000 u + 99``): its worst case
 is one draw of the short run's noise. Here seed ``k`` is ``1000 u + 99 + k`` (``k = 0`` is
@@ -108,6 +109,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--families", default="validation,break")
     ap.add_argument("--first-seed", type=int, default=0, help="k of the first seed")
     ap.add_argument("--save", default="", help="an .npz of every ratio, gap and refusal")
+    ap.add_argument(
+        "--fleet", type=int, default=12, help="the fleet each unit's prior is learned from"
+    )
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
@@ -115,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     profiles = args.profiles.split(",")
     L = [
         f"`python benchmarks/prior_profiles.py --profiles {args.profiles} --seeds {args.seeds}"
-        f" --first-seed {args.first_seed}`"
+        f" --first-seed {args.first_seed} --fleet {args.fleet}`"
         f" — {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load "
         "{:.1f} {:.1f} {:.1f} before".format(*os.getloadavg()),
         "",
@@ -126,7 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     ]
     saved = {}
     for fam in args.families.split(","):
-        res = family(fam, args.units, profiles, args.seeds, first=args.first_seed)
+        res = family(
+            fam, args.units, profiles, args.seeds, fleet=args.fleet, first=args.first_seed
+        )
         L += report(fam, res)
         saved.update({f"{fam}|{p}|{k}": v for p, d in res.items() for k, v in d.items()})
     if args.save:

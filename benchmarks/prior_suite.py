@@ -549,6 +549,8 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
         + "; ".join(
             f"{f}: {n[f]} units × {len(held[f])} held-out runs ({', '.join(held[f])})" for f in fams
         )
+        + (f"; prior learned from a fleet of {meta['fleet']} units a family (leave-unit-out)"
+           if meta.get("fleet", 0) > len(next(iter(data.values()))) else "")
         + f"; wall clock {meta['wall_s']:.0f} s with {meta['workers']} workers, load average "
         f"{meta['load_before']} before, {meta['load_after']} after (shared machine).",
         "",
@@ -673,6 +675,14 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=8)
+    ap.add_argument(
+        "--fleet",
+        type=int,
+        default=0,
+        help="units 0..N-1 of each family make the fleet the prior is learned from "
+        "(leave-unit-out; default --units); the first --units of them are evaluated. "
+        "Other than --units its results go to results-fleet<N>",
+    )
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--families", default="validation,break")
     ap.add_argument("--held", type=int, default=5, help="held-out runs per unit (of 5)")
@@ -693,6 +703,9 @@ def main(argv: list[str] | None = None) -> int:
     stem = CACHE / ("results-white" if args.white else "results")
     if args.quick != "quick":
         stem = CACHE / ("results-quick-" + Path(args.quick).stem.replace(":", "-"))
+    fleet = max(args.fleet or args.units, args.units)
+    if fleet != args.units:
+        stem = stem.with_name(stem.name + f"-fleet{fleet}")
     if args.tables_only:
         d = load(stem)
         body = tables(d["data"], d["meta"])
@@ -704,8 +717,9 @@ def main(argv: list[str] | None = None) -> int:
         from concurrent.futures import ProcessPoolExecutor
 
         units = list(range(args.units))
+        members = list(range(fleet))
         with ProcessPoolExecutor(args.workers) as ex:
-            s1 = {f: list(ex.map(stage1, [f] * len(units), units)) for f in fams}
+            s1 = {f: list(ex.map(stage1, [f] * fleet, members)) for f in fams}
             futs = {
                 f: [
                     ex.submit(
@@ -728,6 +742,7 @@ def main(argv: list[str] | None = None) -> int:
             "machine": f"{platform.machine()} {os.cpu_count()} cores, Python "
             f"{platform.python_version()}",
             "workers": args.workers,
+            "fleet": fleet,
             "wall_s": time.perf_counter() - t0,
             "load_before": load_before,
             "load_after": "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()),
