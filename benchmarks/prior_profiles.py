@@ -112,14 +112,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--fleet", type=int, default=12, help="the fleet each unit's prior is learned from"
     )
+    ap.add_argument("--temperature", choices=("pt100", "internal"), default="pt100")
     args = ap.parse_args(argv)
+    ps.TEMP = args.temperature
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
     t0 = time.perf_counter()
     profiles = args.profiles.split(",")
     L = [
         f"`python benchmarks/prior_profiles.py --profiles {args.profiles} --seeds {args.seeds}"
-        f" --first-seed {args.first_seed} --fleet {args.fleet}`"
+        f" --first-seed {args.first_seed} --fleet {args.fleet}"
+        f" --temperature {args.temperature}`"
         f" — {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load "
         "{:.1f} {:.1f} {:.1f} before".format(*os.getloadavg()),
         "",

@@ -70,6 +70,10 @@ HELD = {
     "break": ("heating", "random", "fastramp", "coldstart", "slowramp"),
 }
 CAL = {"validation": "paper", "break": "staircase"}
+#: the models' temperature input: "pt100" (the case) or "internal" (the unit's own die
+#: thermometer: gyrolab's DieThermometer for its family, breakfam.physics.die_sensor for
+#: the break family; set by --temperature)
+TEMP = "pt100"
 
 
 # ------------------------------------------------------------------------------ runs
@@ -102,6 +106,12 @@ def simulate(
             c = {k: p.get(k, v) for k, v in (("c0", 0.0), ("c1", 3.84e-4), ("c2", 3.4e-6))}
             model = model.with_effect("bias_poly", c0=c["c0"], c1=-c["c1"], c2=-c["c2"])
         prof = q if name == "quick" else vs.trajectory(name, u)
+        if TEMP == "internal":  # the unit's die-sensor offset, the same on all its runs
+            from gyrolab.sim.sensors import DieThermometer
+
+            off = DieThermometer().offset_sd_c * np.random.default_rng([2026, u, 7]).normal()
+            r = vs.simulate(model, prof, RATE_HZ, seed, die_offset_c=off)
+            return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], r["die_c"])
         r = vs.simulate(model, prof, RATE_HZ, seed)
         return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], r["pt_c"])
     from breakfam.family import simulate_run, units
@@ -113,7 +123,7 @@ def simulate(
     if name == "quick":
         sp = np.concatenate([np.full(int(s.duration_s), s.setpoint_c) for s in q.steps])
     r = simulate_run(unit, name, seed, setpoints=sp)
-    return _Run(r.t, r.raw, r.drift, r.pt_t, r.pt_c)
+    return _Run(r.t, r.raw, r.drift, r.pt_t, r.die_sensor_c if TEMP == "internal" else r.pt_c)
 
 
 def truth(family: str, u: int) -> dict[str, Any]:
@@ -192,7 +202,7 @@ def quick_profile(spec: str, prior: Any):  # noqa: ANN201
 
 def stage1(family: str, u: int) -> dict[str, Any]:
     """Unit ``u``'s 13 h model and timing (cached: it does not depend on the prior)."""
-    cached = CACHE / f"stage1-{family}-{u}.json"
+    cached = CACHE / f"stage1-{family}-{u}{'-internal' if TEMP == 'internal' else ''}.json"
     if cached.exists():
         return json.loads(cached.read_text())
     t0 = time.perf_counter()
@@ -676,6 +686,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=8)
     ap.add_argument(
+        "--temperature",
+        choices=("pt100", "internal"),
+        default="pt100",
+        help="the models' temperature input: the case PT100, or the unit's die thermometer "
+        "(both calibrations; results-…-internal)",
+    )
+    ap.add_argument(
         "--fleet",
         type=int,
         default=0,
@@ -703,6 +720,10 @@ def main(argv: list[str] | None = None) -> int:
     stem = CACHE / ("results-white" if args.white else "results")
     if args.quick != "quick":
         stem = CACHE / ("results-quick-" + Path(args.quick).stem.replace(":", "-"))
+    global TEMP
+    TEMP = args.temperature
+    if TEMP == "internal":
+        stem = stem.with_name(stem.name + "-internal")
     fleet = max(args.fleet or args.units, args.units)
     if fleet != args.units:
         stem = stem.with_name(stem.name + f"-fleet{fleet}")
@@ -743,6 +764,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{platform.python_version()}",
             "workers": args.workers,
             "fleet": fleet,
+            "temperature": TEMP,
             "wall_s": time.perf_counter() - t0,
             "load_before": load_before,
             "load_after": "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg()),

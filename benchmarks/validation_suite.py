@@ -142,11 +142,16 @@ def unit_model(unit: int):
 DETERMINISTIC = {"arw", "bias_instability", "rate_random_walk", "outliers", "quantization"}
 
 
-def simulate(model, profile: Profile, rate_hz: float, seed: int) -> dict[str, np.ndarray]:
+def simulate(
+    model, profile: Profile, rate_hz: float, seed: int, die_offset_c: float | None = None
+) -> dict[str, np.ndarray]:
     """Run ``profile`` through :class:`~gyrolab.sim.physics.Physics` step by step (time
     rule only): the raw output as a bench converts it, the true deterministic drift (same
     model without its stochastic effects, same thermal history) and 1 Hz PT100 readings
-    (CVD inverse of the case resistance plus the multimeter's noise)."""
+    (CVD inverse of the case resistance plus the multimeter's noise). With
+    ``die_offset_c`` (the unit's die-sensor offset, °C) also ``die_c``: the unit's
+    internal (die) thermometer at the same 1 Hz (:class:`~gyrolab.sim.sensors.DieThermometer`,
+    its register's resolution and noise)."""
     from gyrolab.pt100 import cvd_resistance, cvd_temperature
     from gyrolab.sim.noise import effect_rng
     from gyrolab.sim.physics import Physics
@@ -157,7 +162,7 @@ def simulate(model, profile: Profile, rate_hz: float, seed: int) -> dict[str, np
             det_model = det_model.without_effect(e.name)
     full = Physics(model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
     det = Physics(det_model, rate_hz=rate_hz, seed=seed, ambient_c=profile.ambient_c)
-    raw, drift, case = [], [], []
+    raw, drift, case, die = [], [], [], []
     for s in profile.steps:
         n = int(round(s.duration_s * rate_hz))
         full.set_setpoint(s.setpoint_c)
@@ -166,13 +171,22 @@ def simulate(model, profile: Profile, rate_hz: float, seed: int) -> dict[str, np
         raw.append(full.adc.counts_to_dps(b.counts))
         drift.append(det.advance(n).rate_dps)
         case.append(b.case_trace)
+        die.append(b.die_trace)
     raw_a, drift_a, case_a = (np.concatenate(x) for x in (raw, drift, case))
     t = np.arange(raw_a.size) / rate_hz
     step = int(round(rate_hz))  # PT100 at 1 Hz, read at the start of each second
     pt_t = t[::step]
     r = cvd_resistance(case_a[::step])
     r = r + model.sensors.dmm_noise_ohm * effect_rng(seed, "dmm").standard_normal(r.size)
-    return {"t": t, "raw": raw_a, "drift": drift_a, "pt_t": pt_t, "pt_c": cvd_temperature(r)}
+    out = {"t": t, "raw": raw_a, "drift": drift_a, "pt_t": pt_t, "pt_c": cvd_temperature(r)}
+    if die_offset_c is not None:
+        from gyrolab.sim.sensors import DieThermometer
+
+        d = np.concatenate(die)[::step]
+        th = DieThermometer()
+        w = np.random.default_rng([seed, 71]).standard_normal(d.size)
+        out["die_c"] = th.to_celsius(th.codes(d, die_offset_c, w))
+    return out
 
 
 # ------------------------------------------------------------------------ evaluation

@@ -6,7 +6,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .physics import Unit, air_temperature, draw_unit, drift, pt100, synthetic_noise, thermal
+from .physics import (
+    Unit,
+    air_temperature,
+    die_sensor,
+    draw_unit,
+    drift,
+    pt100,
+    synthetic_noise,
+    thermal,
+)
 from .realnoise import DATA, real_noise
 from .trajectories import NAMES, trajectory
 
@@ -23,6 +32,7 @@ class Run:
     pt_t: np.ndarray  # s, PT100 reading times (1 Hz)
     pt_c: np.ndarray  # °C, PT100 readings
     die_c: np.ndarray  # °C, die temperature at 1 Hz (diagnostics)
+    die_sensor_c: np.ndarray  # °C, the unit's die thermometer at pt_t (physics.die_sensor)
 
 
 def units(n: int) -> list[Unit]:
@@ -57,4 +67,6 @@ def simulate_run(
         noise = synthetic_noise(unit, n, rate_hz, rng)
     u = (np.interp(t, t1, D) - 25.0) / 50.0
     raw = d + noise * np.maximum(1.0 + unit.gamma * u, 0.2)
-    return Run(t=t, raw=raw, drift=d, pt_t=t1, pt_c=pt_c, die_c=D)
+    # its own generator: the runs' PT100 and noise draws are those of before
+    die = die_sensor(unit.index, D, np.random.default_rng([seed, 6]))
+    return Run(t=t, raw=raw, drift=d, pt_t=t1, pt_c=pt_c, die_c=D, die_sensor_c=die)

@@ -82,6 +82,7 @@ class Unit:
     gamma: float  # noise temperature coefficient (per 50 °C)
     real_noise: bool = False
     effects: tuple[str, ...] = field(default=())
+    index: int = 0  # u of draw_unit (the die thermometer's offset is drawn from it)
 
 
 def draw_unit(u: int, real_noise: bool) -> Unit:
@@ -140,6 +141,7 @@ def draw_unit(u: int, real_noise: bool) -> Unit:
         gamma=float(rng.uniform(-0.3, 0.3)) if tnoise else 0.0,
         real_noise=real_noise,
         effects=tuple(present),
+        index=u,
     )
 
 
@@ -182,6 +184,20 @@ def pt100(unit: Unit, P: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         s[i] = x
     s = s + unit.pt_noise_c * rng.standard_normal(s.size)
     return np.round(s / 1e-3) * 1e-3
+
+
+#: the gyro's own die thermometer, as an ADIS16405 reports it: TEMP_OUT 12 bits at
+#: 0.136 °C per LSB (ADIS16405 data sheet, Table 9); the unit's offset and the white noise
+#: are this family's choices
+DIE_LSB_C, DIE_NOISE_C, DIE_OFFSET_SD_C = 0.136, 0.05, 0.5
+
+
+def die_sensor(index: int, D: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """1 Hz readings of unit ``index``'s die thermometer: its own offset (drawn once per
+    unit), white noise, the register's resolution."""
+    offset = DIE_OFFSET_SD_C * float(np.random.default_rng([71, index]).standard_normal())
+    s = D + offset + DIE_NOISE_C * rng.standard_normal(D.size)
+    return np.round(s / DIE_LSB_C) * DIE_LSB_C
 
 
 def drift(unit: Unit, P: np.ndarray, D: np.ndarray, t_abs0: float) -> np.ndarray:
