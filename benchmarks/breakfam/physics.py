@@ -186,9 +186,10 @@ def pt100(unit: Unit, P: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.round(s / 1e-3) * 1e-3
 
 
-#: the gyro's own die thermometer, as an ADIS16405 reports it: TEMP_OUT 12 bits at
-#: 0.136 °C per LSB (ADIS16405 data sheet, Table 9); the unit's offset and the white noise
-#: are this family's choices
+#: the gyro's own die thermometer, about as coarse as an ADIS16405's: its TEMP_OUT is a
+#: 12-bit two's-complement word of ≈ 0.14 °C per LSB (as public drivers decode it, e.g.
+#: rust-fc's devices.rs, TEMP2C = 0.14); 0.136 here. The unit's offset and the white
+#: noise are this family's choices
 DIE_LSB_C, DIE_NOISE_C, DIE_OFFSET_SD_C = 0.136, 0.05, 0.5
 
 
