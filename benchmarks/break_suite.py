@@ -128,8 +128,11 @@ def run_unit(
     noise: str,
     quick: bool,
     lag: str = DEFAULT_LAG,
+    draw: int = 0,
 ):
-    """Simulate unit ``u`` on every trajectory, calibrate on ``protocol``, score the rest."""
+    """Simulate unit ``u`` on every trajectory, calibrate on ``protocol``, score the rest;
+    ``draw`` > 0 re-draws the calibration run's noise (seed + 100 000 × draw), the held-out
+    runs kept."""
     t0 = time.perf_counter()
     unit = units(u + 1)[u]
     names = list(NAMES)
@@ -138,8 +141,9 @@ def run_unit(
         for i, n in enumerate(names)
     }
     base = CALIBRATIONS.get(protocol, protocol)
-    if protocol in CALIBRATIONS:  # a calibration-only run, seeded as the run it extends
-        seed = 100 * u + names.index(base) + 1
+    # a calibration-only run is seeded as the run it extends
+    seed = 100 * u + names.index(base) + 1 + 100_000 * draw
+    if protocol in CALIBRATIONS or draw:
         runs[protocol] = simulate_run(unit, protocol, seed=seed, noise_path=noise)
     t_sim = time.perf_counter() - t0
     held = [n for n in names if n != base]
@@ -403,6 +407,12 @@ def main(argv: list[str] | None = None) -> int:
         choices=LAG_CRITERIA,
         help="PipelineConfig.causal_lag_criterion of the causal selection",
     )
+    ap.add_argument(
+        "--cal-draw",
+        type=int,
+        default=0,
+        help="re-draw the calibration run's noise (K > 0; held-out runs unchanged)",
+    )
     args = ap.parse_args(argv)
     fams = tuple(args.families.split(","))
     name = f"{args.protocol}{('-' + args.tag) if args.tag else ''}"
@@ -414,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
         t0 = time.perf_counter()
         la = load_now()
-        job = (args.protocol, fams, args.noise, args.quick, args.lag_criterion)
+        job = (args.protocol, fams, args.noise, args.quick, args.lag_criterion, args.cal_draw)
         us = list(range(args.first_unit, args.first_unit + args.units))
         if args.workers > 1:
             from concurrent.futures import ProcessPoolExecutor
@@ -428,6 +438,7 @@ def main(argv: list[str] | None = None) -> int:
             "families": list(fams),
             "quick": args.quick,
             "lag_criterion": args.lag_criterion,
+            "cal_draw": args.cal_draw,
         }
         save(CACHE / name, {"meta": meta, "units": results})
     body = tables(results, meta)
