@@ -5,6 +5,7 @@ validation families, held out on the same trajectories.
     python benchmarks/prior_suite.py [--units 8] [--workers 2] [--families validation,break]
                                      [--held N] [--out docs/results.md] [--tables-only]
                                      [--quick quick|P.toml|design[:WEIGHT[:SETPOINT_MAX]]]
+                                     [--fleet N] [--temperature pt100|internal]
 
 **Families.** ``validation``: gyrolab's own Monte-Carlo family
 (benchmarks/validation_suite.py: ``unit_model``, simulated by gyrolab's simulator, 13 h
@@ -559,8 +560,16 @@ def tables(data: dict[str, list[dict[str, Any]]], meta: dict[str, Any]) -> str:
         + "; ".join(
             f"{f}: {n[f]} units × {len(held[f])} held-out runs ({', '.join(held[f])})" for f in fams
         )
-        + (f"; prior learned from a fleet of {meta['fleet']} units a family (leave-unit-out)"
-           if meta.get("fleet", 0) > len(next(iter(data.values()))) else "")
+        + (
+            f"; prior learned from a fleet of {meta['fleet']} units a family (leave-unit-out)"
+            if meta.get("fleet", 0) > len(next(iter(data.values())))
+            else ""
+        )
+        + (
+            "; temperature input: the unit's die thermometer (both calibrations)"
+            if meta.get("temperature") == "internal"
+            else ""
+        )
         + f"; wall clock {meta['wall_s']:.0f} s with {meta['workers']} workers, load average "
         f"{meta['load_before']} before, {meta['load_after']} after (shared machine).",
         "",
