@@ -109,3 +109,21 @@ def test_one_round_through_gyrolab_causal_model() -> None:
     assert out["bias_stability_deg_per_h"] >= oracle["bias_stability_deg_per_h"] * 0.98
     lo, hi = m.band_at(held.t, held.pt_t, held.pt_c)
     assert np.all(hi > 0) and np.all(lo == -hi)
+
+
+def test_die_sensor_is_the_units_own_coarse_register() -> None:
+    """The die thermometer (``--temperature internal`` in prior_suite): readings on its
+    register's grid, one offset per unit across its runs (another unit another), and its
+    own generator — the run's PT100 readings are those of the same seed without it."""
+    u0, u1 = units(2)
+    a, b = (simulate_run(u0, "slowramp", seed=s) for s in (3, 4))
+    c = simulate_run(u1, "slowramp", seed=3)
+    lsb = P.DIE_LSB_C
+    assert np.allclose(a.die_sensor_c / lsb, np.round(a.die_sensor_c / lsb))
+    off = [float(np.mean(r.die_sensor_c - r.die_c)) for r in (a, b, c)]
+    assert abs(off[0] - off[1]) < 0.01  # the same unit: the same offset (noise averages)
+    assert abs(off[0] - off[2]) > 0.01  # draws of N(0, 0.5 °C) for units 0 and 1 differ
+    rng = np.random.default_rng([3, 5])  # the run's own generator, as simulate_run seeds it
+    sp, rest = trajectory("slowramp", 3)
+    pkg, _ = P.thermal(u0, P.air_temperature(sp, rest), rest)
+    assert np.array_equal(a.pt_c, P.pt100(u0, pkg, rng))
