@@ -136,17 +136,16 @@ def run_unit(
     t0 = time.perf_counter()
     unit = units(u + 1)[u]
     names = list(NAMES)
-    runs = {
-        n: simulate_run(unit, n, seed=100 * u + i + 1, noise_path=noise)
-        for i, n in enumerate(names)
-    }
     base = CALIBRATIONS.get(protocol, protocol)
-    # a calibration-only run is seeded as the run it extends
-    seed = 100 * u + names.index(base) + 1 + 100_000 * draw
-    if protocol in CALIBRATIONS or draw:
-        runs[protocol] = simulate_run(unit, protocol, seed=seed, noise_path=noise)
-    t_sim = time.perf_counter() - t0
     held = [n for n in names if n != base]
+    runs = {
+        n: simulate_run(unit, n, seed=100 * u + names.index(n) + 1, noise_path=noise)
+        for n in held
+    }
+    # the calibration run, once (a calibration-only one is seeded as the run it extends)
+    seed = 100 * u + names.index(base) + 1 + 100_000 * draw
+    runs[protocol] = simulate_run(unit, protocol, seed=seed, noise_path=noise)
+    t_sim = time.perf_counter() - t0
     outs, info = fit_and_apply(
         runs[protocol], {n: runs[n] for n in held}, families, u, quick, lag
     )
