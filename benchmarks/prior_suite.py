@@ -107,14 +107,14 @@ def simulate(
             c = {k: p.get(k, v) for k, v in (("c0", 0.0), ("c1", 3.84e-4), ("c2", 3.4e-6))}
             model = model.with_effect("bias_poly", c0=c["c0"], c1=-c["c1"], c2=-c["c2"])
         prof = q if name == "quick" else vs.trajectory(name, u)
+        off = None
         if TEMP == "internal":  # the unit's die-sensor offset, the same on all its runs
             from gyrolab.sim.sensors import DieThermometer
 
             off = DieThermometer().offset_sd_c * np.random.default_rng([2026, u, 7]).normal()
-            r = vs.simulate(model, prof, RATE_HZ, seed, die_offset_c=off)
-            return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], r["die_c"])
-        r = vs.simulate(model, prof, RATE_HZ, seed)
-        return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], r["pt_c"])
+        r = vs.simulate(model, prof, RATE_HZ, seed, die_offset_c=off)
+        temp = r["pt_c"] if off is None else r["die_c"]
+        return _Run(r["t"], r["raw"], r["drift"], r["pt_t"], temp)
     from breakfam.family import simulate_run, units
 
     unit = units(u + 1)[u]
