@@ -15,14 +15,18 @@ from gyrolab.compensation.causal_features import (
 )
 
 
-@pytest.mark.parametrize("tau,s0", [(0.0, 0.0), (12.0, 1.0), (600.0, -0.5)])
-def test_step_equals_vectorised_features_bit_for_bit(tau: float, s0: float) -> None:
+@pytest.mark.parametrize(
+    "tau,s0,shift", [(0.0, 0.0, 0.0), (12.0, 1.0, 0.0), (600.0, -0.5, 0.0), (300.0, 0.0, 0.8)]
+)
+def test_step_equals_vectorised_features_bit_for_bit(tau: float, s0: float, shift: float) -> None:
     rng = np.random.default_rng(3)
     n = 3000
     T = 25.0 + np.cumsum(rng.normal(0.0, 0.05, n))
     dt = rng.uniform(0.5, 1.5, n)
     dt[0] = 0.0
-    p = CausalParams(tau_s=tau, width_c=0.7, warmup_tau_s=500.0, start_branch=s0)
+    p = CausalParams(
+        tau_s=tau, width_c=0.7, warmup_tau_s=500.0, start_branch=s0, self_heating_c=shift
+    )
     X = features(T, dt, p)
     assert X[0, 2] == pytest.approx(s0)  # the play starts on its power-on branch
     s = initial_state(T[0], 0.0, p)
@@ -44,6 +48,21 @@ def test_features_follow_their_equations() -> None:
     assert X[i, 1] == pytest.approx(0.001, rel=3e-3)  # discrete step: Δt/2τ
     assert X[i, 2] == 1.0 and X[-1000, 2] == -1.0
     assert X[600, 3] == pytest.approx(np.exp(-1.0))
+
+
+def test_the_play_follows_the_die_self_heating() -> None:
+    # the case held still: with δ the die warms by δ (1 − E) after power-on and drags
+    # the play up once δ (1 − E) exceeds its half-width; without δ nothing moves
+    t = np.arange(0.0, 6000.0)
+    T = np.full(t.size, 20.0)
+    p = CausalParams(tau_s=300.0, width_c=1.0, warmup_tau_s=600.0, self_heating_c=0.8)
+    X = reading_features(t, T, p)
+    H = 0.8 * (1.0 - X[:, 3])
+    np.testing.assert_allclose(X[:, 2], np.minimum(H / 0.5, 1.0), atol=1e-12)
+    assert X[-1, 2] == 1.0
+    assert np.all(reading_features(t, T, CausalParams(tau_s=300.0))[:, 2] == 0.0)
+    assert p.to_dict()["self_heating_c"] == 0.8
+    assert "self_heating_c" not in CausalParams(tau_s=300.0).to_dict()  # files as before
 
 
 # ------------------------------------------------------------------ family selection

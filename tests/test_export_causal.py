@@ -100,9 +100,10 @@ def test_causal_model_exported_to_c_and_json(
         got = series_metrics(acc.result()[1], SMALL.block_s)
         for k in KEYS:
             assert got[k] == pytest.approx(metrics["axes"][name]["causal"][k], rel=1e-4)
-    # issue 23's terms (heating-only rate, R|R|, hysteresis amplitude across T) and the
-    # play's branch at power-on, added to the fitted models: the JSON evaluator equals
-    # the Python model, and the compiled C follows it to float32 precision
+    # issue 23's terms (heating-only rate, R|R|, hysteresis amplitude across T), the
+    # play's branch at power-on and its self-heating shift, added to the fitted models:
+    # the JSON evaluator equals the Python model, and the compiled C follows it to
+    # float32 precision
     from gyrolab.compensation.causal_models import StructuredCausalModel
     from gyrolab.export.c_code import generate
 
@@ -110,12 +111,16 @@ def test_causal_model_exported_to_c_and_json(
     for a, (_, d) in enumerate(ModelDir(model).axes()):
         cm = d.load().causal
         inner = replace(cm.model, **extra)
-        params = replace(cm.params, start_branch=(1.0, -1.0, 0.5)[a])
+        shift = (0.0, 0.6, 1.2)[a]  # the play's self-heating shift δ (axis 0: none)
+        params = replace(cm.params, start_branch=(1.0, -1.0, 0.5)[a], self_heating_c=shift)
         sm = StructuredCausalModel(cm.family, params, inner)
         py = sm.reading_drift(rec.pt100_t, rec.pt100_c)
         assert sm.spec()["features"]["start_branch"] == params.start_branch
+        assert sm.spec()["features"].get("self_heating_c", 0.0) == shift
         spec["axes"][a]["model"]["model"].update(extra)
         spec["axes"][a]["model"]["features"]["start_branch"] = params.start_branch
+        if shift:
+            spec["axes"][a]["model"]["features"]["self_heating_c"] = shift
         np.testing.assert_allclose(
             evaluate_causal(spec["axes"][a]["model"], rec.pt100_t, rec.pt100_c),
             py,

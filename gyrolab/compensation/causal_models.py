@@ -22,8 +22,8 @@ Outside the calibration range of F the polynomial continues linearly from its ed
 the networks do the same (:class:`~gyrolab.compensation.gabp.MLPDriftModel`).
 
 Exported as ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s",
-"width_c", "warmup_tau_s"[, "start_branch"]}, "model": INNER}`` (``start_branch`` only
-when not 0) with ``INNER`` a ``structured`` or ``mlp``
+"width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"]}, "model": INNER}``
+(``start_branch`` and ``self_heating_c`` only when not 0) with ``INNER`` a ``structured`` or ``mlp``
 form of :mod:`gyrolab.compensation.regressors` (inputs ``["F", "R", "S", "E"]``);
 :func:`causal_readings` states the state machine's equations as the JSON's reference.
 """
@@ -152,6 +152,7 @@ class CausalDriftModel(DriftModel):
                 "warmup_tau_s": float(p.warmup_tau_s),
                 # only when not 0: exports of models without it stay as they were
                 **({"start_branch": float(p.start_branch)} if p.start_branch else {}),
+                **({"self_heating_c": float(p.self_heating_c)} if p.self_heating_c else {}),
             },
             "model": inner,
         }
@@ -388,15 +389,18 @@ def causal_readings(
     time as firmware runs it), from the JSON's ``features`` alone. At rest at the first
     reading (``F = G = T_0``, ``p = T_0 − s₀ w/2`` with ``s₀`` the ``start_branch``, 0
     when absent; ``t = t_0 − t_power_on``); then, with ``Δt`` the time
-    since the previous reading, ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width::
+    since the previous reading, ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width,
+    ``δ`` the ``self_heating_c`` (0 when absent)::
 
         F += a (T − F),  a = −expm1(−Δt/τ)  (1 when τ = 0)      die temperature
         G += b (T − G),  b = −expm1(−Δt/τ_r);  R = (T − G)/τ_r   rate
-        p = min(max(p, F − w/2), F + w/2);     S = (F − p)/(w/2) hysteresis branch
         t += Δt;                               E = exp(−t/τ_w)    warm-up
+        H = F + δ (1 − E)                                        die with its self-heating
+        p = min(max(p, H − w/2), H + w/2);     S = (H − p)/(w/2) hysteresis branch
     """
     tau, tmin = features["tau_s"], features["rate_tau_min_s"]
     tau_r, half, tau_w = max(tau, tmin), 0.5 * features["width_c"], features["warmup_tau_s"]
+    shift = features.get("self_heating_c", 0.0)
     out = np.empty((len(pt_c), 4))
     F = G = float(pt_c[0])
     p = F - features.get("start_branch", 0.0) * half
@@ -408,9 +412,11 @@ def causal_readings(
         a = -math.expm1(-dt / tau) if tau > 0 else 1.0
         F += a * (T - F)
         G += -math.expm1(-dt / tau_r) * (T - G)
-        p = min(max(p, F - half), F + half)
         t += dt
-        out[n] = (F, (T - G) / tau_r, (F - p) / half, math.exp(-t / tau_w))
+        E = math.exp(-t / tau_w)
+        H = F + shift * (1.0 - E)
+        p = min(max(p, H - half), H + half)
+        out[n] = (F, (T - G) / tau_r, (H - p) / half, E)
     return out
 
 
@@ -436,16 +442,29 @@ def _c_model(m: dict[str, Any], prefix: str) -> CModel:
         if s0
         else "    if (first) st->F = st->G = st->p = T;"
     )
+    shift = f.get("self_heating_c", 0.0)
+    if shift:  # the play follows the die with its self-heating, H = F + δ (1 − E)
+        play = [
+            f"    const float E = expf(-(float)(t / {f['warmup_tau_s']!r}));",
+            f"    const float H = st->F + {c_float(shift)} * (1.0f - E);",
+            f"    st->p = clampf(st->p, H - {c_float(half)}, H + {c_float(half)});",
+            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
+            f"                        (H - st->p) / {c_float(half)}, E}};",
+        ]
+    else:  # as exported before δ existed
+        play = [
+            f"    st->p = clampf(st->p, st->F - {c_float(half)}, st->F + {c_float(half)});",
+            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
+            f"                        (st->F - st->p) / {c_float(half)},",
+            f"                        expf(-(float)(t / {f['warmup_tau_s']!r}))}};",
+        ]
     reading = "\n".join(
         [
             first,
             f"    const float a = {a};",
             "    st->F += a * (T - st->F);",
             f"    st->G += -expm1f(-dt / {c_float(tau_r)}) * (T - st->G);",
-            f"    st->p = clampf(st->p, st->F - {c_float(half)}, st->F + {c_float(half)});",
-            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
-            f"                        (st->F - st->p) / {c_float(half)},",
-            f"                        expf(-(float)(t / {f['warmup_tau_s']!r}))}};",
+            *play,
             f"    st->held = {prefix}f(x);",
         ]
     )
