@@ -110,3 +110,32 @@ def test_structured_rate_keeps_a_heating_only_rate_term() -> None:
     ext = m.alternatives["structured_rate"]
     assert "rate_pos" in ext.model.terms
     assert m.cv_rmse["structured_rate"] < m.cv_rmse["structured"]
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.5])
+def test_structured_rate_finds_the_die_self_heating_its_play_follows(shift: float) -> None:
+    """A gyro whose hysteresis follows a die that warms δ = 0.5 °C above its case after
+    power-on (issue 23's self-heating; half the play's half-width, so neither start
+    branch fits it): the extended search finds it and beats the same search without δ
+    in CV by the 1 % it must; a gyro without it keeps δ = 0 (both on every seed 1–6
+    tried)."""
+    from dataclasses import replace
+
+    from gyrolab.compensation import structured
+
+    cal = _staircase_run(tau_die=200.0, hyst=0.0, seed=8, hours=4.0)
+    true = CausalParams(tau_s=200.0, width_c=2.0, warmup_tau_s=600.0, self_heating_c=shift)
+    S = reading_features(cal.pt_t, cal.pt_c, true)[:, 2]
+    cal = replace(cal, rate=cal.rate + hold(cal.t, cal.pt_t, 3e-3 * S))
+    m = fit_causal(cal, families=("structured_rate",), seed=0)
+    log = m.selection["structured_rate"]
+    assert set(log["cv_rmse_by_self_heating"]) == {str(v) for v in structured.SELF_HEATING_GRID_C}
+    if shift:
+        assert m.params.self_heating_c > 0.0 and m.params.start_branch == 0.0
+        # the branch it settles on, δ/(w/2), is what the run identifies: 0.5
+        assert m.params.self_heating_c / (0.5 * m.params.width_c) == pytest.approx(0.5)
+        assert m.cv_rmse["structured_rate"] < 0.99 * min(log["cv_rmse_by_start_branch"].values())
+        assert m.describe()["features"]["self_heating_c"] == m.params.self_heating_c
+    else:
+        assert m.params.self_heating_c == 0.0
+        assert "self_heating_c" not in m.describe()["features"]

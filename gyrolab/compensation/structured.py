@@ -13,10 +13,11 @@ searched with the lag and kept by backward elimination on the blocked CV (ridge-
 fold fits, :func:`cv_linear`), ``S·v`` only when also significant with the effective
 sample size (:func:`_select_terms`); outside the calibration range of ``F`` the series
 continues linearly from its edge, and R|R| beyond the calibrated rates likewise. The
-nonlinear parameters (τ, w, τ_w) and the order P are chosen on grids by blocked
-cross-validation inside the calibration run (:func:`select_structured`), the linear ones
-by least squares (:func:`fit_structured`); a term is kept only if it lowers the
-cross-validated error by ≥ 1 % (:data:`~gyrolab.compensation.drift_model.TIE`). The
+nonlinear parameters (τ, w, τ_w; the extended search also s₀ and δ) and the order P are
+chosen on grids by blocked cross-validation inside the calibration run
+(:func:`select_structured`), the linear ones by least squares (:func:`fit_structured`); a
+term is kept only if it lowers the cross-validated error by ≥ 1 %
+(:data:`~gyrolab.compensation.drift_model.TIE`). The
 ``poly`` and ``structured`` families of :mod:`gyrolab.compensation.causal_models` are
 this model (poly: τ = 0, no term).
 """
@@ -76,6 +77,10 @@ DEFAULT_LAG_CRITERION = "profile"
 #: it let ``structured`` (symmetric rate term) win the selection over ``structured_rate``
 #: on units whose rate sensitivity differs heating and cooling (docs/results.md).
 START_BRANCHES = (0.0, 1.0)
+#: the play's self-heating shift δ (°C, :class:`CausalParams` ``self_heating_c``),
+#: searched by the extended family after the width (:func:`_self_heating`): the die's
+#: settled rise above its case that the play follows, ``H = F + δ (1 − E)``
+SELF_HEATING_GRID_C = (0.25, 0.5, 1.0, 2.0)
 
 
 @dataclass
@@ -576,6 +581,43 @@ def _profile_lag(
     return replace(q, tau_s=tau), log
 
 
+def _self_heating(
+    cv: Callable[[CausalParams, int], float], p: CausalParams, order: int, err: float
+) -> tuple[float, CausalParams, dict[str, float]]:
+    """The play's self-heating shift δ (:class:`CausalParams` ``self_heating_c``): each δ
+    of :data:`SELF_HEATING_GRID_C`, the play started where the PT100 reads (s₀ = 0),
+    against the choice so far (δ = 0, s₀ 0 or +1) by the blocked CV, kept only if ≥ 1 %
+    (TIE) better; where a δ wins, the warm-up's τ_w (which the shift shares) with δ on
+    their joint grid, then the width again. Returns the CV RMSE, the parameters and the
+    CV RMSE of each δ first tried."""
+    tried: dict[str, float] = {}
+    best = (np.inf, p)
+    for v in SELF_HEATING_GRID_C:
+        q = replace(p, self_heating_c=v, start_branch=0.0)
+        e = cv(q, order)
+        tried[str(v)] = e
+        if e < best[0]:
+            best = (e, q)
+    if best[0] < err * (1.0 - TIE):  # a new parameter must win by TIE, as s₀ must
+        err, p = best
+    if p.self_heating_c:
+        joint = [
+            replace(p, self_heating_c=v, warmup_tau_s=tw)
+            for tw in WARMUP_GRID_S
+            for v in SELF_HEATING_GRID_C
+        ]
+        for q in joint:
+            e = cv(q, order)
+            if e < err:
+                err, p = e, q
+        for w in WIDTH_GRID_C:  # then the width, at the (τ_w, δ) chosen
+            q = replace(p, width_c=w)
+            e = cv(q, order)
+            if e < err:
+                err, p = e, q
+    return err, p, tried
+
+
 def select_structured(
     cal: CausalCalibration,
     folds: list[np.ndarray],
@@ -584,14 +626,14 @@ def select_structured(
 ) -> tuple[CausalParams, int, tuple[str, ...], float, dict[str, Any]]:
     """Choose (τ, τ_w, order, s₀) on the joint grid with every original term on
     (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
-    between its grid neighbours (golden section), then w and τ_w again on their grids;
-    then the terms (:func:`_select_terms`; ``extended``:
-    :func:`_select_terms_backward`); with ``lag_criterion="profile"`` τ is finally chosen
-    again, for the terms kept, by profile least squares (``"profile_warmup"``: with τ_w
-    where the warm-up term is kept) (:func:`_profile_lag`). The lag,
-    the warm-up and (``extended`` only) the start branch (:data:`START_BRANCHES`) are
-    searched together because all three shape the first hours of a run. Returns the
-    choice and a log."""
+    between its grid neighbours (golden section), then w and τ_w again on their grids
+    (``extended``: then the self-heating shift δ, :func:`_self_heating`); then the terms
+    (:func:`_select_terms`; ``extended``: :func:`_select_terms_backward`); with
+    ``lag_criterion="profile"`` τ is finally chosen again, for the terms kept, by profile
+    least squares (``"profile_warmup"``: with τ_w where the warm-up term is kept)
+    (:func:`_profile_lag`). The lag, the warm-up and (``extended`` only) the start branch
+    (:data:`START_BRANCHES`) are searched together because all three shape the first
+    hours of a run. Returns the choice and a log."""
     if lag_criterion not in LAG_CRITERIA:
         raise ValueError(f"lag_criterion must be one of {LAG_CRITERIA}, not {lag_criterion!r}")
     y = cal.rate
@@ -630,6 +672,9 @@ def select_structured(
             e = cv(q, order)
             if e < err:
                 err, p = e, q
+    shifts: dict[str, float] = {}
+    if extended:
+        err, p, shifts = _self_heating(cv, p, order, err)
     select = _select_terms_backward if extended else _select_terms
     terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
@@ -637,6 +682,8 @@ def select_structured(
         warm = lag_criterion == "profile_warmup"
         p, log["lag_profile"] = _profile_lag(feature, y, p, order, terms, warm)
     log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
+    if shifts:
+        log["cv_rmse_by_self_heating"] = shifts
     return p, order, terms, err, log
 
 
@@ -646,6 +693,7 @@ __all__ = [
     "EXTRA_TERMS",
     "LAG_CRITERIA",
     "ORDERS",
+    "SELF_HEATING_GRID_C",
     "START_BRANCHES",
     "TERMS",
     "T_KEEP",
