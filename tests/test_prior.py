@@ -209,6 +209,35 @@ def test_start_branch_is_carried_from_the_fleet_to_the_fit() -> None:
     assert FleetPrior.from_dict(d).clusters[0].start_branch == 0.0
 
 
+def test_self_heating_shift_is_carried_from_the_fleet_to_the_fit() -> None:
+    """Units whose play follows the die's self-heating (``structured_rate``'s δ): the
+    cluster carries the members' median δ and the MAP fit of a new unit runs its play with
+    it; a prior written without δ reads as δ = 0 and is written without it."""
+    rng = np.random.default_rng(25)
+    units = []
+    for i, sh in enumerate((0.5, 0.5, 1.0, 0.25)):
+        p, c = _unit(rng)
+        p = CausalParams(
+            p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, self_heating_c=sh
+        )
+        cal, _ = _run("paper", p, c, seed=70 + i)
+        units.append(UnitEntry(f"u{i}", p, _own_fit(cal, p)))
+    prior = learn_prior(units)
+    assert [cl.self_heating_c for cl in prior.clusters] == [0.5]
+    p, c = _unit(np.random.default_rng(26))
+    p = CausalParams(p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, self_heating_c=0.5)
+    cal, _ = _run("quick", p, c, seed=7)
+    got = fit_map(cal, prior)
+    assert got.model.params.self_heating_c == 0.5, got.log["features_from"]
+    assert got.log["features"]["self_heating_c"] == 0.5
+    d = prior.to_dict()
+    assert FleetPrior.from_dict(d).clusters[0].self_heating_c == 0.5
+    del d["clusters"][0]["self_heating_c"]
+    back = FleetPrior.from_dict(d)
+    assert back.clusters[0].self_heating_c == 0.0
+    assert "self_heating_c" not in back.to_dict()["clusters"][0]
+
+
 def test_own_covariance_holds_correlated_noise() -> None:
     """The detector's jackknife covariance of a least-squares estimate under correlated
     noise (AR(1), correlation time 10 samples, shorter than a jackknife block) matches the

@@ -23,8 +23,9 @@ cannot estimate ``P + 7`` dimensions' correlations), widened for the cluster mea
 uncertainty (n units), and a floor: no component is claimed known better than
 :data:`FLOOR_DPS` at its regressor's largest value (:data:`REGRESSOR_SCALE`). φ gets a
 mean and standard deviation per cluster (floor 0.1); the power-on hysteresis branch s₀
-(``start_branch``, 0 or +1: issue 23's ``structured_rate``) is not in φ but carried with
-it — each cluster fits and applies its members' median s₀.
+(``start_branch``, 0 or +1: issue 23's ``structured_rate``) and the play's self-heating
+shift δ (``self_heating_c``, °C, the same family's) are not in φ but carried with it —
+each cluster fits and applies its members' median s₀ and median δ.
 **Clusters**: k-means (k = 2, 3) on what the units' drift does (°/s: the polynomial at 11
 temperatures, each term at its largest regressor value), kept only when every cluster has
 ≥ :data:`MIN_CLUSTER` units and the mean silhouette is ≥ :data:`SILHOUETTE_MIN` (the
@@ -197,7 +198,9 @@ def phi_of(p: CausalParams) -> np.ndarray:
     return np.array([math.log(p.tau_s + TAU0_S), math.log(p.width_c), math.log(p.warmup_tau_s)])
 
 
-def params_of(phi: np.ndarray, start_branch: float = 0.0) -> CausalParams:
+def params_of(
+    phi: np.ndarray, start_branch: float = 0.0, self_heating_c: float = 0.0
+) -> CausalParams:
     """The feature parameters of φ, the play starting on hysteresis branch
     ``start_branch`` s₀ (issue 23's power-on branch: not part of φ — it takes the values
     0 and +1 only — but carried with it, so a unit or cluster whose models start on the
@@ -207,6 +210,7 @@ def params_of(phi: np.ndarray, start_branch: float = 0.0) -> CausalParams:
         width_c=float(math.exp(phi[1])),
         warmup_tau_s=float(math.exp(phi[2])),
         start_branch=float(start_branch),
+        self_heating_c=float(self_heating_c),
     )
 
 
@@ -242,11 +246,14 @@ class Cluster:
     members: list[str]
     #: the members' power-on hysteresis branch s₀ (their median: 0 or +1)
     start_branch: float = 0.0
+    #: the members' self-heating shift δ of the play (their median, °C)
+    self_heating_c: float = 0.0
 
     def params(self, phi: np.ndarray | None = None) -> CausalParams:
         """The feature parameters at ``phi`` (default: the cluster's mean) on the
-        cluster's start branch."""
-        return params_of(self.phi_mean if phi is None else phi, self.start_branch)
+        cluster's start branch and self-heating shift."""
+        phi = self.phi_mean if phi is None else phi
+        return params_of(phi, self.start_branch, self.self_heating_c)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -256,6 +263,8 @@ class Cluster:
             "phi_sd": self.phi_sd.tolist(),
             "members": list(self.members),
             "start_branch": self.start_branch,
+            # only when not 0: priors of fleets without it are written as before
+            **({"self_heating_c": self.self_heating_c} if self.self_heating_c else {}),
         }
 
     @classmethod
@@ -267,6 +276,7 @@ class Cluster:
             np.asarray(d["phi_sd"], float),
             list(d["members"]),
             float(d.get("start_branch", 0.0)),  # priors written before s₀ was carried
+            float(d.get("self_heating_c", 0.0)),
         )
 
 
@@ -327,6 +337,7 @@ def _cluster(
     S: np.ndarray,
     basis: Basis,
     s0: np.ndarray,
+    sh: np.ndarray,
 ) -> Cluster:
     """A cluster's prior: its mean, and the pooled within-cluster covariance ``S`` shrunk
     halfway to its diagonal, floored, and widened by ``1 + 1/n`` (the mean itself is
@@ -342,6 +353,7 @@ def _cluster(
         np.maximum(sd, PHI_SD_FLOOR),
         names,
         float(np.median(s0)),
+        float(np.median(sh)),
     )
 
 
@@ -399,6 +411,7 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
     thetas = np.array([unit_vector(u.model, basis) for u in units])
     phis = np.array([phi_of(u.params) for u in units])
     s0 = np.array([u.params.start_branch for u in units])
+    sh = np.array([u.params.self_heating_c for u in units])
     names = [u.name for u in units]
     labels = np.zeros(len(units), dtype=int)
     Z = _drift_space(thetas, basis)
@@ -424,6 +437,7 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
             S,
             basis,
             s0[labels == j],
+            sh[labels == j],
         )
         for j in range(k)
     ]
