@@ -5,6 +5,8 @@ of another part number is detected, and a full-data unit reproduces its own fit.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -184,58 +186,41 @@ def test_clusters_found_when_the_units_form_groups() -> None:
     assert mem.belongs and "u0" in prior.clusters[mem.cluster].members
 
 
-def test_start_branch_is_carried_from_the_fleet_to_the_fit() -> None:
-    """Units whose models start on the heating branch (issue 23's power-on branch, s₀ = +1):
-    the cluster carries s₀, the MAP fit of a new unit of the part number runs its play
-    from it, and a prior saved before s₀ was carried reads as s₀ = 0."""
-    rng = np.random.default_rng(23)
+@pytest.mark.parametrize(
+    "name,fleet,value,seeds",
+    [
+        ("start_branch", (1.0, 1.0, 1.0, 1.0), 1.0, (23, 24, 60)),
+        ("self_heating_c", (0.5, 0.5, 1.0, 0.25), 0.5, (25, 26, 70)),
+    ],
+)
+def test_power_on_branch_and_self_heating_are_carried_from_the_fleet_to_the_fit(
+    name: str, fleet: tuple[float, ...], value: float, seeds: tuple[int, int, int]
+) -> None:
+    """Units whose models start on the heating branch (issue 23's power-on branch, s₀ = +1)
+    or whose play follows the die's self-heating (``structured_rate``'s δ): the cluster
+    carries the members' median, the MAP fit of a new unit of the part number runs its
+    play with it, and a prior saved before it was carried reads as 0 (δ: and is written
+    without it)."""
+    rng = np.random.default_rng(seeds[0])
     units = []
-    for i in range(4):
+    for i, v in enumerate(fleet):
         p, c = _unit(rng)
-        p = CausalParams(p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, start_branch=1.0)
-        cal, _ = _run("paper", p, c, seed=60 + i)
+        p = replace(p, **{name: v})
+        cal, _ = _run("paper", p, c, seed=seeds[2] + i)
         units.append(UnitEntry(f"u{i}", p, _own_fit(cal, p)))
     prior = learn_prior(units)
-    assert [cl.start_branch for cl in prior.clusters] == [1.0]
-    p, c = _unit(np.random.default_rng(24))
-    p = CausalParams(p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, start_branch=1.0)
-    cal, _ = _run("quick", p, c, seed=7)
+    assert [getattr(cl, name) for cl in prior.clusters] == [value]
+    p, c = _unit(np.random.default_rng(seeds[1]))
+    cal, _ = _run("quick", replace(p, **{name: value}), c, seed=7)
     got = fit_map(cal, prior)
-    assert got.model.params.start_branch == 1.0, got.log["features_from"]
-    assert got.log["features"]["start_branch"] == 1.0
+    assert getattr(got.model.params, name) == value, got.log["features_from"]
+    assert got.log["features"][name] == value
     d = prior.to_dict()
-    assert FleetPrior.from_dict(d).clusters[0].start_branch == 1.0
-    del d["clusters"][0]["start_branch"]
-    assert FleetPrior.from_dict(d).clusters[0].start_branch == 0.0
-
-
-def test_self_heating_shift_is_carried_from_the_fleet_to_the_fit() -> None:
-    """Units whose play follows the die's self-heating (``structured_rate``'s δ): the
-    cluster carries the members' median δ and the MAP fit of a new unit runs its play with
-    it; a prior written without δ reads as δ = 0 and is written without it."""
-    rng = np.random.default_rng(25)
-    units = []
-    for i, sh in enumerate((0.5, 0.5, 1.0, 0.25)):
-        p, c = _unit(rng)
-        p = CausalParams(
-            p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, self_heating_c=sh
-        )
-        cal, _ = _run("paper", p, c, seed=70 + i)
-        units.append(UnitEntry(f"u{i}", p, _own_fit(cal, p)))
-    prior = learn_prior(units)
-    assert [cl.self_heating_c for cl in prior.clusters] == [0.5]
-    p, c = _unit(np.random.default_rng(26))
-    p = CausalParams(p.tau_s, width_c=p.width_c, warmup_tau_s=p.warmup_tau_s, self_heating_c=0.5)
-    cal, _ = _run("quick", p, c, seed=7)
-    got = fit_map(cal, prior)
-    assert got.model.params.self_heating_c == 0.5, got.log["features_from"]
-    assert got.log["features"]["self_heating_c"] == 0.5
-    d = prior.to_dict()
-    assert FleetPrior.from_dict(d).clusters[0].self_heating_c == 0.5
-    del d["clusters"][0]["self_heating_c"]
+    assert getattr(FleetPrior.from_dict(d).clusters[0], name) == value
+    del d["clusters"][0][name]
     back = FleetPrior.from_dict(d)
-    assert back.clusters[0].self_heating_c == 0.0
-    assert "self_heating_c" not in back.to_dict()["clusters"][0]
+    assert getattr(back.clusters[0], name) == 0.0
+    assert (name in back.to_dict()["clusters"][0]) == (name == "start_branch")
 
 
 def test_own_covariance_holds_correlated_noise() -> None:
