@@ -27,8 +27,9 @@ without it the lag absorbed that first heating, fitted τ 963/824/635 s against 
 follows ``H = F + δ (1 − E)``, the die rising by δ with the warm-up's time constant after
 power-on, and keeps that offset once warmed up (issue 23: on the break family's unit 10,
 whose die runs 0.5 °C above its case, least squares on the noiseless drift with the play
-on ``F`` leaves its held-out runs at 1.19–1.29× the oracle, with the play on ``H``
-1.01–1.07×; docs/results.md).
+on ``F`` leaves its held-out runs at 1.22–1.31× the oracle, with the play on ``H``
+1.00–1.03×; a static start s₀ = δ/(w/2) does as well there, but on noisy calibrations it
+met the break family's targets on 6 of 16 draws against δ's 10: docs/results.md).
 
 Equations, evaluated in this order at every reading (τ_r = max(τ, τ_min))::
 
