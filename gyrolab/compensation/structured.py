@@ -581,6 +581,28 @@ def _profile_lag(
     return replace(q, tau_s=tau), log
 
 
+def _grid(name: str, values: tuple[float, ...]) -> list[dict[str, float]]:
+    """One feature parameter's grid as changes for :func:`_descend`."""
+    return [{name: v} for v in values]
+
+
+def _descend(
+    cv: Callable[[CausalParams, int], float],
+    order: int,
+    err: float,
+    p: CausalParams,
+    changes: list[dict[str, float]],
+) -> tuple[float, CausalParams]:
+    """Each change in turn applied to the parameters chosen so far, kept where it lowers
+    the CV RMSE: a coordinate pass over grids. Returns the CV RMSE and the parameters."""
+    for change in changes:
+        q = replace(p, **change)
+        e = cv(q, order)
+        if e < err:
+            err, p = e, q
+    return err, p
+
+
 def _self_heating(
     cv: Callable[[CausalParams, int], float], p: CausalParams, order: int, err: float
 ) -> tuple[float, CausalParams, dict[str, float]]:
@@ -600,21 +622,13 @@ def _self_heating(
             best = (e, q)
     if best[0] < err * (1.0 - TIE):  # a new parameter must win by TIE, as s₀ must
         err, p = best
-    if p.self_heating_c:
+    if p.self_heating_c:  # (τ_w, δ) on their joint grid, then the width at them
         joint = [
-            replace(p, self_heating_c=v, warmup_tau_s=tw)
+            {"warmup_tau_s": tw, "self_heating_c": v}
             for tw in WARMUP_GRID_S
             for v in SELF_HEATING_GRID_C
         ]
-        for q in joint:
-            e = cv(q, order)
-            if e < err:
-                err, p = e, q
-        for w in WIDTH_GRID_C:  # then the width, at the (τ_w, δ) chosen
-            q = replace(p, width_c=w)
-            e = cv(q, order)
-            if e < err:
-                err, p = e, q
+        err, p = _descend(cv, order, err, p, joint + _grid("width_c", WIDTH_GRID_C))
     return err, p, tried
 
 
@@ -666,12 +680,9 @@ def select_structured(
             err, p, order = bests[s0]
     tau, err = _refine_tau(lambda t: cv(replace(p, tau_s=t), order), p.tau_s, err)
     p = replace(p, tau_s=tau)
-    for name, grid in (("width_c", WIDTH_GRID_C), ("warmup_tau_s", WARMUP_GRID_S)):
-        for v in grid:
-            q = replace(p, **{name: v})
-            e = cv(q, order)
-            if e < err:
-                err, p = e, q
+    err, p = _descend(
+        cv, order, err, p, _grid("width_c", WIDTH_GRID_C) + _grid("warmup_tau_s", WARMUP_GRID_S)
+    )
     shifts: dict[str, float] = {}
     if extended:
         err, p, shifts = _self_heating(cv, p, order, err)
