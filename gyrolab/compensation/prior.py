@@ -336,24 +336,25 @@ def _cluster(
     names: list[str],
     S: np.ndarray,
     basis: Basis,
-    s0: np.ndarray,
-    sh: np.ndarray,
+    carried: np.ndarray,
 ) -> Cluster:
     """A cluster's prior: its mean, and the pooled within-cluster covariance ``S`` shrunk
     halfway to its diagonal, floored, and widened by ``1 + 1/n`` (the mean itself is
-    estimated from the cluster's ``n`` units: the predictive spread of a new unit)."""
+    estimated from the cluster's ``n`` units: the predictive spread of a new unit), and
+    the medians of the members' ``carried`` (s₀, δ) rows."""
     n = thetas.shape[0]
     cov = 0.5 * S + 0.5 * np.diag(np.diag(S))
     cov = (1.0 + 1.0 / n) * cov + np.diag((FLOOR_DPS / basis.scale()) ** 2)
     sd = phis.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
+    s0, shift = np.median(carried, axis=0)
     return Cluster(
         thetas.mean(axis=0),
         cov,
         phis.mean(axis=0),
         np.maximum(sd, PHI_SD_FLOOR),
         names,
-        float(np.median(s0)),
-        float(np.median(sh)),
+        start_branch=float(s0),
+        self_heating_c=float(shift),
     )
 
 
@@ -410,8 +411,8 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
     basis = Basis(lo, hi, min(max(u.model.order for u in units), MAX_ORDER))
     thetas = np.array([unit_vector(u.model, basis) for u in units])
     phis = np.array([phi_of(u.params) for u in units])
-    s0 = np.array([u.params.start_branch for u in units])
-    sh = np.array([u.params.self_heating_c for u in units])
+    # s₀ and δ, carried beside φ (module docstring)
+    carried = np.array([(u.params.start_branch, u.params.self_heating_c) for u in units])
     names = [u.name for u in units]
     labels = np.zeros(len(units), dtype=int)
     Z = _drift_space(thetas, basis)
@@ -436,8 +437,7 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
             [n for n, lab in zip(names, labels, strict=True) if lab == j],
             S,
             basis,
-            s0[labels == j],
-            sh[labels == j],
+            carried[labels == j],
         )
         for j in range(k)
     ]
