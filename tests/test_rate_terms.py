@@ -139,3 +139,27 @@ def test_structured_rate_finds_the_die_self_heating_its_play_follows(shift: floa
     else:
         assert m.params.self_heating_c == 0.0
         assert "self_heating_c" not in m.describe()["features"]
+
+
+@pytest.mark.parametrize(("gain", "shift"), [(0.005, 0.0), (0.05, 0.5)])
+def test_the_order_width_and_shift_are_chosen_jointly(gain: float, shift: float) -> None:
+    """A scripted CV surface with break unit 7's trap: at the default width order 2 wins,
+    and at order 2 the narrow width; a pass over the width at that order (the search
+    before) stops there, the joint grid finds order 5 at 1 °C, then τ_w. The shift δ must
+    beat the best δ = 0 by TIE (1 %): 0.5 % better is not taken, 5 % is (s₀ then 0)."""
+    from gyrolab.compensation import structured
+
+    def cv(p: CausalParams, order: int) -> float:
+        e = {(2, 1.0): 0.90, (2, 0.5): 0.85, (5, 1.0): 0.80}.get((order, p.width_c), 1.0)
+        if (order, p.width_c, p.self_heating_c) == (5, 1.0, 0.5):
+            e *= 1.0 - gain
+        return e * (0.975 if p.warmup_tau_s == 300.0 else 1.0)
+
+    p0 = CausalParams(tau_s=300.0, width_c=1.0, warmup_tau_s=600.0, start_branch=1.0)
+    widths = structured._grid("width_c", structured.WIDTH_GRID_C)
+    trapped, q = structured._descend(cv, 2, 0.90, p0, widths)
+    assert (trapped, q.width_c) == (0.85, 0.5)
+    err, p, order = structured._order_width(cv, p0, 2, 0.90)
+    assert (order, p.width_c, p.self_heating_c, p.warmup_tau_s) == (5, 1.0, shift, 300.0)
+    assert p.start_branch == (0.0 if shift else 1.0)
+    assert err == pytest.approx(0.80 * (1.0 - (gain if shift else 0.0)) * 0.975)
