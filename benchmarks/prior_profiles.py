@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--temperature", choices=("pt100", "internal"), default="pt100")
     args = ap.parse_args(argv)
-    ps.TEMP = args.temperature
+    ps.use_temperature(args.temperature)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
     t0 = time.perf_counter()

@@ -77,6 +77,14 @@ CAL = {"validation": "paper", "break": "staircase"}
 TEMP = "pt100"
 
 
+def use_temperature(temp: str) -> None:
+    """Set the models' temperature input (:data:`TEMP`) in this process; the pool's
+    workers run it at start (its initializer), so the choice reaches them under any
+    start method, not only fork."""
+    global TEMP
+    TEMP = temp
+
+
 # ------------------------------------------------------------------------------ runs
 
 
@@ -729,8 +737,7 @@ def main(argv: list[str] | None = None) -> int:
     stem = CACHE / ("results-white" if args.white else "results")
     if args.quick != "quick":
         stem = CACHE / ("results-quick-" + Path(args.quick).stem.replace(":", "-"))
-    global TEMP
-    TEMP = args.temperature
+    use_temperature(args.temperature)
     if TEMP == "internal":
         stem = stem.with_name(stem.name + "-internal")
     fleet = max(args.fleet or args.units, args.units)
@@ -748,7 +755,9 @@ def main(argv: list[str] | None = None) -> int:
 
         units = list(range(args.units))
         members = list(range(fleet))
-        with ProcessPoolExecutor(args.workers) as ex:
+        with ProcessPoolExecutor(
+            args.workers, initializer=use_temperature, initargs=(TEMP,)
+        ) as ex:
             s1 = {f: list(ex.map(stage1, [f] * fleet, members)) for f in fams}
             futs = {
                 f: [
