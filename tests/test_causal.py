@@ -16,16 +16,31 @@ from gyrolab.compensation.causal_features import (
 
 
 @pytest.mark.parametrize(
-    "tau,s0,shift", [(0.0, 0.0, 0.0), (12.0, 1.0, 0.0), (600.0, -0.5, 0.0), (300.0, 0.0, 0.8)]
+    "tau,s0,shift,kappa",
+    [
+        (0.0, 0.0, 0.0, 0.0),
+        (12.0, 1.0, 0.0, 0.0),
+        (600.0, -0.5, 0.0, 0.0),
+        (300.0, 0.0, 0.8, 0.0),
+        (300.0, 0.0, 0.8, 0.01),
+        (60.0, 1.0, 0.0, -0.2),  # the width at its floor below 20.5 °C
+    ],
 )
-def test_step_equals_vectorised_features_bit_for_bit(tau: float, s0: float, shift: float) -> None:
+def test_step_equals_vectorised_features_bit_for_bit(
+    tau: float, s0: float, shift: float, kappa: float
+) -> None:
     rng = np.random.default_rng(3)
     n = 3000
     T = 25.0 + np.cumsum(rng.normal(0.0, 0.05, n))
     dt = rng.uniform(0.5, 1.5, n)
     dt[0] = 0.0
     p = CausalParams(
-        tau_s=tau, width_c=0.7, warmup_tau_s=500.0, start_branch=s0, self_heating_c=shift
+        tau_s=tau,
+        width_c=0.7,
+        warmup_tau_s=500.0,
+        start_branch=s0,
+        self_heating_c=shift,
+        width_temp_per_c=kappa,
     )
     X = features(T, dt, p)
     assert X[0, 2] == pytest.approx(s0)  # the play starts on its power-on branch
@@ -63,6 +78,31 @@ def test_the_play_follows_the_die_self_heating() -> None:
     assert np.all(reading_features(t, T, CausalParams(tau_s=300.0))[:, 2] == 0.0)
     assert p.to_dict()["self_heating_c"] == 0.8
     assert "self_heating_c" not in CausalParams(tau_s=300.0).to_dict()  # files as before
+
+
+def test_the_play_width_follows_temperature() -> None:
+    # a triangle 0 → 50 → 0 °C at 1 °C/min: with κ the play's half-width is
+    # h = w/2 (1 + κ (F − 25)), so after the turn at 50 °C the branch S falls from +1
+    # to −1 over 2.9 °C (the fixed w = 2 °C play: 2 °C); κ = 0 is the fixed play, and
+    # absent from files
+    t = np.arange(0.0, 6000.0)
+    T = np.where(t < 3000, t / 60.0, 100.0 - t / 60.0)
+    w, k = 2.0, 0.02
+    p = CausalParams(width_c=w, width_temp_per_c=k)
+    S = reading_features(t, T, p)[:, 2]
+    h = 0.5 * w * (1.0 + k * (T - 25.0))  # 1.5 °C at 50 °C, 0.5 °C at 0 °C
+    assert S[3000] == pytest.approx(1.0)  # the top, 50 °C
+    # cooling from the top: the play stays at p = F_top − h(F_top) = 48.5 °C until
+    # F + h(F) falls to it (47.1 °C: h shrinks as it cools), then S = −1
+    top = T[3000] - h[3000]
+    j = np.flatnonzero(S[3001:] <= -1.0 + 1e-12)[0] + 3001
+    assert T[j] + h[j] == pytest.approx(top, abs=1.1 / 60.0)  # one reading's step
+    assert S[3001] < 1.0 - 1e-3  # it leaves +1 at once: the width shrinks with F
+    assert np.all(np.diff(S[3000:j]) < 0)
+    assert p.to_dict()["width_temp_per_c"] == k
+    assert "width_temp_per_c" not in CausalParams(width_c=w).to_dict()
+    with pytest.raises(ValueError):
+        CausalParams(width_temp_per_c=float("nan"))
 
 
 # ------------------------------------------------------------------ family selection

@@ -191,16 +191,17 @@ def test_clusters_found_when_the_units_form_groups() -> None:
     [
         ("start_branch", (1.0, 1.0, 1.0, 1.0), 1.0, (23, 24, 60)),
         ("self_heating_c", (0.5, 0.5, 1.0, 0.25), 0.5, (25, 26, 70)),
+        ("width_temp_per_c", (0.01, 0.01, 0.005, 0.01), 0.01, (27, 28, 80)),
     ],
 )
-def test_power_on_branch_and_self_heating_are_carried_from_the_fleet_to_the_fit(
+def test_power_on_branch_self_heating_and_width_slope_are_carried_to_the_fit(
     name: str, fleet: tuple[float, ...], value: float, seeds: tuple[int, int, int]
 ) -> None:
     """Units whose models start on the heating branch (issue 23's power-on branch, s₀ = +1)
-    or whose play follows the die's self-heating (``structured_rate``'s δ): the cluster
-    carries the members' median, the MAP fit of a new unit of the part number runs its
-    play with it, and a prior saved before it was carried reads as 0 (δ: and is written
-    without it)."""
+    or whose play follows the die's self-heating or changes width with temperature
+    (``structured_rate``'s δ and κ): the cluster carries the members' median, the MAP fit
+    of a new unit of the part number runs its play with it, and a prior saved before it
+    was carried reads as 0 (δ, κ: and is written without it)."""
     rng = np.random.default_rng(seeds[0])
     units = []
     for i, v in enumerate(fleet):

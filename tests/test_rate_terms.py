@@ -163,3 +163,43 @@ def test_the_order_width_and_shift_are_chosen_jointly(gain: float, shift: float)
     assert (order, p.width_c, p.self_heating_c, p.warmup_tau_s) == (5, 1.0, shift, 300.0)
     assert p.start_branch == (0.0 if shift else 1.0)
     assert err == pytest.approx(0.80 * (1.0 - (gain if shift else 0.0)) * 0.975)
+
+
+def _triangle_run(kappa: float, seed: int, hours: float = 8.0):
+    """A synthetic run whose hysteresis is a play of width 2 °C changing by κ per °C:
+    the case a 0.5 °C/min triangle between 5 and 55 °C, the bias a quadratic plus
+    5e-3 °/s times the play's branch, white noise; 4 s block means, 1 Hz PT100."""
+    from gyrolab.compensation.causal import CausalCalibration
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, hours * 3600.0)
+    phase = (t / 120.0) % 100.0
+    case = 5.0 + np.where(phase < 50.0, phase, 100.0 - phase)
+    pt = case + rng.normal(0.0, 0.005, t.size)
+    S = reading_features(t, pt, CausalParams(width_c=2.0, width_temp_per_c=kappa))[:, 2]
+    d = case - 25.0
+    noise = rng.normal(0.0, 4.6e-4 * np.sqrt(3.6), t.size)
+    rate = 1e-3 + 3.8e-4 * d + 3.4e-6 * d * d + 5e-3 * S + noise
+    nb = t.size // 4
+    return CausalCalibration(
+        t=t[: nb * 4].reshape(nb, 4).mean(axis=1),
+        rate=rate[: nb * 4].reshape(nb, 4).mean(axis=1),
+        pt_t=t,
+        pt_c=pt,
+    )
+
+
+@pytest.mark.parametrize("kappa", [0.0, 0.01, -0.01])
+def test_structured_rate_finds_the_play_width_temperature_slope(kappa: float) -> None:
+    """A hysteresis whose width grows or shrinks by half over 50 °C (issue 23's
+    temperature-dependent width): the extended search finds κ, sign and size, where it
+    beats κ = 0 by the 1 % it must; a play of fixed width keeps κ = 0 (seeds 1–3 alike)."""
+    from gyrolab.compensation import structured
+
+    m = fit_causal(_triangle_run(kappa, seed=1), families=("structured_rate",), seed=0)
+    log = m.selection["structured_rate"]
+    assert set(log["cv_rmse_by_width_temp"]) == {
+        str(v) for v in structured.WIDTH_TEMP_GRID_PER_C
+    }
+    assert m.params.width_temp_per_c == kappa
+    assert ("width_temp_per_c" in m.describe()["features"]) == bool(kappa)

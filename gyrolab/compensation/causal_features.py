@@ -74,6 +74,10 @@ import numba
 import numpy as np
 
 FEATURES = ("F", "R", "S", "E")  # column order of :func:`features`
+#: the play width ``w (1 + κ (H − WIDTH_REF_C))``, not below ``WIDTH_FLOOR w``, when κ
+#: (``width_temp_per_c``) is not 0: a hysteresis whose width changes with temperature
+WIDTH_REF_C = 25.0
+WIDTH_FLOOR = 0.1
 FEATURE_UNITS = {"F": "degC", "R": "degC/s", "S": "1", "E": "1"}
 
 
@@ -87,6 +91,7 @@ class CausalParams:
     warmup_tau_s: float = 600.0  # warm-up time constant τ_w
     start_branch: float = 0.0  # hysteresis branch s₀ at power-on (−1 cooling … +1 heating)
     self_heating_c: float = 0.0  # δ: the die's self-heating rise above F, settled, °C
+    width_temp_per_c: float = 0.0  # κ: the play width's change per °C about 25 °C
 
     def __post_init__(self) -> None:
         ok = (
@@ -97,6 +102,7 @@ class CausalParams:
             and self.warmup_tau_s > 0
             and -1.0 <= self.start_branch <= 1.0
             and math.isfinite(self.self_heating_c)
+            and math.isfinite(self.width_temp_per_c)
             and all(
                 math.isfinite(v) for v in (self.rate_tau_min_s, self.width_c, self.warmup_tau_s)
             )
@@ -110,10 +116,11 @@ class CausalParams:
         return max(self.tau_s, self.rate_tau_min_s)
 
     def to_dict(self) -> dict[str, Any]:
-        """The parameters; ``start_branch`` and ``self_heating_c`` only when not 0
-        (model.json and exports of models without them stay as they were)."""
+        """The parameters; ``start_branch``, ``self_heating_c`` and ``width_temp_per_c``
+        only when not 0 (model.json and exports of models without them stay as they
+        were)."""
         d = asdict(self)
-        for k in ("start_branch", "self_heating_c"):
+        for k in ("start_branch", "self_heating_c", "width_temp_per_c"):
             if not d[k]:
                 del d[k]
         return d
@@ -156,6 +163,9 @@ def step(state: State, T: float, dt: float, params: CausalParams) -> tuple[float
     t = state.t + dt
     E = math.exp(-t / params.warmup_tau_s)
     H = F + params.self_heating_c * (1.0 - E)
+    k = params.width_temp_per_c
+    if k != 0.0:
+        half = half * max(1.0 + k * (H - WIDTH_REF_C), WIDTH_FLOOR)
     p = state.p
     if p < H - half:
         p = H - half
@@ -175,6 +185,7 @@ def _features_kernel(
     half: float,
     tau_w: float,
     shift: float,
+    k: float,
     st: np.ndarray,
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; same operations as step()
@@ -190,11 +201,14 @@ def _features_kernel(
         t = t + d
         E = math.exp(-t / tau_w)
         H = F + shift * (1.0 - E)
-        if p < H - half:
-            p = H - half
-        elif p > H + half:
-            p = H + half
-        S = (H - p) / half
+        hh = half
+        if k != 0.0:
+            hh = half * max(1.0 + k * (H - WIDTH_REF_C), WIDTH_FLOOR)
+        if p < H - hh:
+            p = H - hh
+        elif p > H + hh:
+            p = H + hh
+        S = (H - p) / hh
         out[i, 0] = F
         out[i, 1] = R
         out[i, 2] = S
@@ -227,6 +241,7 @@ def features(
         0.5 * float(params.width_c),
         float(params.warmup_tau_s),
         float(params.self_heating_c),
+        float(params.width_temp_per_c),
         st,
         out,
     )

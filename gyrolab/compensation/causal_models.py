@@ -22,8 +22,8 @@ Outside the calibration range of F the polynomial continues linearly from its ed
 the networks do the same (:class:`~gyrolab.compensation.gabp.MLPDriftModel`).
 
 Exported as ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s",
-"width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"]}, "model": INNER}``
-(``start_branch`` and ``self_heating_c`` only when not 0) with ``INNER`` a ``structured`` or ``mlp``
+"width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"][, "width_temp_per_c"]},
+"model": INNER}`` (the last three only when not 0) with ``INNER`` a ``structured`` or ``mlp``
 form of :mod:`gyrolab.compensation.regressors` (inputs ``["F", "R", "S", "E"]``);
 :func:`causal_readings` states the state machine's equations as the JSON's reference.
 """
@@ -38,6 +38,8 @@ import numpy as np
 
 from gyrolab.compensation.causal_features import (
     FEATURES,
+    WIDTH_FLOOR,
+    WIDTH_REF_C,
     CausalParams,
     State,
     hold,
@@ -153,6 +155,7 @@ class CausalDriftModel(DriftModel):
                 # only when not 0: exports of models without it stay as they were
                 **({"start_branch": float(p.start_branch)} if p.start_branch else {}),
                 **({"self_heating_c": float(p.self_heating_c)} if p.self_heating_c else {}),
+                **({"width_temp_per_c": float(p.width_temp_per_c)} if p.width_temp_per_c else {}),
             },
             "model": inner,
         }
@@ -390,17 +393,19 @@ def causal_readings(
     reading (``F = G = T_0``, ``p = T_0 − s₀ w/2`` with ``s₀`` the ``start_branch``, 0
     when absent; ``t = t_0 − t_power_on``); then, with ``Δt`` the time
     since the previous reading, ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width,
-    ``δ`` the ``self_heating_c`` (0 when absent)::
+    ``δ`` the ``self_heating_c`` and ``κ`` the ``width_temp_per_c`` (0 when absent)::
 
         F += a (T − F),  a = −expm1(−Δt/τ)  (1 when τ = 0)      die temperature
         G += b (T − G),  b = −expm1(−Δt/τ_r);  R = (T − G)/τ_r   rate
         t += Δt;                               E = exp(−t/τ_w)    warm-up
         H = F + δ (1 − E)                                        die with its self-heating
-        p = min(max(p, H − w/2), H + w/2);     S = (H − p)/(w/2) hysteresis branch
+        h = w/2 · max(1 + κ (H − 25), 0.1)     (w/2 when κ = 0)  the play's half-width
+        p = min(max(p, H − h), H + h);         S = (H − p)/h     hysteresis branch
     """
     tau, tmin = features["tau_s"], features["rate_tau_min_s"]
     tau_r, half, tau_w = max(tau, tmin), 0.5 * features["width_c"], features["warmup_tau_s"]
     shift = features.get("self_heating_c", 0.0)
+    k = features.get("width_temp_per_c", 0.0)
     out = np.empty((len(pt_c), 4))
     F = G = float(pt_c[0])
     p = F - features.get("start_branch", 0.0) * half
@@ -415,8 +420,9 @@ def causal_readings(
         t += dt
         E = math.exp(-t / tau_w)
         H = F + shift * (1.0 - E)
-        p = min(max(p, H - half), H + half)
-        out[n] = (F, (T - G) / tau_r, (H - p) / half, E)
+        h = half * max(1.0 + k * (H - WIDTH_REF_C), WIDTH_FLOOR) if k else half
+        p = min(max(p, H - h), H + h)
+        out[n] = (F, (T - G) / tau_r, (H - p) / h, E)
     return out
 
 
@@ -443,7 +449,18 @@ def _c_model(m: dict[str, Any], prefix: str) -> CModel:
         else "    if (first) st->F = st->G = st->p = T;"
     )
     shift = f.get("self_heating_c", 0.0)
-    if shift:  # the play follows the die with its self-heating, H = F + δ (1 − E)
+    k = f.get("width_temp_per_c", 0.0)
+    if k:  # the play's width changes with temperature: h = w/2 max(1 + κ (H − 25), 0.1)
+        play = [
+            f"    const float E = expf(-(float)(t / {f['warmup_tau_s']!r}));",
+            f"    const float H = st->F + {c_float(shift)} * (1.0f - E);",
+            f"    const float h = {c_float(half)} * fmaxf(1.0f + {c_float(k)} * "
+            f"(H - {c_float(WIDTH_REF_C)}), {c_float(WIDTH_FLOOR)});",
+            "    st->p = clampf(st->p, H - h, H + h);",
+            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
+            "                        (H - st->p) / h, E};",
+        ]
+    elif shift:  # the play follows the die with its self-heating, H = F + δ (1 − E)
         play = [
             f"    const float E = expf(-(float)(t / {f['warmup_tau_s']!r}));",
             f"    const float H = st->F + {c_float(shift)} * (1.0f - E);",

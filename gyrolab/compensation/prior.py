@@ -23,9 +23,10 @@ cannot estimate ``P + 7`` dimensions' correlations), widened for the cluster mea
 uncertainty (n units), and a floor: no component is claimed known better than
 :data:`FLOOR_DPS` at its regressor's largest value (:data:`REGRESSOR_SCALE`). φ gets a
 mean and standard deviation per cluster (floor 0.1); the power-on hysteresis branch s₀
-(``start_branch``, 0 or +1: issue 23's ``structured_rate``) and the play's self-heating
-shift δ (``self_heating_c``, °C, the same family's) are not in φ but carried with it —
-each cluster fits and applies its members' median s₀ and median δ.
+(``start_branch``, 0 or +1: issue 23's ``structured_rate``), the play's self-heating
+shift δ (``self_heating_c``, °C) and its width's temperature coefficient κ
+(``width_temp_per_c``, 1/°C; both the same family's) are not in φ but carried with it —
+each cluster fits and applies its members' median s₀, δ and κ.
 **Clusters**: k-means (k = 2, 3) on what the units' drift does (°/s: the polynomial at 11
 temperatures, each term at its largest regressor value), kept only when every cluster has
 ≥ :data:`MIN_CLUSTER` units and the mean silhouette is ≥ :data:`SILHOUETTE_MIN` (the
@@ -199,7 +200,10 @@ def phi_of(p: CausalParams) -> np.ndarray:
 
 
 def params_of(
-    phi: np.ndarray, start_branch: float = 0.0, self_heating_c: float = 0.0
+    phi: np.ndarray,
+    start_branch: float = 0.0,
+    self_heating_c: float = 0.0,
+    width_temp_per_c: float = 0.0,
 ) -> CausalParams:
     """The feature parameters of φ, the play starting on hysteresis branch
     ``start_branch`` s₀ (issue 23's power-on branch: not part of φ — it takes the values
@@ -211,6 +215,7 @@ def params_of(
         warmup_tau_s=float(math.exp(phi[2])),
         start_branch=float(start_branch),
         self_heating_c=float(self_heating_c),
+        width_temp_per_c=float(width_temp_per_c),
     )
 
 
@@ -248,12 +253,14 @@ class Cluster:
     start_branch: float = 0.0
     #: the members' self-heating shift δ of the play (their median, °C)
     self_heating_c: float = 0.0
+    #: the members' play-width temperature coefficient κ (their median, 1/°C)
+    width_temp_per_c: float = 0.0
 
     def params(self, phi: np.ndarray | None = None) -> CausalParams:
         """The feature parameters at ``phi`` (default: the cluster's mean) on the
-        cluster's start branch and self-heating shift."""
+        cluster's start branch, self-heating shift and width coefficient."""
         phi = self.phi_mean if phi is None else phi
-        return params_of(phi, self.start_branch, self.self_heating_c)
+        return params_of(phi, self.start_branch, self.self_heating_c, self.width_temp_per_c)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -265,6 +272,7 @@ class Cluster:
             "start_branch": self.start_branch,
             # only when not 0: priors of fleets without it are written as before
             **({"self_heating_c": self.self_heating_c} if self.self_heating_c else {}),
+            **({"width_temp_per_c": self.width_temp_per_c} if self.width_temp_per_c else {}),
         }
 
     @classmethod
@@ -277,6 +285,7 @@ class Cluster:
             list(d["members"]),
             float(d.get("start_branch", 0.0)),  # priors written before s₀ was carried
             float(d.get("self_heating_c", 0.0)),
+            float(d.get("width_temp_per_c", 0.0)),
         )
 
 
@@ -341,12 +350,12 @@ def _cluster(
     """A cluster's prior: its mean, and the pooled within-cluster covariance ``S`` shrunk
     halfway to its diagonal, floored, and widened by ``1 + 1/n`` (the mean itself is
     estimated from the cluster's ``n`` units: the predictive spread of a new unit), and
-    the medians of the members' ``carried`` (s₀, δ) rows."""
+    the medians of the members' ``carried`` (s₀, δ, κ) rows."""
     n = thetas.shape[0]
     cov = 0.5 * S + 0.5 * np.diag(np.diag(S))
     cov = (1.0 + 1.0 / n) * cov + np.diag((FLOOR_DPS / basis.scale()) ** 2)
     sd = phis.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
-    s0, shift = np.median(carried, axis=0)
+    s0, shift, kappa = np.median(carried, axis=0)
     return Cluster(
         thetas.mean(axis=0),
         cov,
@@ -355,6 +364,7 @@ def _cluster(
         names,
         start_branch=float(s0),
         self_heating_c=float(shift),
+        width_temp_per_c=float(kappa),
     )
 
 
@@ -411,8 +421,10 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
     basis = Basis(lo, hi, min(max(u.model.order for u in units), MAX_ORDER))
     thetas = np.array([unit_vector(u.model, basis) for u in units])
     phis = np.array([phi_of(u.params) for u in units])
-    # s₀ and δ, carried beside φ (module docstring)
-    carried = np.array([(u.params.start_branch, u.params.self_heating_c) for u in units])
+    # s₀, δ and κ, carried beside φ (module docstring)
+    carried = np.array(
+        [(u.params.start_branch, u.params.self_heating_c, u.params.width_temp_per_c) for u in units]
+    )
     names = [u.name for u in units]
     labels = np.zeros(len(units), dtype=int)
     Z = _drift_space(thetas, basis)

@@ -81,6 +81,10 @@ START_BRANCHES = (0.0, 1.0)
 #: searched by the extended family after the width (:func:`_self_heating`): the die's
 #: settled rise above its case that the play follows, ``H = F + δ (1 − E)``
 SELF_HEATING_GRID_C = (0.25, 0.5, 1.0, 2.0)
+#: the play width's temperature coefficient κ (1/°C, :class:`CausalParams`
+#: ``width_temp_per_c``: ``w (1 + κ (H − 25 °C))``), searched by the extended family
+#: after the order and width (:func:`_width_temperature`): ±25 % and ±50 % over 50 °C
+WIDTH_TEMP_GRID_PER_C = (-0.01, -0.005, 0.005, 0.01)
 
 
 @dataclass
@@ -664,6 +668,27 @@ def _order_width(
     return err, p, order
 
 
+def _width_temperature(
+    cv: Callable[[CausalParams, int], float], p: CausalParams, order: int, err: float
+) -> tuple[float, CausalParams, dict[str, float]]:
+    """The play width's temperature coefficient κ (:class:`CausalParams`
+    ``width_temp_per_c``): each κ of :data:`WIDTH_TEMP_GRID_PER_C` against κ = 0, kept
+    only if ≥ 1 % (TIE) better in the blocked CV; where one wins, the width at it again.
+    Returns the CV RMSE, the parameters and the CV RMSE of each κ tried."""
+    tried: dict[str, float] = {}
+    best = (np.inf, p)
+    for k in WIDTH_TEMP_GRID_PER_C:
+        q = replace(p, width_temp_per_c=k)
+        e = cv(q, order)
+        tried[str(k)] = e
+        if e < best[0]:
+            best = (e, q)
+    if best[0] < err * (1.0 - TIE):
+        err, p = best
+        err, p = _descend(cv, order, err, p, _grid("width_c", WIDTH_GRID_C))
+    return err, p, tried
+
+
 def select_structured(
     cal: CausalCalibration,
     folds: list[np.ndarray],
@@ -673,8 +698,9 @@ def select_structured(
     """Choose (τ, τ_w, order, s₀) on the joint grid with every original term on
     (:data:`TERMS`; ``extended``: :data:`GRID_TERMS`, ridge-stabilised CV), refine τ
     between its grid neighbours (golden section), then w and τ_w again on their grids
-    (``extended``: then the self-heating shift δ, :func:`_self_heating`, and the order,
-    width and δ on their joint grid, :func:`_order_width`); then the terms
+    (``extended``: then the self-heating shift δ, :func:`_self_heating`, the order,
+    width and δ on their joint grid, :func:`_order_width`, and the width's temperature
+    coefficient κ, :func:`_width_temperature`); then the terms
     (:func:`_select_terms`; ``extended``: :func:`_select_terms_backward`); with
     ``lag_criterion="profile"`` τ is finally chosen again, for the terms kept, by profile
     least squares (``"profile_warmup"``: with τ_w where the warm-up term is kept)
@@ -717,9 +743,11 @@ def select_structured(
         cv, order, err, p, _grid("width_c", WIDTH_GRID_C) + _grid("warmup_tau_s", WARMUP_GRID_S)
     )
     shifts: dict[str, float] = {}
+    slopes: dict[str, float] = {}
     if extended:
         err, p, shifts = _self_heating(cv, p, order, err)
         err, p, order = _order_width(cv, p, order, err)
+        err, p, slopes = _width_temperature(cv, p, order, err)
     select = _select_terms_backward if extended else _select_terms
     terms, err, log = select(feature(p), y, order, folds)
     log["order"] = order
@@ -729,6 +757,8 @@ def select_structured(
     log["cv_rmse_by_start_branch"] = {str(k): v[0] for k, v in bests.items()}
     if shifts:
         log["cv_rmse_by_self_heating"] = shifts
+    if slopes:
+        log["cv_rmse_by_width_temp"] = slopes
     return p, order, terms, err, log
 
 
@@ -739,6 +769,7 @@ __all__ = [
     "LAG_CRITERIA",
     "ORDERS",
     "SELF_HEATING_GRID_C",
+    "WIDTH_TEMP_GRID_PER_C",
     "START_BRANCHES",
     "TERMS",
     "T_KEEP",
