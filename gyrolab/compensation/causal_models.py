@@ -143,20 +143,12 @@ class CausalDriftModel(DriftModel):
     # -- firmware
     def spec(self) -> dict[str, Any]:
         inner = self.model.spec(list(FEATURES), None)
-        p = self.params
         return {
             "kind": "causal",
             "family": str(self.family),
-            "features": {
-                "tau_s": float(p.tau_s),
-                "rate_tau_min_s": float(p.rate_tau_min_s),
-                "width_c": float(p.width_c),
-                "warmup_tau_s": float(p.warmup_tau_s),
-                # only when not 0: exports of models without it stay as they were
-                **({"start_branch": float(p.start_branch)} if p.start_branch else {}),
-                **({"self_heating_c": float(p.self_heating_c)} if p.self_heating_c else {}),
-                **({"width_temp_per_c": float(p.width_temp_per_c)} if p.width_temp_per_c else {}),
-            },
+            # CausalParams.to_dict leaves out the terms that are 0: exports of models
+            # without them stay as they were
+            "features": {k: float(v) for k, v in self.params.to_dict().items()},
             "model": inner,
         }
 
@@ -450,23 +442,21 @@ def _c_model(m: dict[str, Any], prefix: str) -> CModel:
     )
     shift = f.get("self_heating_c", 0.0)
     k = f.get("width_temp_per_c", 0.0)
-    if k:  # the play's width changes with temperature: h = w/2 max(1 + κ (H − 25), 0.1)
+    if shift or k:  # the play follows the die with its self-heating, H = F + δ (1 − E)
+        h, width = c_float(half), []
+        if k:  # and its width changes with temperature: h = w/2 max(1 + κ (H − 25), 0.1)
+            width = [
+                f"    const float h = {h} * fmaxf(1.0f + {c_float(k)} * "
+                f"(H - {c_float(WIDTH_REF_C)}), {c_float(WIDTH_FLOOR)});"
+            ]
+            h = "h"
         play = [
             f"    const float E = expf(-(float)(t / {f['warmup_tau_s']!r}));",
             f"    const float H = st->F + {c_float(shift)} * (1.0f - E);",
-            f"    const float h = {c_float(half)} * fmaxf(1.0f + {c_float(k)} * "
-            f"(H - {c_float(WIDTH_REF_C)}), {c_float(WIDTH_FLOOR)});",
-            "    st->p = clampf(st->p, H - h, H + h);",
+            *width,
+            f"    st->p = clampf(st->p, H - {h}, H + {h});",
             f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
-            "                        (H - st->p) / h, E};",
-        ]
-    elif shift:  # the play follows the die with its self-heating, H = F + δ (1 − E)
-        play = [
-            f"    const float E = expf(-(float)(t / {f['warmup_tau_s']!r}));",
-            f"    const float H = st->F + {c_float(shift)} * (1.0f - E);",
-            f"    st->p = clampf(st->p, H - {c_float(half)}, H + {c_float(half)});",
-            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
-            f"                        (H - st->p) / {c_float(half)}, E}};",
+            f"                        (H - st->p) / {h}, E}};",
         ]
     else:  # as exported before δ existed
         play = [

@@ -607,6 +607,32 @@ def _descend(
     return err, p
 
 
+def _new_parameter(
+    cv: Callable[[CausalParams, int], float],
+    p: CausalParams,
+    order: int,
+    err: float,
+    name: str,
+    values: tuple[float, ...],
+    **fixed: float,
+) -> tuple[float, CausalParams, dict[str, float]]:
+    """Each value of the feature parameter ``name`` (with ``fixed`` set beside it)
+    against the choice so far by the blocked CV, the best kept only if ≥ 1 % (TIE)
+    better: a new parameter must win by TIE, as s₀ must. Returns the CV RMSE, the
+    parameters and the CV RMSE of each value tried."""
+    tried: dict[str, float] = {}
+    best = (np.inf, p)
+    for v in values:
+        q = replace(p, **{name: v}, **fixed)
+        e = cv(q, order)
+        tried[str(v)] = e
+        if e < best[0]:
+            best = (e, q)
+    if best[0] < err * (1.0 - TIE):
+        err, p = best
+    return err, p, tried
+
+
 def _self_heating(
     cv: Callable[[CausalParams, int], float], p: CausalParams, order: int, err: float
 ) -> tuple[float, CausalParams, dict[str, float]]:
@@ -616,16 +642,9 @@ def _self_heating(
     (TIE) better; where a δ wins, the warm-up's τ_w (which the shift shares) with δ on
     their joint grid, then the width again. Returns the CV RMSE, the parameters and the
     CV RMSE of each δ first tried."""
-    tried: dict[str, float] = {}
-    best = (np.inf, p)
-    for v in SELF_HEATING_GRID_C:
-        q = replace(p, self_heating_c=v, start_branch=0.0)
-        e = cv(q, order)
-        tried[str(v)] = e
-        if e < best[0]:
-            best = (e, q)
-    if best[0] < err * (1.0 - TIE):  # a new parameter must win by TIE, as s₀ must
-        err, p = best
+    err, p, tried = _new_parameter(
+        cv, p, order, err, "self_heating_c", SELF_HEATING_GRID_C, start_branch=0.0
+    )
     if p.self_heating_c:  # (τ_w, δ) on their joint grid, then the width at them
         joint = [
             {"warmup_tau_s": tw, "self_heating_c": v}
@@ -675,16 +694,8 @@ def _width_temperature(
     ``width_temp_per_c``): each κ of :data:`WIDTH_TEMP_GRID_PER_C` against κ = 0, kept
     only if ≥ 1 % (TIE) better in the blocked CV; where one wins, the width at it again.
     Returns the CV RMSE, the parameters and the CV RMSE of each κ tried."""
-    tried: dict[str, float] = {}
-    best = (np.inf, p)
-    for k in WIDTH_TEMP_GRID_PER_C:
-        q = replace(p, width_temp_per_c=k)
-        e = cv(q, order)
-        tried[str(k)] = e
-        if e < best[0]:
-            best = (e, q)
-    if best[0] < err * (1.0 - TIE):
-        err, p = best
+    err, p, tried = _new_parameter(cv, p, order, err, "width_temp_per_c", WIDTH_TEMP_GRID_PER_C)
+    if p.width_temp_per_c:
         err, p = _descend(cv, order, err, p, _grid("width_c", WIDTH_GRID_C))
     return err, p, tried
 
