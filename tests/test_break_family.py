@@ -127,3 +127,19 @@ def test_die_sensor_is_the_units_own_coarse_register() -> None:
     sp, rest = trajectory("slowramp", 3)
     pkg, _ = P.thermal(u0, P.air_temperature(sp, rest), rest)
     assert np.array_equal(a.pt_c, P.pt100(u0, pkg, rng))
+
+
+def test_true_form_regressors_span_the_familys_drift() -> None:
+    """benchmarks/true_form.py's floor fits the family's own drift form: on each unit's
+    run, the drift is exactly a linear combination of its regressors (and the coefficients
+    are the unit's), so what that floor misses is noise and excitation, not form."""
+    from true_form import regressors
+
+    for u, unit in enumerate(units(4)):
+        sp, rest = trajectory("heating", 100 * u + 2)
+        pkg, die = P.thermal(unit, P.air_temperature(sp, rest), rest)
+        d = P.drift(unit, pkg, die, 86400.0)  # heating is held out on day 1
+        X = regressors(unit, "heating", 100 * u + 2)
+        beta = np.linalg.lstsq(X, d, rcond=None)[0]
+        assert np.max(np.abs(X @ beta - d)) < 1e-9 * np.max(np.abs(d))
+        assert beta[1] == pytest.approx(unit.c[1], rel=1e-6)  # the linear u coefficient
