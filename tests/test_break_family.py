@@ -135,7 +135,8 @@ def test_true_form_regressors_span_the_familys_drift() -> None:
     are the unit's), so what that floor misses is noise and excitation, not form."""
     from true_form import regressors
 
-    for u, unit in enumerate(units(4)):
+    for u in (2, 3):  # every effect; and a unit without hysteresis
+        unit = units(4)[u]
         sp, rest = trajectory("heating", 100 * u + 2)
         pkg, die = P.thermal(unit, P.air_temperature(sp, rest), rest)
         d = P.drift(unit, pkg, die, 86400.0)  # heating is held out on day 1
