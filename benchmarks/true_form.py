@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from breakfam.family import DAY_OF, RATE_HZ, simulate_run, units  # noqa: E402
-from breakfam.physics import DT, air_temperature, thermal  # noqa: E402
+from breakfam.physics import DT, air_temperature, plays, thermal  # noqa: E402
 from breakfam.score import BLOCK, means, score  # noqa: E402
 from breakfam.trajectories import CALIBRATIONS, NAMES, trajectory  # noqa: E402
 
@@ -45,14 +45,8 @@ def regressors(unit, name: str, seed: int) -> np.ndarray:  # noqa: ANN001
     u = (D - 25.0) / 50.0
     cols = [u**k for k in range(5 if unit.c[4] else 4)]
     if any(unit.h):
-        wid = np.maximum(np.outer(1.0 + unit.kappa * u, unit.w0), 0.05)
-        p = np.full(len(unit.h), float(D[0]))
-        play = np.empty((D.size, len(unit.h)))
-        for i in range(D.size):
-            half = 0.5 * wid[i]
-            p = np.minimum(np.maximum(p, D[i] - half), D[i] + half)
-            play[i] = (D[i] - p) / half
-        cols += [play[:, j] for j in range(play.shape[1]) if unit.h[j]]
+        dp, half = plays(unit, D)
+        cols += [dp[:, j] / half[:, j] for j in range(dp.shape[1]) if unit.h[j]]
     if unit.k_pos or unit.k_neg or unit.k2:
         rate = np.gradient(D, DT) * 60.0
         cols += [np.maximum(rate, 0.0), np.minimum(rate, 0.0), rate * np.abs(rate)]

@@ -201,23 +201,30 @@ def die_sensor(index: int, D: np.ndarray, rng: np.random.Generator) -> np.ndarra
     return np.round(s / DIE_LSB_C) * DIE_LSB_C
 
 
+def plays(unit: Unit, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The hysteresis play operators (module docstring), one column per play: ``D − p_i``
+    and the half-width ``w_i(D)/2`` (their ratio is the play's output). Each play starts
+    at the first die temperature; its width follows the die temperature, ``w_i(D) = w_i0
+    (1 + κ u)``, not below 0.05 °C."""
+    u = (D - 25.0) / 50.0
+    half = 0.5 * np.maximum(np.outer(1.0 + unit.kappa * u, unit.w0), 0.05)
+    p = np.full(len(unit.h), float(D[0]))
+    dp = np.empty((D.size, len(unit.h)))
+    for i in range(D.size):
+        p = np.minimum(np.maximum(p, D[i] - half[i]), D[i] + half[i])
+        dp[i] = D[i] - p
+    return dp, half
+
+
 def drift(unit: Unit, P: np.ndarray, D: np.ndarray, t_abs0: float) -> np.ndarray:
     """True deterministic drift (°/s) at 1 Hz (module docstring)."""
     u = (D - 25.0) / 50.0
     out = np.zeros(D.size)
     for k, ck in enumerate(unit.c):
         out += ck * u**k
-    # hysteresis: play operators with a width that follows the die temperature
     if any(unit.h):
-        wid = np.maximum(np.outer(1.0 + unit.kappa * u, unit.w0), 0.05)
-        p = np.full(len(unit.h), float(D[0]))
-        hsum = np.empty(D.size)
-        hw = np.asarray(unit.h)
-        for i in range(D.size):
-            half = 0.5 * wid[i]
-            p = np.minimum(np.maximum(p, D[i] - half), D[i] + half)
-            hsum[i] = float(np.sum(hw * (D[i] - p) / half))
-        out += hsum
+        dp, half = plays(unit, D)
+        out += np.sum(np.asarray(unit.h) * dp / half, axis=1)
     rate = np.gradient(D, DT) * 60.0  # °C/min
     out += unit.k_pos * np.maximum(rate, 0.0) + unit.k_neg * np.minimum(rate, 0.0)
     out += unit.k2 * rate * np.abs(rate)
