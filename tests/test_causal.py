@@ -16,18 +16,20 @@ from gyrolab.compensation.causal_features import (
 
 
 @pytest.mark.parametrize(
-    "tau,s0,shift,kappa",
+    "tau,s0,shift,kappa,die",
     [
-        (0.0, 0.0, 0.0, 0.0),
-        (12.0, 1.0, 0.0, 0.0),
-        (600.0, -0.5, 0.0, 0.0),
-        (300.0, 0.0, 0.8, 0.0),
-        (300.0, 0.0, 0.8, 0.01),
-        (60.0, 1.0, 0.0, -0.2),  # the width at its floor below 20.5 °C
+        (0.0, 0.0, 0.0, 0.0, 0.0),
+        (12.0, 1.0, 0.0, 0.0, 0.0),
+        (600.0, -0.5, 0.0, 0.0, 0.0),
+        (300.0, 0.0, 0.8, 0.0, 0.0),
+        (300.0, 0.0, 0.8, 0.01, 0.0),
+        (60.0, 1.0, 0.0, -0.2, 0.0),  # the width at its floor below 20.5 °C
+        (450.0, 0.0, 0.5, 0.0, 3.0),  # the die's own self-heating
+        (0.0, 1.0, 0.0, 0.0, 2.0),  # ... with no lag: a constant rise
     ],
 )
 def test_step_equals_vectorised_features_bit_for_bit(
-    tau: float, s0: float, shift: float, kappa: float
+    tau: float, s0: float, shift: float, kappa: float, die: float
 ) -> None:
     rng = np.random.default_rng(3)
     n = 3000
@@ -41,6 +43,7 @@ def test_step_equals_vectorised_features_bit_for_bit(
         start_branch=s0,
         self_heating_c=shift,
         width_temp_per_c=kappa,
+        die_heating_c=die,
     )
     X = features(T, dt, p)
     assert X[0, 2] == pytest.approx(s0)  # the play starts on its power-on branch
@@ -78,6 +81,27 @@ def test_the_play_follows_the_die_self_heating() -> None:
     assert np.all(reading_features(t, T, CausalParams(tau_s=300.0))[:, 2] == 0.0)
     assert p.to_dict()["self_heating_c"] == 0.8
     assert "self_heating_c" not in CausalParams(tau_s=300.0).to_dict()  # files as before
+
+
+def test_the_die_carries_its_own_self_heating() -> None:
+    # δ_d is the step response of τ dD/dt = T + δ_d − D from D = T at power-on: the
+    # temperature column rises by δ_d (1 − exp(−t/τ)) with the case held still, the
+    # play follows it, the rate R (of the case's lag) does not; absent from files at 0
+    t = np.arange(0.0, 6000.0)
+    T = np.full(t.size, -35.0)
+    p = CausalParams(tau_s=500.0, width_c=1.0, warmup_tau_s=600.0, die_heating_c=3.0)
+    X = reading_features(t, T, p)
+    np.testing.assert_allclose(X[:, 0], -35.0 + 3.0 * (1.0 - np.exp(-t / 500.0)), atol=1e-12)
+    assert X[-1, 2] == 1.0 and np.all(X[:, 1] == 0.0)
+    # the same die by a first-order lag of the case plus δ_d, stepped exactly
+    D = np.empty(t.size)
+    D[0] = -35.0
+    for i in range(1, t.size):
+        D[i] = D[i - 1] + (1.0 - np.exp(-1.0 / 500.0)) * (T[i] + 3.0 - D[i - 1])
+    np.testing.assert_allclose(X[:, 0], D, atol=1e-9)
+    assert p.to_dict()["die_heating_c"] == 3.0
+    assert "die_heating_c" not in CausalParams(tau_s=300.0).to_dict()
+    assert CausalParams.from_dict(p.to_dict()) == p
 
 
 def test_the_play_width_follows_temperature() -> None:

@@ -101,8 +101,8 @@ def test_causal_model_exported_to_c_and_json(
         for k in KEYS:
             assert got[k] == pytest.approx(metrics["axes"][name]["causal"][k], rel=1e-4)
     # issue 23's terms (heating-only rate, R|R|, hysteresis amplitude across T), the
-    # play's branch at power-on, its self-heating shift and its width's temperature
-    # coefficient, added to the fitted models:
+    # play's branch at power-on, its self-heating shift, its width's temperature
+    # coefficient and the die's own self-heating, added to the fitted models:
     # the JSON evaluator equals the Python model, and the compiled C follows it to
     # float32 precision
     from gyrolab.compensation.causal_models import StructuredCausalModel
@@ -114,23 +114,28 @@ def test_causal_model_exported_to_c_and_json(
         inner = replace(cm.model, **extra)
         shift = (0.0, 0.6, 1.2)[a]  # the play's self-heating shift δ (axis 0: none)
         kappa = (0.0, 0.0, 0.01)[a]  # its width's temperature coefficient (axis 2)
+        die = (2.5, 0.0, 1.5)[a]  # the die's own self-heating δ_d (axes 0 and 2)
         params = replace(
             cm.params,
             start_branch=(1.0, -1.0, 0.5)[a],
             self_heating_c=shift,
             width_temp_per_c=kappa,
+            die_heating_c=die,
         )
         sm = StructuredCausalModel(cm.family, params, inner)
         py = sm.reading_drift(rec.pt100_t, rec.pt100_c)
         assert sm.spec()["features"]["start_branch"] == params.start_branch
         assert sm.spec()["features"].get("self_heating_c", 0.0) == shift
         assert sm.spec()["features"].get("width_temp_per_c", 0.0) == kappa
+        assert sm.spec()["features"].get("die_heating_c", 0.0) == die
         spec["axes"][a]["model"]["model"].update(extra)
         spec["axes"][a]["model"]["features"]["start_branch"] = params.start_branch
         if shift:
             spec["axes"][a]["model"]["features"]["self_heating_c"] = shift
         if kappa:
             spec["axes"][a]["model"]["features"]["width_temp_per_c"] = kappa
+        if die:
+            spec["axes"][a]["model"]["features"]["die_heating_c"] = die
         np.testing.assert_allclose(
             evaluate_causal(spec["axes"][a]["model"], rec.pt100_t, rec.pt100_c),
             py,

@@ -14,7 +14,8 @@ since the previous reading ``Δt_n`` (s; ``Δt_0 = 0``). Parameters (:class:`Cau
 ``width_c`` = w > 0 (hysteresis play width), ``warmup_tau_s`` = τ_w > 0,
 ``start_branch`` = s₀ ∈ [−1, 1] (hysteresis branch at power-on, default 0),
 ``self_heating_c`` = δ (°C, the die's settled self-heating rise that the play follows,
-default 0).
+default 0), ``die_heating_c`` = δ_d (°C, the die's settled self-heating rise that the die
+temperature F itself carries, default 0).
 
 State (:class:`State`): ``F`` die-temperature estimate (°C), ``G`` rate filter (°C),
 ``p`` play-operator position (°C), ``t`` time since power-on (s). :func:`initial_state`
@@ -40,9 +41,20 @@ Equations, evaluated in this order at every reading (τ_r = max(τ, τ_min))::
     R_n = (T_n − G_n) / τ_r                              rate dG/dt, °C/s
     t_n = t_{n−1} + Δt_n
     E_n = exp(−t_n / τ_w)                                warm-up, 1 at power-on
-    H_n = F_n + δ (1 − E_n)                              die with its self-heating, °C
+    D_n = F_n + δ_d (1 − exp(−t_n / τ))  (D_n = F_n + δ_d when τ = 0)   die, °C
+    H_n = D_n + δ (1 − E_n)                              die with its self-heating, °C
     p_n = min(max(p_{n−1}, H_n − w/2), H_n + w/2)        play (backlash) operator, °C
     S_n = (H_n − p_n) / (w/2)                            branch: +1 heating, −1 cooling
+
+The features are ``(D, R, S, E)``; with δ_d = 0 (every model fitted before it existed)
+``D = F``. ``δ_d > 0`` is the die's self-heating as a die model has it (issue 23): after
+power-on the die, at rest at its case temperature, rises by δ_d with its own time
+constant τ — the step response of ``τ dD/dt = T + δ_d − D`` from ``D = T`` — so that
+every term of the drift model, the temperature series included, sees the die's own
+temperature. An additive warm-up ``A E`` is the same transient at the power-on
+temperature only; after a cold power-on the series' slope there, not at 25 °C, scales
+it (the break family's unit 28, docs/results.md). The state keeps ``F``; ``D`` is
+computed from it.
 
 ``R`` is the exact derivative of the lagged temperature ``G`` (τ_r dG/dt = T − G), so for
 τ ≥ τ_min it is dF/dt, the rate the die sees; below τ_min it is the rate of T smoothed by
@@ -79,6 +91,8 @@ FEATURES = ("F", "R", "S", "E")  # column order of :func:`features`
 WIDTH_REF_C = 25.0
 WIDTH_FLOOR = 0.1
 FEATURE_UNITS = {"F": "degC", "R": "degC/s", "S": "1", "E": "1"}
+#: the parameters written only when not 0 (absent: 0, as before each existed)
+OPTIONAL = ("start_branch", "self_heating_c", "width_temp_per_c", "die_heating_c")
 
 
 @dataclass(frozen=True)
@@ -92,6 +106,7 @@ class CausalParams:
     start_branch: float = 0.0  # hysteresis branch s₀ at power-on (−1 cooling … +1 heating)
     self_heating_c: float = 0.0  # δ: the die's self-heating rise above F, settled, °C
     width_temp_per_c: float = 0.0  # κ: the play width's change per °C about 25 °C
+    die_heating_c: float = 0.0  # δ_d: the self-heating rise the die temperature carries, °C
 
     def __post_init__(self) -> None:
         ok = (
@@ -103,6 +118,7 @@ class CausalParams:
             and -1.0 <= self.start_branch <= 1.0
             and math.isfinite(self.self_heating_c)
             and math.isfinite(self.width_temp_per_c)
+            and math.isfinite(self.die_heating_c)
             and all(
                 math.isfinite(v) for v in (self.rate_tau_min_s, self.width_c, self.warmup_tau_s)
             )
@@ -116,11 +132,11 @@ class CausalParams:
         return max(self.tau_s, self.rate_tau_min_s)
 
     def to_dict(self) -> dict[str, Any]:
-        """The parameters; ``start_branch``, ``self_heating_c`` and ``width_temp_per_c``
-        only when not 0 (model.json and exports of models without them stay as they
-        were)."""
+        """The parameters; ``start_branch``, ``self_heating_c``, ``width_temp_per_c`` and
+        ``die_heating_c`` only when not 0 (model.json and exports of models without them
+        stay as they were)."""
         d = asdict(self)
-        for k in ("start_branch", "self_heating_c", "width_temp_per_c"):
+        for k in OPTIONAL:
             if not d[k]:
                 del d[k]
         return d
@@ -162,7 +178,11 @@ def step(state: State, T: float, dt: float, params: CausalParams) -> tuple[float
     R = (T - G) / tau_r
     t = state.t + dt
     E = math.exp(-t / params.warmup_tau_s)
-    H = F + params.self_heating_c * (1.0 - E)
+    D = F
+    dd = params.die_heating_c
+    if dd != 0.0:
+        D = F + dd * (-math.expm1(-t / tau) if tau > 0.0 else 1.0)
+    H = D + params.self_heating_c * (1.0 - E)
     k = params.width_temp_per_c
     if k != 0.0:
         half = half * max(1.0 + k * (H - WIDTH_REF_C), WIDTH_FLOOR)
@@ -173,7 +193,7 @@ def step(state: State, T: float, dt: float, params: CausalParams) -> tuple[float
         p = H + half
     S = (H - p) / half
     state.F, state.G, state.p, state.t = F, G, p, t
-    return F, R, S, E
+    return D, R, S, E
 
 
 @numba.njit(cache=True, nogil=True)
@@ -186,6 +206,7 @@ def _features_kernel(
     tau_w: float,
     shift: float,
     k: float,
+    dd: float,
     st: np.ndarray,
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; same operations as step()
@@ -200,7 +221,10 @@ def _features_kernel(
         R = (Ti - G) / tau_r
         t = t + d
         E = math.exp(-t / tau_w)
-        H = F + shift * (1.0 - E)
+        D = F
+        if dd != 0.0:
+            D = F + dd * (-math.expm1(-t / tau) if tau > 0.0 else 1.0)
+        H = D + shift * (1.0 - E)
         hh = half
         if k != 0.0:
             hh = half * max(1.0 + k * (H - WIDTH_REF_C), WIDTH_FLOOR)
@@ -209,7 +233,7 @@ def _features_kernel(
         elif p > H + hh:
             p = H + hh
         S = (H - p) / hh
-        out[i, 0] = F
+        out[i, 0] = D
         out[i, 1] = R
         out[i, 2] = S
         out[i, 3] = E
@@ -242,6 +266,7 @@ def features(
         float(params.warmup_tau_s),
         float(params.self_heating_c),
         float(params.width_temp_per_c),
+        float(params.die_heating_c),
         st,
         out,
     )

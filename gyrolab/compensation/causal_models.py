@@ -22,8 +22,9 @@ Outside the calibration range of F the polynomial continues linearly from its ed
 the networks do the same (:class:`~gyrolab.compensation.gabp.MLPDriftModel`).
 
 Exported as ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s",
-"width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"][, "width_temp_per_c"]},
-"model": INNER}`` (the last three only when not 0) with ``INNER`` a ``structured`` or ``mlp``
+"width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"][, "width_temp_per_c"]
+[, "die_heating_c"]},
+"model": INNER}`` (the last four only when not 0) with ``INNER`` a ``structured`` or ``mlp``
 form of :mod:`gyrolab.compensation.regressors` (inputs ``["F", "R", "S", "E"]``);
 :func:`causal_readings` states the state machine's equations as the JSON's reference.
 """
@@ -245,20 +246,28 @@ def _scored(
     changes which family wins — the CV at the profile lag can be jagged from the fold
     fits of the warm-up column, and scored there the polynomial won gyrolab's validation
     unit 5 (1.58–3.16× the oracle, docs/results.md). The held-out predictions are the
-    shipped model's own, at its lag; their RMSE is logged as ``cv_rmse_at_profile_lag``."""
+    shipped model's own, at its lag; their RMSE is logged as ``cv_rmse_at_profile_lag``.
+    The die's own self-heating δ_d (:func:`.structured._die_heating`, also by profile
+    least squares) likewise: the score is that of the terms and τ_w before it."""
     y = ctx.cal.rate
     pred = np.empty_like(y)
     err = cv_linear(Xs, y, order, terms, ctx.folds, pred, ridge=ridge)
     pc, Xc = cv_lag_features(ctx, key, ps, log)
-    if pc == ps:
+    tc = tuple(log.get("die_heating", {}).get("terms_plain", terms))
+    if pc == ps and tc == terms:
         return err, pred, log
-    score = cv_linear(Xc, y, order, terms, ctx.folds, ridge=ridge)
+    score = cv_linear(Xs if Xc is None else Xc, y, order, tc, ctx.folds, ridge=ridge)
     return score, pred, {**log, "cv_rmse_at_profile_lag": err}
 
 
 def cv_lag_params(ps: CausalParams, log: dict[str, Any]) -> CausalParams:
     """The feature parameters the blocked CV chose: ``ps`` itself, or with the τ and τ_w
-    before the profile lag (:func:`.structured._profile_lag`) where that moved them."""
+    before the profile lag (:func:`.structured._profile_lag`) where that moved them, and
+    without the die's own self-heating δ_d (:func:`.structured._die_heating`) where that
+    step chose one (with the τ_w before it)."""
+    die = log.get("die_heating")
+    if die is not None and ps.die_heating_c:
+        ps = replace(ps, die_heating_c=0.0, warmup_tau_s=float(die["warmup_plain_s"]))
     prof = log.get("lag_profile")
     if prof is None:
         return ps
@@ -385,12 +394,14 @@ def causal_readings(
     reading (``F = G = T_0``, ``p = T_0 − s₀ w/2`` with ``s₀`` the ``start_branch``, 0
     when absent; ``t = t_0 − t_power_on``); then, with ``Δt`` the time
     since the previous reading, ``τ_r = max(τ, τ_min)``, ``w/2`` half the play width,
-    ``δ`` the ``self_heating_c`` and ``κ`` the ``width_temp_per_c`` (0 when absent)::
+    ``δ`` the ``self_heating_c``, ``κ`` the ``width_temp_per_c`` and ``δ_d`` the
+    ``die_heating_c`` (0 when absent)::
 
         F += a (T − F),  a = −expm1(−Δt/τ)  (1 when τ = 0)      die temperature
         G += b (T − G),  b = −expm1(−Δt/τ_r);  R = (T − G)/τ_r   rate
         t += Δt;                               E = exp(−t/τ_w)    warm-up
-        H = F + δ (1 − E)                                        die with its self-heating
+        D = F + δ_d (−expm1(−t/τ))  (F + δ_d when τ = 0)          die's own self-heating
+        H = D + δ (1 − E)                                        die with its self-heating
         h = w/2 · max(1 + κ (H − 25), 0.1)     (w/2 when κ = 0)  the play's half-width
         p = min(max(p, H − h), H + h);         S = (H − p)/h     hysteresis branch
     """
@@ -398,6 +409,7 @@ def causal_readings(
     tau_r, half, tau_w = max(tau, tmin), 0.5 * features["width_c"], features["warmup_tau_s"]
     shift = features.get("self_heating_c", 0.0)
     k = features.get("width_temp_per_c", 0.0)
+    dd = features.get("die_heating_c", 0.0)
     out = np.empty((len(pt_c), 4))
     F = G = float(pt_c[0])
     p = F - features.get("start_branch", 0.0) * half
@@ -411,10 +423,11 @@ def causal_readings(
         G += -math.expm1(-dt / tau_r) * (T - G)
         t += dt
         E = math.exp(-t / tau_w)
-        H = F + shift * (1.0 - E)
+        D = F + dd * (-math.expm1(-t / tau) if tau > 0 else 1.0) if dd else F
+        H = D + shift * (1.0 - E)
         h = half * max(1.0 + k * (H - WIDTH_REF_C), WIDTH_FLOOR) if k else half
         p = min(max(p, H - h), H + h)
-        out[n] = (F, (T - G) / tau_r, (H - p) / h, E)
+        out[n] = (D, (T - G) / tau_r, (H - p) / h, E)
     return out
 
 
@@ -442,8 +455,13 @@ def _c_model(m: dict[str, Any], prefix: str) -> CModel:
     )
     shift = f.get("self_heating_c", 0.0)
     k = f.get("width_temp_per_c", 0.0)
-    if shift or k:  # the play follows the die with its self-heating, H = F + δ (1 − E)
+    dd = f.get("die_heating_c", 0.0)
+    if shift or k or dd:  # the play follows the die with its self-heating, H = D + δ (1 − E)
         h, width = c_float(half), []
+        die = ["    const float D = st->F;"]
+        if dd:  # the die's own self-heating: D = F + δ_d (1 − exp(−t/τ))
+            rise = f"-expm1f(-(float)(t / {tau!r}))" if tau > 0 else "1.0f"
+            die = [f"    const float D = st->F + {c_float(dd)} * ({rise});"]
         if k:  # and its width changes with temperature: h = w/2 max(1 + κ (H − 25), 0.1)
             width = [
                 f"    const float h = {h} * fmaxf(1.0f + {c_float(k)} * "
@@ -452,10 +470,11 @@ def _c_model(m: dict[str, Any], prefix: str) -> CModel:
             h = "h"
         play = [
             f"    const float E = expf(-(float)(t / {f['warmup_tau_s']!r}));",
-            f"    const float H = st->F + {c_float(shift)} * (1.0f - E);",
+            *die,
+            f"    const float H = D + {c_float(shift)} * (1.0f - E);",
             *width,
             f"    st->p = clampf(st->p, H - {h}, H + {h});",
-            f"    const float x[4] = {{st->F, (T - st->G) / {c_float(tau_r)},",
+            f"    const float x[4] = {{D, (T - st->G) / {c_float(tau_r)},",
             f"                        (H - st->p) / {h}, E}};",
         ]
     else:  # as exported before δ existed

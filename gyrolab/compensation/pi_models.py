@@ -162,15 +162,20 @@ def _fit(ctx: FitContext) -> Candidate:
     cal, y = ctx.cal, ctx.cal.rate
     widths = PI_WIDTHS_C if "hyst" in terms else ()
     base_terms = tuple(t for t in terms if t not in PLAY_TERMS) if widths else terms
+    # the score's terms: those before the die's self-heating step (cv_lag_params)
+    plain = tuple(log.get("die_heating", {}).get("terms_plain", terms))
+    score_terms = tuple(t for t in plain if t not in PLAY_TERMS) if widths else plain
 
-    def columns(p: CausalParams, off: float) -> tuple[np.ndarray, np.ndarray]:
+    def columns(
+        p: CausalParams, off: float, tt: tuple[str, ...] = base_terms
+    ) -> tuple[np.ndarray, np.ndarray]:
         X = hold(cal.t, cal.pt_t, pi_features(cal.pt_t, cal.pt_c, p, widths, off))
         lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
-        return X, np.hstack([design(X[:, :4], order, base_terms, lo, hi), X[:, 4:]])
+        return X, np.hstack([design(X[:, :4], order, tt, lo, hi), X[:, 4:]])
 
     pc = cv_lag_params(ps, log)
     cvs = {
-        off: cv_design(columns(pc, off)[1], y, ctx.folds, ridge=CV_RIDGE)
+        off: cv_design(columns(pc, off, score_terms)[1], y, ctx.folds, ridge=CV_RIDGE)
         for off in (OFFSET_GRID_C if widths else (0.0,))
     }
     off = min(cvs, key=lambda o: cvs[o])

@@ -25,8 +25,9 @@ uncertainty (n units), and a floor: no component is claimed known better than
 mean and standard deviation per cluster (floor 0.1); the power-on hysteresis branch s₀
 (``start_branch``, 0 or +1: issue 23's ``structured_rate``), the play's self-heating
 shift δ (``self_heating_c``, °C) and its width's temperature coefficient κ
-(``width_temp_per_c``, 1/°C; both the same family's) are not in φ but carried with it —
-each cluster fits and applies its members' median s₀, δ and κ.
+(``width_temp_per_c``, 1/°C; both the same family's) and the die's own self-heating δ_d
+(``die_heating_c``, °C) are not in φ but carried with it — each cluster fits and applies
+its members' median s₀, δ, κ and δ_d.
 **Clusters**: k-means (k = 2, 3) on what the units' drift does (°/s: the polynomial at 11
 temperatures, each term at its largest regressor value), kept only when every cluster has
 ≥ :data:`MIN_CLUSTER` units and the mean silhouette is ≥ :data:`SILHOUETTE_MIN` (the
@@ -204,6 +205,7 @@ def params_of(
     start_branch: float = 0.0,
     self_heating_c: float = 0.0,
     width_temp_per_c: float = 0.0,
+    die_heating_c: float = 0.0,
 ) -> CausalParams:
     """The feature parameters of φ, the play starting on hysteresis branch
     ``start_branch`` s₀ (issue 23's power-on branch: not part of φ — it takes the values
@@ -216,6 +218,7 @@ def params_of(
         start_branch=float(start_branch),
         self_heating_c=float(self_heating_c),
         width_temp_per_c=float(width_temp_per_c),
+        die_heating_c=float(die_heating_c),
     )
 
 
@@ -255,12 +258,16 @@ class Cluster:
     self_heating_c: float = 0.0
     #: the members' play-width temperature coefficient κ (their median, 1/°C)
     width_temp_per_c: float = 0.0
+    #: the members' own die self-heating δ_d (their median, °C)
+    die_heating_c: float = 0.0
 
     def params(self, phi: np.ndarray | None = None) -> CausalParams:
         """The feature parameters at ``phi`` (default: the cluster's mean) on the
         cluster's start branch, self-heating shift and width coefficient."""
         phi = self.phi_mean if phi is None else phi
-        return params_of(phi, self.start_branch, self.self_heating_c, self.width_temp_per_c)
+        return params_of(
+            phi, self.start_branch, self.self_heating_c, self.width_temp_per_c, self.die_heating_c
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -273,6 +280,7 @@ class Cluster:
             # only when not 0: priors of fleets without it are written as before
             **({"self_heating_c": self.self_heating_c} if self.self_heating_c else {}),
             **({"width_temp_per_c": self.width_temp_per_c} if self.width_temp_per_c else {}),
+            **({"die_heating_c": self.die_heating_c} if self.die_heating_c else {}),
         }
 
     @classmethod
@@ -286,6 +294,7 @@ class Cluster:
             float(d.get("start_branch", 0.0)),  # priors written before s₀ was carried
             float(d.get("self_heating_c", 0.0)),
             float(d.get("width_temp_per_c", 0.0)),
+            float(d.get("die_heating_c", 0.0)),
         )
 
 
@@ -350,12 +359,12 @@ def _cluster(
     """A cluster's prior: its mean, and the pooled within-cluster covariance ``S`` shrunk
     halfway to its diagonal, floored, and widened by ``1 + 1/n`` (the mean itself is
     estimated from the cluster's ``n`` units: the predictive spread of a new unit), and
-    the medians of the members' ``carried`` (s₀, δ, κ) rows."""
+    the medians of the members' ``carried`` (s₀, δ, κ, δ_d) rows."""
     n = thetas.shape[0]
     cov = 0.5 * S + 0.5 * np.diag(np.diag(S))
     cov = (1.0 + 1.0 / n) * cov + np.diag((FLOOR_DPS / basis.scale()) ** 2)
     sd = phis.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
-    s0, shift, kappa = np.median(carried, axis=0)
+    s0, shift, kappa, die = np.median(carried, axis=0)
     return Cluster(
         thetas.mean(axis=0),
         cov,
@@ -365,6 +374,7 @@ def _cluster(
         start_branch=float(s0),
         self_heating_c=float(shift),
         width_temp_per_c=float(kappa),
+        die_heating_c=float(die),
     )
 
 
@@ -421,9 +431,12 @@ def learn_prior(units: list[UnitEntry], skipped: dict[str, str] | None = None) -
     basis = Basis(lo, hi, min(max(u.model.order for u in units), MAX_ORDER))
     thetas = np.array([unit_vector(u.model, basis) for u in units])
     phis = np.array([phi_of(u.params) for u in units])
-    # s₀, δ and κ, carried beside φ (module docstring)
+    # s₀, δ, κ and δ_d, carried beside φ (module docstring)
     carried = np.array(
-        [(u.params.start_branch, u.params.self_heating_c, u.params.width_temp_per_c) for u in units]
+        [
+            (p.start_branch, p.self_heating_c, p.width_temp_per_c, p.die_heating_c)
+            for p in (u.params for u in units)
+        ]
     )
     names = [u.name for u in units]
     labels = np.zeros(len(units), dtype=int)

@@ -24,10 +24,11 @@ the C of :mod:`.c_code` come from that kind. The built-in kinds:
   (:mod:`gyrolab.compensation.temperature_model`; the equations in
   :mod:`gyrolab.compensation.regressors`);
 * ``causal`` — ``{"kind": "causal", "family", "features": {"tau_s", "rate_tau_min_s",
-  "width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"][, "width_temp_per_c"]},
-  "model": INNER}`` (``start_branch``, the play's branch at power-on, ``self_heating_c``,
-  the die's self-heating the play follows, and ``width_temp_per_c``, the play width's
-  change per °C, only when not 0), the causal families of
+  "width_c", "warmup_tau_s"[, "start_branch"][, "self_heating_c"][, "width_temp_per_c"]
+  [, "die_heating_c"]}, "model": INNER}`` (``start_branch``, the play's branch at
+  power-on, ``self_heating_c``, the die's self-heating the play follows,
+  ``width_temp_per_c``, the play width's change per °C, and ``die_heating_c``, the
+  die's own self-heating every term sees, only when not 0), the causal families of
   :mod:`gyrolab.compensation.causal_models`: a state machine run at every temperature
   reading (:func:`~gyrolab.compensation.causal_models.causal_readings` states its
   equations) gives the features F (die temperature), R (its rate), S (hysteresis branch),
