@@ -541,6 +541,15 @@ def _refine_tau(f: Callable[[float], float], tau: float, err: float) -> tuple[fl
     return tau, err
 
 
+def profile_rms(X: np.ndarray, y: np.ndarray, order: int, terms: tuple[str, ...]) -> float:
+    """The profile least-squares criterion: the in-sample RMS residual (°/s) of the whole
+    run's least-squares fit of the structured model of ``order`` and ``terms`` on feature
+    rows ``X`` (what :func:`_profile_lag` and :func:`_die_heating` minimise)."""
+    A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
+    r = y - A @ lstsq(A, y)
+    return float(np.sqrt(float(r @ r) / r.size))
+
+
 def _profile_lag(
     feature: Callable[[CausalParams], np.ndarray],
     y: np.ndarray,
@@ -567,10 +576,7 @@ def _profile_lag(
     a log (the criterion on the τ grid at the chosen τ_w, °/s)."""
 
     def crit(q: CausalParams) -> float:
-        X = feature(q)
-        A = design(X, order, terms, float(X[:, 0].min()), float(X[:, 0].max()))
-        r = y - A @ lstsq(A, y)
-        return float(np.sqrt(float(r @ r) / r.size))
+        return profile_rms(feature(q), y, order, terms)
 
     tws = WARMUP_GRID_S if warmup and "warmup" in terms else (p.warmup_tau_s,)
     grid = {
@@ -726,10 +732,7 @@ def _die_heating(
     δ_d = 0 unless the fit drops by TIE). Returns the parameters, the terms and a log."""
 
     def rms(q: CausalParams, tt: tuple[str, ...]) -> float:
-        X = feature(q)
-        A = design(X, order, tt, float(X[:, 0].min()), float(X[:, 0].max()))
-        r = y - A @ lstsq(A, y)
-        return float(np.sqrt(float(r @ r) / r.size))
+        return profile_rms(feature(q), y, order, tt)
 
     base = rms(p, terms)
     warm = terms if "warmup" in terms else terms + ("warmup",)
@@ -851,5 +854,6 @@ __all__ = [
     "lstsq",
     "model_from_coef",
     "fit_structured",
+    "profile_rms",
     "select_structured",
 ]
