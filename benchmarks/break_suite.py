@@ -23,7 +23,10 @@ calibrate on random steps, evaluate on the others (the staircase included);
 ``staircase_ramps3c`` move the cycle or change its rates), evaluate on the staircase
 protocol's five runs (``--before staircase-TAG`` pairs it with a staircase run).
 ``--first-unit 12 --units 8`` runs the development units 12–19 (never in the tables of
-units 0–11).
+units 0–11). ``--cold-power-on`` appends a second calibration run to the protocol's, a
+3.6 h one powered on cold at −20 °C (``coldcal``, seed + 55 555), on the same time axis
+1e6 s after the first ends: one calibration with two power-ons
+(``CausalCalibration.power_ons``; the features start again at rest at the second).
 
 **Methods**: gyrolab's selected causal model (``fit_causal`` on the calibration run's
 3.6 s means, the PT100 readings, every family of ``--families``), each family alone, the
@@ -69,6 +72,32 @@ from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 CACHE = REPO / "benchmarks" / "results" / "break_suite"
 DEFAULT_LAG = DEFAULT_CONFIG.causal_lag_criterion
 BLOCK_S = 3.6
+#: the time between two calibration runs on one axis (s; any: the features restart)
+GAP_S = 1.0e6
+
+
+def calibration(cals: list[Any]):  # noqa: ANN201
+    """The calibration of one or more runs (each from its own power-on): each run's 3.6 s
+    block means, the later runs shifted 1e6 s after the one before ends (any gap: the
+    features start again at rest at each power-on), the PT100 readings likewise, and
+    their power-ons."""
+    from gyrolab.compensation.causal import CausalCalibration
+    from gyrolab.numerics.averaging import block_average
+
+    ts, xs, pts, pcs, ons, off = [], [], [], [], [], 0.0
+    for i, c in enumerate(cals):
+        tb, xb, _ = block_average(c.t, c.raw, BLOCK_S, 1.0 / RATE_HZ)
+        ts.append(tb + off)
+        xs.append(xb)
+        pts.append(c.pt_t + off)
+        pcs.append(c.pt_c)
+        if i:
+            ons.append(off)
+        off += float(c.t[-1]) + GAP_S
+    cat = np.concatenate
+    return CausalCalibration(
+        t=cat(ts), rate=cat(xs), pt_t=cat(pts), pt_c=cat(pcs), power_ons=tuple(ons)
+    )
 
 
 def fit_and_apply(
@@ -79,22 +108,21 @@ def fit_and_apply(
     quick: bool,
     lag_criterion: str = DEFAULT_LAG,
 ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any]]:
-    """gyrolab's causal selection fitted on ``cal``; every family's 10 Hz output (and its
-    band, where the model states one) on every run of ``runs``."""
+    """gyrolab's causal selection fitted on ``cal`` (a run, or a list of runs each from
+    its own power-on: :func:`calibration`); every family's 10 Hz output (and its band,
+    where the model states one) on every run of ``runs``."""
     import torch
 
-    from gyrolab.compensation.causal import CausalCalibration, family_models, fit_causal
+    from gyrolab.compensation.causal import family_models, fit_causal
     from gyrolab.compensation.config import PipelineConfig
-    from gyrolab.numerics.averaging import block_average
 
     torch.set_num_threads(1)
-    tb, xb, _ = block_average(cal.t, cal.raw, BLOCK_S, 1.0 / RATE_HZ)
     cfg = PipelineConfig(causal_lag_criterion=lag_criterion)
     if quick:
         cfg = replace(cfg, bp_max_iter=60, ga_population=12, ga_generations=6)
     t0 = time.perf_counter()
     cm = fit_causal(
-        CausalCalibration(t=tb, rate=xb, pt_t=cal.pt_t, pt_c=cal.pt_c),
+        calibration(cal if isinstance(cal, list) else [cal]),
         families=families,
         config=cfg,
         seed=seed,
@@ -129,10 +157,12 @@ def run_unit(
     quick: bool,
     lag: str = DEFAULT_LAG,
     draw: int = 0,
+    cold: bool = False,
 ):
     """Simulate unit ``u`` on every trajectory, calibrate on ``protocol``, score the rest;
     ``draw`` > 0 re-draws the calibration run's noise (seed + 100 000 × draw), the held-out
-    runs kept."""
+    runs kept; ``cold``: a second calibration run, ``coldcal`` (seed + 55 555), powered on
+    cold (module docstring)."""
     t0 = time.perf_counter()
     unit = units(u + 1)[u]
     names = list(NAMES)
@@ -145,10 +175,11 @@ def run_unit(
     # the calibration run, once (a calibration-only one is seeded as the run it extends)
     seed = 100 * u + names.index(base) + 1 + 100_000 * draw
     runs[protocol] = simulate_run(unit, protocol, seed=seed, noise_path=noise)
+    cals = [runs[protocol]]
+    if cold:
+        cals.append(simulate_run(unit, "coldcal", seed=seed + 55_555, noise_path=noise))
     t_sim = time.perf_counter() - t0
-    outs, info = fit_and_apply(
-        runs[protocol], {n: runs[n] for n in held}, families, u, quick, lag
-    )
+    outs, info = fit_and_apply(cals, {n: runs[n] for n in held}, families, u, quick, lag)
     res: dict[str, Any] = {
         "unit": u,
         "protocol": protocol,
@@ -412,6 +443,11 @@ def main(argv: list[str] | None = None) -> int:
         default=0,
         help="re-draw the calibration run's noise (K > 0; held-out runs unchanged)",
     )
+    ap.add_argument(
+        "--cold-power-on",
+        action="store_true",
+        help="a second calibration run powered on cold (coldcal) beside the protocol's",
+    )
     args = ap.parse_args(argv)
     fams = tuple(args.families.split(","))
     name = f"{args.protocol}{('-' + args.tag) if args.tag else ''}"
@@ -423,7 +459,15 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("GYROLAB_NO_PROGRESS", "1")
         t0 = time.perf_counter()
         la = load_now()
-        job = (args.protocol, fams, args.noise, args.quick, args.lag_criterion, args.cal_draw)
+        job = (
+            args.protocol,
+            fams,
+            args.noise,
+            args.quick,
+            args.lag_criterion,
+            args.cal_draw,
+            args.cold_power_on,
+        )
         us = list(range(args.first_unit, args.first_unit + args.units))
         if args.workers > 1:
             from concurrent.futures import ProcessPoolExecutor
@@ -438,6 +482,7 @@ def main(argv: list[str] | None = None) -> int:
             "quick": args.quick,
             "lag_criterion": args.lag_criterion,
             "cal_draw": args.cal_draw,
+            "cold_power_on": args.cold_power_on,
         }
         save(CACHE / name, {"meta": meta, "units": results})
     body = tables(results, meta)

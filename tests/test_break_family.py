@@ -111,6 +111,30 @@ def test_one_round_through_gyrolab_causal_model() -> None:
     assert np.all(hi > 0) and np.all(lo == -hi)
 
 
+def test_a_calibration_of_two_power_ons() -> None:
+    # break_suite --cold-power-on: the ramp-cycle run and a cold power-on (coldcal) on one
+    # time axis; the structured features of each run's blocks are those of that run alone
+    import break_suite
+
+    from gyrolab.compensation.causal_features import CausalParams
+    from gyrolab.compensation.structured import block_features
+
+    sp, rest = trajectory("coldcal")
+    assert rest == -20.0 and sp[0] == -20.0 and 3.5 * 3600 < sp.size < 3.7 * 3600
+    u = units(1)[0]
+    a, b = simulate_run(u, "staircase", seed=1), simulate_run(u, "coldcal", seed=2)
+    cal = break_suite.calibration([a, b])
+    one = [break_suite.calibration([r]) for r in (a, b)]
+    assert cal.power_ons == (float(a.t[-1]) + break_suite.GAP_S,)
+    assert cal.t.size == sum(c.t.size for c in one) and one[0].power_ons == ()
+    p = CausalParams(tau_s=400.0, width_c=1.0, warmup_tau_s=600.0)
+    X = block_features(cal, p)
+    # to 1e-10: the second run's times, shifted by 1e6 s, round in their last bits
+    np.testing.assert_allclose(X, np.vstack([block_features(c, p) for c in one]), atol=1e-10)
+    ever = break_suite.calibration([simulate_run(u, "coldcal", seed=2), a])
+    assert not np.allclose(block_features(ever, p)[:10, 0], X[:10, 0])  # order matters
+
+
 def test_die_sensor_is_the_units_own_coarse_register() -> None:
     """The die thermometer (``--temperature internal`` in prior_suite): readings on its
     register's grid, one offset per unit across its runs (another unit another), and its

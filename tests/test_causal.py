@@ -56,6 +56,30 @@ def test_step_equals_vectorised_features_bit_for_bit(
     assert np.array_equal(X, Z)
 
 
+def test_features_restart_at_each_power_on() -> None:
+    # a calibration of two runs on one time axis: with the second run's power-on given,
+    # the features of each stretch are those of that run alone, bit for bit (the state
+    # at rest again, the time since power-on from that power-on), the plays of
+    # structured_pi's features too
+    from gyrolab.compensation.pi_models import pi_features
+
+    rng = np.random.default_rng(5)
+    ta, tb = np.arange(0.0, 4000.0), np.arange(0.0, 3000.0)
+    Ta = 25.0 + np.cumsum(rng.normal(0.0, 0.05, ta.size))
+    Tb = -20.0 + np.cumsum(rng.normal(0.0, 0.05, tb.size))
+    p = CausalParams(tau_s=300.0, width_c=1.0, warmup_tau_s=600.0, die_heating_c=2.0)
+    on = 4000.0 + 1e6
+    t, T = np.r_[ta, tb + on], np.r_[Ta, Tb]
+    X = reading_features(t, T, p, power_ons=(on,))
+    assert np.array_equal(X, np.vstack([reading_features(ta, Ta, p), reading_features(tb, Tb, p)]))
+    assert not np.array_equal(X, reading_features(t, T, p))  # one power-on: not the same
+    w = (0.5, 2.0)
+    Y = pi_features(t, T, p, w, 0.3, (on,))
+    alone = [pi_features(ta, Ta, p, w, 0.3), pi_features(tb, Tb, p, w, 0.3)]
+    assert np.array_equal(Y, np.vstack(alone))
+    assert np.array_equal(pi_features(ta, Ta, p, w, 0.3, ()), pi_features(ta, Ta, p, w, 0.3))
+
+
 def test_features_follow_their_equations() -> None:
     # a slow ramp: the lagged temperature trails by rate·τ, R is the rate, S the branch
     t = np.arange(0.0, 20000.0)

@@ -15,6 +15,7 @@ CALIBRATIONS = {
     "staircase_centrecycle": "staircase",
     "staircase_ramps15": "staircase",
     "staircase_ramps3c": "staircase",
+    "staircase_ramps_coldtail": "staircase",
 }
 
 
@@ -56,7 +57,14 @@ def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
       rate the chamber can cool at (≈ 15 h);
     * ``staircase_ramps3c`` (calibration only) — the staircase, then −40 → 60 at 3 °C/min,
       30 min, 60 → −40 at 1.5 °C/min (what the chamber can cool at), 30 min (≈ 14.7 h):
-      the fast heating, and the cold end in a second CV segment.
+      the fast heating, and the cold end in a second CV segment;
+    * ``coldcal`` (calibration only, a second power-on appended to a calibration:
+      ``break_suite.py --cold-power-on``) — rests at −20 °C unpowered, powered on cold:
+      1 h at −20, 2 °C/min to 40, 1 h, 1.5 °C/min to −10, 30 min (≈ 3.6 h). Not the
+      held-out ``coldstart`` (−35 °C, 1 °C/min);
+    * ``staircase_ramps_coldtail`` (calibration only) — ``staircase_ramps``, then 2 °C/min
+      to −20 and ``coldcal``'s program without its power cycle (≈ 17.8 h): the control
+      of ``--cold-power-on`` — the same chamber program and hours, one power-on.
     """
     if name == "staircase":
         sp = [(25.0, 3600.0), (60.0, 3600.0)] + [(60.0 - 10.0 * i, 3600.0) for i in range(1, 11)]
@@ -101,6 +109,14 @@ def trajectory(name: str, seed: int = 0) -> tuple[np.ndarray, float]:
         up = 1.5 if name == "staircase_ramps15" else 3.0
         cyc = [_ramp(-40.0, 60.0, up), np.full(1800, 60.0), _ramp(60.0, -40.0, 1.5)]
         return np.concatenate([sp, *cyc, np.full(1800, -40.0)]), rest
+    if name == "staircase_ramps_coldtail":
+        sp, rest = trajectory("staircase_ramps")
+        cold, _ = trajectory("coldcal")
+        return np.concatenate([sp, _ramp(-40.0, -20.0, 2.0), cold]), rest
+    if name == "coldcal":
+        seg = [np.full(3600, -20.0), _ramp(-20.0, 40.0, 2.0), np.full(3600, 40.0)]
+        seg += [_ramp(40.0, -10.0, 1.5), np.full(1800, -10.0)]
+        return np.concatenate(seg), -20.0
     if name == "coldstart":
         seg = [np.full(3600, -35.0), _ramp(-35.0, 50.0, 1.0), np.full(7200, 50.0)]
         seg += [_steps([(20.0, 3600.0), (-10.0, 3600.0), (40.0, 3600.0)])]

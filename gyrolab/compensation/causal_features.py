@@ -275,12 +275,31 @@ def features(
 
 
 def reading_features(
-    pt_t: np.ndarray, pt_c: np.ndarray, params: CausalParams, t_power_on: float = 0.0
+    pt_t: np.ndarray,
+    pt_c: np.ndarray,
+    params: CausalParams,
+    t_power_on: float = 0.0,
+    power_ons: tuple[float, ...] = (),
 ) -> np.ndarray:
     """:func:`features` over a run's PT100 readings at times ``pt_t`` (s, increasing) with
     values ``pt_c`` (°C); power-on at ``t_power_on`` (the recording's t = 0 for simulated
-    and gyrolab-acquired runs)."""
+    and gyrolab-acquired runs). ``power_ons``: later power-ons (s, increasing, after
+    ``t_power_on``), e.g. a calibration made of two runs on one time axis: at the first
+    reading at or after each, the state starts again at rest there, its time since
+    power-on counted from that power-on — the features of each stretch are those of
+    that stretch alone."""
     pt_t = np.asarray(pt_t, dtype=float)
+    pt_c = np.asarray(pt_c, dtype=float)
+    if power_ons:
+        cuts = np.searchsorted(pt_t, np.asarray(power_ons, dtype=float), side="left")
+        edges = [0, *(int(c) for c in cuts), pt_t.size]
+        starts = [t_power_on, *power_ons]
+        parts = [
+            reading_features(pt_t[a:b], pt_c[a:b], params, t0)
+            for a, b, t0 in zip(edges[:-1], edges[1:], starts, strict=True)
+            if b > a
+        ]
+        return np.vstack(parts) if parts else np.empty((0, 4))
     dt = np.diff(pt_t, prepend=pt_t[0]) if pt_t.size else pt_t
     st = initial_state(float(pt_c[0]), float(pt_t[0] - t_power_on), params) if pt_t.size else None
     return features(pt_c, dt, params, st)

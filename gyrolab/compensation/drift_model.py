@@ -176,12 +176,16 @@ def drift_sample_by_sample(
 @dataclass
 class CausalCalibration:
     """What a family is fitted on: a calibration run's 3.6 s block means of the raw
-    rate at the block centres, and its PT100 readings."""
+    rate at the block centres, and its PT100 readings; ``power_ons``: the times (s) of
+    later power-ons where the calibration is several runs, or a run with a power cycle,
+    on one time axis (the features start again at rest at each:
+    :func:`~gyrolab.compensation.causal_features.reading_features`)."""
 
     t: np.ndarray  # block centres, s
     rate: np.ndarray  # 3.6 s block means of the raw rate, °/s
     pt_t: np.ndarray  # PT100 reading times, s
     pt_c: np.ndarray  # PT100 readings, °C
+    power_ons: tuple[float, ...] = ()  # later power-ons, s (the first is t = 0)
 
 
 @dataclass
@@ -221,8 +225,15 @@ class FitContext:
         """Blocked CV of a family: ``fit(train)`` (a boolean mask over the blocks) fitted
         on each fold's training blocks, its :meth:`DriftModel.drift_at` at the held-out
         block centres against their block means → ``(RMSE °/s, the held-out prediction
-        of every block)``."""
+        of every block)``. Not for a calibration with later ``power_ons``:
+        :meth:`DriftModel.drift_at` knows one power-on (a family there predicts from
+        its own block features, :func:`~gyrolab.compensation.structured.block_features`)."""
         cal = self.cal
+        if cal.power_ons:
+            raise ValueError(
+                "cross_validate predicts through drift_at, which knows one power-on; this "
+                "calibration has later power-ons"
+            )
         pred = np.empty(cal.t.size)
         for held in self.folds:
             pred[held] = fit(~held).drift_at(cal.t[held], cal.pt_t, cal.pt_c)

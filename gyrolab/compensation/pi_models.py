@@ -131,15 +131,24 @@ def pi_features(
     params: CausalParams,
     widths: tuple[float, ...],
     offset_c: float = 0.0,
+    power_ons: tuple[float, ...] = (),
 ) -> np.ndarray:
     """Rows ``(F, R, S, E, S_1, …, S_m)`` at every reading: the causal features and the
     branches of the plays of ``widths`` on ``F``, at the first reading ``offset_c`` below
-    it (:func:`~gyrolab.compensation.hysteresis.pi_start`)."""
-    X = reading_features(pt_t, pt_c, params)
+    it (:func:`~gyrolab.compensation.hysteresis.pi_start`); at rest again at each of the
+    later ``power_ons`` (s), as the features are."""
+    X = reading_features(pt_t, pt_c, params, power_ons=power_ons)
     if not widths or not X.shape[0]:
         return X
-    p = pi_start(float(pt_c[0]), widths, offset_c)
-    return np.hstack([X, pi_branches(X[:, 0], widths, p)])
+    pt_c = np.asarray(pt_c, dtype=float)
+    cuts = np.searchsorted(np.asarray(pt_t, dtype=float), np.asarray(power_ons, dtype=float))
+    edges = [0, *(int(c) for c in cuts), X.shape[0]]
+    S = [
+        pi_branches(X[a:b, 0], widths, pi_start(float(pt_c[a]), widths, offset_c))
+        for a, b in zip(edges[:-1], edges[1:], strict=True)
+        if b > a
+    ]
+    return np.hstack([X, np.vstack(S)])
 
 
 def _load(meta: dict[str, Any], arrays: dict[str, np.ndarray], prefix: str) -> PICausalModel:
@@ -169,7 +178,8 @@ def _fit(ctx: FitContext) -> Candidate:
     def columns(
         p: CausalParams, off: float, tt: tuple[str, ...] = base_terms
     ) -> tuple[np.ndarray, np.ndarray]:
-        X = hold(cal.t, cal.pt_t, pi_features(cal.pt_t, cal.pt_c, p, widths, off))
+        feats = pi_features(cal.pt_t, cal.pt_c, p, widths, off, tuple(cal.power_ons))
+        X = hold(cal.t, cal.pt_t, feats)
         lo, hi = float(X[:, 0].min()), float(X[:, 0].max())
         return X, np.hstack([design(X[:, :4], order, tt, lo, hi), X[:, 4:]])
 

@@ -333,8 +333,10 @@ def cv_design(
 
 def block_features(cal: CausalCalibration, params: CausalParams) -> np.ndarray:
     """The features of every block centre of ``cal``: those of the last reading at or
-    before it (zero-order hold)."""
-    return hold(cal.t, cal.pt_t, reading_features(cal.pt_t, cal.pt_c, params))
+    before it (zero-order hold), the state at rest again at each of its later
+    ``power_ons``."""
+    feats = reading_features(cal.pt_t, cal.pt_c, params, power_ons=tuple(cal.power_ons))
+    return hold(cal.t, cal.pt_t, feats)
 
 
 def effective_samples(r: np.ndarray) -> float:
