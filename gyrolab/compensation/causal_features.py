@@ -274,6 +274,14 @@ def features(
     return out
 
 
+def power_on_edges(pt_t: np.ndarray, power_ons: tuple[float, ...]) -> list[int]:
+    """Where each power-on's stretch of the readings at ``pt_t`` (s, increasing) begins
+    and the last ends: ``[0, i_1, …, i_k, n]``, ``i_j`` the first reading at or after the
+    ``j``-th of the later ``power_ons`` (s)."""
+    cuts = np.searchsorted(np.asarray(pt_t, dtype=float), np.asarray(power_ons, dtype=float))
+    return [0, *(int(c) for c in cuts), int(np.size(pt_t))]
+
+
 def reading_features(
     pt_t: np.ndarray,
     pt_c: np.ndarray,
@@ -291,8 +299,7 @@ def reading_features(
     pt_t = np.asarray(pt_t, dtype=float)
     pt_c = np.asarray(pt_c, dtype=float)
     if power_ons:
-        cuts = np.searchsorted(pt_t, np.asarray(power_ons, dtype=float), side="left")
-        edges = [0, *(int(c) for c in cuts), pt_t.size]
+        edges = power_on_edges(pt_t, power_ons)
         starts = [t_power_on, *power_ons]
         parts = [
             reading_features(pt_t[a:b], pt_c[a:b], params, t0)

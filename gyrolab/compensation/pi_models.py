@@ -33,6 +33,7 @@ from gyrolab.compensation.causal_features import (
     CausalParams,
     hold,
     initial_state,
+    power_on_edges,
     reading_features,
     step,
 )
@@ -141,8 +142,7 @@ def pi_features(
     if not widths or not X.shape[0]:
         return X
     pt_c = np.asarray(pt_c, dtype=float)
-    cuts = np.searchsorted(np.asarray(pt_t, dtype=float), np.asarray(power_ons, dtype=float))
-    edges = [0, *(int(c) for c in cuts), X.shape[0]]
+    edges = power_on_edges(pt_t, power_ons)
     S = [
         pi_branches(X[a:b, 0], widths, pi_start(float(pt_c[a]), widths, offset_c))
         for a, b in zip(edges[:-1], edges[1:], strict=True)
