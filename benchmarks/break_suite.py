@@ -101,16 +101,16 @@ def calibration(cals: list[Any]):  # noqa: ANN201
 
 
 def fit_and_apply(
-    cal,
+    cals: list[Any],
     runs: dict[str, Any],
     families: tuple[str, ...],
     seed: int,
     quick: bool,
     lag_criterion: str = DEFAULT_LAG,
 ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any]]:
-    """gyrolab's causal selection fitted on ``cal`` (a run, or a list of runs each from
-    its own power-on: :func:`calibration`); every family's 10 Hz output (and its band,
-    where the model states one) on every run of ``runs``."""
+    """gyrolab's causal selection fitted on the calibration runs ``cals`` (each from its
+    own power-on: :func:`calibration`); every family's 10 Hz output (and its band, where
+    the model states one) on every run of ``runs``."""
     import torch
 
     from gyrolab.compensation.causal import family_models, fit_causal
@@ -122,7 +122,7 @@ def fit_and_apply(
         cfg = replace(cfg, bp_max_iter=60, ga_population=12, ga_generations=6)
     t0 = time.perf_counter()
     cm = fit_causal(
-        calibration(cal if isinstance(cal, list) else [cal]),
+        calibration(cals),
         families=families,
         config=cfg,
         seed=seed,

@@ -253,7 +253,7 @@ def _scored(
     pred = np.empty_like(y)
     err = cv_linear(Xs, y, order, terms, ctx.folds, pred, ridge=ridge)
     pc, Xc = cv_lag_features(ctx, key, ps, log)
-    tc = tuple(log.get("die_heating", {}).get("terms_plain", terms))
+    tc = cv_lag_terms(terms, log)
     if pc == ps and tc == terms:
         return err, pred, log
     score = cv_linear(Xs if Xc is None else Xc, y, order, tc, ctx.folds, ridge=ridge)
@@ -273,6 +273,13 @@ def cv_lag_params(ps: CausalParams, log: dict[str, Any]) -> CausalParams:
         return ps
     tw = float(prof.get("warmup_plain_cv_s", ps.warmup_tau_s))
     return replace(ps, tau_s=float(prof["tau_plain_cv_s"]), warmup_tau_s=tw)
+
+
+def cv_lag_terms(terms: tuple[str, ...], log: dict[str, Any]) -> tuple[str, ...]:
+    """The terms the blocked CV chose: ``terms`` itself, or those before the die's own
+    self-heating step (:func:`.structured._die_heating`, which keeps the warm-up on
+    beside δ_d) — the terms a family is scored with, at :func:`cv_lag_params`."""
+    return tuple(log.get("die_heating", {}).get("terms_plain", terms))
 
 
 def cv_lag_features(
@@ -516,6 +523,7 @@ __all__ = [
     "causal_readings",
     "cv_lag_features",
     "cv_lag_params",
+    "cv_lag_terms",
     "evaluate_causal",
     "extended_choice",
     "structured_choice",

@@ -41,6 +41,7 @@ from gyrolab.compensation.causal_models import (
     CausalDriftModel,
     CausalState,
     cv_lag_params,
+    cv_lag_terms,
     extended_choice,
 )
 from gyrolab.compensation.drift_model import Candidate, Family, FitContext, NotExportable
@@ -171,8 +172,7 @@ def _fit(ctx: FitContext) -> Candidate:
     cal, y = ctx.cal, ctx.cal.rate
     widths = PI_WIDTHS_C if "hyst" in terms else ()
     base_terms = tuple(t for t in terms if t not in PLAY_TERMS) if widths else terms
-    # the score's terms: those before the die's self-heating step (cv_lag_params)
-    plain = tuple(log.get("die_heating", {}).get("terms_plain", terms))
+    plain = cv_lag_terms(terms, log)  # the score's terms, as every family's
     score_terms = tuple(t for t in plain if t not in PLAY_TERMS) if widths else plain
 
     def columns(
