@@ -72,32 +72,20 @@ from gyrolab.compensation.structured import LAG_CRITERIA  # noqa: E402
 CACHE = REPO / "benchmarks" / "results" / "break_suite"
 DEFAULT_LAG = DEFAULT_CONFIG.causal_lag_criterion
 BLOCK_S = 3.6
-#: the time between two calibration runs on one axis (s; any: the features restart)
-GAP_S = 1.0e6
 
 
 def calibration(cals: list[Any]):  # noqa: ANN201
     """The calibration of one or more runs (each from its own power-on): each run's 3.6 s
-    block means, the later runs shifted 1e6 s after the one before ends (any gap: the
-    features start again at rest at each power-on), the PT100 readings likewise, and
-    their power-ons."""
-    from gyrolab.compensation.causal import CausalCalibration
+    block means and PT100 readings, joined as ``gyrolab compensate RUN --also ...`` joins
+    them (:func:`~gyrolab.compensation.drift_model.join_calibrations`)."""
+    from gyrolab.compensation.drift_model import CausalCalibration, join_calibrations
     from gyrolab.numerics.averaging import block_average
 
-    ts, xs, pts, pcs, ons, off = [], [], [], [], [], 0.0
-    for i, c in enumerate(cals):
+    parts = []
+    for c in cals:
         tb, xb, _ = block_average(c.t, c.raw, BLOCK_S, 1.0 / RATE_HZ)
-        ts.append(tb + off)
-        xs.append(xb)
-        pts.append(c.pt_t + off)
-        pcs.append(c.pt_c)
-        if i:
-            ons.append(off)
-        off += float(c.t[-1]) + GAP_S
-    cat = np.concatenate
-    return CausalCalibration(
-        t=cat(ts), rate=cat(xs), pt_t=cat(pts), pt_c=cat(pcs), power_ons=tuple(ons)
-    )
+        parts.append(CausalCalibration(t=tb, rate=xb, pt_t=c.pt_t, pt_c=c.pt_c))
+    return join_calibrations(parts)
 
 
 def fit_and_apply(

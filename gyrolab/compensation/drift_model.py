@@ -40,7 +40,7 @@ Samples before the first reading get the first reading's drift in the vectorised
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -188,6 +188,34 @@ class CausalCalibration:
     power_ons: tuple[float, ...] = ()  # later power-ons, s (the first is t = 0)
 
 
+#: The gap (s) :func:`join_calibrations` leaves between one power-on's run and the next:
+#: the features start again at rest at a power-on, so its length changes nothing as long
+#: as no reading of one run falls inside the next.
+POWER_CYCLE_GAP_S = 1.0e6
+
+
+def join_calibrations(parts: Sequence[CausalCalibration]) -> CausalCalibration:
+    """Several calibrations of one unit, each from its own power-on at its ``t = 0``
+    (e.g. ``compensate RUN --also COLD``: the main run and a cold start), as one: each
+    later part shifted to start :data:`POWER_CYCLE_GAP_S` after the one before it ends
+    (its last block centre or reading), every part's start a power-on of ``power_ons``.
+    A part's own later ``power_ons`` are kept, shifted with it."""
+    if not parts:
+        raise ValueError("no calibration to join")
+    ts, ys, pts, pcs, ons, off = [], [], [], [], [], 0.0
+    for i, c in enumerate(parts):
+        ts.append(np.asarray(c.t, dtype=float) + off)
+        ys.append(np.asarray(c.rate, dtype=float))
+        pts.append(np.asarray(c.pt_t, dtype=float) + off)
+        pcs.append(np.asarray(c.pt_c, dtype=float))
+        ons.extend(([off] if i else []) + [p + off for p in c.power_ons])
+        off += max(float(c.t[-1]), float(c.pt_t[-1])) + POWER_CYCLE_GAP_S
+    cat = np.concatenate
+    return CausalCalibration(
+        t=cat(ts), rate=cat(ys), pt_t=cat(pts), pt_c=cat(pcs), power_ons=tuple(ons)
+    )
+
+
 @dataclass
 class Candidate:
     """A family fitted on the whole calibration run: the model, its blocked-CV RMSE
@@ -324,9 +352,11 @@ __all__ = [
     "Family",
     "FitContext",
     "NotExportable",
+    "POWER_CYCLE_GAP_S",
     "SpecKind",
     "TIE",
     "c_array",
     "c_float",
+    "join_calibrations",
     "drift_sample_by_sample",
 ]
