@@ -75,6 +75,7 @@ class BatchOptions:
     models: str | None = None  # report: MODELS/<stem> is the model of each run
     sim_model: str | None = None  # discrepancy: starting SIM_MODEL.toml
     validate: str | None = None  # compensate: held-out run (the same unit's topics)
+    also: tuple[str, ...] = ()  # compensate: further calibration runs (--also)
     force: bool = False
     threads: int = 1
     config: Any = None  # compensate: a PipelineConfig (None: the command's default)
@@ -243,6 +244,7 @@ def _run_task(task: str, item: Item, opt: BatchOptions, progress: Progress | Non
             run,
             out,
             validate=opt.validate,
+            also=opt.also,
             config=opt.config_file,
             seed=opt.seed,
             base_config=opt.config,
@@ -286,13 +288,14 @@ def _item_model(item: Item, opt: BatchOptions) -> str | None:
 
 def item_inputs(task: str, item: Item, opt: BatchOptions) -> list[str]:
     """The item's inputs, which its output may never replace: the run, and the held-out
-    run (compensate) or the model (report, discrepancy)."""
+    and ``--also`` runs (compensate) or the model (report, discrepancy)."""
     other = {
         "compensate": opt.validate,
         "report": _item_model(item, opt),
         "discrepancy": opt.sim_model,
     }[task]
-    return [v for v in (str(item.run), other) if v]
+    also = opt.also if task == "compensate" else ()
+    return [v for v in (str(item.run), other, *also) if v]
 
 
 def run_item(

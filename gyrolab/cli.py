@@ -110,7 +110,7 @@ def _positive_float(text: str) -> float:
 UNIT_HELP = "the unit of a multi-unit run (required when the run holds several)"
 # The built-in profiles (gyrolab/profiles/profile.py BUILTIN, docs/profiles.md); not
 # imported from there so that --help needs no library import.
-_PROFILES = "paper | short | quick | paper_ramps | FILE.toml"
+_PROFILES = "paper | short | quick | paper_ramps | cold_start | FILE.toml"
 
 
 def _log_options(sp: argparse.ArgumentParser) -> None:
@@ -249,6 +249,14 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("run", metavar="RUN.mcap")
     c.add_argument("--out", required=True, help="output MODEL_DIR")
     c.add_argument("--validate", metavar="OTHER.mcap", help="held-out run for metrics")
+    c.add_argument(
+        "--also",
+        metavar="RUN2.mcap",
+        action="append",
+        default=[],
+        help="another calibration run of the unit from its own power-on (a cold start: "
+        "profile cold_start); the causal model is fitted on both (repeatable)",
+    )
     c.add_argument(
         "--seed", type=_seed, default=None, help="random seed (default: the config's, 0)"
     )

@@ -314,3 +314,31 @@ def test_fleet_counts_only_validated_units_named_by_serial(
     for u in doc["units"]:
         if u["bias_at_25c_dps"] is None:  # NaN in the JSON
             assert u["temp_min_c"] > 25.0 and "25 °C outside 25" in html
+
+
+def test_also_takes_each_units_own_run_of_a_multi_unit_recording(
+    runs: dict[str, Path],
+) -> None:
+    """``compensate MULTI --also MULTI2``: every unit's causal model gets that unit's run
+    of MULTI2 (by serial), in the fan-out as with ``--unit``."""
+    from gyrolab.compensation.axis_runs import load_runs
+
+    d = runs["dir"]
+    cold, prof = d / "multi_cold.mcap", d / "cold.toml"
+    # the same units (the family's seed), powered on cold: a short cold_start
+    steps = "".join(
+        f"[[step]]\nsetpoint_c = {c}\nduration_s = {s}\n" for c, s in ((-20, 600), (40, 900))
+    )
+    prof.write_text(f'name = "cold"\nambient_c = -20.0\n{steps}')
+    common = ["--profile", str(prof), "--rate", "10", "--seed", "3", "--units", "3"]
+    assert main(["simulate", "--out", str(cold), *common]) == 0
+    out = d / "models_also"
+    argv = ["compensate", str(runs["multi"]), "--also", str(cold), "--workers", "2"]
+    assert main([*argv, "--out", str(out)]) == 0
+    one = d / "one_also"
+    assert main([*argv[:4], "--unit", "SIM3-03", "--out", str(one)]) == 0
+    for s in SERIALS:
+        (also,) = json.loads((out / s / "model.json").read_text())["calibration"]["also"]
+        (want,) = load_runs(str(cold), CLI_CONFIG, unit=s)
+        assert also["content_hash"] == want.content_hash and also["path"] == str(cold)
+    assert (one / "model.json").read_bytes() == (out / "SIM3-03" / "model.json").read_bytes()

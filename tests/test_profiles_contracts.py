@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gyrolab.cli import main
@@ -145,3 +146,19 @@ def test_paper_ramps_is_the_staircase_then_one_cycle_and_listed() -> None:
         (-40.0, 7200.0),
     ]
     assert set(BUILTIN) <= {n.strip() for n in cli._PROFILES.split("|")}
+
+
+def test_cold_start_powers_on_soaked_at_its_first_setpoint() -> None:
+    """``cold_start`` (docs/profiles.md; ``compensate --also``): the unit starts at
+    −20 °C, where the chamber holds it for the first hour, 3.5 h in all; the simulator
+    starts the unit there (its first PT100 reading)."""
+    from gyrolab.sim.model import nominal_model
+    from gyrolab.sim.physics import Physics
+
+    p = BUILTIN["cold_start"]
+    assert p.ambient_c == p.steps[0].setpoint_c == -20.0 and p.steps[0].duration_s == 3600.0
+    assert p.duration_s == 3.5 * 3600 and max(s.setpoint_c for s in p.steps) == 40.0
+    phys = Physics(nominal_model(), rate_hz=1.0, seed=0, ambient_c=p.ambient_c)
+    phys.set_setpoint(p.steps[0].setpoint_c)
+    b = phys.advance(10)
+    assert np.all(np.abs(b.case_trace + 20.0) < 0.05)

@@ -19,6 +19,7 @@ from gyrolab.batch import BatchOptions, Item, run_items
 from gyrolab.compensation import commands
 from gyrolab.compensation.commands import units_of
 from gyrolab.compensation.config import PipelineConfig, resolve_config
+from gyrolab.compensation.guards import check_also_prior
 from gyrolab.errors import InputError
 from gyrolab.outputs import atomic_dir, check_output
 from gyrolab.record.reader import list_units
@@ -29,6 +30,7 @@ def compensate(opts: CompensateOptions) -> int:
     unit of a multi-unit run."""
     t_start = time.perf_counter()
     run = str(opts.run)
+    check_also_prior(opts.also, opts.prior)  # before the prior is read
     if opts.unit is None and units_of(run):
         if opts.prior is not None:  # each unit is tested against the prior on its own
             raise InputError(run, "--prior fits one unit of a multi-unit run: name it with --unit")
@@ -53,6 +55,7 @@ def compensate(opts: CompensateOptions) -> int:
         run_label=opts.run_label,
         validate_label=opts.validate_label,
         prior=prior,
+        also=[str(a) for a in opts.also],
     )
     print(summary)
     total = time.perf_counter() - t_start
@@ -61,7 +64,8 @@ def compensate(opts: CompensateOptions) -> int:
 
 
 def _inputs(opts: CompensateOptions) -> tuple[str | None, ...]:
-    return tuple(None if p is None else str(p) for p in (opts.run, opts.validate, opts.config))
+    paths = (opts.run, opts.validate, opts.config, *opts.also)
+    return tuple(None if p is None else str(p) for p in paths)
 
 
 def compensate_units(opts: CompensateOptions, cfg: PipelineConfig, seed: int = 0) -> int:
@@ -71,7 +75,8 @@ def compensate_units(opts: CompensateOptions, cfg: PipelineConfig, seed: int = 0
     run = str(opts.run)
     units = list_units(run)
     validate = None if opts.validate is None else str(opts.validate)
-    opt = BatchOptions(seed=seed, validate=validate, config=cfg)
+    also = tuple(str(a) for a in opts.also)
+    opt = BatchOptions(seed=seed, validate=validate, config=cfg, also=also)
     with atomic_dir(opts.out, opts.force, command="compensate", inputs=_inputs(opts)) as tmp:
         items = [Item(Path(run), Path(tmp) / u, u) for u in units]
         results = run_items("compensate", items, opt, workers=opts.workers)

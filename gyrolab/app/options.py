@@ -197,9 +197,10 @@ class CompensateOptions:
     run_label: str = ""
     validate_label: str = ""
     prior: str | None = None  # DIR of model directories, or part-number:PN
+    also: tuple[PathArg, ...] = ()  # further calibration runs, each its own power-on
 
     def __post_init__(self) -> None:
-        for p in (self.run, self.validate, self.config):
+        for p in (self.run, self.validate, self.config, *self.also):
             need_file(p)
         need_prior(self.prior)
 

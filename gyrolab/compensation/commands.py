@@ -30,7 +30,7 @@ import contextlib
 import json
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -44,7 +44,12 @@ from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_
 from gyrolab.compensation.evaluate import add_firmware_metrics, evaluate
 from gyrolab.compensation.firmware import fit_poly3
 from gyrolab.compensation.fit import fit
-from gyrolab.compensation.guards import check_not_calibration, range_check, warn_outside
+from gyrolab.compensation.guards import (
+    check_also_prior,
+    check_not_calibration,
+    range_check,
+    warn_outside,
+)
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, ModelDir
 from gyrolab.compensation.oracle import add_oracle
 from gyrolab.compensation.prepare import PreparedRun, prepare_file
@@ -119,6 +124,11 @@ def _summary(m: dict[str, Any]) -> str:
             f"{pp.get('causal', float('nan')):.4g} deg/s "
             f"({pct(pp.get('raw', 0.0), pp.get('causal', 0.0))} less)"
         )
+        if m.get("causal_also"):
+            lines.append(
+                "  causal model fitted on the calibration run and, each from its own "
+                f"power-on, {', '.join(m['causal_also'])}"
+            )
         lines += _prior_lines(m["causal_model"])
         mb = m.get("headline", {}).get("mean_bias_deg_per_h")
         band = m.get("causal_band")
@@ -196,6 +206,7 @@ def compensate(
     base_config: PipelineConfig | None = None,
     on_stage: Callable[[str], None] | None = None,
     prior: Any = None,
+    also: Sequence[str | os.PathLike[str]] = (),
 ) -> str:
     """Fit on ``run_path``, optionally evaluate on ``validate``, write ``out``; returns
     the summary the command prints (one block per axis, the calibration run's after the
@@ -210,12 +221,17 @@ def compensate(
     output directory). ``prior``: a fleet prior
     (:class:`~gyrolab.compensation.prior.FleetPrior`) for the causal model's MAP fit
     (every axis against the same prior). ``on_stage(name)`` is told each of
-    :data:`STAGES` as it is done."""
+    :data:`STAGES` as it is done. ``also``: further calibration recordings of the same
+    unit, each from its own power-on (a cold start, say): the causal model is fitted on
+    the main run and these joined (:func:`also_runs`); the paper's method and the
+    baselines on the main run alone."""
     t_start = time.perf_counter()
     stage = on_stage or (lambda _name: None)
     run_s, val_s = str(run_path), None if validate is None else str(validate)
-    inputs = (run_s, val_s, config)
+    also_s = [str(a) for a in also]
+    inputs = (run_s, val_s, config, *also_s)
     check_output(out, force, inputs=inputs, kind="dir")
+    check_also_prior(also_s, prior)
     cfg, seed = resolve_config(config, base_config or DEFAULT_CONFIG, seed)
     if unit is None and units_of(run_s):
         # every unit of a multi-unit run is the fan-out of gyrolab.app.compensate (above
@@ -239,20 +255,22 @@ def compensate(
         raise InputError(val_s, f"has {len(vals)} axes but the calibration run has {len(runs)}")
     for run, val in zip(runs, vals or [], strict=False):
         check_not_calibration(val_s, val.content_hash, run.content_hash)
+    serial = unit or recording_serial(run_s)
+    extra = also_runs(also_s, runs, vals, val_s, cfg, unit, serial, opts)
     # how the outputs name the runs: an app's stable labels, else the paths as given
     for prepared, label in ((runs, run_label), (vals or [], validate_label)):
         for r in prepared:
             r.label = label
     # the serial each model and its metrics belong to (docs/fleet.md): the unit of a
     # multi-unit recording, else the one the recording's run metadata names
-    serial = unit or recording_serial(run_s)
     vserial = (vunit or recording_serial(val_s)) if val_s else serial
     t_read = time.perf_counter() - t_start
     stage("read")
     fitted = []
     for k, run in enumerate(runs):
         t_axis = time.perf_counter()
-        fitted.append(_fit_axis(val_s, cfg, run, None if vals is None else vals[k], seed, prior))
+        val = None if vals is None else vals[k]
+        fitted.append(_fit_axis(val_s, cfg, run, val, seed, prior, [a[k] for a in extra]))
         total = (t_read if k == 0 else 0.0) + time.perf_counter() - t_axis
         model, metrics, metrics_cal, _results = fitted[-1]
         metrics["timing_s"] = total
@@ -297,12 +315,14 @@ def _fit_axis(
     val: PreparedRun | None,
     seed: int = 0,
     prior: Any = None,
+    also: Sequence[PreparedRun] = (),
 ) -> tuple[Any, ...]:
     """Fit one axis → ``(model, metrics, calibration metrics, results)``: the metrics
     (held-out when ``val``) with the firmware cubic's cost, and what the report reads of
-    each evaluated run (:mod:`gyrolab.compensation.results`)."""
+    each evaluated run (:mod:`gyrolab.compensation.results`); ``also``: the axis's further
+    calibration runs (the causal model's)."""
     with _named(run.path):
-        model, dec = fit(run, cfg, seed=seed, prior=prior)
+        model, dec = fit(run, cfg, seed=seed, prior=prior, also=also)
         app = compensate_offline(model, run, dec)
         metrics_cal = evaluate(model, app, run, held_out=False)
         p3 = fit_poly3(run)
@@ -318,6 +338,9 @@ def _fit_axis(
         warn_outside(validate, metrics.get("temperature", {}))
     else:
         metrics = metrics_cal
+    if also:  # what the summary names beside the causal headline
+        for m in {id(metrics): metrics, id(metrics_cal): metrics_cal}.values():
+            m["causal_also"] = [a.name for a in also]
     model.firmware_poly3 = p3  # type: ignore[attr-defined]
     return model, metrics, metrics_cal, results
 
@@ -329,6 +352,54 @@ def _write_axis(
     out.write_metrics(metrics)
     out.write_firmware(model.firmware_poly3)
     out.write_results(results)
+
+
+def also_runs(
+    paths: Sequence[str],
+    runs: list[PreparedRun],
+    vals: list[PreparedRun] | None,
+    val_s: str | None,
+    cfg: PipelineConfig,
+    unit: str | None,
+    serial: str | None,
+    log_options: dict[str, Any],
+) -> list[list[PreparedRun]]:
+    """``compensate --also``: each further calibration recording prepared axis by axis
+    (the same ``unit`` of a multi-unit one). Refused, one line naming the file: another
+    number of axes, another unit (the serials its metadata and the main run's name), another
+    temperature source, or the data of the main run, of an earlier ``--also`` or of the
+    held-out run."""
+    out: list[list[PreparedRun]] = []
+    seen = {r.content_hash for r in runs}
+    for path in paths:
+        aunit = select_unit(path, unit if units_of(path) else None) if unit is not None else None
+        if aunit is not None:
+            got = load_runs(path, cfg, unit=aunit)
+        else:
+            got = load_runs(path, cfg, **log_options)
+        if len(got) != len(runs):
+            raise InputError(path, f"has {len(got)} axes but the calibration run has {len(runs)}")
+        other = aunit or recording_serial(path)
+        if serial and other and other != serial:
+            raise InputError(
+                path, f"is unit {other}, the calibration run unit {serial}: --also is the same unit"
+            )
+        for a, r in zip(got, runs, strict=True):
+            if a.content_hash in seen:
+                raise InputError(
+                    path, "has the same rate and temperature data as a calibration run already "
+                    "given: --also needs another power-on's run"
+                )
+            seen.add(a.content_hash)
+            if a.temperature_source != r.temperature_source:
+                raise InputError(
+                    path, f"reads temperature from {a.temperature_source}, the calibration run "
+                    f"from {r.temperature_source}: one model has one temperature input"
+                )
+        for a, val in zip(got, vals or [], strict=False):
+            check_not_calibration(str(val_s), val.content_hash, a.content_hash)
+        out.append(got)
+    return out
 
 
 def recording_serial(path: str) -> str | None:

@@ -26,6 +26,7 @@ decomposition). Beside them the causal headline model (:mod:`gyrolab.compensatio
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from gyrolab.compensation.causal import fit_causal
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig
-from gyrolab.compensation.drift_model import CausalCalibration, DriftModel
+from gyrolab.compensation.drift_model import CausalCalibration, DriftModel, join_calibrations
 from gyrolab.compensation.fitness import search_vmd_parameters
 from gyrolab.compensation.flp import ForwardLinearPredictor
 from gyrolab.compensation.guards import calibration_ranges
@@ -173,11 +174,23 @@ class CompensationModel:
         return self.causal if self.causal is not None else self.drift
 
 
-def fit_causal_model(run: PreparedRun, cfg: PipelineConfig, seed: int = 0) -> DriftModel:
+def causal_calibration(run: PreparedRun, also: Sequence[PreparedRun] = ()) -> CausalCalibration:
+    """What the causal model is fitted on: the run's block means and PT100 readings, and
+    those of the ``also`` runs (each from its own power-on) joined after it
+    (:func:`~gyrolab.compensation.drift_model.join_calibrations`)."""
+    parts = [
+        CausalCalibration(t=r.t, rate=r.rate, pt_t=r.pt_t, pt_c=r.pt_c) for r in (run, *also)
+    ]
+    return parts[0] if len(parts) == 1 else join_calibrations(parts)
+
+
+def fit_causal_model(
+    run: PreparedRun, cfg: PipelineConfig, seed: int = 0, also: Sequence[PreparedRun] = ()
+) -> DriftModel:
     """The causal drift model (:func:`gyrolab.compensation.causal.fit_causal`): every family
-    of ``cfg.causal_families``, the winner by CV inside ``run``."""
-    cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
-    return fit_causal(cal, config=cfg, seed=seed)
+    of ``cfg.causal_families``, the winner by CV inside ``run`` (and the ``also`` runs:
+    :func:`causal_calibration`)."""
+    return fit_causal(causal_calibration(run, also), config=cfg, seed=seed)
 
 
 def fit_prior_model(run: PreparedRun, prior: Any) -> DriftModel:
@@ -185,8 +198,7 @@ def fit_prior_model(run: PreparedRun, prior: Any) -> DriftModel:
     outside the prior is an :class:`InputError` asking for the full profile."""
     from gyrolab.compensation.prior import fit_map
 
-    cal = CausalCalibration(t=run.t, rate=run.rate, pt_t=run.pt_t, pt_c=run.pt_c)
-    got = fit_map(cal, prior)
+    got = fit_map(causal_calibration(run), prior)
     if not got.membership.belongs:
         raise InputError(run.path, got.membership.message())
     return got.model
@@ -202,12 +214,19 @@ def fit_drift_model(
 
 
 def fit(
-    run: PreparedRun, cfg: PipelineConfig = DEFAULT_CONFIG, seed: int = 0, prior: Any = None
+    run: PreparedRun,
+    cfg: PipelineConfig = DEFAULT_CONFIG,
+    seed: int = 0,
+    prior: Any = None,
+    also: Sequence[PreparedRun] = (),
 ) -> tuple[CompensationModel, Decomposition]:
     """Fit the hybrid model (and the baselines) on a prepared calibration run; with a
     fleet prior (:class:`~gyrolab.compensation.prior.FleetPrior`) the causal model is its
     MAP fit, and a unit that does not belong to the prior is refused (one line: calibrate
-    it on the full profile)."""
+    it on the full profile). ``also``: further runs of the unit, each from its own
+    power-on, that the causal model is fitted on beside ``run`` (model.json's
+    ``calibration.also``); the calibrated ranges stay ``run``'s, the one range every
+    output of the model shares."""
     import torch  # heavy: imported only when a model is fitted
 
     span = float(np.ptp(run.temp))
@@ -236,7 +255,10 @@ def fit(
     }
     timing["baselines"] = time.perf_counter() - t2
     t3 = time.perf_counter()
-    causal = fit_causal_model(run, cfg, seed) if prior is None else fit_prior_model(run, prior)
+    if prior is None:
+        causal = fit_causal_model(run, cfg, seed, also)
+    else:
+        causal = fit_prior_model(run, prior)
     timing["causal"] = time.perf_counter() - t3
     mixed = dec.part("mixed")
     flp_mixed = fit_flp(mixed, cfg) if dec.classes.get("mixed") else None
@@ -272,6 +294,8 @@ def fit(
             "temperature_source": run.temperature_source,
             # the unit it was fitted on, as its recording names it (guards.unit_check)
             **({"unit_serial": run.serial} if run.serial else {}),
+            # the causal model's further runs, each from its own power-on (--also)
+            **({"also": [_run_entry(a, cfg) for a in also]} if also else {}),
         },
         flp_mixed=flp_mixed,
         flp_stream=flp_stream,
@@ -282,3 +306,13 @@ def fit(
         seed=int(seed),
     )
     return model, dec
+
+
+def _run_entry(run: PreparedRun, cfg: PipelineConfig) -> dict[str, Any]:
+    """model.json's record of one ``also`` run: its name, size, length and content hash."""
+    return {
+        "path": run.name,
+        "n_points": int(run.t.size),
+        "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
+        "content_hash": run.content_hash,
+    }

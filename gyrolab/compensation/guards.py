@@ -71,6 +71,16 @@ def content_hash(rate: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray) -> str:
     return h.hexdigest(pt_t, pt_c)
 
 
+def check_also_prior(also: Any, prior: Any) -> None:
+    """Refuse ``--also`` with ``--prior``: the one lengthens the calibration, the other is
+    for a short one (a MAP fit of one run towards the fleet)."""
+    if also and prior is not None:
+        raise InputError(
+            str(also[0]),
+            "--also lengthens the calibration and --prior shortens it: fit with one of them",
+        )
+
+
 def check_not_calibration(validate_path: str, val_hash: str, cal_hash: str) -> None:
     """Refuse a validation run whose data are the calibration run's (same content hash)."""
     if val_hash and val_hash == cal_hash:

@@ -227,11 +227,34 @@ def _paper_ramps() -> Profile:
     )
 
 
+def _cold_start() -> Profile:
+    """A second calibration run, powered on cold (``gyrolab compensate RUN --also COLD``;
+    docs/profiles.md, "cold_start"): the unit soaked unpowered at −20 °C and powered on
+    there, 1 h at −20 °C, 1.5 h towards 40 °C, 1 h towards −10 °C — 3.5 h. A power-on in
+    a warm room cannot tell a warm-up that always comes at power-on from the die's own
+    self-heating; a power-on in the cold can (docs/results.md, "A second power-on,
+    cold"). ``ambient_c`` is −20 °C: where the simulator starts the chamber and the unit,
+    and where a lab soaks the unit before powering it on and starting the run."""
+    steps = (
+        Step(-20.0, 3600.0, "power-on cold"),
+        Step(40.0, 5400.0, "warm to 40 C"),
+        Step(-10.0, 3600.0, "cool to -10 C"),
+    )
+    return Profile(
+        name="cold_start",
+        steps=steps,
+        ambient_c=-20.0,
+        description="second calibration run from a cold power-on (compensate --also): soak "
+        "unpowered at -20 °C, power on, then -20, 40, -10 °C (3.5 h)",
+    )
+
+
 BUILTIN: dict[str, Profile] = {
     "paper": _paper(),
     "short": _short(),
     "quick": _quick(),
     "paper_ramps": _paper_ramps(),
+    "cold_start": _cold_start(),
 }
 
 
@@ -302,7 +325,8 @@ def profile_from_dict(d: dict[str, Any], source: str = "<dict>") -> Profile:
 
 
 def load_profile(spec: str | os.PathLike[str]) -> Profile:
-    """A built-in profile (``BUILTIN``: paper, short, quick, paper_ramps) or a profile TOML."""
+    """A built-in profile (``BUILTIN``: paper, short, quick, paper_ramps, cold_start) or a
+    profile TOML."""
     s = str(spec)
     if s in BUILTIN:
         return BUILTIN[s]
