@@ -136,3 +136,25 @@ def test_a_batch_never_writes_over_an_also_run(tmp_path: Path) -> None:
     got = item_inputs("compensate", item, opt)
     assert got == [str(item.run), opt.validate, str(tmp_path / "c.mcap")]
     assert item_inputs("report", item, opt) == [str(item.run)]
+
+
+def test_the_report_counts_an_also_run_as_fitted_on_and_names_it(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """A report of the cold run with that model is in sample, and says why it applied
+    the model itself; the identity table names the run the causal model also saw."""
+    from gyrolab.record.reader import read_recording
+    from gyrolab.report.analysis import model_run
+    from gyrolab.report.record_sections import identity_section
+
+    out = tmp_path / "model"
+    cal, cold = str(runs["cal"]), str(runs["cold"])
+    assert main(["compensate", cal, "--also", cold, "--out", str(out)]) == 0
+    m = load_model(out)
+    rec = read_recording(cold)
+    mr = model_run(out, m, rec)
+    assert mr.held_out is False and "compensate --also" in (mr.computed or "")
+    other = model_run(out, m, read_recording(str(runs["val"])))
+    assert other.held_out is True
+    rows = identity_section(rec, m.calibration["path"], [cold]).blocks[-1].rows
+    assert ["causal model also fitted on (own power-on)", cold] in rows

@@ -160,12 +160,18 @@ def model_run(
         if model.causal is not None and not match.oracle_checked:
             _add_oracle(out, rec)
         return out
-    why = (
-        f"{Path(model_dir).name} holds no results of gyrolab compensate (written before "
-        "they were kept)"
-        if not stored
-        else "this run is neither the model's calibration run nor its --validate run"
-    )
+    if not stored:
+        why = (
+            f"{Path(model_dir).name} holds no results of gyrolab compensate (written before "
+            "they were kept)"
+        )
+    elif is_calibration_run(model, run):
+        why = (
+            "the causal model was also fitted on this run (compensate --also), whose "
+            "results compensate does not keep"
+        )
+    else:
+        why = "this run is neither the model's calibration run nor its --validate run"
     return _apply(model_dir, model, run, rec, why)
 
 
@@ -216,11 +222,14 @@ def _add_oracle(mr: ModelRun, rec: Recording) -> None:
 
 
 def is_calibration_run(model: Any, run: Any) -> bool:
-    """True when ``run`` is the run the model was fitted on: same content hash of the rate
-    and temperature data (models that record it), else the same averaged series."""
+    """True when ``run`` is a run the model was fitted on — its calibration run, or one of
+    the runs its causal model was also fitted on (``compensate --also``) —: same content
+    hash of the rate and temperature data (models that record it), else the same
+    averaged series."""
     digest = model.calibration.get("content_hash")
     if digest and getattr(run, "content_hash", ""):
-        return bool(digest == run.content_hash)
+        also = {a.get("content_hash") for a in model.calibration.get("also", [])}
+        return bool(run.content_hash == digest or run.content_hash in also)
     cal = model.diagnostics.get("calib_rate")
     if cal is None:
         return Path(str(model.calibration.get("path", ""))).resolve() == Path(run.path).resolve()

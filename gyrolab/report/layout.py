@@ -54,7 +54,8 @@ def document(data: ReportData) -> Document:
     doc.sections.append(plateau_noise_section(data.plateaus))
     doc.sections.append(log_section(rec))
     cal = None if mr is None else str(mr.model.calibration.get("path"))
-    doc.sections.append(identity_section(rec, cal))
+    also = [] if mr is None else [str(a.get("path")) for a in mr.model.calibration.get("also", [])]
+    doc.sections.append(identity_section(rec, cal, also))
     doc.sections.append(signoff_section(data))
     return doc
 

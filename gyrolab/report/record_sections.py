@@ -4,6 +4,7 @@ the noise per temperature plateau (layout only; the plateau numbers come from
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -195,9 +196,12 @@ def log_section(rec: Recording) -> Section:
     return sec
 
 
-def identity_section(rec: Recording, calibration_run: str | None) -> Section:
+def identity_section(
+    rec: Recording, calibration_run: str | None, also: Sequence[str] = ()
+) -> Section:
     """Run metadata, the profile's steps, the bench's instruments and the software;
-    ``calibration_run``: the model's, when the report has one."""
+    ``calibration_run``: the model's, when the report has one; ``also``: the runs its
+    causal model was also fitted on, each from its own power-on (``compensate --also``)."""
     sec = Section("identity", "Bench identity and software")
     run: dict[str, Any] = {}
     steps: list[dict[str, Any]] = []
@@ -245,6 +249,8 @@ def identity_section(rec: Recording, calibration_run: str | None) -> Section:
     ]
     if calibration_run is not None:
         sw.append(["compensation model calibration run", calibration_run])
+    for a in also:
+        sw.append(["causal model also fitted on (own power-on)", a])
     sec.blocks.append(TableBlock("software", "Software", ["component", "version"], sw))
     return sec
 
