@@ -30,6 +30,7 @@ from gyrolab.app import register as reg
 from gyrolab.app.demo import demo_catalogue
 from gyrolab.catalogue import Catalogue, CatalogueError, schema
 from gyrolab.catalogue.entries import (
+    AlsoRunRef,
     ExportEntry,
     FlashEntry,
     ModelEntry,
@@ -213,6 +214,68 @@ def test_flash_and_verification_complete_the_trace(catalogue: str) -> None:
     (flash,) = export["flashes"]
     assert flash["device"] == "fc-1" and flash["verifications"][0]["verdict"] == "PASS"
     assert t["verdict"] == {"verdict": "PASS", "from": "verification"}
+
+
+def test_a_models_also_run_is_traced_and_registering_again_fills_it(catalogue: str) -> None:
+    """``compensate --also`` (revision 0002): the model hangs under its calibration run and
+    under the cold start it was also fitted on; a second registration that knows the file
+    fills the hash the first did not know, and erases nothing."""
+    cat = Catalogue.open(catalogue)
+    try:
+        cat.add(_run("run-a", "sha256:fa01", UnitRef("SNA", "G7")))
+        cat.add(_run("run-b", "sha256:fb02", UnitRef("SNA", "G7")))
+        blind = AlsoRunRef(None, "blake2b-160:cc", "cold.mcap")
+        cat.add(ModelEntry("sha256:ma", "/m/a", UnitRef("SNA"), "sha256:fa01", also=[blind]))
+        (m,) = cat.unit("SNA")["models"]
+        assert m["also"] == [
+            {"file_hash": None, "data_hash": "blake2b-160:cc", "path": "cold.mcap"}
+        ]
+        known = AlsoRunRef("sha256:fb02", None, None)
+        cat.add(ModelEntry("sha256:ma", "/m/a", UnitRef("SNA"), None, also=[known]))
+        t = cat.trace("SNA")
+    finally:
+        cat.close()
+    assert t is not None
+    roles = {r["run_key"]: [m["role"] for m in r["models"]] for r in t["runs"]}
+    assert roles == {"run-a": ["calibration"], "run-b": ["also"]}
+    (m,) = t["runs"][1]["models"]
+    assert m["also"] == [
+        {"file_hash": "sha256:fb02", "data_hash": "blake2b-160:cc", "path": "cold.mcap"}
+    ]
+    assert m["calibration_file"] == "sha256:fa01"  # kept: the second did not know it
+
+
+def test_a_catalogue_at_revision_0001_is_upgraded_keeping_its_rows(tmp_path: Path) -> None:
+    """A catalogue written by a gyrolab before ``--also`` (revision 0001) is migrated to
+    the head when opened, its models kept (with no ``--also`` runs)."""
+    from alembic import command
+    from alembic.config import Config
+    from sqlalchemy import create_engine
+
+    from gyrolab.catalogue.store import MIGRATIONS, current_revision
+
+    url = f"sqlite:///{tmp_path / 'old.sqlite'}"
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        cfg = Config()
+        cfg.set_main_option("script_location", str(MIGRATIONS))
+        cfg.attributes["connection"] = conn
+        command.upgrade(cfg, "0001")
+        assert current_revision(conn) == "0001"
+        conn.exec_driver_sql(
+            "INSERT INTO models (model_hash, path, held_out, axes, metrics, registered_at) "
+            "VALUES ('sha256:old', '/m/old', 0, 1, '{}', '2026-11-26 10:00:00')"
+        )
+    engine.dispose()
+    cat = Catalogue.open(url)
+    try:
+        with cat.engine.connect() as conn:
+            assert current_revision(conn) == HEAD
+            rows = conn.execute(select(schema.Model.__table__.c.model_hash)).all()
+            also = conn.execute(select(func.count()).select_from(schema.ModelAlsoRun)).scalar()
+    finally:
+        cat.close()
+    assert [r[0] for r in rows] == ["sha256:old"] and also == 0
 
 
 def test_parameters_flashed_from_a_model_hang_under_it(catalogue: str) -> None:

@@ -158,3 +158,40 @@ def test_the_report_counts_an_also_run_as_fitted_on_and_names_it(
     assert other.held_out is True
     rows = identity_section(rec, m.calibration["path"], [cold]).blocks[-1].rows
     assert ["causal model also fitted on (own power-on)", cold] in rows
+
+
+def test_the_catalogue_traces_the_model_to_both_power_ons(
+    runs: dict[str, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Registered as compensate ran, and again by ``runs rebuild`` from the files alone:
+    the model hangs under the calibration run and under the ``--also`` run."""
+    import json
+
+    d = tmp_path / "lab"
+    d.mkdir()
+    for k in ("cal", "cold"):
+        shutil.copyfile(runs[k], d / runs[k].name)
+    out = d / "model"
+    cat = f"sqlite:///{tmp_path / 'cat.sqlite'}"
+    monkeypatch.setenv("GYROLAB_CATALOGUE", cat)
+    argv = ["compensate", str(d / "cal.mcap"), "--also", str(d / "cold.mcap")]
+    assert main([*argv, "--out", str(out)]) == 0
+    rebuilt = f"sqlite:///{tmp_path / 'rebuilt.sqlite'}"
+    assert main(["runs", "rebuild", str(d), "--catalogue", rebuilt]) == 0
+    capsys.readouterr()
+    for url in (cat, rebuilt):
+        assert main(["runs", "trace", "G-7", "--json", "--catalogue", url]) == 0
+        t = json.loads(capsys.readouterr().out)
+        roles = {
+            Path(r["segments"][0]["path"]).name: [m["role"] for m in r["models"]]
+            for r in t["runs"]
+        }
+        assert roles == {"cal.mcap": ["calibration"], "cold.mcap": ["also"]}, url
+        (also,) = t["runs"][0]["models"][0]["also"]
+        assert also["path"] == str(d / "cold.mcap") and also["file_hash"].startswith("sha256:")
+    assert main(["runs", "trace", "G-7", "--catalogue", cat]) == 0
+    text = capsys.readouterr().out
+    assert "model" in text and "(also " in text

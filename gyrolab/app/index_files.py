@@ -14,11 +14,13 @@ import datetime as dt
 import json
 import os
 import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from gyrolab.catalogue.digest import file_digest
 from gyrolab.catalogue.entries import (
+    AlsoRunRef,
     ApplicationEntry,
     ExportEntry,
     FlashEntry,
@@ -169,10 +171,12 @@ def model_entry(
     calibration_file: str | None = None,
     validation_file: str | None = None,
     unit: UnitRef | None = None,
+    also_files: Sequence[str | None] = (),
 ) -> ModelEntry:
     """A model directory: its hash, unit, the runs it was fitted and validated on (their
     data hashes from ``model.json``/``results.json``; their file hashes where the caller
-    knows the files), its headline metrics."""
+    knows the files — ``also_files``: those of the ``--also`` runs, in order), its
+    headline metrics."""
     from gyrolab.compensation.model_dir import ModelDir
 
     d = Path(model_dir)
@@ -203,6 +207,14 @@ def model_entry(
         axes=len(axes),
         metrics=_kept(metrics),
         created_at=_created(d),
+        also=[
+            AlsoRunRef(
+                also_files[k] if k < len(also_files) else None,
+                a.get("content_hash"),
+                a.get("path"),
+            )
+            for k, a in enumerate(cal.get("also") or [])
+        ],
     )
 
 

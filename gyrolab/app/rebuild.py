@@ -188,6 +188,8 @@ def rebuild_entries(root: str | os.PathLike[str]) -> Rebuilt:
             m = model_entry(d)
             m.calibration_file = resolve(m.calibration_path, _near(d, base), runs, out)
             m.validation_file = resolve(m.validation_path, _near(d, base), runs, out)
+            for a in m.also:
+                a.file_hash = resolve(a.path, _near(d, base), runs, out)
             m.unit = unit_of(m.calibration_file, None if m.unit is None else m.unit.serial)
             models[d.resolve()] = m
             out.add("models", m)

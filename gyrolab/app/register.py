@@ -12,7 +12,7 @@ DIR`` registers the files later. ``GYROLAB_CATALOGUE=off`` turns it off.
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -109,13 +109,16 @@ def register_models(
     run: PathLike | None,
     validate: PathLike | None = None,
     url: str | None = None,
+    also: Sequence[PathLike] = (),
 ) -> bool:
-    """``compensate``: the calibration (and validation) run, and each model directory
-    written (one per unit of a multi-unit run)."""
+    """``compensate``: the calibration (and validation, and ``--also``) runs, and each
+    model directory written (one per unit of a multi-unit run)."""
 
     def build() -> list[Any]:
         cal, val = _run(run), _run(validate)
-        out: list[Any] = [e for e in (cal, val) if e is not None]
+        more = [_run(a) for a in also]
+        out: list[Any] = [e for e in (cal, val, *more) if e is not None]
+        also_files = [None if e is None else e.segment.file_hash for e in more]
         for d in model_dirs:
             out.append(
                 model_entry(
@@ -123,6 +126,7 @@ def register_models(
                     None if cal is None else cal.segment.file_hash,
                     None if val is None else val.segment.file_hash,
                     _part_number(cal, None),
+                    also_files,
                 )
             )
             if cal is not None and out[-1].unit is not None:  # the serial from model.json
@@ -233,7 +237,7 @@ def register_command(opts: object, rc: int) -> None:
             else sorted(d for d in out.glob("*") if ModelDir.is_model_dir(d))
         )
         if dirs:
-            register_models(dirs, opts.run, opts.validate)
+            register_models(dirs, opts.run, opts.validate, also=opts.also)
     elif isinstance(opts, o.ApplyOptions) and out.is_file():
         register_application(opts.model, opts.run, out)
     elif isinstance(opts, o.ExportOptions):

@@ -139,7 +139,7 @@ def trace_lines(t: dict[str, Any]) -> list[str]:
             f"{pad}model {short(m['model_hash'])} ({role}{m.get('family') or '—'}, "
             f"{held}{_metric(m)}) {m['path']}"
         )
-        if m.get("role") == "validation" and m["model_hash"] in calibrated:
+        if m.get("role") in ("validation", "also") and m["model_hash"] in calibrated:
             return  # its exports are shown under its calibration run
         for e in m["exports"]:
             lines.append(f"{pad}  export {e['format']} {short(e['file_hash'])} {e['path']}")

@@ -96,6 +96,17 @@ class ModelEntry:
     axes: int = 1
     metrics: dict[str, Any] = field(default_factory=dict)
     created_at: dt.datetime | None = None
+    also: list[AlsoRunRef] = field(default_factory=list)  # compensate --also, in order
+
+
+@dataclass
+class AlsoRunRef:
+    """A run a model's causal part was also fitted on (``compensate --also``): the
+    recording's file hash where known, its data's content hash and path (model.json)."""
+
+    file_hash: str | None
+    data_hash: str | None
+    path: str | None
 
 
 @dataclass

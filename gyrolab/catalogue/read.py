@@ -24,6 +24,7 @@ T_APP = schema.Application.__table__
 T_FLASH = schema.Flash.__table__
 T_VER = schema.Verification.__table__
 T_REPORT = schema.Report.__table__
+T_ALSO = schema.ModelAlsoRun.__table__
 
 
 def _iso(t: dt.datetime | None) -> str | None:
@@ -94,13 +95,29 @@ def list_runs(
     return out
 
 
-def _by(conn: Connection, table: Table, column: str, values: list[Any]) -> list[dict[str, Any]]:
+def _by(
+    conn: Connection,
+    table: Table,
+    column: str,
+    values: list[Any],
+    drop: tuple[str, ...] = ("id",),
+) -> list[dict[str, Any]]:
     if not values:
         return []
     names = ("created_at", "path", "record_path", "id")  # the same order however registered
     order = [table.c[n] for n in names if n in table.c]
     q = select(table).where(table.c[column].in_(values)).order_by(*order)
-    return [_row(r) for r in conn.execute(q)]
+    return [_row(r, drop) for r in conn.execute(q)]
+
+
+def _also(conn: Connection, model_ids: list[int]) -> dict[int, list[dict[str, Any]]]:
+    """Each model's ``--also`` runs, in order (file hash, data hash, path)."""
+    out: dict[int, list[dict[str, Any]]] = defaultdict(list)
+    if model_ids:
+        q = select(T_ALSO).where(T_ALSO.c.model_id.in_(model_ids))
+        for r in conn.execute(q.order_by(T_ALSO.c.model_id, T_ALSO.c.position)):
+            out[r.model_id].append(_row(r, ("model_id", "position")))
+    return out
 
 
 def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
@@ -110,11 +127,20 @@ def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
         return None
     runs = list_runs(conn, serial=serial)
     run_files = [s["file_hash"] for r in runs for s in r["segments"]]
-    # the unit's models, and the models fitted or validated on its runs (another serial's)
-    models = {m["model_hash"]: m for m in _by(conn, T_MODEL, "unit_id", [u.id])}
+    # the unit's models, and the models fitted, also fitted (compensate --also) or
+    # validated on its runs (another serial's)
+    model_rows = _by(conn, T_MODEL, "unit_id", [u.id], drop=())
     for column in ("calibration_file", "validation_file"):
-        for m in _by(conn, T_MODEL, column, run_files):
-            models.setdefault(m["model_hash"], m)
+        model_rows += _by(conn, T_MODEL, column, run_files, drop=())
+    if run_files:
+        q = select(T_ALSO.c.model_id).where(T_ALSO.c.file_hash.in_(run_files))
+        model_rows += _by(conn, T_MODEL, "id", [r.model_id for r in conn.execute(q)], drop=())
+    models: dict[str, dict[str, Any]] = {}
+    for m in model_rows:
+        models.setdefault(m["model_hash"], m)
+    also = _also(conn, [m["id"] for m in models.values()])
+    for m in models.values():
+        m["also"] = also.get(m.pop("id"), [])
     model_hashes = list(models)
     # the unit's reports, and the reports of its models (on another unit's run too)
     reports = {r["report_hash"]: r for r in _by(conn, T_REPORT, "unit_id", [u.id])}
@@ -181,6 +207,8 @@ def trace(conn: Connection, serial: str) -> dict[str, Any] | None:
                 if m["calibration_file"] in files
                 else "validation"
                 if m["validation_file"] in files
+                else "also"  # compensate --also: the causal model's other power-on
+                if any(a["file_hash"] in files for a in m["also"])
                 else None
             )
             if role is not None:

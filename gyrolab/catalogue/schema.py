@@ -1,9 +1,10 @@
-"""The catalogue's tables (SQLAlchemy 2 declarative), revision ``0001`` of the migrations.
+"""The catalogue's tables (SQLAlchemy 2 declarative), revision ``0002`` of the migrations.
 
 What is linked to what (docs/catalogue.md draws it)::
 
     unit ─< run_unit >─ run ─< segment            a run: one or more segment files
     unit ─< model ── segment (calibration, validation)
+    model ─< model_also_run ── segment            compensate --also: the causal model's other runs
     model ─< export ─< flash >─ unit ─< verification ── flash, segment
     model ─< flash                                parameters flashed from the model itself
     model ─< application ── segment               gyrolab apply's compensated recording
@@ -122,6 +123,20 @@ class Model(Base):
     metrics: Mapped[Any] = mapped_column(JSON)
     created_at: Mapped[dt.datetime | None] = mapped_column(DateTime)
     registered_at: Mapped[dt.datetime] = mapped_column(DateTime)
+
+
+class ModelAlsoRun(Base):
+    """A run a model's causal part was also fitted on, from its own power-on
+    (``compensate --also``; revision 0002), in the order given: the recording's file hash
+    where the fit knew the file, the data's content hash and path as model.json names
+    them."""
+
+    __tablename__ = "model_also_runs"
+    model_id: Mapped[int] = mapped_column(ForeignKey("models.id"), primary_key=True)
+    position: Mapped[int] = mapped_column(Integer, primary_key=True)
+    file_hash: Mapped[str | None] = mapped_column(HASH, index=True)
+    data_hash: Mapped[str | None] = mapped_column(HASH)
+    path: Mapped[str | None] = mapped_column(Text)
 
 
 class Export(Base):

@@ -154,10 +154,21 @@ def _values(conn: Connection, e: Any) -> dict[str, Any]:
 
 def add_model(conn: Connection, e: ModelEntry) -> int:
     values = _values(conn, e)
+    also = values.pop("also")
     values["registered_at"] = utc_now()
     t = schema.Model.__table__
     fill = [c.name for c in t.columns if c.nullable]
-    return upsert(conn, t, values, key=["model_hash"], fill=fill)
+    model_id = upsert(conn, t, values, key=["model_hash"], fill=fill)
+    ta = schema.ModelAlsoRun.__table__
+    for k, a in enumerate(also):  # the same model, the same runs: fill what was unknown
+        stmt = _insert(conn, ta).values(model_id=model_id, position=k, **a)
+        ex = stmt.excluded  # type: ignore[attr-defined]
+        stmt = stmt.on_conflict_do_update(  # type: ignore[attr-defined]
+            index_elements=["model_id", "position"],
+            set_={c: func.coalesce(ex[c], ta.c[c]) for c in a},
+        )
+        conn.execute(stmt)
+    return model_id
 
 
 def add_export(conn: Connection, e: ExportEntry) -> int:
