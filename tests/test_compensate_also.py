@@ -195,3 +195,25 @@ def test_the_catalogue_traces_the_model_to_both_power_ons(
     assert main(["runs", "trace", "G-7", "--catalogue", cat]) == 0
     text = capsys.readouterr().out
     assert "model" in text and "(also " in text
+
+
+def test_the_band_takes_dt_dt_within_each_power_on() -> None:
+    """The band's calibrated dT/dt range of a joined calibration is its runs' own: the
+    backward difference never compares the last reading of one run with the next's
+    (a junction from +10 °C to −20 °C would read −6 °C/min), and no window spans two."""
+    from gyrolab.compensation.band import fit_band
+    from gyrolab.compensation.causal import blocked_folds
+
+    rng = np.random.default_rng(5)
+    tb = np.arange(1.8, 3000.0, 3.6)
+    pt = np.arange(0.0, 3000.0, 1.0)
+    a = CausalCalibration(t=tb, rate=np.zeros(tb.size), pt_t=pt, pt_c=pt * 0.01)  # 0.6 °C/min
+    b = CausalCalibration(t=tb, rate=np.zeros(tb.size), pt_t=pt, pt_c=np.full(pt.size, -20.0))
+    j = join_calibrations([a, b])
+    y = rng.normal(0.0, 1e-3, j.t.size)
+    folds = blocked_folds(j.t.size, 5, 10)
+    band = fit_band(j.t, y, np.zeros(j.t.size), folds, j.pt_t, j.pt_c, power_ons=j.power_ons)
+    assert band.rate_min_c_per_min == pytest.approx(0.0, abs=1e-9)
+    assert band.rate_max_c_per_min == pytest.approx(0.6, abs=1e-6)
+    blind = fit_band(j.t, y, np.zeros(j.t.size), folds, j.pt_t, j.pt_c)
+    assert blind.rate_min_c_per_min < -5.0  # what it read before

@@ -127,17 +127,47 @@ class PredictionBand:
         return cls(**{k: d[k] for k in cls.__dataclass_fields__ if d.get(k) is not None})
 
 
-def _windows(mask: np.ndarray, n: int = WINDOW_BLOCKS) -> list[np.ndarray]:
-    """Index arrays of consecutive ``n``-block windows inside every run of True."""
+def _windows(
+    mask: np.ndarray, n: int = WINDOW_BLOCKS, starts: tuple[int, ...] = ()
+) -> list[np.ndarray]:
+    """Index arrays of consecutive ``n``-block windows inside every run of True, none
+    across a block index of ``starts`` (a later power-on's first block)."""
     out: list[np.ndarray] = []
     idx = np.flatnonzero(mask)
     if idx.size == 0:
         return out
-    breaks = np.flatnonzero(np.diff(idx) > 1) + 1
+    cut = np.diff(idx) > 1
+    if starts:
+        cut |= np.isin(idx[1:], starts)
+    breaks = np.flatnonzero(cut) + 1
     for seg in np.split(idx, breaks):
         for s in range(0, seg.size - n + 1, n):
             out.append(seg[s : s + n])
     return out
+
+
+def _rate_by_run(
+    t: np.ndarray, pt_t: np.ndarray, pt_c: np.ndarray, power_ons: tuple[float, ...]
+) -> tuple[np.ndarray, tuple[int, ...]]:
+    """dT/dt (°C/min, :func:`~gyrolab.compensation.guards.temperature_rate`) at the block
+    centres ``t``, each run of a calibration of several power-ons on its own — across a
+    power-on the backward difference would compare two runs — and the block index where
+    each later run starts."""
+    if not power_ons:
+        return temperature_rate(t, pt_t, pt_c, RATE_WINDOW_S), ()
+    tb = np.searchsorted(t, power_ons)
+    tp = np.searchsorted(pt_t, power_ons)
+    cuts_b = [0, *(int(i) for i in tb), t.size]
+    cuts_p = [0, *(int(i) for i in tp), pt_t.size]
+    spans = zip(
+        zip(cuts_b[:-1], cuts_b[1:], strict=True),
+        zip(cuts_p[:-1], cuts_p[1:], strict=True),
+        strict=True,
+    )
+    parts = [
+        temperature_rate(t[a:b], pt_t[c:d], pt_c[c:d], RATE_WINDOW_S) for (a, b), (c, d) in spans
+    ]
+    return np.concatenate(parts), tuple(int(i) for i in tb)
 
 
 def fit_band(
@@ -148,14 +178,16 @@ def fit_band(
     pt_t: np.ndarray,
     pt_c: np.ndarray,
     level: float = LEVEL,
+    power_ons: tuple[float, ...] = (),
 ) -> PredictionBand:
     """The band of a model from its cross-validated predictions (module docstring).
 
     ``t``, ``y``: the calibration run's block centres (s) and 3.6 s means (°/s); ``pred``:
     each block's prediction by the model fitted without its fold; ``folds``: the boolean
-    held-out masks of the CV."""
+    held-out masks of the CV; ``power_ons``: the calibration's later power-ons (s), where
+    a new run starts: dT/dt is taken within each run and no window spans two."""
     T = hold(t, pt_t, pt_c)
-    R = temperature_rate(t, pt_t, pt_c, RATE_WINDOW_S)
+    R, starts = _rate_by_run(t, pt_t, pt_c, power_ons)
     r = y - pred
     res, dts, drs = [], [], []
     for held in folds:
@@ -166,7 +198,7 @@ def fit_band(
         rlo, rhi = float(R[tr].min()), float(R[tr].max())
         dT = np.maximum(0.0, np.maximum(T - thi, tlo - T))
         dR = np.maximum(0.0, np.maximum(R - rhi, rlo - R))
-        for w in _windows(held):
+        for w in _windows(held, starts=starts):
             res.append(abs(float(r[w].mean())))
             dts.append(float(dT[w].mean()))
             drs.append(float(dR[w].mean()))

@@ -93,7 +93,9 @@ def fit_causal(
     model.alternatives = {f: c.model for f, c in fitted.items()}
     pred = fitted[win].cv_pred
     if pred is not None:  # the winner's 90 % band, from its own held-out predictions
-        model.band = fit_band(cal.t, y, pred, ctx.folds, cal.pt_t, cal.pt_c)
+        model.band = fit_band(
+            cal.t, y, pred, ctx.folds, cal.pt_t, cal.pt_c, power_ons=tuple(cal.power_ons)
+        )
     return model
 
 

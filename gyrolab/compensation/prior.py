@@ -778,7 +778,7 @@ def fit_map(cal: CausalCalibration, prior: FleetPrior, *, neff: bool = True) -> 
         model=b.model(theta),
         cv_rmse={"structured": cv},
         selection={"winner": "structured", "prior": log},
-        band=fit_band(cal.t, y, pred, folds, cal.pt_t, cal.pt_c),
+        band=fit_band(cal.t, y, pred, folds, cal.pt_t, cal.pt_c, power_ons=tuple(cal.power_ons)),
     )
     return PriorFit(model, mem, log)
 
