@@ -339,8 +339,7 @@ def _fit_axis(
     else:
         metrics = metrics_cal
     if also:  # what the summary names beside the causal headline
-        for m in {id(metrics): metrics, id(metrics_cal): metrics_cal}.values():
-            m["causal_also"] = [a.name for a in also]
+        metrics["causal_also"] = metrics_cal["causal_also"] = [a.name for a in also]
     model.firmware_poly3 = p3  # type: ignore[attr-defined]
     return model, metrics, metrics_cal, results
 
