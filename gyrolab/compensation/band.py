@@ -57,7 +57,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.special import erfinv
 
-from gyrolab.compensation.causal_features import hold
+from gyrolab.compensation.causal_features import hold, power_on_edges
 from gyrolab.compensation.guards import temperature_rate
 
 LEVEL = 0.9
@@ -155,10 +155,7 @@ def _rate_by_run(
     each later run starts."""
     if not power_ons:
         return temperature_rate(t, pt_t, pt_c, RATE_WINDOW_S), ()
-    tb = np.searchsorted(t, power_ons)
-    tp = np.searchsorted(pt_t, power_ons)
-    cuts_b = [0, *(int(i) for i in tb), t.size]
-    cuts_p = [0, *(int(i) for i in tp), pt_t.size]
+    cuts_b, cuts_p = power_on_edges(t, power_ons), power_on_edges(pt_t, power_ons)
     spans = zip(
         zip(cuts_b[:-1], cuts_b[1:], strict=True),
         zip(cuts_p[:-1], cuts_p[1:], strict=True),
@@ -167,7 +164,7 @@ def _rate_by_run(
     parts = [
         temperature_rate(t[a:b], pt_t[c:d], pt_c[c:d], RATE_WINDOW_S) for (a, b), (c, d) in spans
     ]
-    return np.concatenate(parts), tuple(int(i) for i in tb)
+    return np.concatenate(parts), tuple(cuts_b[1:-1])
 
 
 def fit_band(

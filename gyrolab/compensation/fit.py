@@ -284,8 +284,7 @@ def fit(
         alpha=dec.alpha,
         calibration={
             "path": run.name,
-            "n_points": int(run.t.size),
-            "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
+            **_run_size(run, cfg),
             **calibration_ranges(run, cfg.dtdt_window_s),
             "raw_rate_hz": 1.0 / run.raw_period,
             "filled_blocks": run.filled_blocks,
@@ -308,11 +307,14 @@ def fit(
     return model, dec
 
 
-def _run_entry(run: PreparedRun, cfg: PipelineConfig) -> dict[str, Any]:
-    """model.json's record of one ``also`` run: its name, size, length and content hash."""
+def _run_size(run: PreparedRun, cfg: PipelineConfig) -> dict[str, Any]:
+    """model.json's size of a calibration run: its blocks and its length (s)."""
     return {
-        "path": run.name,
         "n_points": int(run.t.size),
         "duration_s": float(run.t[-1] - run.t[0] + cfg.block_s),
-        "content_hash": run.content_hash,
     }
+
+
+def _run_entry(run: PreparedRun, cfg: PipelineConfig) -> dict[str, Any]:
+    """model.json's record of one ``also`` run: its name, size, length and content hash."""
+    return {"path": run.name, **_run_size(run, cfg), "content_hash": run.content_hash}
