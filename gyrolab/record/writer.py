@@ -371,6 +371,9 @@ class RecordingWriter:
         self.fsync = fsync
         self.fsync_every_s = fsync_every_s
         self._last_flush_t = 0.0
+        # Block topics (ADC, rate): run time their data reaches, written / handed to the OS.
+        self._put_to: dict[str, float] = {}
+        self._flushed_to: dict[str, float] = {}
         self._last_fsync_wall = time.monotonic()
         self.flush_count = 0
         self.fsync_count = 0
@@ -425,7 +428,8 @@ class RecordingWriter:
         )
 
     # -- low level
-    def _put(self, topic: str, t: float, data: bytes) -> None:
+    def _put(self, topic: str, t: float, data: bytes, t_end: float | None = None) -> None:
+        """Add one message stamped ``t``; a block's ``t_end`` is where its data ends."""
         if self._closed:
             raise RuntimeError("recording is closed")
         seq = self._seq.get(topic, 0)
@@ -448,7 +452,20 @@ class RecordingWriter:
                 self.tap(topic, ts, data)
             except Exception:  # noqa: BLE001 - the recording comes first
                 pass
-        if self.flush_every_s is not None and t - self._last_flush_t >= self.flush_every_s:
+        fe = self.flush_every_s
+        if fe is None:
+            return
+        if t_end is not None:
+            # A block is stamped with its start, other messages on arrival, which is later:
+            # the stamp rule alone can leave several blocks unflushed behind a message that
+            # arrived after them. So each block topic also keeps its own account — its data
+            # not yet handed to the OS never exceeds flush_every_s (docs/reliability.md).
+            self._put_to[topic] = t_end
+            if t_end - self._flushed_to.setdefault(topic, t) > fe * (1 + 1e-9):
+                self.flush()
+                self._last_flush_t = max(self._last_flush_t, t)
+                return
+        if t - self._last_flush_t >= fe:
             self.flush()
             self._last_flush_t = t
 
@@ -486,6 +503,7 @@ class RecordingWriter:
             self._write_group(g)
         self._w.flush()
         self._fh.flush()
+        self._flushed_to.update(self._put_to)
         self.flush_count += 1
         now = time.monotonic()
         if self.fsync or (
@@ -525,7 +543,10 @@ class RecordingWriter:
         unit: str | None = None,
     ) -> None:
         self._put(
-            self._unit(TOPIC_ADC, unit), t0, encode_block(t0, period, first_index, counts, "adc")
+            self._unit(TOPIC_ADC, unit),
+            t0,
+            encode_block(t0, period, first_index, counts, "adc"),
+            t0 + len(counts) * period,
         )
 
     def write_rate_block(
@@ -541,6 +562,7 @@ class RecordingWriter:
             self._unit(TOPIC_RATE, unit),
             t0,
             encode_block(t0, period, first_index, rate_dps, "rate"),
+            t0 + len(rate_dps) * period,
         )
         r = np.asarray(rate_dps, dtype=np.float32).astype(np.float64)  # what the block holds
         if r.size:
