@@ -53,6 +53,17 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         os.environ["GYROLAB_CATALOGUE"] = str(_SAVED["GYROLAB_CATALOGUE"])
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Groups for ``pytest -n 2 --dist loadgroup`` (the README's command): each test file
+    is its group, as ``--dist loadfile`` makes it, except that the files using the
+    session's demo (those importing ``test_demo.make_demo``) are one group, so the demo
+    is made once per run instead of once per worker (about 45 s)."""
+    for item in items:
+        module = getattr(item, "module", None)
+        demo = module is not None and hasattr(module, "make_demo")
+        item.add_marker(pytest.mark.xdist_group("demo" if demo else item.path.name))
+
+
 @pytest.fixture(scope="session")
 def session_catalogue() -> Path:
     """The session's catalogue file (pytest_configure)."""
