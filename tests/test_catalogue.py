@@ -191,6 +191,23 @@ def test_registration_is_idempotent_and_keeps_what_others_knew(catalogue: str) -
     assert (c["runs"], c["segments"], c["units"], c["models"], c["exports"]) == (1, 2, 1, 1, 1)
 
 
+def test_a_units_models_are_not_the_other_units_of_its_multi_unit_run(catalogue: str) -> None:
+    """Two units tested at once (one file), a model each: each unit shows its own model;
+    a model of another unit validated on a unit's own single-unit run still shows there."""
+    cat = Catalogue.open(catalogue)
+    try:
+        cat.add(_run("run-m", "sha256:fm01", UnitRef("SA", "G7"), UnitRef("SB", "G7")))
+        cat.add(_run("run-b", "sha256:fb01", UnitRef("SB", "G7")))
+        cat.add(ModelEntry("sha256:ma", "/models/A", UnitRef("SA"), "sha256:fm01", "sha256:fb01"))
+        cat.add(ModelEntry("sha256:mb", "/models/B", UnitRef("SB"), "sha256:fm01"))
+        for serial, paths in (("SA", ["/models/A"]), ("SB", ["/models/A", "/models/B"])):
+            unit = cat.unit(serial)
+            assert unit is not None
+            assert sorted(m["path"] for m in unit["models"]) == paths, serial
+    finally:
+        cat.close()
+
+
 def test_flash_and_verification_complete_the_trace(catalogue: str) -> None:
     """The flight-controller commands' API: a flash of an export's parameters, and the
     verification verdict of that flash, end the trace."""

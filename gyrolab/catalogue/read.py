@@ -128,13 +128,26 @@ def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
     runs = list_runs(conn, serial=serial)
     run_files = [s["file_hash"] for r in runs for s in r["segments"]]
     # the unit's models, and the models fitted, also fitted (compensate --also) or
-    # validated on its runs (another serial's)
+    # validated on its runs (another serial's) — not those of the other units of a
+    # multi-unit run, fitted on the same file but theirs
+    units_of_file = {s["file_hash"]: set(r["units"]) for r in runs for s in r["segments"]}
+    serials = sorted(set().union(*units_of_file.values())) if units_of_file else []
+    q = select(T_UNIT.c.id, T_UNIT.c.serial).where(T_UNIT.c.serial.in_(serials))
+    serial_of = {r.id: r.serial for r in conn.execute(q)}
+
+    def theirs(m: dict[str, Any], file: str | None) -> bool:
+        owner = serial_of.get(m["unit_id"])
+        return owner not in (None, serial) and owner in units_of_file.get(file or "", ())
+
     model_rows = _by(conn, T_MODEL, "unit_id", [u.id], drop=())
     for column in ("calibration_file", "validation_file"):
-        model_rows += _by(conn, T_MODEL, column, run_files, drop=())
+        rows = _by(conn, T_MODEL, column, run_files, drop=())
+        model_rows += [m for m in rows if not theirs(m, m[column])]
     if run_files:
-        q = select(T_ALSO.c.model_id).where(T_ALSO.c.file_hash.in_(run_files))
-        model_rows += _by(conn, T_MODEL, "id", [r.model_id for r in conn.execute(q)], drop=())
+        q = select(T_ALSO.c.model_id, T_ALSO.c.file_hash).where(T_ALSO.c.file_hash.in_(run_files))
+        also_file = {r.model_id: r.file_hash for r in conn.execute(q)}
+        rows = _by(conn, T_MODEL, "id", list(also_file), drop=())
+        model_rows += [m for m in rows if not theirs(m, also_file[m["id"]])]
     models: dict[str, dict[str, Any]] = {}
     for m in model_rows:
         models.setdefault(m["model_hash"], m)
