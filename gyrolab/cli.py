@@ -280,6 +280,11 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("model", metavar="MODEL_DIR")
     ap.add_argument("run", metavar="RUN.mcap")
     ap.add_argument("--out", required=True, help="output COMPENSATED.mcap")
+    ap.add_argument(
+        "--unit",
+        metavar="SERIAL",
+        help=UNIT_HELP + "; MODEL_DIR may then be compensate's DIR (DIR/SERIAL is taken)",
+    )
     ap.add_argument("--force", action="store_true", help="overwrite an existing output")
 
     r = cmd("report", "write the temperature-test report of a run")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from os import PathLike
 from pathlib import Path
 
@@ -30,3 +32,15 @@ def existing_file(path: str | PathLike[str], what: str = "recording") -> Path:
     if not p.is_file():
         raise InputError(p, "file not found" if not p.exists() else f"is not a {what} file")
     return p
+
+
+@contextlib.contextmanager
+def named(path: str | PathLike[str]) -> Iterator[None]:
+    """Give an :class:`InputError` raised deep in the numerics (no file attached) the name
+    of the file it came from."""
+    try:
+        yield
+    except InputError as err:
+        if err.path is None:
+            raise InputError(path, err.problem) from None
+        raise

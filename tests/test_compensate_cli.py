@@ -14,7 +14,7 @@ from contract import METRIC_KEYS
 from test_pipeline import SMALL, write_run
 
 from gyrolab.cli import main
-from gyrolab.compensation.commands import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
+from gyrolab.compensation.apply_command import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
 from gyrolab.compensation.model_dir import load_model
 from gyrolab.numerics.averaging import PAPER_BLOCK_S, block_average
 from gyrolab.record.format import TOPIC_PT100, TOPIC_RATE

@@ -99,7 +99,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         (["report", "{model}"], "{model}", "is a directory, not a recording file"),
         (["compensate", "{model}"], "{model}", "is a directory, not a recording file"),
         (["convert", "{model}", "--to", "csv"], "{model}", "is a directory, not a recording"),
-        (["apply", "{model}", "{two}"], "{two}", "is a multi-unit recording (units SIM0-01"),
+        (["apply", "{model}", "{two}"], "{two}", "holds 2 units; choose one with --unit SERIAL"),
         (["compensate", "{one}", "--config", "{cfg}"], "{cfg}", "block_s must be a finite"),
     ],
     ids=["model dir as report's run", "… as compensate's", "… as convert's",

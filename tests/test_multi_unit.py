@@ -339,3 +339,84 @@ def test_also_takes_each_units_own_run_of_a_multi_unit_recording(
         (also,) = json.loads((out / s / "model.json").read_text())["calibration"]["also"]
         (want,) = load_runs(str(cold), CLI_CONFIG, unit=s)
         assert also["content_hash"] == want.content_hash and also["path"] == str(cold)
+
+
+def _sha12(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+
+
+def test_apply_compensates_the_named_unit_and_copies_every_other_topic(
+    fleet_models: Path, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`gyrolab apply DIR MULTI --unit S`: unit S's rate compensated by DIR/S (or by its
+    model directory given itself: the same bytes), its raw and offline topics beside it
+    under its prefix, every other unit's topics and the shared ones unchanged."""
+    from gyrolab.compensation.apply_command import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
+    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.record.reader import iter_blocks, iter_messages, read_metadata
+
+    multi, s = runs["multi"], "SIM3-02"
+    out, out2 = tmp_path / "dir.mcap", tmp_path / "model.mcap"
+    assert main(["apply", str(fleet_models), str(multi), "--unit", s, "--out", str(out)]) == 0
+    assert f"unit {s} compensated" in capsys.readouterr().err
+    assert main(["apply", str(fleet_models / s), str(multi), "--unit", s, "--out", str(out2)]) == 0
+    assert out.read_bytes() == out2.read_bytes()
+    added = {unit_topic(TOPIC_RATE_RAW, s), unit_topic(TOPIC_RATE_OFFLINE, s)}
+    assert _topics(out) == _topics(multi) | added
+    src, dst = read_recording(multi, unit=s), read_recording(out, unit=s)
+    np.testing.assert_array_equal(dst.rate.t, src.rate.t)
+    np.testing.assert_array_equal(dst.rate.index, src.rate.index)
+    raw = np.concatenate([b[3] for b in iter_blocks(out, unit_topic(TOPIC_RATE_RAW, s))])
+    np.testing.assert_array_equal(raw, src.rate.values.astype(np.float32))
+    model = load_model(str(fleet_models / s))
+    expect = src.rate.values - model.causal.drift_at(src.rate.t, src.pt100_t, src.pt100_c)
+    np.testing.assert_allclose(dst.rate.values, expect, atol=1e-6)
+    assert np.ptp(dst.rate.values) < np.ptp(src.rate.values)  # the unit's drift taken out
+    off = list(iter_blocks(out, unit_topic(TOPIC_RATE_OFFLINE, s)))
+    assert off and off[0][1] == pytest.approx(3.6)
+    # the other units and the chamber: message for message what the input holds
+    kept = sorted(_topics(multi) - {unit_topic(TOPIC_RATE, s)})
+    assert list(iter_messages(out, kept)) == list(iter_messages(multi, kept))
+    meta = read_metadata(out)
+    assert {k: v for k, v in meta.items() if k != "compensation"} == read_metadata(multi)
+    comp = meta["compensation"]
+    assert comp["unit"] == s and comp["model_dir"] == str(fleet_models / s)
+    assert set(comp["topics"]) == {unit_topic(TOPIC_RATE, s), *added}
+    assert comp["calibrated_range"]["unit_mismatch"] is False
+    # the catalogue: the unit's own model, applied (both copies are one file, the same
+    # bytes: the latest path); the other units' models of the run are theirs, not listed
+    assert main(["runs", "trace", s]) == 0
+    text = capsys.readouterr().out
+    assert str(fleet_models / s) in text and f"applied {_sha12(out)} {out2}" in text
+    assert not any(str(fleet_models / o) in text for o in SERIALS if o != s)
+
+
+def test_apply_to_a_multi_unit_run_refuses_what_it_cannot_take(
+    fleet_models: Path, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No --unit, a unit the run lacks, a DIR without the unit's model, another unit's
+    model: one line each (exit 2, nothing written), or a warning for the last."""
+    multi, out = runs["multi"], tmp_path / "c.mcap"
+    partial = tmp_path / "partial"
+    shutil.copytree(fleet_models / "SIM3-01", partial / "SIM3-01")
+    cases = [
+        ([str(fleet_models), str(multi)], "holds 3 units; choose one with --unit SERIAL"),
+        ([str(fleet_models), str(multi), "--unit", "SN9"], "has no unit 'SN9'"),
+        ([str(partial), str(multi), "--unit", "SIM3-03"], "has no model for unit SIM3-03"),
+    ]
+    for args, msg in cases:
+        assert main(["apply", *args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
+    # SIM3-01's model on SIM3-03: applied, with the warning that it is another unit's drift
+    assert (
+        main(
+            ["apply", str(partial / "SIM3-01"), str(multi), "--unit", "SIM3-03", "--out", str(out)]
+        )
+        == 0
+    )
+    err = capsys.readouterr().err
+    assert "fitted on unit SIM3-01, this run is unit SIM3-03" in err

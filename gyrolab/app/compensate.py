@@ -17,6 +17,7 @@ from pathlib import Path
 from gyrolab.app.options import ApplyOptions, CompensateOptions
 from gyrolab.batch import BatchOptions, Item, run_items
 from gyrolab.compensation import commands
+from gyrolab.compensation.apply_command import apply as apply_model
 from gyrolab.compensation.commands import units_of
 from gyrolab.compensation.config import PipelineConfig, resolve_config
 from gyrolab.compensation.guards import check_also_prior
@@ -95,7 +96,8 @@ def compensate_units(opts: CompensateOptions, cfg: PipelineConfig, seed: int = 0
 
 
 def apply(opts: ApplyOptions) -> int:
-    """The ``gyrolab apply`` command: :func:`gyrolab.compensation.commands.apply`."""
-    commands.apply(opts.model, opts.run, opts.out, opts.force)
-    print(f"compensated recording written to {opts.out}", file=sys.stderr)
+    """The ``gyrolab apply`` command: :func:`gyrolab.compensation.apply_command.apply`."""
+    apply_model(opts.model, opts.run, opts.out, opts.force, unit=opts.unit)
+    which = "" if opts.unit is None else f" (unit {opts.unit} compensated)"
+    print(f"compensated recording written to {opts.out}{which}", file=sys.stderr)
     return 0

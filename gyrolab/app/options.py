@@ -207,12 +207,14 @@ class CompensateOptions:
 
 @dataclass(frozen=True)
 class ApplyOptions:
-    """``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap`` (docs/compensation.md)."""
+    """``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap [--unit SERIAL]``
+    (docs/compensation.md; a multi-unit run: docs/fleet.md)."""
 
     model: PathArg
     run: PathArg
     out: PathArg
     force: bool = False
+    unit: str | None = None
 
     def __post_init__(self) -> None:
         need_model_dir(self.model)

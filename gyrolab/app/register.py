@@ -239,7 +239,10 @@ def register_command(opts: object, rc: int) -> None:
         if dirs:
             register_models(dirs, opts.run, opts.validate, also=opts.also)
     elif isinstance(opts, o.ApplyOptions) and out.is_file():
-        register_application(opts.model, opts.run, out)
+        from gyrolab.compensation.apply_command import resolve_model
+
+        # the model applied: MODEL_DIR itself, or DIR/<serial> of compensate's DIR
+        register_application(resolve_model(opts.model, opts.run, opts.unit)[0], opts.run, out)
     elif isinstance(opts, o.ExportOptions):
         from gyrolab.export.commands import target
 

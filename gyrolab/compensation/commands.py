@@ -8,37 +8,19 @@ MODEL_DIR (layout in
 top-level metrics are those of OTHER (``"held_out": true``) and the calibration run's own
 metrics sit under ``"calibration"``; without it they are RUN's (``"held_out": false``).
 
-:func:`apply` (``gyrolab apply MODEL_DIR RUN.mcap --out COMPENSATED.mcap``) writes a copy
-of RUN in which
-
-* ``/gyro/rate`` is the causal, full-rate compensated rate ``raw − d`` of the causal
-  headline model (:mod:`gyrolab.compensation.causal`; ``raw − f(T)`` with the GA-BP drift
-  model for a model directory without one), same blocks, timestamps and sample indices
-  as the input;
-* ``/gyro/rate_raw`` is the input's ``/gyro/rate``, byte for byte (same schema);
-* ``/gyro/rate_offline`` is the paper's offline output (noise modes removed, mixed modes
-  FLP-filtered, drift compensated) at 1000 points/h, as ``GyroRateBlock``s of period 3.6 s;
-* every other topic is copied unchanged, and a ``compensation`` metadata record names the
-  model (calibration run, format and software versions, what each topic holds).
+:func:`apply` (``gyrolab apply``) is :mod:`gyrolab.compensation.apply_command`'s.
 
 Every input is checked before anything is written; bad input is one line and exit 2.
 """
 
 from __future__ import annotations
 
-import contextlib
-import json
 import os
 import time
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import replace
-from pathlib import Path
+from collections.abc import Callable, Sequence
 from typing import Any
 
-import numpy as np
-
-from gyrolab import __version__
-from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
+from gyrolab.compensation.apply import compensate_offline
 from gyrolab.compensation.axis_runs import load_runs
 from gyrolab.compensation.config import DEFAULT_CONFIG, PipelineConfig, resolve_config
 from gyrolab.compensation.evaluate import add_firmware_metrics, evaluate
@@ -47,35 +29,20 @@ from gyrolab.compensation.fit import fit
 from gyrolab.compensation.guards import (
     check_also_prior,
     check_not_calibration,
-    range_check,
     warn_outside,
 )
-from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, ModelDir
+from gyrolab.compensation.model_dir import ModelDir
 from gyrolab.compensation.oracle import add_oracle
-from gyrolab.compensation.prepare import PreparedRun, prepare_file
+from gyrolab.compensation.prepare import PreparedRun
 from gyrolab.compensation.results import keep_oracle, run_results
-from gyrolab.errors import InputError
-from gyrolab.outputs import atomic_dir, atomic_file, check_output
-from gyrolab.record.blocks import decode_block, encode_block
-from gyrolab.record.format import TOPIC_RATE
-from gyrolab.record.reader import iter_messages, list_units, read_metadata, select_unit
-from gyrolab.record.rewrite import Message, rewrite_recording
+from gyrolab.errors import InputError, named
+from gyrolab.outputs import atomic_dir, check_output
+from gyrolab.record.reader import list_units, read_metadata, select_unit
 
 #: What :func:`compensate` reports to its ``on_stage`` as each is done (batch's progress).
 STAGES = ("read", "fit", "write")
 TOPIC_RATE_RAW = "/gyro/rate_raw"
 TOPIC_RATE_OFFLINE = "/gyro/rate_offline"
-
-
-@contextlib.contextmanager
-def _named(path: str) -> Iterator[None]:
-    """Give an error raised deep in the numerics (no file attached) the run's name."""
-    try:
-        yield
-    except InputError as e:
-        if e.path is None:
-            raise InputError(path, e.problem) from None
-        raise
 
 
 def _prior_lines(cm: dict[str, Any]) -> list[str]:
@@ -321,7 +288,7 @@ def _fit_axis(
     (held-out when ``val``) with the firmware cubic's cost, and what the report reads of
     each evaluated run (:mod:`gyrolab.compensation.results`); ``also``: the axis's further
     calibration runs (the causal model's)."""
-    with _named(run.path):
+    with named(run.path):
         model, dec = fit(run, cfg, seed=seed, prior=prior, also=also)
         app = compensate_offline(model, run, dec)
         metrics_cal = evaluate(model, app, run, held_out=False)
@@ -329,7 +296,7 @@ def _fit_axis(
         add_firmware_metrics(p3, run, metrics_cal, cfg.block_s)
         results = [run_results("calibration", model, app, run, held_out=False)]
     if val is not None:
-        with _named(val.path):
+        with named(val.path):
             app_val = compensate_offline(model, val)
             metrics = evaluate(model, app_val, val, held_out=True)
             add_firmware_metrics(p3, val, metrics, cfg.block_s)
@@ -386,14 +353,16 @@ def also_runs(
         for a, r in zip(got, runs, strict=True):
             if a.content_hash in seen:
                 raise InputError(
-                    path, "has the same rate and temperature data as a calibration run already "
-                    "given: --also needs another power-on's run"
+                    path,
+                    "has the same rate and temperature data as a calibration run already "
+                    "given: --also needs another power-on's run",
                 )
             seen.add(a.content_hash)
             if a.temperature_source != r.temperature_source:
                 raise InputError(
-                    path, f"reads temperature from {a.temperature_source}, the calibration run "
-                    f"from {r.temperature_source}: one model has one temperature input"
+                    path,
+                    f"reads temperature from {a.temperature_source}, the calibration run "
+                    f"from {r.temperature_source}: one model has one temperature input",
                 )
         for a, val in zip(got, vals or [], strict=False):
             check_not_calibration(str(val_s), val.content_hash, a.content_hash)
@@ -419,179 +388,3 @@ def units_of(path: str) -> list[str]:
         return list_units(path)
     except InputError:
         return []
-
-
-def _headline_text(models: list[Any]) -> str:
-    """What ``/gyro/rate`` of the compensated copy holds (the apply metadata)."""
-    per_axis = " per axis" if len(models) > 1 else ""
-    if all(m.causal is not None for m in models):
-        fams = "/".join(sorted({m.causal.family for m in models}))
-        return (
-            f"causal full-rate compensated rate, raw - d (causal {fams} model on PT100 "
-            f"readings up to now){per_axis}"
-        )
-    return f"causal full-rate compensated rate, raw - f(T){per_axis}"
-
-
-def rate_axes(path: str) -> int:
-    """The axis count of a gyrolab recording's ``/gyro/rate`` (1 without rate data: the
-    single-axis path reports that)."""
-    for _topic, _ts, data in iter_messages(path, [TOPIC_RATE]):
-        arr = decode_block(data, "rate")[3]
-        return 1 if arr.ndim == 1 else int(arr.shape[1])
-    return 1
-
-
-def apply(
-    model_dir: str | os.PathLike[str],
-    run_path: str | os.PathLike[str],
-    out: str | os.PathLike[str],
-    force: bool = False,
-) -> None:
-    """Apply ``model_dir`` to ``run_path`` and write the compensated MCAP ``out``
-    (module docstring): ``/gyro/rate`` of every axis compensated by its model's headline
-    drift model (:meth:`~gyrolab.compensation.fit.CompensationModel.headline`: the causal
-    model, the one ``gyrolab export`` exports by default), whatever the axis count; a run
-    of another axis count than the model's is refused."""
-    from gyrolab.logs import detect_format
-
-    model_dir, run_path = str(model_dir), str(run_path)
-    inputs = (model_dir, run_path)
-    check_output(out, force, inputs=inputs, kind="file")
-    if detect_format(run_path) != "gyrolab":  # also checks the file (a damaged one: exit 2)
-        raise InputError(run_path, "apply writes a compensated copy of a gyrolab recording only")
-    units = list_units(run_path)
-    if units:
-        raise InputError(
-            run_path,
-            f"is a multi-unit recording (units {', '.join(units)}); apply writes a compensated "
-            "copy of a single-unit recording",
-        )
-    models = [d.load() for _a, d in ModelDir(model_dir).axes()]
-    have = rate_axes(run_path)
-    if have != len(models):
-        raise InputError(
-            run_path,
-            f"has {have} axes, the model {model_dir} {len(models)}: apply a {have}-axis model",
-        )
-    if len(models) > 1:
-        _apply_axes(model_dir, run_path, out, force, models)
-        return
-    model = models[0]
-    run = prepare_file(run_path, model.config)
-    with _named(run_path):
-        offline = compensate_offline(model, run)
-    comp = StreamingCompensator(model.headline(), run.pt_t, run.pt_c)
-    in_range = range_check(model.calibration, run)
-    warn_outside(run_path, in_range)
-    info = {
-        "model_dir": str(model_dir),
-        "model_format_version": MODEL_FORMAT_VERSION,
-        "software_version": __version__,
-        "calibration_run": model.calibration.get("path", ""),
-        "vmd": {"K": model.K, "alpha": model.alpha},
-        "calibrated_range": in_range,
-        "topics": {
-            TOPIC_RATE: _headline_text(models),
-            TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
-            TOPIC_RATE_OFFLINE: "offline GPSO-VMD/MPE/FLP/GA-BP output, "
-            f"{model.config.block_s} s averages",
-        },
-    }
-    with atomic_file(out, force, inputs=inputs) as tmp:
-        _write_compensated(
-            run_path,
-            tmp,
-            comp,
-            offline.t,
-            offline.series["compensated"],
-            model.config.block_s,
-            info,
-        )
-
-
-def _apply_axes(
-    model_dir: str, run_path: str, out: str | os.PathLike[str], force: bool, models: list[Any]
-) -> None:
-    """``apply`` for a multi-axis model: every axis of the recording compensated by its own
-    model's headline, block by block (the rate blocks keep their (n, axes) layout)."""
-    inputs = (model_dir, run_path)
-    runs = load_runs(run_path, models[0].config)
-    comps, y_off, ranges = [], [], []
-    for k, (m, r) in enumerate(zip(models, runs, strict=True)):
-        ranges.append(range_check(m.calibration, r))
-        warn_outside(f"{run_path} (axis {'xyz'[k]})", ranges[-1])
-        with _named(run_path):
-            off = compensate_offline(m, r)
-        y_off.append(off.series["compensated"])
-        comps.append(StreamingCompensator(m.headline(), r.pt_t, r.pt_c))
-
-    def comp(t: np.ndarray, arr: np.ndarray) -> np.ndarray:
-        return np.column_stack([c(t, arr[:, k]) for k, c in enumerate(comps)])
-
-    block_s = models[0].config.block_s
-    info = {
-        "model_dir": str(model_dir),
-        "model_format_version": MODEL_FORMAT_VERSION,
-        "software_version": __version__,
-        "axes": len(models),
-        "calibrated_range": ranges,
-        "calibration_run": models[0].calibration.get("path", ""),
-        "vmd": [{"K": m.K, "alpha": m.alpha} for m in models],
-        "topics": {
-            TOPIC_RATE: _headline_text(models),
-            TOPIC_RATE_RAW: "the input's /gyro/rate, unchanged",
-            TOPIC_RATE_OFFLINE: f"offline GPSO-VMD/MPE/FLP/GA-BP output per axis, {block_s} s "
-            "averages",
-        },
-    }
-    with atomic_file(out, force, inputs=inputs) as tmp:
-        _write_compensated(run_path, tmp, comp, off.t, np.column_stack(y_off), block_s, info)
-
-
-def _write_compensated(
-    src: str,
-    dst: Path,
-    comp: Any,
-    t_off: np.ndarray,
-    y_off: np.ndarray,
-    block_s: float,
-    info: dict[str, Any],
-) -> None:
-    """Copy ``src`` to ``dst`` (:func:`~gyrolab.record.rewrite.rewrite_recording`), with
-    ``/gyro/rate`` compensated block by block by ``comp`` (a
-    :class:`~gyrolab.compensation.apply.StreamingCompensator`) and the two extra rate
-    channels added (module docstring). Memory: one block at a time."""
-    start_ns = _start_time_ns(src)
-
-    def compensate(m: Message) -> list[Message]:
-        if m.topic != TOPIC_RATE:
-            return [m]
-        t0, period, first, arr = decode_block(m.data, "rate")
-        t = t0 + np.arange(arr.shape[0]) * period
-        data = encode_block(t0, period, first, comp(t, arr.astype(float)), "rate")
-        return [replace(m, topic=TOPIC_RATE_RAW), replace(m, data=data)]
-
-    per = 1000  # offline samples per message: 1 h at 1000 points/h
-    offline = []
-    for k, s in enumerate(range(0, y_off.shape[0], per)):
-        t0 = float(t_off[s])
-        ts = start_ns + int(round(t0 * 1e9))
-        data = encode_block(t0, block_s, s, y_off[s : s + per], "rate")
-        offline.append(Message(TOPIC_RATE_OFFLINE, ts, ts, k, data))
-    rewrite_recording(
-        src,
-        dst,
-        transform=compensate,
-        derived={TOPIC_RATE_RAW: TOPIC_RATE, TOPIC_RATE_OFFLINE: TOPIC_RATE},
-        tail=offline,
-        metadata={"compensation": {k: json.dumps(v) for k, v in info.items()}},
-    )
-
-
-def _start_time_ns(path: str) -> int:
-    """The run's start (Unix ns): ``log_time − t0·1e9`` of the first rate block."""
-    for _topic, log_ns, data in iter_messages(path, [TOPIC_RATE]):
-        t0 = decode_block(data, "rate")[0]
-        return int(log_ns - round(t0 * 1e9))
-    raise InputError(path, f"recording has no {TOPIC_RATE} data")
