@@ -283,7 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--unit",
         metavar="SERIAL",
-        help=UNIT_HELP + "; MODEL_DIR may then be compensate's DIR (DIR/SERIAL is taken)",
+        help="the unit of a multi-unit run to compensate (default: every unit, by the model "
+        "of each in MODEL_DIR, the DIR compensate wrote: DIR/SERIAL)",
     )
     ap.add_argument("--force", action="store_true", help="overwrite an existing output")
 

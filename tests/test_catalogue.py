@@ -31,6 +31,7 @@ from gyrolab.app.demo import demo_catalogue
 from gyrolab.catalogue import Catalogue, CatalogueError, schema
 from gyrolab.catalogue.entries import (
     AlsoRunRef,
+    ApplicationEntry,
     ExportEntry,
     FlashEntry,
     ModelEntry,
@@ -206,6 +207,35 @@ def test_a_units_models_are_not_the_other_units_of_its_multi_unit_run(catalogue:
             assert sorted(m["path"] for m in unit["models"]) == paths, serial
     finally:
         cat.close()
+
+
+def test_a_copy_that_applied_a_model_per_unit_is_under_each_model(catalogue: str) -> None:
+    """`apply DIR MULTI` registers one copy with every unit's model (revision 0003): each
+    unit sees it under its own model; registering it again adds no row."""
+    cat = Catalogue.open(catalogue)
+    try:
+        cat.add(_run("run-m", "sha256:fm02", UnitRef("SA", "G7"), UnitRef("SB", "G7")))
+        cat.add(ModelEntry("sha256:ma", "/models/SA", UnitRef("SA"), "sha256:fm02"))
+        cat.add(ModelEntry("sha256:mb", "/models/SB", UnitRef("SB"), "sha256:fm02"))
+        app = ApplicationEntry(None, "sha256:fm02", "sha256:c1", "/c/all.mcap")
+        app.models = ["sha256:ma", "sha256:mb"]
+        cat.add(app)
+        cat.add(app)
+        for serial, h in (("SA", "sha256:ma"), ("SB", "sha256:mb")):
+            unit = cat.unit(serial)
+            assert unit is not None
+            (a,) = unit["applications"]
+            assert a["path"] == "/c/all.mcap" and a["models"] == ["sha256:ma", "sha256:mb"]
+            t = cat.trace(serial)
+            assert t is not None
+            (m,) = t["runs"][0]["models"]
+            assert m["model_hash"] == h and [x["path"] for x in m["applications"]] == [
+                "/c/all.mcap"
+            ]
+    finally:
+        cat.close()
+    c = counts(catalogue)
+    assert (c["applications"], c["application_models"]) == (1, 2)
 
 
 def test_flash_and_verification_complete_the_trace(catalogue: str) -> None:

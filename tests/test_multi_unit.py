@@ -396,15 +396,16 @@ def test_apply_compensates_the_named_unit_and_copies_every_other_topic(
 def test_apply_to_a_multi_unit_run_refuses_what_it_cannot_take(
     fleet_models: Path, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """No --unit, a unit the run lacks, a DIR without the unit's model, another unit's
-    model: one line each (exit 2, nothing written), or a warning for the last."""
+    """One model and no --unit, a DIR short of a unit's model, a unit the run lacks, another
+    unit's model: one line each (exit 2, nothing written), or a warning for the last."""
     multi, out = runs["multi"], tmp_path / "c.mcap"
     partial = tmp_path / "partial"
     shutil.copytree(fleet_models / "SIM3-01", partial / "SIM3-01")
     cases = [
-        ([str(fleet_models), str(multi)], "holds 3 units; choose one with --unit SERIAL"),
+        ([str(partial / "SIM3-01"), str(multi)], "holds 3 units; choose one with --unit SERIAL"),
+        ([str(partial), str(multi)], "has no model for unit SIM3-02, SIM3-03 of"),
         ([str(fleet_models), str(multi), "--unit", "SN9"], "has no unit 'SN9'"),
-        ([str(partial), str(multi), "--unit", "SIM3-03"], "has no model for unit SIM3-03"),
+        ([str(partial), str(multi), "--unit", "SIM3-03"], "has no model for unit SIM3-03;"),
     ]
     for args, msg in cases:
         assert main(["apply", *args, "--out", str(out)]) == 2
@@ -420,3 +421,45 @@ def test_apply_to_a_multi_unit_run_refuses_what_it_cannot_take(
     )
     err = capsys.readouterr().err
     assert "fitted on unit SIM3-01, this run is unit SIM3-03" in err
+
+
+def test_apply_without_unit_compensates_every_unit_by_its_own_model(
+    fleet_models: Path, runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`gyrolab apply DIR MULTI`: every unit by DIR/<serial>, in one copy; the catalogue
+    links the copy to each unit's model, as registered and as rebuilt from the files."""
+    from gyrolab.compensation.apply_command import TOPIC_RATE_OFFLINE, TOPIC_RATE_RAW
+    from gyrolab.compensation.model_dir import load_model
+    from gyrolab.record.reader import iter_messages, read_metadata
+
+    multi, out = runs["multi"], tmp_path / "all.mcap"
+    assert main(["apply", str(fleet_models), str(multi), "--out", str(out)]) == 0
+    assert f"units {', '.join(SERIALS)} compensated" in capsys.readouterr().err
+    added = {unit_topic(t, s) for s in SERIALS for t in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE)}
+    assert _topics(out) == _topics(multi) | added
+    for s in SERIALS:
+        src, dst = read_recording(multi, unit=s), read_recording(out, unit=s)
+        model = load_model(str(fleet_models / s))
+        d = model.causal.drift_at(src.rate.t, src.pt100_t, src.pt100_c)
+        np.testing.assert_allclose(dst.rate.values, src.rate.values - d, atol=1e-6)
+    shared = sorted(t for t in _topics(multi) if not t.startswith("/unit/"))
+    assert list(iter_messages(out, shared)) == list(iter_messages(multi, shared))
+    comp = read_metadata(out)["compensation"]
+    assert list(comp["units"]) == SERIALS and "unit" not in comp
+    for s in SERIALS:
+        assert comp["units"][s]["model_dir"] == str(fleet_models / s)
+        assert set(comp["units"][s]["topics"]) == {unit_topic(TOPIC_RATE, s)} | {
+            unit_topic(t, s) for t in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE)
+        }
+    # registered, and rebuilt from the files into a new catalogue: under every unit's model
+    rebuilt = tmp_path / "rebuilt.sqlite"
+    assert (
+        main(["runs", "rebuild", str(runs["dir"]), str(tmp_path), "--catalogue", str(rebuilt)]) == 0
+    )
+    capsys.readouterr()
+    for cat in ([], ["--catalogue", str(rebuilt)]):
+        for s in SERIALS:
+            assert main(["runs", "trace", s, *cat]) == 0
+            text = capsys.readouterr().out
+            model_line = text.index(str(fleet_models / s))
+            assert f"applied {_sha12(out)} {out}" in text[model_line:], (s, cat, text)

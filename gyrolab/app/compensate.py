@@ -97,7 +97,9 @@ def compensate_units(opts: CompensateOptions, cfg: PipelineConfig, seed: int = 0
 
 def apply(opts: ApplyOptions) -> int:
     """The ``gyrolab apply`` command: :func:`gyrolab.compensation.apply_command.apply`."""
-    apply_model(opts.model, opts.run, opts.out, opts.force, unit=opts.unit)
-    which = "" if opts.unit is None else f" (unit {opts.unit} compensated)"
+    units = apply_model(opts.model, opts.run, opts.out, opts.force, unit=opts.unit)
+    which = ""
+    if units != [None]:  # a multi-unit run: which of its units
+        which = f" (unit{'s' if len(units) > 1 else ''} {', '.join(map(str, units))} compensated)"
     print(f"compensated recording written to {opts.out}{which}", file=sys.stderr)
     return 0

@@ -243,14 +243,18 @@ def export_model_hash(path: PathLike) -> str | None:
 
 
 def application_entry(
-    out: PathLike, model_hash: str | None, run_file: str | None
+    out: PathLike, model_hashes: list[str | None], run_file: str | None
 ) -> ApplicationEntry:
+    """A compensated recording and the models it applied: one (``model_hash``; None when
+    unknown), or one per unit of a multi-unit run (``models``)."""
+    known = [h for h in model_hashes if h]
     return ApplicationEntry(
-        model_hash=model_hash,
+        model_hash=model_hashes[0] if len(model_hashes) == 1 else None,
         run_file=run_file,
         file_hash=file_digest(out),
         path=absolute(out),
         created_at=written(out),
+        models=known if len(model_hashes) > 1 else [],
     )
 
 

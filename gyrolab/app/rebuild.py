@@ -224,17 +224,25 @@ def rebuild_entries(root: str | os.PathLike[str]) -> Rebuilt:
             out.add("exports", export_entry(d["model_sha256"], "json", d.get("target") or {}, [p]))
     for p, meta in applications:
         try:
-            model_dir = Path(str(meta.get("compensation", {}).get("model_dir", "")))
-            if ModelDir.is_model_dir(model_dir):
-                model_hash: str | None = ModelDir(model_dir).digest()
-            else:  # moved since: the model of that name found here
-                named = [m for path, m in models.items() if path.name == model_dir.name]
-                model_hash = named[0].model_hash if len(named) == 1 else None
+            comp = meta.get("compensation", {})
+            per_unit = comp.get("units") if isinstance(comp.get("units"), dict) else None
+            dirs = [
+                Path(str(info.get("model_dir", "")))
+                for info in (per_unit.values() if per_unit else [comp])
+                if isinstance(info, dict)
+            ]
+            hashes: list[str | None] = []
+            for model_dir in dirs:
+                if ModelDir.is_model_dir(model_dir):
+                    hashes.append(ModelDir(model_dir).digest())
+                else:  # moved since: the model of that name found here
+                    named = [m for path, m in models.items() if path.name == model_dir.name]
+                    hashes.append(named[0].model_hash if len(named) == 1 else None)
             # apply copies its input's `run` record: the input is the run that has it
             source = [
                 runs[q].segment.file_hash for q, r in run_records.items() if r == meta.get("run")
             ]
-            entry = application_entry(p, model_hash, source[0] if len(source) == 1 else None)
+            entry = application_entry(p, hashes, source[0] if len(source) == 1 else None)
             out.add("applications", entry)
         except (GyrolabError, OSError) as e:
             out.skipped.append((str(p), str(e)))

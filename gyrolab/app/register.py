@@ -137,16 +137,17 @@ def register_models(
 
 
 def register_application(
-    model_dir: PathLike, run: PathLike, out: PathLike, url: str | None = None
+    model_dirs: list[PathLike], run: PathLike, out: PathLike, url: str | None = None
 ) -> bool:
-    """``apply``: the input run, the model and the compensated recording."""
+    """``apply``: the input run, the models (one, or one per unit of a multi-unit run) and
+    the compensated recording."""
 
     def build() -> list[Any]:
         entry = _run(run)
-        model = model_entry(model_dir, None, None, _part_number(entry, None))
+        models = [model_entry(d, None, None, _part_number(entry, None)) for d in model_dirs]
         file = None if entry is None else entry.segment.file_hash
-        return [e for e in (entry, model) if e is not None] + [
-            application_entry(out, model.model_hash, file)
+        return [e for e in (entry, *models) if e is not None] + [
+            application_entry(out, [m.model_hash for m in models], file)
         ]
 
     return register([build], url)
@@ -239,10 +240,11 @@ def register_command(opts: object, rc: int) -> None:
         if dirs:
             register_models(dirs, opts.run, opts.validate, also=opts.also)
     elif isinstance(opts, o.ApplyOptions) and out.is_file():
-        from gyrolab.compensation.apply_command import resolve_model
+        from gyrolab.compensation.apply_command import resolve_models
 
-        # the model applied: MODEL_DIR itself, or DIR/<serial> of compensate's DIR
-        register_application(resolve_model(opts.model, opts.run, opts.unit)[0], opts.run, out)
+        # the models applied: MODEL_DIR itself, or DIR/<serial> of compensate's DIR per unit
+        dirs = [d for d, _serial in resolve_models(opts.model, opts.run, opts.unit)]
+        register_application(dirs, opts.run, out)
     elif isinstance(opts, o.ExportOptions):
         from gyrolab.export.commands import target
 

@@ -123,13 +123,16 @@ class ExportEntry:
 
 @dataclass
 class ApplicationEntry:
-    """A model applied to a recording: the compensated recording written."""
+    """A model applied to a recording: the compensated recording written. ``models``: every
+    model applied, where there are several (one per unit of a multi-unit run; revision
+    0003) — ``model_hash`` is then None."""
 
     model_hash: str | None
     run_file: str | None
     file_hash: str
     path: str
     created_at: dt.datetime = field(default_factory=utc_now)
+    models: list[str] = field(default_factory=list)
 
 
 @dataclass

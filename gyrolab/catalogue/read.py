@@ -21,6 +21,7 @@ T_RU = schema.RunUnit.__table__
 T_MODEL = schema.Model.__table__
 T_EXPORT = schema.Export.__table__
 T_APP = schema.Application.__table__
+T_APP_MODEL = schema.ApplicationModel.__table__
 T_FLASH = schema.Flash.__table__
 T_VER = schema.Verification.__table__
 T_REPORT = schema.Report.__table__
@@ -120,6 +121,30 @@ def _also(conn: Connection, model_ids: list[int]) -> dict[int, list[dict[str, An
     return out
 
 
+def _applications(conn: Connection, model_hashes: list[str]) -> list[dict[str, Any]]:
+    """The compensated recordings of these models, each with ``models``: every model it
+    applied (one, or one per unit of a multi-unit run: ``application_models``)."""
+    if not model_hashes:
+        return []
+    q = select(T_APP_MODEL).where(T_APP_MODEL.c.model_hash.in_(model_hashes))
+    linked = [r.application_id for r in conn.execute(q)]
+    rows = _by(conn, T_APP, "model_hash", model_hashes, drop=()) + _by(
+        conn, T_APP, "id", linked, drop=()
+    )
+    apps = {a["id"]: a for a in rows}
+    models: dict[int, set[str]] = defaultdict(set)
+    if apps:
+        q = select(T_APP_MODEL).where(T_APP_MODEL.c.application_id.in_(list(apps)))
+        for r in conn.execute(q):
+            models[r.application_id].add(r.model_hash)
+    out = []
+    for i, a in sorted(apps.items(), key=lambda kv: (kv[1]["created_at"], kv[1]["path"], kv[0])):
+        a.pop("id")
+        a["models"] = sorted(models[i] | ({a["model_hash"]} if a["model_hash"] else set()))
+        out.append(a)
+    return out
+
+
 def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
     """Everything registered about one unit, table by table (None: not in the catalogue)."""
     u = conn.execute(select(T_UNIT).where(T_UNIT.c.serial == serial)).first()
@@ -171,7 +196,7 @@ def unit(conn: Connection, serial: str) -> dict[str, Any] | None:
         "runs": runs,
         "models": list(models.values()),
         "exports": _by(conn, T_EXPORT, "model_hash", model_hashes),
-        "applications": _by(conn, T_APP, "model_hash", model_hashes),
+        "applications": _applications(conn, model_hashes),
         "flashes": list(flashes.values()),
         "verifications": _by(conn, T_VER, "unit_id", [u.id]),
         "reports": list(reports.values()),
@@ -198,7 +223,8 @@ def trace(conn: Connection, serial: str) -> dict[str, Any] | None:
         exports_of[e["model_hash"]].append(e)
     apps_of: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for a in d["applications"]:
-        apps_of[a["model_hash"]].append(a)
+        for h in a["models"]:  # one model, or one per unit of a multi-unit run
+            apps_of[h].append(a)
     reports = d["reports"]
     exported = {e["file_hash"] for e in d["exports"]}
     flashed_from: dict[str, list[dict[str, Any]]] = defaultdict(list)

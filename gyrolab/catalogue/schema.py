@@ -165,6 +165,15 @@ class Application(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime)
 
 
+class ApplicationModel(Base):
+    """A model of a compensated recording that applied several, one per unit of a
+    multi-unit run (``gyrolab apply`` without ``--unit``; revision 0003)."""
+
+    __tablename__ = "application_models"
+    application_id: Mapped[int] = mapped_column(ForeignKey("applications.id"), primary_key=True)
+    model_hash: Mapped[str] = mapped_column(HASH, primary_key=True, index=True)
+
+
 class Flash(Base):
     """A parameter set written to a device (a flight controller) and read back."""
 

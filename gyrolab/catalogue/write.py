@@ -181,8 +181,15 @@ def add_export(conn: Connection, e: ExportEntry) -> int:
 
 def add_application(conn: Connection, e: ApplicationEntry) -> int:
     t = schema.Application.__table__
+    values = _values(conn, e)
+    models = values.pop("models")
     fill = ["model_hash", "run_file"]
-    return upsert(conn, t, _values(conn, e), key=["file_hash"], keep=["created_at"], fill=fill)
+    app_id = upsert(conn, t, values, key=["file_hash"], keep=["created_at"], fill=fill)
+    tm = schema.ApplicationModel.__table__
+    for h in models:  # the same file again: the same rows
+        stmt = _insert(conn, tm).values(application_id=app_id, model_hash=h)
+        conn.execute(stmt.on_conflict_do_nothing())  # type: ignore[attr-defined]
+    return app_id
 
 
 def add_flash(conn: Connection, e: FlashEntry) -> int:

@@ -12,11 +12,13 @@ which
 * every other topic is copied unchanged, and a ``compensation`` metadata record names the
   model (calibration run, format and software versions, what each topic holds).
 
-Of a multi-unit recording it compensates the unit ``--unit`` names: the three topics above
-are that unit's (``/unit/<serial>/gyro/rate`` …), every other unit's topics and the shared
-ones are copied unchanged, and the ``compensation`` record names the unit. MODEL_DIR is the
-unit's model directory, or the directory ``gyrolab compensate RUN.mcap --out DIR`` wrote for
-the whole run (``DIR/<serial>`` is taken: :func:`resolve_model`).
+Of a multi-unit recording it compensates the unit ``--unit`` names, or without it every
+unit, each by its own model: the three topics above are each unit's
+(``/unit/<serial>/gyro/rate`` …), the other units' topics and the shared ones are copied
+unchanged, and the ``compensation`` record names the unit (``unit``), or holds one record
+per unit (``units``). MODEL_DIR is the unit's model directory, or the directory
+``gyrolab compensate RUN.mcap --out DIR`` wrote for the whole run, of which ``DIR/<serial>``
+is taken (:func:`resolve_models`).
 
 Every input is checked before anything is written; bad input is one line and exit 2.
 """
@@ -42,7 +44,7 @@ from gyrolab.errors import InputError, named
 from gyrolab.outputs import atomic_file, check_output
 from gyrolab.record.blocks import decode_block, encode_block
 from gyrolab.record.format import TOPIC_RATE, unit_topic
-from gyrolab.record.reader import iter_messages, read_metadata, select_unit
+from gyrolab.record.reader import iter_messages, list_units, read_metadata, select_unit
 from gyrolab.record.rewrite import Message, rewrite_recording
 
 TOPIC_RATE_RAW = "/gyro/rate_raw"
@@ -58,35 +60,61 @@ class _Target:
     comp: Callable[[np.ndarray, np.ndarray], np.ndarray]
     t_off: np.ndarray
     y_off: np.ndarray
+    block_s: float  # the offline output's period
 
     def topic(self, topic: str) -> str:
         return unit_topic(topic, self.serial)
 
 
-def resolve_model(
+def resolve_models(
     model_dir: str | os.PathLike[str], run_path: str | os.PathLike[str], unit: str | None
-) -> tuple[str, str | None]:
-    """The model directory ``apply`` uses and the unit of ``run_path`` it compensates (None
-    for a single-unit recording). A multi-unit recording needs ``unit`` (unless it holds
-    one unit); ``model_dir`` is the model itself or a directory of unit models, of which
-    ``model_dir/<serial>`` is taken (for a single-unit run, the serial its metadata names)."""
+) -> list[tuple[str, str | None]]:
+    """The model directories ``apply`` uses, each with the unit of ``run_path`` it
+    compensates (None for a single-unit recording).
+
+    ``model_dir`` is a model itself, or the directory of unit models ``gyrolab compensate``
+    writes for a multi-unit run, of which ``model_dir/<serial>`` is taken (for a
+    single-unit run, the serial its metadata names). ``unit`` picks one unit of a
+    multi-unit recording; without it a directory of unit models compensates every unit of
+    the run (each must have its model), and a single model needs a run of one unit."""
     from gyrolab.logs import detect_format
 
     model_dir, run_path = str(model_dir), str(run_path)
     if detect_format(run_path) != "gyrolab":  # also checks the file (a damaged one: exit 2)
         raise InputError(run_path, "apply writes a compensated copy of a gyrolab recording only")
+    units = list_units(run_path)
+    is_model = ModelDir.is_model_dir(model_dir)
+    have = (
+        []
+        if is_model
+        else sorted(p.name for p in Path(model_dir).glob("*") if ModelDir.is_model_dir(p))
+    )
+    if unit is None and len(units) > 1:
+        if not have:
+            raise InputError(
+                run_path,
+                f"holds {len(units)} units; choose one with --unit SERIAL: {', '.join(units)} "
+                "(or give the directory `gyrolab compensate` wrote for the run, a model per unit)",
+            )
+        missing = [s for s in units if s not in have]
+        if missing:
+            raise InputError(
+                model_dir,
+                f"has no model for unit {', '.join(missing)} of {run_path} (its unit models: "
+                f"{', '.join(have)}); choose the units it has with --unit SERIAL",
+            )
+        return [(str(Path(model_dir) / s), s) for s in units]
     serial = select_unit(run_path, unit)
-    if ModelDir.is_model_dir(model_dir):
-        return model_dir, serial
+    if is_model:
+        return [(model_dir, serial)]
     name = serial or read_metadata(run_path).get("run", {}).get("unit_serial")
-    if name and ModelDir.is_model_dir(Path(model_dir) / str(name)):
-        return str(Path(model_dir) / str(name)), serial
-    have = sorted(p.name for p in Path(model_dir).glob("*") if ModelDir.is_model_dir(p))
+    if name and str(name) in have:
+        return [(str(Path(model_dir) / str(name)), serial)]
     if name and have:
         raise InputError(
             model_dir, f"has no model for unit {name}; its unit models: {', '.join(have)}"
         )
-    return model_dir, serial  # not a model directory: ModelDir says what is wrong with it
+    return [(model_dir, serial)]  # not a model directory: ModelDir says what is wrong with it
 
 
 def rate_axes(path: str, serial: str | None = None) -> int:
@@ -116,136 +144,132 @@ def apply(
     out: str | os.PathLike[str],
     force: bool = False,
     unit: str | None = None,
-) -> None:
-    """Apply ``model_dir`` to ``run_path`` (unit ``unit`` of a multi-unit one) and write the
+) -> list[str | None]:
+    """Apply ``model_dir`` to ``run_path`` (unit ``unit`` of a multi-unit one, or each unit
+    by its model in compensate's directory) and write the
     compensated MCAP ``out`` (module docstring): ``/gyro/rate`` of every axis compensated by
     its model's headline drift model
     (:meth:`~gyrolab.compensation.fit.CompensationModel.headline`: the causal model, the one
     ``gyrolab export`` exports by default), whatever the axis count; a run of another axis
-    count than the model's is refused."""
+    count than the model's is refused. The units compensated (``[None]``: a single-unit
+    recording)."""
     given, run_path = str(model_dir), str(run_path)
     inputs = (given, run_path)
     check_output(out, force, inputs=inputs, kind="file")
-    model_dir, serial = resolve_model(given, run_path, unit)
-    where = run_path if serial is None else f"{run_path} (unit {serial})"
-    models = [d.load() for _a, d in ModelDir(model_dir).axes()]
-    have = rate_axes(run_path, serial)
-    if have != len(models):
-        raise InputError(
-            where,
-            f"has {have} axes, the model {model_dir} {len(models)}: apply a {have}-axis model",
-        )
-    target, info = (_one_axis if len(models) == 1 else _axes)(
-        model_dir, run_path, serial, models, where
-    )
-    info["topics"] = {
-        target.topic(TOPIC_RATE): headline_text(models),
-        target.topic(TOPIC_RATE_RAW): "the input's /gyro/rate, unchanged",
-        target.topic(TOPIC_RATE_OFFLINE): info.pop("offline"),
-    }
-    if serial is not None:
-        info["unit"] = serial
+    targets, infos = [], {}
+    for unit_dir, serial in resolve_models(given, run_path, unit):
+        where = run_path if serial is None else f"{run_path} (unit {serial})"
+        models = [d.load() for _a, d in ModelDir(unit_dir).axes()]
+        have = rate_axes(run_path, serial)
+        if have != len(models):
+            raise InputError(
+                where,
+                f"has {have} axes, the model {unit_dir} {len(models)}: apply a {have}-axis model",
+            )
+        target, info = _prepare(unit_dir, run_path, serial, models, where)
+        info["topics"] = {
+            target.topic(TOPIC_RATE): headline_text(models),
+            target.topic(TOPIC_RATE_RAW): "the input's /gyro/rate, unchanged",
+            target.topic(TOPIC_RATE_OFFLINE): info.pop("offline"),
+        }
+        targets.append(target)
+        infos[serial] = info
+    if len(targets) == 1:
+        info = infos[targets[0].serial]
+        if targets[0].serial is not None:
+            info["unit"] = targets[0].serial
+    else:  # every unit of a multi-unit run: each unit's record under its serial
+        info = {
+            "model_format_version": MODEL_FORMAT_VERSION,
+            "software_version": __version__,
+            "units": infos,
+        }
     with atomic_file(out, force, inputs=inputs) as tmp:
-        _write_compensated(run_path, tmp, target, models[0].config.block_s, info)
+        _write_compensated(run_path, tmp, targets, info)
+    return [t.serial for t in targets]
 
 
-def _common(model_dir: str, models: list[Any]) -> dict[str, Any]:
-    return {
-        "model_dir": str(model_dir),
-        "model_format_version": MODEL_FORMAT_VERSION,
-        "software_version": __version__,
-    }
-
-
-def _one_axis(
-    model_dir: str,
-    run_path: str,
-    serial: str | None,
-    models: list[Any],
-    where: str,
+def _prepare(
+    model_dir: str, run_path: str, serial: str | None, models: list[Any], where: str
 ) -> tuple[_Target, dict[str, Any]]:
-    """A single-axis model on its run (streamed from the file: bounded memory)."""
-    model = models[0]
-    run = prepare_file(run_path, model.config, unit=serial)
-    with named(run_path):
-        offline = compensate_offline(model, run)
-    comp = StreamingCompensator(model.headline(), run.pt_t, run.pt_c)
-    in_range = range_check(model.calibration, run)
-    warn_outside(where, in_range)
-    info = _common(model_dir, models) | {
-        "calibration_run": model.calibration.get("path", ""),
-        "vmd": {"K": model.K, "alpha": model.alpha},
-        "calibrated_range": in_range,
-        "offline": f"offline GPSO-VMD/MPE/FLP/GA-BP output, {model.config.block_s} s averages",
-    }
-    return _Target(serial, comp, offline.t, offline.series["compensated"]), info
-
-
-def _axes(
-    model_dir: str,
-    run_path: str,
-    serial: str | None,
-    models: list[Any],
-    where: str,
-) -> tuple[_Target, dict[str, Any]]:
-    """A multi-axis model: every axis compensated by its own model's headline, block by
-    block (the rate blocks keep their (n, axes) layout)."""
-    runs = load_runs(run_path, models[0].config, unit=serial)
+    """Each axis's model on its run: its causal compensator and offline output, its range
+    check (warned on stderr); a single-axis run is streamed from the file (bounded memory),
+    a multi-axis one keeps its (n, axes) blocks."""
+    cfg = models[0].config
+    single = len(models) == 1
+    runs = (
+        [prepare_file(run_path, cfg, unit=serial)]
+        if single
+        else load_runs(run_path, cfg, unit=serial)
+    )
     comps, y_off, ranges = [], [], []
     for k, (m, r) in enumerate(zip(models, runs, strict=True)):
         ranges.append(range_check(m.calibration, r))
-        warn_outside(f"{where} (axis {'xyz'[k]})", ranges[-1])
+        warn_outside(where if single else f"{where} (axis {'xyz'[k]})", ranges[-1])
         with named(run_path):
             off = compensate_offline(m, r)
         y_off.append(off.series["compensated"])
         comps.append(StreamingCompensator(m.headline(), r.pt_t, r.pt_c))
+    common = {
+        "model_dir": str(model_dir),
+        "model_format_version": MODEL_FORMAT_VERSION,
+        "software_version": __version__,
+    }
+    if single:
+        info = common | {
+            "calibration_run": models[0].calibration.get("path", ""),
+            "vmd": {"K": models[0].K, "alpha": models[0].alpha},
+            "calibrated_range": ranges[0],
+            "offline": f"offline GPSO-VMD/MPE/FLP/GA-BP output, {cfg.block_s} s averages",
+        }
+        return _Target(serial, comps[0], off.t, y_off[0], cfg.block_s), info
 
     def comp(t: np.ndarray, arr: np.ndarray) -> np.ndarray:
         return np.column_stack([c(t, arr[:, k]) for k, c in enumerate(comps)])
 
-    block_s = models[0].config.block_s
-    info = _common(model_dir, models) | {
+    info = common | {
         "axes": len(models),
         "calibrated_range": ranges,
         "calibration_run": models[0].calibration.get("path", ""),
         "vmd": [{"K": m.K, "alpha": m.alpha} for m in models],
-        "offline": f"offline GPSO-VMD/MPE/FLP/GA-BP output per axis, {block_s} s averages",
+        "offline": f"offline GPSO-VMD/MPE/FLP/GA-BP output per axis, {cfg.block_s} s averages",
     }
-    return _Target(serial, comp, off.t, np.column_stack(y_off)), info
+    return _Target(serial, comp, off.t, np.column_stack(y_off), cfg.block_s), info
 
 
-def _write_compensated(
-    src: str, dst: Path, target: _Target, block_s: float, info: dict[str, Any]
-) -> None:
-    """Copy ``src`` to ``dst`` (:func:`~gyrolab.record.rewrite.rewrite_recording`), with the
-    target's ``/gyro/rate`` compensated block by block and its two extra rate channels added
-    (module docstring). Memory: one block at a time."""
-    rate, raw, offline_topic = (
-        target.topic(t) for t in (TOPIC_RATE, TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE)
-    )
-    start_ns = _start_time_ns(src, rate)
+def _write_compensated(src: str, dst: Path, targets: list[_Target], info: dict[str, Any]) -> None:
+    """Copy ``src`` to ``dst`` (:func:`~gyrolab.record.rewrite.rewrite_recording`), with each
+    target's ``/gyro/rate`` compensated block by block and its two extra rate channels
+    added (module docstring). Memory: one block at a time."""
+    by_rate = {t.topic(TOPIC_RATE): t for t in targets}
+    start_ns = _start_time_ns(src, targets[0].topic(TOPIC_RATE))
 
     def compensate(m: Message) -> list[Message]:
-        if m.topic != rate:
+        target = by_rate.get(m.topic)
+        if target is None:
             return [m]
         t0, period, first, arr = decode_block(m.data, "rate")
         t = t0 + np.arange(arr.shape[0]) * period
         data = encode_block(t0, period, first, target.comp(t, arr.astype(float)), "rate")
-        return [replace(m, topic=raw), replace(m, data=data)]
+        return [replace(m, topic=target.topic(TOPIC_RATE_RAW)), replace(m, data=data)]
 
     per = 1000  # offline samples per message: 1 h at 1000 points/h
+    derived: dict[str, str] = {}
     offline = []
-    y_off = target.y_off
-    for k, s in enumerate(range(0, y_off.shape[0], per)):
-        t0 = float(target.t_off[s])
-        ts = start_ns + int(round(t0 * 1e9))
-        data = encode_block(t0, block_s, s, y_off[s : s + per], "rate")
-        offline.append(Message(offline_topic, ts, ts, k, data))
+    for rate, target in by_rate.items():
+        off_topic = target.topic(TOPIC_RATE_OFFLINE)
+        derived |= {target.topic(TOPIC_RATE_RAW): rate, off_topic: rate}
+        y_off = target.y_off
+        for k, s in enumerate(range(0, y_off.shape[0], per)):
+            t0 = float(target.t_off[s])
+            ts = start_ns + int(round(t0 * 1e9))
+            data = encode_block(t0, target.block_s, s, y_off[s : s + per], "rate")
+            offline.append(Message(off_topic, ts, ts, k, data))
     rewrite_recording(
         src,
         dst,
         transform=compensate,
-        derived={raw: rate, offline_topic: rate},
+        derived=derived,
         tail=offline,
         metadata={"compensation": {k: json.dumps(v) for k, v in info.items()}},
     )
