@@ -58,6 +58,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     is its group, as ``--dist loadfile`` makes it, except that the files using the
     session's demo (those importing ``test_demo.make_demo``) are one group, so the demo
     is made once per run instead of once per worker (about 45 s)."""
+    if not config.pluginmanager.hasplugin("xdist"):  # the mark is xdist's
+        return
     for item in items:
         module = getattr(item, "module", None)
         demo = module is not None and hasattr(module, "make_demo")
