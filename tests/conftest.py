@@ -53,6 +53,7 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         os.environ["GYROLAB_CATALOGUE"] = str(_SAVED["GYROLAB_CATALOGUE"])
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own, which reads the marks into node ids
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Groups for ``pytest -n 2 --dist loadgroup`` (the README's command): each test file
     is its group, as ``--dist loadfile`` makes it, except that the files using the
