@@ -452,10 +452,11 @@ def test_apply_without_unit_compensates_every_unit_by_its_own_model(
             unit_topic(t, s) for t in (TOPIC_RATE_RAW, TOPIC_RATE_OFFLINE)
         }
     # registered, and rebuilt from the files into a new catalogue: under every unit's model
+    # (the run copied beside the copy: the module's directory holds other tests' files)
+    shutil.copy(multi, tmp_path / "multi.mcap")
     rebuilt = tmp_path / "rebuilt.sqlite"
-    assert (
-        main(["runs", "rebuild", str(runs["dir"]), str(tmp_path), "--catalogue", str(rebuilt)]) == 0
-    )
+    argv = ["runs", "rebuild", str(fleet_models), str(tmp_path), "--catalogue", str(rebuilt)]
+    assert main(argv) == 0
     capsys.readouterr()
     for cat in ([], ["--catalogue", str(rebuilt)]):
         for s in SERIALS:
