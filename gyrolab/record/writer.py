@@ -35,6 +35,7 @@ from gyrolab.record.format import (
     TOPIC_RATE,
     TOPIC_RATE_SUMMARY,
     TOPIC_TEMPERATURE_INTERNAL,
+    UNIT_PREFIX,
     check_serial,
     recording_channels,
     unit_topic,
@@ -374,6 +375,7 @@ class RecordingWriter:
         # Block topics (ADC, rate): run time their data reaches, written / handed to the OS.
         self._put_to: dict[str, float] = {}
         self._flushed_to: dict[str, float] = {}
+        self._mates: dict[str | None, list[str]] = {}  # unit -> its block topics
         self._last_fsync_wall = time.monotonic()
         self.flush_count = 0
         self.fsync_count = 0
@@ -455,19 +457,34 @@ class RecordingWriter:
         fe = self.flush_every_s
         if fe is None:
             return
-        if t_end is not None:
-            # A block is stamped with its start, other messages on arrival, which is later:
-            # the stamp rule alone can leave several blocks unflushed behind a message that
-            # arrived after them. So each block topic also keeps its own account — its data
-            # not yet handed to the OS never exceeds flush_every_s (docs/reliability.md).
-            self._put_to[topic] = t_end
-            if t_end - self._flushed_to.setdefault(topic, t) > fe * (1 + 1e-9):
-                self.flush()
-                self._last_flush_t = max(self._last_flush_t, t)
-                return
+        if t_end is not None and self._block_due(topic, t, t_end, fe):
+            self.flush()
+            # a flush like the others: the clock rules count from it (from where the data
+            # reaches, not the block's start: else the loop's next turn flushes again)
+            self._last_flush_t = max(self._last_flush_t, t_end)
+            return
         if t - self._last_flush_t >= fe:
             self.flush()
             self._last_flush_t = t
+
+    def _block_due(self, topic: str, t: float, t_end: float, fe: float) -> bool:
+        """Whether a block ending at ``t_end`` must be flushed now. A block is stamped with
+        its start, other messages on arrival, which is later: the stamp rule alone can leave
+        several blocks unflushed behind a message that arrived after them. So a unit's
+        block topics (its ADC and rate blocks, written in pairs) keep their own account:
+        their data not yet handed to the OS never spans more than ``flush_every_s``
+        (docs/reliability.md). Checked once a pair is complete, so that the rate block
+        written just after its ADC block does not flush a second time."""
+        self._put_to[topic] = t_end
+        self._flushed_to.setdefault(topic, t)
+        unit = topic[len(UNIT_PREFIX) :].split("/", 1)[0] if topic.startswith(UNIT_PREFIX) else None
+        mates = self._mates.setdefault(unit, [])
+        if topic not in mates:
+            mates.append(topic)
+        ends = [self._put_to[m] for m in mates]
+        if max(ends) - min(ends) > 1e-6:  # a pair half written
+            return False
+        return t_end - min(self._flushed_to[m] for m in mates) > fe * (1 + 1e-9)
 
     def maybe_flush(self, t: float) -> bool:
         """Flush if ``flush_every_s`` of run time passed since the last flush; True if done."""
