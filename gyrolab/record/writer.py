@@ -35,7 +35,6 @@ from gyrolab.record.format import (
     TOPIC_RATE,
     TOPIC_RATE_SUMMARY,
     TOPIC_TEMPERATURE_INTERNAL,
-    UNIT_PREFIX,
     check_serial,
     recording_channels,
     unit_topic,
@@ -375,7 +374,7 @@ class RecordingWriter:
         # Block topics (ADC, rate): run time their data reaches, written / handed to the OS.
         self._put_to: dict[str, float] = {}
         self._flushed_to: dict[str, float] = {}
-        self._mates: dict[str | None, list[str]] = {}  # unit -> its block topics
+        self._mates: dict[str | None, list[str]] = {}  # unit -> its block topics seen
         self._last_fsync_wall = time.monotonic()
         self.flush_count = 0
         self.fsync_count = 0
@@ -477,8 +476,7 @@ class RecordingWriter:
         written just after its ADC block does not flush a second time."""
         self._put_to[topic] = t_end
         self._flushed_to.setdefault(topic, t)
-        unit = topic[len(UNIT_PREFIX) :].split("/", 1)[0] if topic.startswith(UNIT_PREFIX) else None
-        mates = self._mates.setdefault(unit, [])
+        mates = self._mates.setdefault(self._group[topic], [])  # the channel's unit
         if topic not in mates:
             mates.append(topic)
         ends = [self._put_to[m] for m in mates]
