@@ -37,6 +37,7 @@ import numpy as np
 from gyrolab import __version__
 from gyrolab.compensation.apply import StreamingCompensator, compensate_offline
 from gyrolab.compensation.axis_runs import load_runs
+from gyrolab.compensation.commands import recording_serial
 from gyrolab.compensation.guards import range_check, warn_outside
 from gyrolab.compensation.model_dir import MODEL_FORMAT_VERSION, ModelDir
 from gyrolab.compensation.prepare import prepare_file
@@ -44,7 +45,7 @@ from gyrolab.errors import InputError, named
 from gyrolab.outputs import atomic_file, check_output
 from gyrolab.record.blocks import decode_block, encode_block
 from gyrolab.record.format import TOPIC_RATE, unit_topic
-from gyrolab.record.reader import iter_messages, list_units, read_metadata, select_unit
+from gyrolab.record.reader import iter_messages, list_units, select_unit
 from gyrolab.record.rewrite import Message, rewrite_recording
 
 TOPIC_RATE_RAW = "/gyro/rate_raw"
@@ -107,9 +108,9 @@ def resolve_models(
     serial = select_unit(run_path, unit)
     if is_model:
         return [(model_dir, serial)]
-    name = serial or read_metadata(run_path).get("run", {}).get("unit_serial")
-    if name and str(name) in have:
-        return [(str(Path(model_dir) / str(name)), serial)]
+    name = serial or recording_serial(run_path)
+    if name and name in have:
+        return [(str(Path(model_dir) / name), serial)]
     if name and have:
         raise InputError(
             model_dir, f"has no model for unit {name}; its unit models: {', '.join(have)}"
